@@ -1,0 +1,37 @@
+"""Cramer-Rao lower bound of a static emitter seen through bearings (BENCHMARKS.md), and consistency scores."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2
+
+# Scale of the 95 % error ellipse for 2 degrees of freedom: x^T P^-1 x <= 5.991.
+ELLIPSE_95 = float(chi2.ppf(0.95, df=2))
+
+
+def fisher_information(emitter, sensors, sigmas) -> np.ndarray:
+    """J = sum_k 1/(sigma_k^2 r_k^2) [sin^2 t, -sin t cos t; -sin t cos t, cos^2 t] over the bearings used."""
+    d = np.asarray(emitter, float) - np.asarray(sensors, float)
+    r2 = np.sum(d * d, axis=1)
+    t = np.arctan2(d[:, 1], d[:, 0])
+    g = np.stack([-np.sin(t), np.cos(t)], axis=1) / np.sqrt(r2)[:, None]  # gradient of the bearing
+    w = 1.0 / np.asarray(sigmas, float) ** 2
+    return (g * w[:, None]).T @ g
+
+
+def crlb_rmse(emitter, sensors, sigmas) -> float:
+    """sqrt(trace(J^-1)): the RMSE no unbiased estimator beats (inf when J is singular)."""
+    j = fisher_information(emitter, sensors, sigmas)
+    if np.linalg.cond(j) > 1e12:
+        return float("inf")
+    return float(np.sqrt(np.trace(np.linalg.inv(j))))
+
+
+def nees(error, cov) -> float:
+    """Normalised estimation error squared e^T P^-1 e (mean 2 for an honest 2-D filter)."""
+    e = np.asarray(error, float)
+    return float(e @ np.linalg.solve(np.asarray(cov, float), e))
+
+
+def inside_ellipse(error, cov, level_chi2: float = ELLIPSE_95) -> bool:
+    """Whether the truth lies inside the published ellipse."""
+    return nees(error, cov) <= level_chi2

@@ -1,0 +1,60 @@
+"""The vehicle's GPS track in ENU: interpolation at a bearing's stamp, never across a gap or past the last fix."""
+from __future__ import annotations
+
+import bisect
+from enum import Enum
+
+# Fixes kept: enough to bracket any bearing still pending (bearings arrive within gps_max_gap_s).
+_KEEP_FIXES = 512
+
+
+class Where(Enum):
+    """What the track can say about a stamp."""
+
+    OK = "ok"  # bracketed by two fixes close enough in time (or on a fix)
+    WAIT = "wait"  # after the newest fix but within the gap: a later fix may still bracket it
+    GAP = "gps_gap"  # the fixes around it are farther apart than gps_max_gap_s
+    BEFORE = "before_first_fix"  # older than every fix kept
+
+
+class GpsTrack:
+    """Time-ordered ENU fixes with linear interpolation between neighbours at most `max_gap_s` apart."""
+
+    def __init__(self, max_gap_s: float):
+        self.max_gap_s = max_gap_s
+        self.t: list[float] = []
+        self.e: list[float] = []
+        self.n: list[float] = []
+        self.north: list[float] = []  # ENU angle of true north at each fix
+
+    def __len__(self):
+        return len(self.t)
+
+    @property
+    def last_stamp(self) -> float | None:
+        return self.t[-1] if self.t else None
+
+    def add(self, stamp: float, east: float, north: float, north_angle: float) -> str | None:
+        """Append a fix; returns a rejection reason if its stamp is not after the newest one."""
+        if self.t and stamp <= self.t[-1]:
+            return "fix_repeated" if stamp == self.t[-1] else "fix_out_of_order"
+        for column, value in ((self.t, stamp), (self.e, east), (self.n, north), (self.north, north_angle)):
+            column.append(value)
+            if len(column) > 2 * _KEEP_FIXES:
+                del column[:-_KEEP_FIXES]
+        return None
+
+    def locate(self, stamp: float) -> tuple[Where, tuple[float, float, float] | None]:
+        """(east, north, north angle) at `stamp` if the track brackets it closely enough, else the reason it does not."""
+        if not self.t or stamp < self.t[0]:
+            return Where.BEFORE, None
+        k = bisect.bisect_left(self.t, stamp)
+        if k < len(self.t) and self.t[k] == stamp:
+            return Where.OK, (self.e[k], self.n[k], self.north[k])
+        if k == len(self.t):
+            return (Where.GAP if stamp - self.t[-1] > self.max_gap_s else Where.WAIT), None
+        t0, t1 = self.t[k - 1], self.t[k]
+        if t1 - t0 > self.max_gap_s:
+            return Where.GAP, None
+        f = (stamp - t0) / (t1 - t0)
+        return Where.OK, tuple(c[k - 1] + f * (c[k] - c[k - 1]) for c in (self.e, self.n, self.north))

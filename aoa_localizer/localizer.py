@@ -1,0 +1,240 @@
+"""Localizer: the ROS-free engine the node, the offline replay and the benchmarks all drive.
+
+GPS fixes and DF readings go in as a vehicle gives them (lat/lon, azimuths, qualities, stamps);
+estimates come out with ENU metres, lat/lon and a 2x2 covariance. Every input that is not used is
+counted under a reason (`rejected`) and logged; no exception escapes for bad data.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections import Counter, deque
+
+import numpy as np
+
+from .config import LocalizerConfig
+from .filters import make_filter
+from .geodesy import LocalFrame, azimuth_to_enu
+from .gps_track import GpsTrack, Where
+from .preprocess import PointBuilder, make_point, reading_sigma
+from .triangulation import initial_particles
+from .types import Estimate, ObservationPoint, Reading
+
+log = logging.getLogger("aoa_localizer")
+
+# Broad Gaussian prior after a triangulation start, in multiples of the range to the first cloud:
+# it only keeps the bearing-only posterior proper (a flat prior has infinite mass along the rays).
+_PRIOR_RANGE_FACTOR = 10.0
+_PRIOR_MIN_SIGMA_M = 100.0
+
+REASONS = {
+    "bad_stamp": "stamp is not a finite number",
+    "bad_azimuth": "azimuth is NaN or infinite",
+    "bad_quality": "quality outside 0..100",
+    "low_quality": "quality below quality_min",
+    "bearing_out_of_order": "bearing stamp older than the previous bearing",
+    "bearing_repeated": "bearing stamp equal to the previous bearing",
+    "before_first_fix": "no GPS fix at or before the bearing",
+    "gps_gap": "the fixes around the bearing are more than gps_max_gap_s apart",
+    "no_fix_after": "no later fix came to bracket the bearing before the end of data",
+    "point_outlier": "wild reading inside an observation point (point_gate_sigma)",
+    "init_buffer_full": "geometry stayed too poor to start; oldest points dropped (init_max_points)",
+    "weights_degenerate": "no particle could explain the point; measurement skipped",
+    "internal_error": "an unexpected error in the filter; measurement skipped, state kept",
+    "fix_bad_stamp": "fix stamp is not a finite number",
+    "fix_no_fix": "NavSatFix status below STATUS_FIX",
+    "fix_bad_position": "fix latitude/longitude NaN, infinite or out of range",
+    "fix_out_of_order": "fix stamp older than the previous fix",
+    "fix_repeated": "fix stamp equal to the previous fix",
+}
+
+
+def _as_float(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+class Localizer:
+    """Pairs bearings with the interpolated GPS track, builds observation points, starts and runs a filter."""
+
+    def __init__(self, config: LocalizerConfig | None = None):
+        self.cfg = config or LocalizerConfig()
+        self.rng = np.random.default_rng(self.cfg.seed)
+        self.frame: LocalFrame | None = None
+        if self.cfg.has_datum:
+            self.frame = LocalFrame(self.cfg.datum_lat, self.cfg.datum_lon, self.cfg.datum_alt or 0.0)
+        self.rejected: Counter = Counter()
+        self.unknown_quality = 0  # readings used with NaN quality (no correction, default sigma)
+        self._reset_track()
+
+    def _reset_track(self):
+        self.track = GpsTrack(self.cfg.gps_max_gap_s)
+        self.pending: deque[tuple[float, float, float]] = deque()  # (stamp, azimuth, quality) awaiting a fix
+        self.builder = PointBuilder(self.cfg)
+        self.init_points: list[ObservationPoint] = []
+        self.filter = None
+        self.last_bearing_stamp = -math.inf
+        self.bearings_used = 0
+        self.points_used = 0
+        self.estimate: Estimate | None = None
+        self.status = "waiting for a GPS fix"
+        self.last_update_s = float("nan")
+
+    # -- public API -----------------------------------------------------------------------------
+    def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0) -> Estimate | None:
+        """A NavSatFix's content. Returns the newest estimate this fix made possible, if any."""
+        stamp, lat, lon, alt = map(_as_float, (stamp, lat, lon, alt))
+        if not math.isfinite(stamp):
+            return self._reject("fix_bad_stamp")
+        if status < 0:
+            return self._reject("fix_no_fix")
+        if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
+            return self._reject("fix_bad_position")
+        if self.frame is None:
+            datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)
+            self.frame = LocalFrame(lat, lon, datum_alt)
+            log.info("datum set from the first valid fix: %.7f, %.7f, %.1f m", lat, lon, datum_alt)
+        east, north = self.frame.to_enu(lat, lon)
+        reason = self.track.add(stamp, float(east), float(north), float(self.frame.north_angle(lat, lon)))
+        if reason:
+            return self._reject(reason)
+        if self.status == "waiting for a GPS fix":
+            self.status = "collecting bearings"
+        return self._release_pending()
+
+    def add_bearing(self, stamp, azimuth_deg, quality=float("nan")) -> Estimate | None:
+        """A DF record. Returns the estimate this reading produced (when it closed an observation point), else None."""
+        stamp, azimuth, quality = map(_as_float, (stamp, azimuth_deg, quality))
+        if not math.isfinite(stamp):
+            return self._reject("bad_stamp")
+        if not math.isfinite(azimuth):
+            return self._reject("bad_azimuth")
+        if not math.isnan(quality) and not 0 <= quality <= 100:
+            return self._reject("bad_quality")
+        if quality < self.cfg.quality_min:  # False for NaN: unknown quality passes, counted below
+            return self._reject("low_quality")
+        if stamp <= self.last_bearing_stamp:
+            return self._reject("bearing_repeated" if stamp == self.last_bearing_stamp else "bearing_out_of_order")
+        if not len(self.track) or stamp < self.track.t[0]:
+            return self._reject("before_first_fix")
+        self.last_bearing_stamp = stamp
+        self.pending.append((stamp, azimuth % 360.0, quality))
+        return self._release_pending()
+
+    def flush(self) -> Estimate | None:
+        """End of data: bearings still waiting for a fix are dropped, the open observation point is used."""
+        while self.pending:
+            self.pending.popleft()
+            self._reject("no_fix_after")
+        group = self.builder.flush()
+        return self._use_points([group]) if group else None
+
+    def reset(self):
+        """Drop the track, the points and the filter; keep the datum and the counters (the node's ~/reset)."""
+        self._reset_track()
+
+    @property
+    def bearings_rejected(self) -> int:
+        return sum(v for k, v in self.rejected.items() if not k.startswith("fix_"))
+
+    # -- pipeline -------------------------------------------------------------------------------
+    def _reject(self, reason: str) -> None:
+        self.rejected[reason] += 1
+        if self.rejected[reason] == 1:
+            log.warning("input not used: %s (%s); further ones are counted", reason, REASONS[reason])
+        return None
+
+    def _release_pending(self) -> Estimate | None:
+        """Pair held bearings with the track in stamp order; stop at the first one still waiting for a fix."""
+        estimate = None
+        while self.pending:
+            stamp, azimuth, quality = self.pending[0]
+            where, at = self.track.locate(stamp)
+            if where is Where.WAIT:
+                break
+            self.pending.popleft()
+            if where is not Where.OK:
+                self._reject(where.value)
+                continue
+            east, north, north_angle = at
+            if math.isnan(quality):
+                self.unknown_quality += 1
+            reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality,
+                              float(reading_sigma(quality, self.cfg)), east, north)
+            closed = self.builder.add(reading)
+            if closed:
+                estimate = self._use_points(closed) or estimate
+        return estimate
+
+    def _use_points(self, groups: list[list[Reading]]) -> Estimate | None:
+        estimate = None
+        for readings in groups:
+            point, wild = make_point(readings, self.cfg)
+            for _ in range(wild):
+                self._reject("point_outlier")
+            if self.filter is None:
+                self.init_points.append(point)
+                estimate = self._try_start() or estimate
+            else:
+                estimate = self._update(point) or estimate
+        return estimate
+
+    def _try_start(self) -> Estimate | None:
+        """Start the filter from a prior or from triangulation once the geometry allows; then run the buffered points."""
+        cfg = self.cfg
+        if cfg.has_prior:
+            mean = np.array([cfg.prior_east, cfg.prior_north])
+            cov = cfg.prior_sigma_m**2 * np.eye(2)
+            particles = mean + cfg.prior_sigma_m * self.rng.standard_normal((cfg.num_particles, 2))
+        else:
+            if len(self.init_points) > cfg.init_max_points:
+                del self.init_points[0]
+                self._reject("init_buffer_full")
+            if len(self.init_points) < cfg.init_bearings:
+                self.status = f"collecting bearings: {len(self.init_points)} of {cfg.init_bearings} points"
+                return None
+            particles, why = initial_particles(self.init_points, cfg.num_particles, cfg.init_min_crossing_deg,
+                                                cfg.init_min_support, self.rng)
+            if particles is None:
+                self.status = f"waiting for geometry: {why}"
+                return None
+            mean = particles.mean(axis=0)
+            last = self.init_points[-1]
+            sigma = max(_PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(mean[0] - last.east, mean[1] - last.north))
+            cov = sigma**2 * np.eye(2)
+        self.filter = make_filter(cfg, self.rng)
+        self.filter.initialise(particles, mean, cov)
+        self.status = "tracking"
+        log.info("filter %s started after %d observation points", cfg.algorithm, len(self.init_points))
+        estimate = None
+        points, self.init_points = self.init_points, []
+        for point in points:
+            estimate = self._update(point) or estimate
+        return estimate
+
+    def _update(self, point: ObservationPoint) -> Estimate | None:
+        t0 = time.perf_counter()
+        try:
+            ok = self.filter.update(point)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            log.exception("filter update failed; point skipped")
+            return self._reject("internal_error")
+        finally:
+            self.last_update_s = time.perf_counter() - t0
+        if not ok:
+            return self._reject("weights_degenerate")
+        self.points_used += 1
+        self.bearings_used += point.n_readings
+        self.estimate = self._make_estimate(point.stamp)
+        return self.estimate
+
+    def _make_estimate(self, stamp: float) -> Estimate:
+        mean, cov = self.filter.estimate()
+        lat, lon, _ = self.frame.to_geodetic(mean[0], mean[1])
+        return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
+                        cov=cov, bearings_used=self.bearings_used, points_used=self.points_used,
+                        ess=self.filter.ess(), algorithm=self.cfg.algorithm,
+                        particles=self.filter.x.copy(), weights=self.filter.weights)

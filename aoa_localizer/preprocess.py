@@ -1,0 +1,143 @@
+"""Bearing pre-processing of the AFSA paper (sec. 3.2): quality weights, corrected means, observation points.
+
+A DF receiver at 10 Hz on a moving vehicle gives many readings per place. Readings taken close
+together (in time and distance) form one observation point; the point's corrected bearing
+(eqs. 19-21) is one filter measurement whose variance is computed from the readings' own
+variances and their correlation, so ten readings at one place never count as ten independent looks
+unless they are.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import LocalizerConfig
+from .geodesy import circular_mean, wrap_pi
+from .types import ObservationPoint, Reading
+
+
+def quality_weight(quality):
+    """Bearing error weight W(Q) of eq. 20; the share of a reading's deviation from the mean removed.
+
+    The paper defines Q >= 55. For 40 <= Q < 55 we continue its pattern (offsets 0, 1/8, 1/4 -> 3/8,
+    slope denominators 10, 25, 40 -> 55): W = (Q-40)/(55*15) + 3/8, and use the same line below 40.
+    Unknown quality (NaN) gets W = 0: no correction.
+    """
+    q = np.asarray(quality, dtype=float)
+    w = np.where(q >= 85, (q - 85) / (10 * 15),
+        np.where(q >= 70, (q - 70) / (25 * 15) + 1 / 8,
+        np.where(q >= 55, (q - 55) / (40 * 15) + 1 / 4,
+                 (q - 40) / (55 * 15) + 3 / 8)))
+    return np.where(np.isnan(q), 0.0, w)
+
+
+def reading_sigma(quality, cfg: LocalizerConfig):
+    """Standard deviation (rad) of one reading's bearing error under the configured noise model."""
+    q = np.asarray(quality, dtype=float)
+    if cfg.sigma_model == "constant":
+        return np.full(q.shape, math.radians(cfg.bearing_sigma_deg))
+    # Linear in quality between the two calibration points, flat outside them; NaN quality -> the Q=40 value.
+    qc = np.clip(np.nan_to_num(q, nan=40.0), 40.0, 100.0)
+    deg = cfg.sigma_q40_deg + (cfg.sigma_q100_deg - cfg.sigma_q40_deg) * (qc - 40.0) / 60.0
+    return np.radians(deg)
+
+
+def corrected_mean_coefficients(weights) -> np.ndarray:
+    """Coefficients a_j with corrected mean = sum_j a_j gamma_j, for the recursion of eqs. 19-21.
+
+    gamma'_i = gamma_i - (gamma_i - mean_i) W_i with mean_i the running mean of eq. 19, and the
+    corrected mean is the mean of the gamma'_i (eq. 21). Expanding gives
+    a_j = ((1 - W_j) + sum_{i >= j} W_i / i) / n; the a_j sum to one.
+    """
+    w = np.asarray(weights, dtype=float)
+    n = w.size
+    i = np.arange(1, n + 1)
+    suffix = np.cumsum((w / i)[::-1])[::-1]
+    return ((1.0 - w) + suffix) / n
+
+
+def point_coefficients(quality: np.ndarray, sigma: np.ndarray, weighting: str) -> np.ndarray:
+    """Affine weights of a point's readings: the paper's correction (eqs. 19-21), 1/sigma^2, or equal."""
+    if weighting == "paper":
+        return corrected_mean_coefficients(quality_weight(quality))
+    w = 1.0 / sigma**2 if weighting == "inverse_variance" else np.ones(sigma.size)
+    return w / w.sum()
+
+
+def recursive_corrected_mean(gammas, weights) -> float:
+    """The paper's recursion (eqs. 19-21) literally, on unwrapped angles: the reference for tests."""
+    mean = cmean = 0.0
+    for n, (g, w) in enumerate(zip(gammas, weights), start=1):
+        mean = ((n - 1) * mean + g) / n
+        corrected = g - (g - mean) * w
+        cmean = ((n - 1) * cmean + corrected) / n
+    return cmean
+
+
+def point_outliers(theta: np.ndarray, sigma: np.ndarray, gate: float) -> np.ndarray:
+    """Mask of readings farther than `gate` sigmas from the point's circular median (needs >= 3 readings)."""
+    if gate <= 0 or theta.size < 3:
+        return np.zeros(theta.size, dtype=bool)
+    spread = np.abs(wrap_pi(theta[:, None] - theta[None, :])).sum(axis=1)
+    median = theta[np.argmin(spread)]
+    return np.abs(wrap_pi(theta - median)) > gate * sigma
+
+
+def make_point(readings: list[Reading], cfg: LocalizerConfig) -> tuple[ObservationPoint, int]:
+    """Corrected bearing of one observation point and the number of readings gated out as wild.
+
+    `point_weighting` "paper" is eqs. 19-21; "inverse_variance" is the best linear combination when
+    the sigma model is calibrated (sigma_model "quality"). Angles are averaged on the tangent at their circular mean, positions and stamps with the same
+    coefficients (the bearing is nearly linear in position over a few metres, so the corrected
+    bearing belongs to the equally-weighted position). Variance: a^T C a with C the readings'
+    covariance under `df_correlation`.
+    """
+    theta = np.array([r.theta for r in readings])
+    sigma = np.array([r.sigma for r in readings])
+    keep = ~point_outliers(theta, sigma, cfg.point_gate_sigma)
+    kept = [r for r, k in zip(readings, keep) if k]
+    theta, sigma = theta[keep], sigma[keep]
+    quality = np.array([r.quality for r in kept])
+    a = point_coefficients(quality, sigma, cfg.point_weighting)
+    ref = circular_mean(theta)
+    rho = cfg.df_correlation
+    cov = rho * np.outer(sigma, sigma) + (1.0 - rho) * np.diag(sigma**2)
+    point = ObservationPoint(
+        stamp=float(a @ np.array([r.stamp for r in kept])),
+        east=float(a @ np.array([r.east for r in kept])),
+        north=float(a @ np.array([r.north for r in kept])),
+        theta=float(wrap_pi(ref + a @ wrap_pi(theta - ref))),
+        sigma=float(math.sqrt(a @ cov @ a)),
+        n_readings=len(kept),
+    )
+    return point, int((~keep).sum())
+
+
+class PointBuilder:
+    """Groups readings into observation points: a point closes when the next reading is more than
+    `obs_max_duration_s` later or `obs_max_distance_m` away from its first reading, when it holds
+    `obs_max_readings`, or on flush()."""
+
+    def __init__(self, cfg: LocalizerConfig):
+        self.cfg = cfg
+        self.readings: list[Reading] = []
+
+    def add(self, r: Reading) -> list[list[Reading]]:
+        """Add a reading; returns the readings of each point it closed (zero, one or two)."""
+        closed = []
+        if self.readings:
+            first = self.readings[0]
+            too_late = r.stamp - first.stamp > self.cfg.obs_max_duration_s
+            too_far = math.hypot(r.east - first.east, r.north - first.north) > self.cfg.obs_max_distance_m
+            if too_late or too_far:
+                closed.append(self.flush())
+        self.readings.append(r)
+        if len(self.readings) >= self.cfg.obs_max_readings:
+            closed.append(self.flush())
+        return closed
+
+    def flush(self) -> list[Reading] | None:
+        """Close the open point (end of data, reset) and return its readings."""
+        readings, self.readings = self.readings, []
+        return readings or None

@@ -1,0 +1,164 @@
+"""The public benchmark scenarios of BENCHMARKS.md, simulated as a vehicle would record them.
+
+Output is what crosses the public interface: GPS fixes (stamp, lat, lon, alt) on the GPS clock and
+DF records (stamp, azimuth from true north, quality) on the receiver's clock, plus the truth the
+benchmark scores against (emitter, true antenna positions, each bearing's true sigma and whether it
+was wild). Azimuths are geodesic (what a real DF measures), not angles in our ENU plane.
+
+Stop-and-go scenarios (`seed`, `straight`, `homing`): the vehicle drives at `speed` between equally
+spaced observation points (by arc length) and stops `dwell_s` at each; its DF readings are taken
+at 10 Hz from 1 s after arrival, so 1 Hz fixes taken during the stop bracket them. `urban` drives
+on without stopping.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from pymap3d import vincenty
+
+from .geodesy import LocalFrame, wrap_360
+
+DATUM = (39.1, 117.2, 5.0)
+PAPER_SIGMA_RAD = math.sqrt(3.801e-4)
+SEED_TRACK = ((0, 0), (1000, 400), (1500, 600), (1600, 1400))
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything that defines a simulated run; the four public ones are in SCENARIOS."""
+
+    name: str
+    emitter: tuple[float, float]
+    track: tuple[tuple[float, float], ...]
+    points: int = 60  # observation points (stop-and-go); 0 = continuous driving
+    readings_per_point: int = 5
+    quality: tuple[float, float] = (55.0, 100.0)  # uniform range; equal ends = constant
+    sigma_rad: float = PAPER_SIGMA_RAD  # constant bearing noise, unless sigma_q is set
+    sigma_q_deg: tuple[float, float] | None = None  # (sigma at Q=100, sigma at Q=40), linear in Q
+    wild_share: float = 0.0
+    speed: float = 10.0
+    dwell_s: float = 3.0
+    df_rate_hz: float = 10.0
+    gps_rate_hz: float = 1.0
+    gps_noise_m: float = 0.0
+    gps_clock_offset_s: float = 0.37
+    df_clock_offset_s: float = 0.05
+    datum: tuple[float, float, float] = DATUM
+    # Filter settings this scenario asks for (the prior of `straight`, the receiver calibration of `urban`).
+    filter_overrides: dict = field(default_factory=dict)
+
+
+SCENARIOS = {
+    "seed": Scenario("seed", (1200, 800), SEED_TRACK),
+    "straight": Scenario("straight", (1200, 800), ((0, -200), (2400, -200)), readings_per_point=1,
+                         quality=(90.0, 90.0),
+                         filter_overrides={"prior_east": 1350.0, "prior_north": 700.0, "prior_sigma_m": 300.0}),
+    "urban": Scenario("urban", (1200, 800), SEED_TRACK, points=0, quality=(40.0, 100.0), sigma_q_deg=(1.0, 8.0),
+                      wild_share=0.15, gps_noise_m=3.0,
+                      filter_overrides={"sigma_model": "quality", "sigma_q100_deg": 1.0, "sigma_q40_deg": 8.0,
+                                        "point_weighting": "inverse_variance", "gps_sigma_m": 3.0}),
+    "homing": Scenario("homing", (1500, 1500), ((0, 0), (1200, 1200), (1600, 1000), (2000, 1700)),
+                       readings_per_point=3),
+}
+
+
+@dataclass
+class ScenarioData:
+    """One simulated run: public inputs plus the truth."""
+
+    scenario: Scenario
+    fixes: np.ndarray  # (F, 4): stamp, lat, lon, alt
+    bearings: np.ndarray  # (B, 3): stamp, azimuth deg, quality
+    sensor_enu: np.ndarray  # (B, 2): true antenna position at each bearing
+    sigma: np.ndarray  # (B,): true bearing sigma, rad
+    wild: np.ndarray  # (B,) bool
+    emitter_enu: np.ndarray  # (2,)
+    emitter_lat_lon: tuple[float, float]
+
+    @property
+    def frame(self) -> LocalFrame:
+        return LocalFrame(*self.scenario.datum)
+
+    def events(self):
+        """Fixes and bearings merged in stamp order, as ('fix', row) / ('bearing', row): a vehicle's stream."""
+        tagged = [(f[0], 0, "fix", f) for f in self.fixes] + [(b[0], 1, "bearing", b) for b in self.bearings]
+        tagged.sort(key=lambda e: (e[0], e[1]))
+        return [(kind, row) for _, _, kind, row in tagged]
+
+
+class Trajectory:
+    """Position along a polyline as a function of time, with optional stops at given arc lengths."""
+
+    def __init__(self, track, speed: float, stops=(), dwell_s: float = 0.0):
+        self.v = np.asarray(track, float)
+        seg = np.diff(self.v, axis=0)
+        self.cum = np.concatenate([[0.0], np.cumsum(np.hypot(seg[:, 0], seg[:, 1]))])
+        self.length = float(self.cum[-1])
+        # Knots of the (time, arc length) curve: drive to each stop, wait, drive on.
+        t_knots, s_knots, t, s = [0.0], [0.0], 0.0, 0.0
+        for stop in stops:
+            t += (stop - s) / speed
+            t_knots += [t, t + dwell_s]
+            s_knots += [stop, stop]
+            t, s = t + dwell_s, stop
+        t += (self.length - s) / speed
+        t_knots.append(t)
+        s_knots.append(self.length)
+        self.t_knots, self.s_knots = np.array(t_knots), np.array(s_knots)
+        self.duration = t
+
+    def arrival(self, stop_index: int) -> float:
+        """Time the vehicle reaches its stop number `stop_index`."""
+        return float(self.t_knots[1 + 2 * stop_index])
+
+    def at(self, t) -> np.ndarray:
+        """ENU positions at times t."""
+        s = np.interp(t, self.t_knots, self.s_knots)
+        x = np.interp(s, self.cum, self.v[:, 0])
+        y = np.interp(s, self.cum, self.v[:, 1])
+        return np.stack([x, y], axis=-1)
+
+
+def _sigma_of_quality(q, sigma_q_deg):
+    s100, s40 = sigma_q_deg
+    return np.radians(s40 + (s100 - s40) * (np.clip(q, 40, 100) - 40) / 60)
+
+
+def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
+    """One run of a scenario with its data seeded from `seed`."""
+    sc = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
+    rng = np.random.default_rng(seed)
+    frame = LocalFrame(*sc.datum)
+    if sc.points:
+        track_len = Trajectory(sc.track, sc.speed).length
+        stops = np.linspace(0.0, track_len, sc.points)
+        traj = Trajectory(sc.track, sc.speed, stops, sc.dwell_s)
+        k = np.arange(sc.readings_per_point) / sc.df_rate_hz
+        t_df = np.concatenate([traj.arrival(i) + 1.0 + k for i in range(sc.points)])
+    else:
+        traj = Trajectory(sc.track, sc.speed)
+        t_df = np.arange(sc.df_clock_offset_s, traj.duration, 1.0 / sc.df_rate_hz)
+    t_gps = np.arange(sc.gps_clock_offset_s - 1.0 / sc.gps_rate_hz, traj.duration + 2.0, 1.0 / sc.gps_rate_hz)
+    t_gps = t_gps[t_gps >= 0]
+
+    # GPS fixes: true positions plus noise, as lat/lon.
+    gps_enu = traj.at(t_gps) + sc.gps_noise_m * rng.standard_normal((t_gps.size, 2))
+    lat, lon, alt = frame.to_geodetic(gps_enu[:, 0], gps_enu[:, 1], np.zeros(t_gps.size))
+    fixes = np.column_stack([t_gps, lat, lon, alt])
+
+    # DF readings: geodesic azimuth from the true antenna position to the emitter, plus noise.
+    sensor = traj.at(t_df)
+    s_lat, s_lon, _ = frame.to_geodetic(sensor[:, 0], sensor[:, 1], np.zeros(t_df.size))
+    e_lat, e_lon, _ = frame.to_geodetic(sc.emitter[0], sc.emitter[1], 0.0)
+    _, az_true = vincenty.vdist(s_lat, s_lon, np.full(t_df.size, e_lat), np.full(t_df.size, e_lon))
+    lo, hi = sc.quality
+    quality = np.full(t_df.size, lo) if lo == hi else rng.uniform(lo, hi, t_df.size)
+    sigma = _sigma_of_quality(quality, sc.sigma_q_deg) if sc.sigma_q_deg else np.full(t_df.size, sc.sigma_rad)
+    az = np.asarray(az_true) + np.degrees(sigma * rng.standard_normal(t_df.size))
+    wild = rng.random(t_df.size) < sc.wild_share
+    az = np.where(wild, rng.uniform(0, 360, t_df.size), az)
+    bearings = np.column_stack([t_df, wrap_360(az), quality])
+    return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, np.array(sc.emitter, float),
+                        (float(e_lat), float(e_lon)))

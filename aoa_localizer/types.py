@@ -1,0 +1,63 @@
+"""Plain data the engine passes around: GPS fixes, DF readings paired with a position, observation points, estimates."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One accepted DF reading, paired with the antenna position interpolated at its stamp (ENU)."""
+
+    stamp: float
+    theta: float  # ENU bearing, rad CCW from east
+    quality: float  # 0..100, NaN when the receiver did not say
+    sigma: float  # standard deviation of this reading's bearing error, rad
+    east: float
+    north: float
+
+
+@dataclass(frozen=True)
+class ObservationPoint:
+    """The corrected bearing of one observation point: the filter's measurement (paper sec. 3.2)."""
+
+    stamp: float
+    east: float
+    north: float
+    theta: float  # corrected bearing, ENU rad
+    sigma: float  # its standard deviation, rad, from the readings' sigmas and correlation
+    n_readings: int
+
+
+@dataclass
+class Estimate:
+    """The emitter estimate after a filter update: ENU metres at the datum, lat/lon and the 2x2 covariance."""
+
+    stamp: float
+    east: float
+    north: float
+    lat: float
+    lon: float
+    cov: np.ndarray  # 2x2 east/north covariance, m^2
+    bearings_used: int
+    points_used: int
+    ess: float
+    algorithm: str
+    particles: np.ndarray = field(repr=False, default=None)  # (N, 2) east/north
+    weights: np.ndarray = field(repr=False, default=None)  # (N,), normalised
+
+    def to_json_dict(self) -> dict:
+        """The JSON-lines record of INTERFACE.md (offline replay output)."""
+        return {
+            "stamp": self.stamp,
+            "lat": self.lat,
+            "lon": self.lon,
+            "east": self.east,
+            "north": self.north,
+            "cov": [[float(v) for v in row] for row in self.cov],
+            "bearings_used": self.bearings_used,
+            "points_used": self.points_used,
+            "ess": self.ess,
+            "algorithm": self.algorithm,
+        }
