@@ -98,7 +98,8 @@ class ParticleFilter:
         self.history.append(p)
         self.predict()
         self.prev_logw = self.logw
-        ll = self.loglik(self.x, p)
+        with np.errstate(invalid="ignore"):  # a NaN likelihood is handled as zero just below
+            ll = self.loglik(self.x, p)
         new = self.logw + np.where(np.isfinite(ll), ll, -np.inf)
         if not np.isfinite(new.max()):
             self.skipped += 1

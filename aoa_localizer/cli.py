@@ -1,0 +1,61 @@
+"""Command-line pieces shared by the programs: engine options, `-p name=value` overrides, logging."""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+
+import yaml
+
+from .config import ALGORITHMS, ConfigError, LocalizerConfig
+
+
+def add_engine_args(parser: argparse.ArgumentParser):
+    parser.add_argument("--algorithm", choices=ALGORITHMS, help="filter (default: afsa)")
+    parser.add_argument("--particles", type=int, help="number of particles (default: 100)")
+    parser.add_argument("--seed", type=int, help="filter seed: the same seed reproduces a run")
+    parser.add_argument("--params-file", metavar="YAML",
+                        help="parameters as a ROS 2 params file (aoa_localizer: ros__parameters: ...) or a flat mapping")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="any LocalizerConfig parameter, e.g. -p afsa.variant=paper -p quality_min=50")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log the engine's decisions")
+
+
+def _value(text: str):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def load_params_file(path: str) -> dict:
+    """Parameters from a YAML file: the ROS 2 form (`<node>: ros__parameters: {...}`, any node name) or flat."""
+    try:
+        with open(path) as fh:
+            data = yaml.safe_load(fh) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"cannot read params file {path}: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ConfigError(f"params file {path} must hold a mapping")
+    for value in data.values():
+        if isinstance(value, dict) and "ros__parameters" in value:
+            return dict(value["ros__parameters"])
+    return data
+
+
+def config_from_args(args, base: LocalizerConfig | None = None) -> LocalizerConfig:
+    """The config the options describe (file, then -p, then the short options); raises ConfigError."""
+    changes = load_params_file(args.params_file) if args.params_file else {}
+    for item in args.param:
+        name, sep, text = item.partition("=")
+        if not sep:
+            raise ConfigError(f"-p takes NAME=VALUE, got {item!r}")
+        changes[name.strip()] = _value(text.strip())
+    for name, value in (("algorithm", args.algorithm), ("num_particles", args.particles), ("seed", args.seed)):
+        if value is not None:
+            changes[name] = value
+    return (base or LocalizerConfig()).with_changes(**changes)
+
+
+def setup_logging(verbose: bool):
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")

@@ -1,0 +1,152 @@
+"""rosbag2 MCAP bags: write simulated runs with rosbags, read any rosbag2 MCAP bag back as engine records.
+
+Reading goes through rosbags; a bag it cannot open (truncated file, missing metadata.yaml) is read
+again record by record with the `mcap` stream reader and mcap-ros2-support, so the messages before
+the damage are still delivered and the damage is reported as a BagError afterwards.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from . import build
+from .fields import df_from_vector3stamped, fix_from_navsatfix, stamp_seconds
+
+log = logging.getLogger("aoa_localizer.bag")
+
+TOPICS = {"fix": "/gps/fix", "bearing": "/df/bearing", "truth": "/sim/truth", "datum": "/sim/datum"}
+_TYPES = {"fix": "sensor_msgs/msg/NavSatFix", "bearing": "geometry_msgs/msg/Vector3Stamped",
+          "truth": "geometry_msgs/msg/PointStamped", "datum": "sensor_msgs/msg/NavSatFix"}
+
+
+class BagError(RuntimeError):
+    """The bag cannot be read (at all, or past some point): the message says where and why."""
+
+
+def typestore():
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _qos(reliable: bool, latched: bool) -> Qos:
+    zero = QosTime(0, 0)
+    return Qos(QosHistory.KEEP_LAST, 1 if latched else 10,
+               QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
+               QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
+               zero, zero, QosLiveliness.AUTOMATIC, zero, False)
+
+
+@dataclass
+class BagEvent:
+    """One message of interest, converted: kind is 'fix', 'bearing', 'truth' or 'datum'."""
+
+    kind: str
+    log_time_ns: int
+    record: object
+
+
+def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None):
+    """Write fixes (stamp, lat, lon, alt rows), DF records (stamp, azimuth, quality rows) and, for
+    simulated runs, the truth (/sim/truth, ENU in `map`) and the datum (/sim/datum) as a rosbag2 MCAP bag."""
+    ts = typestore()
+    T = build.rosbags_types(ts)
+    messages = [(f[0], "fix", build.navsatfix(T, f[0], f[1], f[2], f[3])) for f in fixes]
+    messages += [(b[0], "bearing", build.df_record(T, b[0], b[1], b[2])) for b in bearings]
+    t0 = min(m[0] for m in messages) if messages else 0.0
+    if truth_enu is not None:
+        messages.append((t0, "truth", build.point_stamped(T, t0, float(truth_enu[0]), float(truth_enu[1]))))
+    if datum is not None:
+        messages.append((t0, "datum", build.navsatfix(T, t0, *datum, frame_id="map")))
+    messages.sort(key=lambda m: m[0])
+    with Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {}
+        for kind in dict.fromkeys(k for _, k, _ in messages):
+            latched = kind in ("truth", "datum")
+            conns[kind] = writer.add_connection(TOPICS[kind], _TYPES[kind], typestore=ts,
+                                                offered_qos_profiles=[_qos(reliable=True, latched=latched)])
+        for stamp, kind, msg in messages:
+            writer.write(conns[kind], int(round(stamp * 1e9)), ts.serialize_cdr(msg, _TYPES[kind]))
+
+
+def _convert(kind: str, msg):
+    if kind == "fix" or kind == "datum":
+        return fix_from_navsatfix(msg)
+    if kind == "bearing":
+        return df_from_vector3stamped(msg)
+    return (stamp_seconds(msg.header), msg.point.x, msg.point.y)
+
+
+def read_bag(path: Path | str, topics: dict[str, str] | None = None) -> Iterator[BagEvent]:
+    """Events of the given topics ({kind: topic}, default TOPICS) in log-time order.
+
+    Raises BagError for an unreadable bag; for a damaged one, after yielding what came before the damage.
+    """
+    topics = {**TOPICS, **(topics or {})}
+    by_topic = {t: k for k, t in topics.items()}
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f"{path}: no such bag")
+    from rosbags.highlevel import AnyReader
+
+    try:
+        reader = AnyReader([path], default_typestore=typestore())
+        reader.open()
+    except Exception as exc:  # rosbags refuses damaged or metadata-less bags: fall back to the stream
+        yield from _read_mcap_stream(path, by_topic, opened_error=exc)
+        return
+    count = 0
+    try:
+        conns = [c for c in reader.connections if c.topic in by_topic]
+        for conn, log_time, raw in reader.messages(connections=conns):
+            kind = by_topic[conn.topic]
+            yield BagEvent(kind, log_time, _convert(kind, reader.deserialize(raw, conn.msgtype)))
+            count += 1
+    except Exception as exc:
+        raise BagError(f"{path}: damaged after {count} messages ({type(exc).__name__}: {exc})") from exc
+    finally:
+        reader.close()
+
+
+def _mcap_files(path: Path) -> list[Path]:
+    return sorted(path.glob("*.mcap")) if path.is_dir() else [path]
+
+
+def _read_mcap_stream(path: Path, by_topic: dict[str, str], opened_error: Exception) -> Iterator[BagEvent]:
+    """Record-by-record read with the mcap library: everything up to the first damaged record."""
+    from mcap.stream_reader import StreamReader
+    from mcap_ros2.decoder import DecoderFactory
+
+    files = _mcap_files(path)
+    if not files or not all(f.is_file() for f in files):
+        raise BagError(f"{path}: not a rosbag2 MCAP bag ({opened_error})")
+    decoder_factory = DecoderFactory()
+    count = 0
+    for file in files:
+        schemas, channels, decoders = {}, {}, {}
+        try:
+            with open(file, "rb") as fh:
+                for record in StreamReader(fh, skip_magic=False).records:
+                    name = type(record).__name__
+                    if name == "Schema":
+                        schemas[record.id] = record
+                    elif name == "Channel":
+                        channels[record.id] = record
+                    elif name == "Message":
+                        channel = channels.get(record.channel_id)
+                        if channel is None or channel.topic not in by_topic:
+                            continue
+                        if channel.id not in decoders:
+                            decoders[channel.id] = decoder_factory.decoder_for(
+                                channel.message_encoding, schemas[channel.schema_id])
+                        msg = decoders[channel.id](record.data)
+                        kind = by_topic[channel.topic]
+                        yield BagEvent(kind, record.log_time, _convert(kind, msg))
+                        count += 1
+        except Exception as exc:
+            raise BagError(f"{file}: damaged after {count} messages ({type(exc).__name__}: {exc})") from exc
+    log.warning("%s: rosbags could not open it (%s); read all %d messages record by record", path, opened_error, count)

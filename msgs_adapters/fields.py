@@ -1,0 +1,57 @@
+"""Message -> engine records, by field name only (no message classes are imported here)."""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+# sensor_msgs/NavSatStatus.STATUS_NO_FIX; STATUS_FIX is 0 and augmented fixes are higher.
+STATUS_NO_FIX = -1
+
+
+class FixRecord(NamedTuple):
+    """A NavSatFix's content as Localizer.add_fix takes it."""
+
+    stamp: float
+    lat: float
+    lon: float
+    alt: float
+    status: int
+
+
+class DfRecord(NamedTuple):
+    """A DF record (Vector3Stamped encoding of INTERFACE.md) as Localizer.add_bearing takes it."""
+
+    stamp: float
+    azimuth_deg: float
+    quality: float
+    frequency_hz: float
+
+
+def stamp_seconds(header) -> float:
+    """header.stamp (sec, nanosec) as float seconds."""
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def seconds_to_stamp(t: float) -> tuple[int, int]:
+    """Float seconds to (sec, nanosec), nanosec in [0, 1e9)."""
+    ns = int(round(t * 1e9))
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
+def _float(v) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def fix_from_navsatfix(msg) -> FixRecord:
+    """sensor_msgs/NavSatFix -> FixRecord."""
+    return FixRecord(stamp_seconds(msg.header), _float(msg.latitude), _float(msg.longitude),
+                     _float(msg.altitude), int(msg.status.status))
+
+
+def df_from_vector3stamped(msg) -> DfRecord:
+    """geometry_msgs/Vector3Stamped DF record -> DfRecord (x azimuth deg, y quality, z frequency Hz)."""
+    v = msg.vector
+    return DfRecord(stamp_seconds(msg.header), _float(v.x), _float(v.y), _float(v.z))

@@ -1,0 +1,17 @@
+"""Shared helpers: a Localizer fed from simple synthetic geometry."""
+import numpy as np
+import pytest
+
+from aoa_localizer.geodesy import LocalFrame
+
+DATUM = (39.1, 117.2, 5.0)
+
+
+@pytest.fixture
+def frame():
+    return LocalFrame(*DATUM)
+
+
+def azimuth_from(frame, east, north, target):
+    """Plane azimuth (deg from north) from (east, north) to target: exact enough near the datum."""
+    return float(np.degrees(np.arctan2(target[0] - east, target[1] - north)) % 360)

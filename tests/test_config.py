@@ -1,0 +1,41 @@
+import math
+
+import pytest
+
+from aoa_localizer import AfsaConfig, ConfigError, LocalizerConfig
+
+
+def test_defaults_are_the_papers():
+    c = LocalizerConfig()
+    assert c.algorithm == "afsa" and c.num_particles == 100 and c.quality_min == 40
+    assert math.radians(c.bearing_sigma_deg) ** 2 == pytest.approx(3.801e-4)
+    assert c.process_noise_m == 1.0 and c.resampling == "systematic"
+    a = c.afsa
+    assert (a.visual, a.step, a.crowd, a.try_number) == (1.0, 0.3, 0.618, 50)
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"num_particles": 0}, "num_particles"),
+    ({"num_particles": 10.5}, "num_particles"),
+    ({"algorithm": "kalman"}, "algorithm"),
+    ({"quality_min": 120}, "quality_min"),
+    ({"bearing_sigma_deg": -1.0}, "bearing_sigma_deg"),
+    ({"bearing_sigma_deg": float("nan")}, "bearing_sigma_deg"),
+    ({"outlier_prob": 1.0}, "outlier_prob"),
+    ({"prior_east": 1.0}, "prior_east"),
+    ({"datum_lat": 95.0, "datum_lon": 0.0}, "datum_lat"),
+    ({"afsa.visual": 0.0}, "afsa.visual"),
+    ({"afsa.variant": "greedy"}, "afsa.variant"),
+    ({"seed": -3}, "seed"),
+    ({"bogus": 1}, "bogus"),
+])
+def test_invalid_values_are_refused_by_name(change, words):
+    with pytest.raises(ConfigError, match=words.replace(".", r"\.")):
+        LocalizerConfig().with_changes(**change)
+
+
+def test_flat_and_nested_dicts_build_the_same_config():
+    flat = LocalizerConfig.from_dict({"algorithm": "sir", "afsa.step": 0.5})
+    nested = LocalizerConfig.from_dict({"algorithm": "sir", "afsa": {"step": 0.5}})
+    assert flat == nested and flat.afsa == AfsaConfig(step=0.5)
+    assert LocalizerConfig.from_dict(flat.to_dict()) == flat

@@ -1,0 +1,23 @@
+import numpy as np
+import pytest
+
+from aoa_localizer.crlb import crlb_rmse, fisher_information, inside_ellipse, nees
+
+
+def test_two_perpendicular_bearings_by_hand():
+    # Emitter at the origin; one sensor 100 m south (bearing north), one 200 m west (bearing east).
+    sigma = 0.01
+    j = fisher_information([0.0, 0.0], [[0.0, -100.0], [-200.0, 0.0]], [sigma, sigma])
+    # The south sensor measures east error with std sigma * 100; the west one north error with sigma * 200.
+    assert j == pytest.approx(np.diag([1 / (sigma * 100) ** 2, 1 / (sigma * 200) ** 2]))
+    assert crlb_rmse([0.0, 0.0], [[0.0, -100.0], [-200.0, 0.0]], [sigma, sigma]) == pytest.approx(np.hypot(1.0, 2.0))
+
+
+def test_collinear_bearings_have_no_bound():
+    assert crlb_rmse([0.0, 0.0], [[0.0, -100.0], [0.0, -200.0]], [0.01, 0.01]) == float("inf")
+
+
+def test_nees_and_ellipse():
+    cov = np.diag([4.0, 1.0])
+    assert nees([2.0, 1.0], cov) == pytest.approx(2.0)
+    assert inside_ellipse([2.0, 1.0], cov) and not inside_ellipse([5.0, 0.0], cov)

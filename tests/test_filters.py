@@ -1,0 +1,110 @@
+import math
+
+import numpy as np
+import pytest
+
+from aoa_localizer.config import LocalizerConfig
+from aoa_localizer.filters import make_filter
+from aoa_localizer.filters.afsa import AfsaFilter, uniform_disc
+from aoa_localizer.filters.likelihood import BearingLikelihood, gaussian_loglik, mixture_loglik
+from aoa_localizer.types import ObservationPoint
+
+
+def test_gaussian_loglik_by_hand():
+    s = 0.02
+    assert gaussian_loglik(0.0, s) == pytest.approx(-math.log(s) - 0.5 * math.log(2 * math.pi))
+    assert gaussian_loglik(s, s) - gaussian_loglik(0.0, s) == pytest.approx(-0.5)
+
+
+def test_mixture_never_falls_below_the_outlier_floor():
+    r = np.linspace(-math.pi, math.pi, 101)
+    m = mixture_loglik(r, 0.02, 0.05)
+    assert np.all(m >= math.log(0.05 / (2 * math.pi)) - 1e-12)
+    assert mixture_loglik(0.0, 0.02, 0.05) == pytest.approx(gaussian_loglik(0.0, 0.02) + math.log(0.95), abs=1e-3)
+
+
+def test_likelihood_wraps_the_residual_and_adds_gps_noise_by_range():
+    lik = BearingLikelihood("gaussian", 0.0)
+    # Particle due west (bearing pi); measurement -pi + 0.01: the residual is 0.01, not 2 pi - 0.01.
+    assert lik.log(np.array([[-100.0, 0.0]]), 0.0, 0.0, -math.pi + 0.01, 0.01)[0] == pytest.approx(gaussian_loglik(0.01, 0.01))
+    with_gps = BearingLikelihood("gaussian", 0.0, gps_sigma_m=3.0)
+    s_eff = math.sqrt(0.01**2 + (3.0 / 100.0) ** 2)
+    assert with_gps.log(np.array([[100.0, 0.0]]), 0.0, 0.0, 0.0, 0.01)[0] == pytest.approx(gaussian_loglik(0.0, s_eff))
+
+
+def _filter(**kw):
+    cfg = LocalizerConfig(seed=1, num_particles=kw.pop("n", 4), **kw)
+    return make_filter(cfg, np.random.default_rng(cfg.seed))
+
+
+def test_ess_estimate_and_covariance_by_hand():
+    f = _filter(algorithm="sir")
+    f.initialise(np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0]]), [1, 1], np.eye(2) * 1e6)
+    assert f.ess() == pytest.approx(4.0)
+    mean, cov = f.estimate()
+    assert mean == pytest.approx([1.0, 1.0]) and cov == pytest.approx(np.eye(2))
+    f.logw = np.array([0.0, -np.inf, -np.inf, -np.inf])
+    assert f.ess() == pytest.approx(1.0)
+    assert f.estimate()[0] == pytest.approx([0.0, 0.0])
+
+
+def test_log_domain_weights_survive_likelihoods_that_underflow():
+    f = _filter(algorithm="sir", likelihood="gaussian", n=3, process_noise_m=0.0)
+    f.initialise(np.array([[1000.0, 10.0], [1000.0, 200.0], [-1000.0, 0.0]]), [0, 0], np.eye(2) * 1e8)
+    p = ObservationPoint(0.0, 0.0, 0.0, 0.0, 1e-4, 1)  # bearing due east, 0.006 deg sigma
+    assert f.update(p)
+    w = f.weights
+    assert np.all(np.isfinite(w)) and w.sum() == pytest.approx(1.0)
+    assert np.all(np.abs(f.x[:, 1]) <= 10.0)  # only the particle on the bearing line survives
+
+
+def test_a_point_no_particle_can_explain_is_skipped_and_nothing_changes():
+    f = _filter(algorithm="sir", process_noise_m=0.0)
+    x0 = np.array([[0.0, 1.0], [1.0, 0.0], [2.0, 2.0], [3.0, 1.0]])
+    f.initialise(x0, [0, 0], np.eye(2))
+    assert not f.update(ObservationPoint(0.0, 0.0, 0.0, float("nan"), 0.01, 1))
+    assert f.skipped == 1 and np.array_equal(f.x, x0) and np.all(f.logw == 0)
+
+
+def test_mcmc_moves_keep_the_target_distribution():
+    """With no bearings the posterior is the Gaussian prior: the fish moves must leave it invariant."""
+    f = _filter(n=4000)
+    assert isinstance(f, AfsaFilter) and not f.paper
+    mean, cov = np.array([100.0, -50.0]), np.array([[400.0, 150.0], [150.0, 100.0]])
+    rng = np.random.default_rng(2)
+    f.initialise(rng.multivariate_normal(mean, cov, 4000), mean, cov)
+    f.spread = cov
+    for _ in range(5):
+        f.move()
+    assert 0.2 < f.acceptance < 0.95
+    assert f.x.mean(axis=0) == pytest.approx(mean, abs=1.5)
+    assert np.cov(f.x.T) == pytest.approx(cov, rel=0.12, abs=10)
+
+
+def test_mcmc_moves_pull_a_misplaced_school_towards_the_posterior():
+    f = _filter(n=500)
+    mean, cov = np.array([0.0, 0.0]), np.eye(2) * 25.0
+    f.initialise(np.full((500, 2), 30.0) + np.random.default_rng(0).normal(size=(500, 2)), mean, cov)
+    f.spread = cov
+    for _ in range(20):
+        f.move()
+    assert np.linalg.norm(f.x.mean(axis=0)) < 6.0
+
+
+def test_paper_school_swims_towards_the_bearing_line():
+    cfg = LocalizerConfig(seed=3, num_particles=200).with_changes(**{"afsa.variant": "paper", "afsa.visual": 5.0,
+                                                                     "afsa.step": 2.0})
+    f = make_filter(cfg, np.random.default_rng(3))
+    rng = np.random.default_rng(4)
+    x = np.column_stack([rng.uniform(900, 1100, 200), rng.uniform(-60, 60, 200)])
+    p = ObservationPoint(0.0, 0.0, 0.0, 0.0, math.radians(1.0), 1)  # the line north = 0
+    moved = f.swim(x, p)
+    assert np.mean(np.abs(moved[:, 1])) < np.mean(np.abs(x[:, 1])) - 1.0
+    assert 1 <= f.school_rounds <= cfg.afsa.max_iterations
+
+
+def test_uniform_disc_is_inside_the_unit_disc_and_centred():
+    d = uniform_disc(np.random.default_rng(0), (20000,))
+    r = np.hypot(d[:, 0], d[:, 1])
+    assert r.max() <= 1.0 and d.mean(axis=0) == pytest.approx([0, 0], abs=0.02)
+    assert np.mean(r < 0.5) == pytest.approx(0.25, abs=0.02)  # uniform in area

@@ -1,0 +1,60 @@
+import numpy as np
+import pytest
+
+from aoa_localizer.geodesy import LocalFrame, azimuth_to_enu, circular_mean, enu_to_azimuth, wrap_360, wrap_pi
+
+
+@pytest.mark.parametrize("datum", [(39.1, 117.2, 5.0), (-33.9, -70.6, 520.0), (-12.0, -77.0, 0.0), (51.5, -0.1, 30.0)])
+def test_enu_round_trip_is_exact_to_a_centimetre_at_10_km(datum):
+    frame = LocalFrame(*datum)
+    east = np.array([10_000.0, -10_000.0, 7071.0, 0.0])
+    north = np.array([0.0, 10_000.0, -7071.0, -10_000.0])
+    lat, lon, alt = frame.to_geodetic(east, north, 0.0)
+    e2, n2 = frame.to_enu(lat, lon, alt)
+    assert np.max(np.abs(e2 - east)) < 0.01 and np.max(np.abs(n2 - north)) < 0.01
+
+
+def test_southern_western_datum_puts_north_and_east_the_right_way(frame):
+    f = LocalFrame(-33.9, -70.6, 0.0)
+    e, n = f.to_enu(-33.8, -70.6)  # 0.1 deg further north
+    assert n == pytest.approx(11_093, rel=2e-3) and abs(e) < 1e-6
+    e, n = f.to_enu(-33.9, -70.5)  # 0.1 deg further east: 11.1 km * cos(33.9 deg)
+    assert e == pytest.approx(9_245, rel=3e-3) and abs(n) < 5
+
+
+def test_azimuth_and_enu_angle_conventions():
+    assert azimuth_to_enu(0.0) == pytest.approx(np.pi / 2)  # north
+    assert azimuth_to_enu(90.0) == pytest.approx(0.0)  # east
+    assert azimuth_to_enu(180.0) == pytest.approx(-np.pi / 2)  # south
+    assert azimuth_to_enu(270.0) == pytest.approx(-np.pi)  # west, wrapped into [-pi, pi)
+    assert enu_to_azimuth(np.pi / 2) == pytest.approx(0.0)
+    assert enu_to_azimuth(-np.pi / 2) == pytest.approx(180.0)
+
+
+@pytest.mark.parametrize("az", [0.0, 359.9, 0.1, 45.0, 180.0, 270.0, 719.5, -10.0])
+def test_azimuth_round_trip_wraps_through_north(az):
+    back = enu_to_azimuth(azimuth_to_enu(az))
+    assert 0.0 <= back < 360.0
+    assert (back - az + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-9)
+
+
+def test_wraps():
+    assert wrap_pi(3 * np.pi / 2) == pytest.approx(-np.pi / 2)
+    assert wrap_pi(-3 * np.pi / 2) == pytest.approx(np.pi / 2)
+    assert wrap_360(-1.0) == pytest.approx(359.0)
+    assert wrap_360(721.0) == pytest.approx(1.0)
+
+
+def test_circular_mean_of_359_and_1_degree_is_north_not_south():
+    m = circular_mean(np.radians([359.0, 1.0]))
+    assert abs(m) < 1e-12
+    assert circular_mean(np.radians([350.0, 10.0, 20.0])) == pytest.approx(np.radians(6.6666), abs=2e-3)
+    assert circular_mean(np.radians([0.0, 90.0]), weights=[3.0, 1.0]) == pytest.approx(np.arctan2(1, 3))
+
+
+def test_north_angle_is_pi_over_two_at_the_datum_and_tilts_with_meridian_convergence():
+    f = LocalFrame(39.1, 117.2, 0.0)
+    assert f.north_angle(39.1, 117.2) == pytest.approx(np.pi / 2, abs=1e-6)
+    # 0.1 deg east: true north leans west of the plane's y axis by about dlon * sin(lat).
+    tilt = f.north_angle(39.1, 117.3) - np.pi / 2
+    assert tilt == pytest.approx(np.radians(0.1) * np.sin(np.radians(39.1)), rel=0.02)

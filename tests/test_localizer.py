@@ -1,0 +1,190 @@
+"""The Localizer's handling of real-vehicle data: pairing with GPS, and every kind of bad input."""
+import math
+
+import numpy as np
+import pytest
+
+from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer.geodesy import LocalFrame
+
+DATUM = (39.1, 117.2, 5.0)
+FRAME = LocalFrame(*DATUM)
+EMITTER = (1200.0, 800.0)
+
+
+def fix_at(east, north):
+    lat, lon, _ = FRAME.to_geodetic(east, north, 0.0)
+    return float(lat), float(lon)
+
+
+def azimuth(east, north):
+    return math.degrees(math.atan2(EMITTER[0] - east, EMITTER[1] - north)) % 360
+
+
+def drive(loc, seconds=120, speed=10.0, df_hz=5, noise_deg=0.5, seed=0, track=lambda t: (10.0 * t, 0.3 * 10.0 * t)):
+    """A vehicle on a straight-ish road: 1 Hz fixes, DF readings in between; returns the last estimate."""
+    rng = np.random.default_rng(seed)
+    est = None
+    for k in range(seconds):
+        e, n = track(k)
+        est = loc.add_fix(k, *fix_at(e, n), 5.0) or est
+        for j in range(df_hz):
+            t = k + (j + 0.5) / df_hz
+            e, n = track(t)
+            est = loc.add_bearing(t, azimuth(e, n) + rng.normal(0, noise_deg), 90.0) or est
+    est = loc.add_fix(seconds, *fix_at(*track(seconds)), 5.0) or est  # brackets the last readings
+    return loc.flush() or est
+
+
+def curved(t):
+    """A road that turns left after 60 s, so the bearings cross."""
+    return (10.0 * t, 0.0) if t < 60 else (600.0 + 7.0 * (t - 60), 7.0 * (t - 60))
+
+
+@pytest.fixture
+def loc():
+    return Localizer(LocalizerConfig(seed=4, datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
+
+
+def test_localises_a_drive_past_the_emitter(loc):
+    est = drive(loc, track=curved)
+    assert est is not None and math.hypot(est.east - EMITTER[0], est.north - EMITTER[1]) < 30
+    lat, lon = fix_at(est.east, est.north)
+    assert est.lat == pytest.approx(lat, abs=1e-7) and est.lon == pytest.approx(lon, abs=1e-7)
+    assert est.cov.shape == (2, 2) and np.all(np.linalg.eigvalsh(est.cov) > 0)
+    assert sum(loc.rejected.values()) == 0
+
+
+def test_bearing_between_fixes_uses_the_interpolated_position(loc):
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_fix(1.0, *fix_at(10.0, 0.0))
+    loc.add_bearing(0.5, 45.0, 90.0)
+    (reading,) = loc.builder.readings
+    assert reading.east == pytest.approx(5.0, abs=1e-3) and reading.north == pytest.approx(0.0, abs=1e-3)
+    assert reading.theta == pytest.approx(math.radians(45.0), abs=1e-6)
+
+
+def test_bearing_after_the_newest_fix_waits_for_the_next_one(loc):
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_bearing(0.5, 45.0, 90.0)
+    assert len(loc.pending) == 1 and not loc.builder.readings
+    loc.add_fix(1.0, *fix_at(10.0, 0.0))
+    assert not loc.pending and loc.builder.readings[0].east == pytest.approx(5.0, abs=1e-3)
+
+
+def test_bearing_in_a_gps_gap_is_dropped_not_paired_with_a_stale_fix(loc):
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_bearing(0.5, 45.0, 90.0)  # waits
+    loc.add_fix(10.0, *fix_at(100.0, 0.0))  # 10 s later: gap > gps_max_gap_s
+    assert loc.rejected["gps_gap"] == 1
+    loc.add_bearing(13.0, 45.0, 90.0)  # 3 s after the newest fix: no fix can bracket it within 2 s
+    assert loc.rejected["gps_gap"] == 2 and not loc.builder.readings
+
+
+def test_bearings_before_any_fix_and_left_waiting_at_the_end_are_counted(loc):
+    loc.add_bearing(0.0, 45.0, 90.0)
+    assert loc.rejected["before_first_fix"] == 1
+    loc.add_fix(1.0, *fix_at(0.0, 0.0))
+    loc.add_bearing(1.5, 45.0, 90.0)
+    loc.flush()
+    assert loc.rejected["no_fix_after"] == 1
+
+
+@pytest.mark.parametrize("args, reason", [
+    ((1.0, float("nan"), 90.0), "bad_azimuth"),
+    ((1.0, float("inf"), 90.0), "bad_azimuth"),
+    ((1.0, "north", 90.0), "bad_azimuth"),
+    ((float("nan"), 10.0, 90.0), "bad_stamp"),
+    ((1.0, 10.0, 150.0), "bad_quality"),
+    ((1.0, 10.0, -1.0), "bad_quality"),
+    ((1.0, 10.0, 39.9), "low_quality"),
+])
+def test_bad_bearings_are_rejected_with_a_reason(loc, args, reason):
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_fix(2.0, *fix_at(0.0, 0.0))
+    assert loc.add_bearing(*args) is None
+    assert loc.rejected == {reason: 1}
+    assert not loc.pending and not loc.builder.readings
+
+
+def test_unknown_quality_is_used_but_counted(loc):
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_fix(2.0, *fix_at(0.0, 0.0))
+    loc.add_bearing(1.0, 10.0, float("nan"))
+    assert loc.unknown_quality == 1 and len(loc.builder.readings) == 1
+
+
+def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_fix(2.0, *fix_at(0.0, 0.0))
+    loc.add_bearing(1.0, 10.0, 90.0)
+    loc.add_bearing(1.0, 10.0, 90.0)
+    loc.add_bearing(0.5, 10.0, 90.0)
+    assert loc.rejected == {"bearing_repeated": 1, "bearing_out_of_order": 1}
+
+
+@pytest.mark.parametrize("args, reason", [
+    ((1.0, float("nan"), 117.2), "fix_bad_position"),
+    ((1.0, 39.1, float("inf")), "fix_bad_position"),
+    ((1.0, 91.0, 117.2), "fix_bad_position"),
+    ((float("inf"), 39.1, 117.2), "fix_bad_stamp"),
+])
+def test_bad_fixes_are_rejected(loc, args, reason):
+    loc.add_fix(*args)
+    assert loc.rejected == {reason: 1} and len(loc.track) == 0
+
+
+def test_fix_without_a_fix_and_fixes_out_of_order_are_rejected(loc):
+    loc.add_fix(5.0, 39.1, 117.2, 5.0, status=-1)
+    loc.add_fix(5.0, 39.1, 117.2)
+    loc.add_fix(5.0, 39.1, 117.2)
+    loc.add_fix(4.0, 39.1, 117.2)
+    assert loc.rejected == {"fix_no_fix": 1, "fix_repeated": 1, "fix_out_of_order": 1}
+    assert len(loc.track) == 1
+
+
+def test_datum_comes_from_the_first_valid_fix_when_unset():
+    loc = Localizer(LocalizerConfig())
+    loc.add_fix(0.0, float("nan"), 0.0)
+    loc.add_fix(1.0, -33.9, -70.6, 520.0)
+    assert (loc.frame.lat0, loc.frame.lon0, loc.frame.alt0) == (-33.9, -70.6, 520.0)
+
+
+def test_driving_straight_at_the_emitter_never_starts_from_a_garbage_fix(loc):
+    est = drive(loc, seconds=60, track=lambda t: (10.0 * t * 0.832, 10.0 * t * 0.5547))  # along the emitter's bearing
+    assert est is None and loc.filter is None
+    assert "waiting for geometry" in loc.status and "parallel" in loc.status
+
+
+def test_a_fixed_seed_reproduces_a_run_and_another_seed_does_not():
+    runs = []
+    for seed in (7, 7, 8):
+        loc = Localizer(LocalizerConfig(seed=seed))
+        runs.append(drive(loc, seconds=90, track=curved, seed=1))
+    assert runs[0].east == runs[1].east and runs[0].north == runs[1].north
+    assert runs[0].east != runs[2].east
+
+
+def test_reset_drops_the_track_but_keeps_datum_and_counters(loc):
+    drive(loc, seconds=90, track=curved)
+    loc.add_bearing(-5.0, 10.0, 10.0)
+    frame = loc.frame
+    loc.reset()
+    assert loc.filter is None and len(loc.track) == 0 and loc.estimate is None
+    assert loc.frame == frame and loc.rejected["low_quality"] == 1
+    assert drive(loc, seconds=90, track=curved) is not None
+
+
+def test_garbage_never_raises():
+    loc = Localizer(LocalizerConfig(seed=1))
+    rng = np.random.default_rng(0)
+    values = [float("nan"), float("inf"), -float("inf"), None, "x", 1e300, -1e300, 0.0, 45.0, 100.0]
+    for k in range(2000):
+        if rng.random() < 0.3:
+            loc.add_fix(rng.choice(values[:8]) if rng.random() < 0.2 else k * 0.1,
+                        *(rng.choice(values) if rng.random() < 0.2 else v for v in fix_at(k, 0.5 * k)))
+        else:
+            loc.add_bearing(*(rng.choice(values) if rng.random() < 0.3 else v
+                              for v in (k * 0.1, azimuth(k, 0.5 * k), 80.0)))
+    loc.flush()
+    assert sum(loc.rejected.values()) > 0

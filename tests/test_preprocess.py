@@ -1,0 +1,95 @@
+import math
+
+import numpy as np
+import pytest
+
+from aoa_localizer.config import LocalizerConfig
+from aoa_localizer.preprocess import (PointBuilder, corrected_mean_coefficients, make_point, point_coefficients,
+                                      quality_weight, reading_sigma, recursive_corrected_mean)
+from aoa_localizer.types import Reading
+
+
+def test_quality_weight_eq20_by_hand():
+    # Q >= 85: (Q-85)/150; 70..85: (Q-70)/375 + 1/8; 55..70: (Q-55)/600 + 1/4.
+    assert quality_weight(100) == pytest.approx(0.1)
+    assert quality_weight(85) == pytest.approx(0.0)
+    assert quality_weight(84) == pytest.approx(14 / 375 + 0.125)
+    assert quality_weight(70) == pytest.approx(0.125)
+    assert quality_weight(55) == pytest.approx(0.25)
+    assert quality_weight(60) == pytest.approx(5 / 600 + 0.25)
+
+
+def test_quality_weight_rule_below_55_continues_the_papers_pattern():
+    assert quality_weight(40) == pytest.approx(3 / 8)
+    assert quality_weight(47.5) == pytest.approx(7.5 / 825 + 3 / 8)
+    assert quality_weight(54.999) == pytest.approx(14.999 / 825 + 3 / 8)
+    assert quality_weight(float("nan")) == 0.0
+
+
+def test_corrected_mean_coefficients_match_the_papers_recursion():
+    gammas = np.array([10.0, 12.0, 9.0, 11.5])
+    w = quality_weight(np.array([90.0, 60.0, 75.0, 100.0]))
+    a = corrected_mean_coefficients(w)
+    assert a.sum() == pytest.approx(1.0)
+    assert a @ gammas == pytest.approx(recursive_corrected_mean(gammas, w))
+
+
+def test_recursive_corrected_mean_by_hand():
+    # n=1: mean 10, corrected 10; n=2 (W=0.5): mean 11, corrected 12 - 1*0.5 = 11.5; mean of (10, 11.5) = 10.75.
+    assert recursive_corrected_mean([10.0, 12.0], [0.0, 0.5]) == pytest.approx(10.75)
+    a = corrected_mean_coefficients([0.0, 0.5])
+    assert a == pytest.approx([0.5 * (1 + 0.5 / 2), 0.5 * (0.5 + 0.5 / 2)])
+
+
+def _reading(theta_deg, q=90.0, sigma_deg=1.0, t=0.0, e=0.0, n=0.0):
+    return Reading(t, math.radians(theta_deg), q, math.radians(sigma_deg), e, n)
+
+
+def test_point_bearing_is_circular_across_the_wrap():
+    cfg = LocalizerConfig(point_weighting="equal")
+    p, wild = make_point([_reading(179.0), _reading(-179.0), _reading(179.5), _reading(-179.5)], cfg)
+    assert wild == 0
+    assert abs(abs(p.theta) - math.pi) < 1e-9  # 180 deg, not 0
+
+
+def test_point_variance_counts_correlated_readings_honestly():
+    readings = [_reading(10.0 + 0.01 * i, sigma_deg=2.0) for i in range(10)]
+    independent, _ = make_point(readings, LocalizerConfig(point_weighting="equal", df_correlation=0.0))
+    correlated, _ = make_point(readings, LocalizerConfig(point_weighting="equal", df_correlation=1.0))
+    assert independent.sigma == pytest.approx(math.radians(2.0) / math.sqrt(10))
+    assert correlated.sigma == pytest.approx(math.radians(2.0))  # fully correlated: one reading's worth
+
+
+def test_inverse_variance_weights_and_position_follow_the_coefficients():
+    a = point_coefficients(np.array([90.0, 90.0]), np.radians([1.0, 2.0]), "inverse_variance")
+    assert a == pytest.approx([0.8, 0.2])
+    p, _ = make_point([_reading(10.0, sigma_deg=1.0, e=0.0), _reading(20.0, sigma_deg=2.0, e=10.0)],
+                      LocalizerConfig(point_weighting="inverse_variance"))
+    assert math.degrees(p.theta) == pytest.approx(12.0)
+    assert p.east == pytest.approx(2.0)
+    assert p.sigma == pytest.approx(math.radians(math.sqrt(0.8**2 * 1 + 0.2**2 * 4)))
+
+
+def test_wild_reading_inside_a_point_is_gated_and_counted():
+    readings = [_reading(30.0), _reading(30.5), _reading(29.5), _reading(200.0), _reading(30.2)]
+    p, wild = make_point(readings, LocalizerConfig())
+    assert wild == 1 and p.n_readings == 4
+    assert math.degrees(p.theta) == pytest.approx(30.05, abs=0.3)
+
+
+def test_reading_sigma_models():
+    cfg = LocalizerConfig(sigma_model="quality", sigma_q100_deg=1.0, sigma_q40_deg=8.0)
+    assert np.degrees(reading_sigma(np.array([100.0, 40.0, 70.0, float("nan")]), cfg)) == pytest.approx([1, 8, 4.5, 8])
+    assert np.degrees(reading_sigma(np.array([50.0]), LocalizerConfig(bearing_sigma_deg=2.5))) == pytest.approx([2.5])
+
+
+def test_point_builder_closes_on_time_distance_and_count():
+    cfg = LocalizerConfig(obs_max_duration_s=1.0, obs_max_distance_m=10.0, obs_max_readings=3)
+    b = PointBuilder(cfg)
+    assert b.add(_reading(1, t=0.0)) == [] and b.add(_reading(1, t=0.5)) == []
+    closed = b.add(_reading(1, t=1.6))  # more than 1 s after the first: closes the first two
+    assert [len(g) for g in closed] == [2]
+    assert [len(g) for g in b.add(_reading(1, t=1.7, e=20.0))] == [1]  # 20 m away
+    b.add(_reading(1, t=1.8, e=20.0))
+    assert [len(g) for g in b.add(_reading(1, t=1.9, e=20.0))] == [3]  # full at 3 readings
+    assert b.flush() is None
