@@ -163,7 +163,7 @@ class Localizer:
             if math.isnan(quality):
                 self.unknown_quality += 1
             reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality,
-                              float(reading_sigma(quality, self.cfg)), east, north)
+                              reading_sigma(quality, self.cfg), east, north)
             closed = self.builder.add(reading)
             if closed:
                 estimate = self._use_points(closed) or estimate

@@ -32,15 +32,13 @@ def quality_weight(quality):
     return np.where(np.isnan(q), 0.0, w)
 
 
-def reading_sigma(quality, cfg: LocalizerConfig):
+def reading_sigma(quality: float, cfg: LocalizerConfig) -> float:
     """Standard deviation (rad) of one reading's bearing error under the configured noise model."""
-    q = np.asarray(quality, dtype=float)
     if cfg.sigma_model == "constant":
-        return np.full(q.shape, math.radians(cfg.bearing_sigma_deg))
+        return math.radians(cfg.bearing_sigma_deg)
     # Linear in quality between the two calibration points, flat outside them; NaN quality -> the Q=40 value.
-    qc = np.clip(np.nan_to_num(q, nan=40.0), 40.0, 100.0)
-    deg = cfg.sigma_q40_deg + (cfg.sigma_q100_deg - cfg.sigma_q40_deg) * (qc - 40.0) / 60.0
-    return np.radians(deg)
+    q = 40.0 if math.isnan(quality) else min(max(quality, 40.0), 100.0)
+    return math.radians(cfg.sigma_q40_deg + (cfg.sigma_q100_deg - cfg.sigma_q40_deg) * (q - 40.0) / 60.0)
 
 
 def corrected_mean_coefficients(weights) -> np.ndarray:

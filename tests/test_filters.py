@@ -108,3 +108,17 @@ def test_uniform_disc_is_inside_the_unit_disc_and_centred():
     r = np.hypot(d[:, 0], d[:, 1])
     assert r.max() <= 1.0 and d.mean(axis=0) == pytest.approx([0, 0], abs=0.02)
     assert np.mean(r < 0.5) == pytest.approx(0.25, abs=0.02)  # uniform in area
+
+
+def test_cached_posterior_of_each_fish_equals_a_fresh_evaluation():
+    from aoa_localizer.evaluation import run
+    from aoa_localizer.scenarios import simulate
+
+    res = run(simulate("straight", 1), LocalizerConfig(seed=5))
+    f = res.localizer.filter
+    assert f.history.appended == 60 and f.target_points >= 0
+    fresh = f.log_target(f.x)
+    if f.target_points == f.history.appended:
+        assert np.allclose(f.target, fresh)
+    f.move()  # a move always starts from a correct cache and leaves one behind
+    assert np.allclose(f.target, f.log_target(f.x))

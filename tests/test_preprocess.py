@@ -79,8 +79,9 @@ def test_wild_reading_inside_a_point_is_gated_and_counted():
 
 def test_reading_sigma_models():
     cfg = LocalizerConfig(sigma_model="quality", sigma_q100_deg=1.0, sigma_q40_deg=8.0)
-    assert np.degrees(reading_sigma(np.array([100.0, 40.0, 70.0, float("nan")]), cfg)) == pytest.approx([1, 8, 4.5, 8])
-    assert np.degrees(reading_sigma(np.array([50.0]), LocalizerConfig(bearing_sigma_deg=2.5))) == pytest.approx([2.5])
+    sigmas = [reading_sigma(q, cfg) for q in (100.0, 40.0, 70.0, float("nan"), 20.0)]
+    assert np.degrees(sigmas) == pytest.approx([1, 8, 4.5, 8, 8])
+    assert math.degrees(reading_sigma(50.0, LocalizerConfig(bearing_sigma_deg=2.5))) == pytest.approx(2.5)
 
 
 def test_point_builder_closes_on_time_distance_and_count():

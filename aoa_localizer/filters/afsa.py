@@ -52,6 +52,10 @@ class AfsaFilter(ParticleFilter):
         self.acceptance = float("nan")  # share of accepted moves in the last mcmc move stage
         self.school_rounds = 0  # rounds the paper school swam at the last step
         self.spread = np.eye(2)  # weighted covariance of the school just before the last resampling
+        # Log posterior of each fish over the kept history, kept up to date between moves (mcmc only);
+        # valid while it counts the same points as the history window.
+        self.target = np.zeros(self.n)
+        self.target_points = -1
 
     def predict(self):
         """Paper: the random walk of eq. 17. mcmc: the emitter is static (paper sec. 3.1); the moves keep diversity."""
@@ -59,7 +63,17 @@ class AfsaFilter(ParticleFilter):
             super().predict()
 
     # -- the paper's school ---------------------------------------------------------------------
+    def initialise(self, particles, prior_mean, prior_cov):
+        super().initialise(particles, prior_mean, prior_cov)
+        self.target, self.target_points = self.log_target(self.x), self.history.appended
+
     def after_weight(self, p: ObservationPoint):
+        if not self.paper:
+            # The fish did not move since the last point: their posterior gains this point's likelihood.
+            fresh = self.target_points == self.history.appended - 1 and self.history.dropped == 0
+            if fresh:
+                self.target = self.target + self.last_ll
+                self.target_points += 1
         if self.paper:
             self.x = self.swim(self.x, p)
             ll = self.loglik(self.x, p)
@@ -106,17 +120,22 @@ class AfsaFilter(ParticleFilter):
         if not self.paper:
             self.move()
 
-    def resample(self):
+    def resample(self) -> np.ndarray:
         # The weighted cloud before resampling is the better picture of the posterior's spread:
         # after it a degenerate school may sit on a handful of points.
         self.spread = self.estimate()[1]
-        super().resample()
+        idx = super().resample()
+        self.target = self.target[idx]
+        return idx
 
     def move(self):
         """Prey looks accepted by Metropolis-Hastings on the posterior, `max_iterations` sweeps."""
         a, rng, n = self.cfg.afsa, self.rng, self.n
         chol = np.linalg.cholesky(self.spread + _MIN_SPREAD_M2 * np.eye(2))
-        target = self.log_target(self.x)
+        if self.target_points != self.history.appended or self.history.dropped:
+            self.target = self.log_target(self.x)
+        self.target_points = self.history.appended
+        target = self.target
         accepted = 0
         for _ in range(a.max_iterations):
             look = self.x + a.visual * uniform_disc(rng, (n,)) @ chol.T
@@ -125,4 +144,5 @@ class AfsaFilter(ParticleFilter):
             self.x = np.where(take[:, None], look, self.x)
             target = np.where(take, look_target, target)
             accepted += int(take.sum())
+        self.target = target
         self.acceptance = accepted / (n * a.max_iterations)

@@ -6,6 +6,8 @@ One `update(point)` is one observation point: predict -> weight -> `after_weight
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..config import LocalizerConfig
@@ -20,10 +22,16 @@ class PointHistory:
     def __init__(self, size: int):
         self.size = size
         self.data = np.empty((0, 4))  # east, north, theta, sigma
+        self.appended = 0  # points ever appended (the window may have dropped some)
 
     def append(self, p: ObservationPoint):
         row = np.array([[p.east, p.north, p.theta, p.sigma]])
         self.data = np.concatenate([self.data[-(self.size - 1):] if self.size > 1 else self.data[:0], row])
+        self.appended += 1
+
+    @property
+    def dropped(self) -> int:
+        return self.appended - len(self)
 
     def __len__(self):
         return self.data.shape[0]
@@ -53,6 +61,7 @@ class ParticleFilter:
     def initialise(self, particles: np.ndarray, prior_mean, prior_cov):
         """Start from given particles (equal weights) and a Gaussian prior the move steps respect."""
         self.x = np.array(particles, dtype=float).reshape(self.n, 2)
+        self.initial = self.x.copy()  # the start cloud, kept for peers fed the same start (benchmark)
         self.logw = np.zeros(self.n)
         self.prior_mean = np.asarray(prior_mean, float)
         self.prior_prec = np.linalg.inv(np.asarray(prior_cov, float))
@@ -82,30 +91,37 @@ class ParticleFilter:
         return w / w.sum()
 
     def ess(self) -> float:
-        w = self.weights
-        return float(1.0 / np.sum(w * w))
+        """(sum w)^2 / sum w^2 of the unnormalised weights: 1/sum(w^2) without normalising first."""
+        w = np.exp(self.logw - self.logw.max())
+        return float(w.sum() ** 2 / np.dot(w, w))
 
     def should_resample(self) -> bool:
         return self.ess() < self.cfg.ess_threshold * self.n
 
-    def resample(self):
+    def resample(self) -> np.ndarray:
+        """Resample in place; returns the ancestor indices."""
         idx = self.resampler(self.weights, self.rng)
         self.x = self.x[idx]
         self.logw = np.zeros(self.n)
+        return idx
 
     def update(self, p: ObservationPoint) -> bool:
-        """One measurement; False (and nothing changed but the prediction) if no particle can explain it."""
-        self.history.append(p)
-        self.predict()
-        self.prev_logw = self.logw
-        with np.errstate(invalid="ignore"):  # a NaN likelihood is handled as zero just below
-            ll = self.loglik(self.x, p)
-        new = self.logw + np.where(np.isfinite(ll), ll, -np.inf)
-        if not np.isfinite(new.max()):
+        """One measurement; False if it is unusable or no particle can explain it (weights untouched)."""
+        if not (math.isfinite(p.theta) and p.sigma > 0 and math.isfinite(p.east) and math.isfinite(p.north)):
             self.skipped += 1
             self.resampled = False
             return False
-        self.logw = new - new.max()
+        self.history.append(p)
+        self.predict()
+        self.prev_logw = self.logw
+        self.last_ll = ll = self.loglik(self.x, p)
+        new = self.logw + ll
+        top = new.max()
+        if not math.isfinite(top):
+            self.skipped += 1
+            self.resampled = False
+            return False
+        self.logw = new - top
         self.after_weight(p)
         self.resampled = self.should_resample()
         if self.resampled:

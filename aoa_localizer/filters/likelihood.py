@@ -5,22 +5,26 @@ import math
 
 import numpy as np
 
-from ..geodesy import TWO_PI, wrap_pi
+from ..geodesy import TWO_PI
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 
 
 def gaussian_loglik(residual, sigma):
     """log N(residual; 0, sigma^2): the paper's likelihood (eq. 24) with its normalising constant."""
-    return -0.5 * (residual / sigma) ** 2 - np.log(sigma) - _LOG_SQRT_2PI
+    log_sigma = math.log(sigma) if np.ndim(sigma) == 0 else np.log(sigma)
+    return (-0.5 / sigma**2) * residual**2 - (log_sigma + _LOG_SQRT_2PI)
 
 
 def mixture_loglik(residual, sigma, outlier_prob: float):
-    """log((1 - e) N(residual; 0, sigma^2) + e / 2pi): a wild bearing costs at most log(e / 2pi)."""
+    """log((1 - e) N(residual; 0, sigma^2) + e / 2pi): a wild bearing costs at most log(e / 2pi).
+
+    Written as log(exp(g) + c): where exp(g) underflows the result is log(c), exactly the floor.
+    """
     g = gaussian_loglik(residual, sigma) + math.log1p(-outlier_prob)
     if outlier_prob == 0:
         return g
-    return np.logaddexp(g, math.log(outlier_prob / TWO_PI))
+    return np.log(np.exp(g) + outlier_prob / TWO_PI)
 
 
 class BearingLikelihood:
@@ -35,9 +39,17 @@ class BearingLikelihood:
         self.gps_var = gps_sigma_m**2
 
     def log(self, particles: np.ndarray, east, north, theta, sigma) -> np.ndarray:
-        """Log-likelihood; broadcasting (N, 1, 2) particles against (K,) points gives (N, K)."""
+        """Log-likelihood; broadcasting (N, 1, 2) particles against (K,) points gives (N, K).
+
+        The residual z - bearing(x) is the angle from the antenna->particle direction d to the
+        measured direction u: atan2(d x u, d . u), already in (-pi, pi] without wrapping.
+        """
         dx, dy = particles[..., 0] - east, particles[..., 1] - north
-        r = wrap_pi(theta - np.arctan2(dy, dx))
+        if np.ndim(theta) == 0:  # one point: scalar maths is several times cheaper than numpy's
+            c, s = math.cos(theta), math.sin(theta)
+        else:
+            c, s = np.cos(theta), np.sin(theta)
+        r = np.arctan2(dx * s - dy * c, dx * c + dy * s)
         if self.gps_var:
             sigma = np.sqrt(sigma**2 + self.gps_var / np.maximum(dx * dx + dy * dy, 1.0))
         return mixture_loglik(r, sigma, self.outlier_prob)

@@ -1,0 +1,180 @@
+"""Benchmark the public scenarios of BENCHMARKS.md: accuracy against the CRLB, honesty of the ellipse, speed.
+
+Runs r = 0..runs-1 of each scenario (data seeded r, filters 10000 + r, so all filters see the same data)
+through the engine with each filter, plus the `particles` package's bootstrap and IBIS filters on the
+same observation points when it is installed (pip install -e '.[bench]'). Prints one table per scenario
+and the AFSA paper's Table 1 next to ours for `seed`.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import logging
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import particles_peers  # noqa: E402
+
+from aoa_localizer import LocalizerConfig  # noqa: E402
+from aoa_localizer.crlb import ELLIPSE_95, nees  # noqa: E402
+from aoa_localizer.evaluation import LARGE_ERROR_M, run  # noqa: E402
+from aoa_localizer.scenarios import SCENARIOS, simulate  # noqa: E402
+
+logging.getLogger("aoa_localizer").setLevel(logging.ERROR)  # per-run first-rejection notes would flood the table
+
+FILTERS = {
+    "afsa": {"algorithm": "afsa"},
+    "afsa-paper": {"algorithm": "afsa", "afsa.variant": "paper"},
+    "sir": {"algorithm": "sir"},
+}
+PEERS = ("particles-bootstrap", "particles-ibis")
+# AFSA paper, Table 1 (relative error x / y in %, seconds for 60 steps, "large errors" of 60 estimates).
+PAPER_TABLE1 = {"sir": (0.266, 0.206, 0.183, 16), "afsa": (0.101, 0.091, 0.352, 6)}
+
+
+def peer_runs(data, res, truth_engine, n, seed):
+    """Run the particles peers on the points our filter used; returns {name: (estimates, step_s)}."""
+    f = res.localizer.filter
+    points = f.history.data
+    cfg = res.localizer.cfg
+    if cfg.has_prior:
+        mean, cov = np.array([cfg.prior_east, cfg.prior_north]), cfg.prior_sigma_m**2 * np.eye(2)
+        # The scenario prior is in the scenario frame; our engine frame may be shifted (datum = first fix).
+        mean = mean + (truth_engine - data.emitter_enu)
+    else:
+        mean, cov = f.initial.mean(axis=0), 2.0 * np.cov(f.initial.T)
+    out = {"particles-bootstrap": particles_peers.run_bootstrap(points, mean, cov, n, cfg.process_noise_m,
+                                                                cfg.outlier_prob, seed),
+           "particles-ibis": particles_peers.run_ibis(points, mean, cov, n, cfg.outlier_prob, seed)}
+    return out
+
+
+def peer_scores(estimates, step_s, truth_engine, crlb, sample_cov_from=None):
+    err = np.array(estimates[-1]) - truth_engine
+    errors = [float(np.hypot(*(np.array(e) - truth_engine))) for e in estimates]
+    return {"converged": True, "error": float(np.hypot(*err)), "err_east": float(err[0]), "err_north": float(err[1]),
+            "crlb": crlb, "large_errors": int(sum(e > LARGE_ERROR_M for e in errors)), "steps": len(estimates),
+            "step_s": step_s}
+
+
+def aggregate(rows, truth) -> dict:
+    ok = [r for r in rows if r["converged"]]
+    if not ok:
+        return {"runs": len(rows), "failed": len(rows)}
+    err = np.array([r["error"] for r in ok])
+    ex = np.array([r["err_east"] for r in ok])
+    ey = np.array([r["err_north"] for r in ok])
+    steps = np.concatenate([r["step_s"] for r in ok])
+    crlb = float(np.sqrt(np.mean(np.square([r["crlb"] for r in ok]))))
+    out = {
+        "runs": len(rows), "failed": len(rows) - len(ok),
+        "rmse_m": float(np.sqrt(np.mean(err**2))), "crlb_m": crlb,
+        "rel_x_pct": float(100 * np.mean(np.abs(ex)) / abs(truth[0])),
+        "rel_y_pct": float(100 * np.mean(np.abs(ey)) / abs(truth[1])),
+        "bias_x_pct": float(100 * np.mean(ex) / truth[0]), "bias_y_pct": float(100 * np.mean(ey) / truth[1]),
+        "large_errors_per_run": float(np.mean([r["large_errors"] for r in ok])),
+        "steps_per_run": float(np.mean([r["steps"] for r in ok])),
+        "step_median_ms": float(1e3 * np.median(steps)), "step_p95_ms": float(1e3 * np.percentile(steps, 95)),
+        "step_mean_ms": float(1e3 * np.mean(steps)),
+        "filter_total_ms": float(1e3 * np.mean([np.sum(r["step_s"]) for r in ok])),
+    }
+    out["rmse_over_crlb"] = out["rmse_m"] / crlb
+    if "nees" in ok[0]:
+        out["nees_mean"] = float(np.mean([r["nees"] for r in ok]))
+        out["coverage95_pct"] = float(100 * np.mean([r["inside95"] for r in ok]))
+        out["engine_wall_ms"] = float(1e3 * np.mean([r["wall_s"] for r in ok]))
+    return out
+
+
+def bench_scenario(name, runs, n, filters, with_peers, bar):
+    rows = {f: [] for f in filters}
+    rows.update({p: [] for p in (PEERS if with_peers else ())})
+    for r in range(runs):
+        data = simulate(name, r)
+        for fname in filters:
+            cfg = LocalizerConfig(seed=10000 + r, num_particles=n).with_changes(**FILTERS[fname])
+            res = run(data, cfg)
+            s = dict(res.scores, step_s=res.step_s, wall_s=res.wall_s)
+            s.pop("errors", None)
+            rows[fname].append(s)
+            if with_peers and fname == "afsa" and s["converged"]:
+                frame = res.localizer.frame
+                truth_engine = np.array(frame.to_enu(*data.emitter_lat_lon))
+                for peer, (est, step_s) in peer_runs(data, res, truth_engine, n, 10000 + r).items():
+                    rows[peer].append(peer_scores(est, step_s, truth_engine, s["crlb"]))
+            bar.update()
+    truth = SCENARIOS[name].emitter
+    return {f: aggregate(v, truth) for f, v in rows.items() if v}
+
+
+def print_tables(results):
+    cols = [("rmse_m", "RMSE m", "{:.2f}"), ("crlb_m", "CRLB m", "{:.2f}"), ("rmse_over_crlb", "xCRLB", "{:.2f}"),
+            ("rel_x_pct", "relX %", "{:.3f}"), ("rel_y_pct", "relY %", "{:.3f}"),
+            ("bias_x_pct", "biasX %", "{:+.3f}"), ("bias_y_pct", "biasY %", "{:+.3f}"),
+            ("large_errors_per_run", ">15m/run", "{:.1f}"), ("nees_mean", "NEES", "{:.2f}"),
+            ("coverage95_pct", "cov95 %", "{:.0f}"), ("step_median_ms", "med ms", "{:.3f}"),
+            ("step_p95_ms", "p95 ms", "{:.3f}"), ("step_mean_ms", "mean ms", "{:.3f}"), ("filter_total_ms", "run ms", "{:.1f}"), ("failed", "fail", "{}")]
+    for scenario, by_filter in results.items():
+        print(f"\n## {scenario}")
+        print("| filter | " + " | ".join(c[1] for c in cols) + " |")
+        print("|---" * (len(cols) + 1) + "|")
+        for fname, m in by_filter.items():
+            cells = [fmt.format(m[k]) if k in m else "-" for k, _, fmt in cols]
+            print(f"| {fname} | " + " | ".join(cells) + " |")
+    ratios = [(sc, m["afsa"]["step_mean_ms"] / m["particles-ibis"]["step_mean_ms"],
+               m["afsa"]["step_median_ms"] / m["particles-ibis"]["step_median_ms"])
+              for sc, m in results.items() if "afsa" in m and "particles-ibis" in m and "step_mean_ms" in m["afsa"]]
+    if ratios:
+        print("\nAFSA-PF time / particles IBIS time, same runs: " + ", ".join(
+            f"{sc} {mean:.2f} (mean step), {med:.2f} (median step)" for sc, mean, med in ratios))
+    if "seed" in results:
+        print("\n## AFSA paper Table 1 (Matlab, i5-2450M) next to ours on `seed`")
+        print("| filter | paper relX % | ours | paper relY % | ours | paper s / 60 steps | ours (filter) | paper >15 m of 60 | ours |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        for fname, (px, py, pt, pl) in PAPER_TABLE1.items():
+            m = results["seed"].get(fname)
+            if m and "rmse_m" in m:
+                ours_t = m["filter_total_ms"] / 1e3 * 60 / m["steps_per_run"]
+                print(f"| {fname} | {px} | {m['rel_x_pct']:.3f} | {py} | {m['rel_y_pct']:.3f} | {pt} | {ours_t:.4f} | "
+                      f"{pl} | {m['large_errors_per_run']:.1f} |")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per scenario (default 100)")
+    parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
+    parser.add_argument("--filters", nargs="+", default=list(FILTERS), choices=list(FILTERS))
+    parser.add_argument("--particles", type=int, default=100, help="N for every filter (default 100)")
+    parser.add_argument("--no-peers", action="store_true", help="skip the particles package's filters")
+    parser.add_argument("--json", metavar="OUT", help="write all figures as JSON")
+    args = parser.parse_args(argv)
+    with_peers = particles_peers.AVAILABLE and not args.no_peers
+    if not particles_peers.AVAILABLE and not args.no_peers:
+        print("note: the `particles` package is not installed (pip install -e '.[bench]'): no peer rows", file=sys.stderr)
+    t0 = time.time()
+    results = {}
+    with tqdm(total=args.runs * len(args.scenarios) * len(args.filters), unit="run", file=sys.stderr) as bar:
+        for name in args.scenarios:
+            bar.set_description(name)
+            results[name] = bench_scenario(name, args.runs, args.particles, args.filters, with_peers, bar)
+    print_tables(results)
+    meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
+            "processor": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            "python": platform.python_version(), "numpy": np.__version__, "runs": args.runs,
+            "particles": args.particles, "wall_s": round(time.time() - t0, 1)}
+    print(f"\n{meta['runs']} runs per scenario, N = {args.particles}, {meta['wall_s']} s, {meta['machine']}, "
+          f"{meta['cores']} cores, {meta['date']}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
