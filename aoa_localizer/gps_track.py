@@ -30,10 +30,6 @@ class GpsTrack:
     def __len__(self):
         return len(self.t)
 
-    @property
-    def last_stamp(self) -> float | None:
-        return self.t[-1] if self.t else None
-
     def add(self, stamp: float, east: float, north: float, north_angle: float) -> str | None:
         """Append a fix; returns a rejection reason if its stamp is not after the newest one."""
         if self.t and stamp <= self.t[-1]:

@@ -136,10 +136,6 @@ class Localizer:
         """Drop the track, the points and the filter; keep the datum and the counters (the node's ~/reset)."""
         self._reset_track()
 
-    @property
-    def bearings_rejected(self) -> int:
-        return sum(v for k, v in self.rejected.items() if not k.startswith("fix_"))
-
     # -- pipeline -------------------------------------------------------------------------------
     def _reject(self, reason: str) -> None:
         self.rejected[reason] += 1

@@ -32,6 +32,7 @@ logging.getLogger("aoa_localizer").setLevel(logging.ERROR)  # per-run first-reje
 
 FILTERS = {
     "afsa": {"algorithm": "afsa"},
+    "afsa-gaussian": {"algorithm": "afsa", "likelihood": "gaussian"},
     "afsa-paper": {"algorithm": "afsa", "afsa.variant": "paper"},
     "sir": {"algorithm": "sir"},
 }
