@@ -72,7 +72,8 @@ class Localizer:
 
     def _reset_track(self):
         self.track = GpsTrack(self.cfg.gps_max_gap_s)
-        self.pending: deque[tuple[float, float, float]] = deque()  # (stamp, azimuth, quality) awaiting a fix
+        # (stamp, azimuth deg, quality, sigma rad or NaN) of bearings awaiting a fix after them
+        self.pending: deque[tuple[float, float, float, float]] = deque()
         self.builder = PointBuilder(self.cfg)
         self.init_points: list[ObservationPoint] = []
         self.filter = None
@@ -103,10 +104,27 @@ class Localizer:
             return self._reject(reason)
         if self.status == "waiting for a GPS fix":
             self.status = "collecting bearings"
-        return self._release_pending()
+        estimate = self._release_pending()
+        # A fix well after the open point's first reading closes it: a vehicle that stopped taking
+        # readings still gets its estimate, without waiting for the next reading.
+        open_point = self.builder.readings
+        if open_point and not self.pending and stamp - open_point[0].stamp > self.cfg.obs_max_duration_s:
+            estimate = self._use_points([self.builder.flush()]) or estimate
+        return estimate
 
     def add_bearing(self, stamp, azimuth_deg, quality=float("nan")) -> Estimate | None:
         """A DF record. Returns the estimate this reading produced (when it closed an observation point), else None."""
+        return self._add_bearing(stamp, azimuth_deg, quality, float("nan"))
+
+    def add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan")) -> Estimate | None:
+        """A bearing as a REP-103 yaw (rad, counter-clockwise from east at the antenna) with its variance
+        (the `pose` encoding). No quality: counted as unknown quality; NaN or non-positive variance
+        means the configured sigma."""
+        yaw, var = _as_float(yaw_rad), _as_float(variance_rad2)
+        sigma = math.sqrt(var) if var > 0 and math.isfinite(var) else float("nan")
+        return self._add_bearing(stamp, 90.0 - math.degrees(yaw) if math.isfinite(yaw) else yaw, float("nan"), sigma)
+
+    def _add_bearing(self, stamp, azimuth_deg, quality, sigma) -> Estimate | None:
         stamp, azimuth, quality = map(_as_float, (stamp, azimuth_deg, quality))
         if not math.isfinite(stamp):
             return self._reject("bad_stamp")
@@ -121,7 +139,7 @@ class Localizer:
         if not len(self.track) or stamp < self.track.t[0]:
             return self._reject("before_first_fix")
         self.last_bearing_stamp = stamp
-        self.pending.append((stamp, azimuth % 360.0, quality))
+        self.pending.append((stamp, azimuth % 360.0, quality, sigma))
         return self._release_pending()
 
     def flush(self) -> Estimate | None:
@@ -147,7 +165,7 @@ class Localizer:
         """Pair held bearings with the track in stamp order; stop at the first one still waiting for a fix."""
         estimate = None
         while self.pending:
-            stamp, azimuth, quality = self.pending[0]
+            stamp, azimuth, quality, sigma = self.pending[0]
             where, at = self.track.locate(stamp)
             if where is Where.WAIT:
                 break
@@ -158,8 +176,9 @@ class Localizer:
             east, north, north_angle = at
             if math.isnan(quality):
                 self.unknown_quality += 1
-            reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality,
-                              reading_sigma(quality, self.cfg), east, north)
+            if math.isnan(sigma):
+                sigma = reading_sigma(quality, self.cfg)
+            reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality, sigma, east, north)
             closed = self.builder.add(reading)
             if closed:
                 estimate = self._use_points(closed) or estimate

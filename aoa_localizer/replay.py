@@ -1,7 +1,12 @@
-"""Replay a rosbag2 MCAP bag. `--offline`: straight through the engine, no ROS, one JSON line per estimate.
+"""Replay a rosbag2 MCAP bag.
 
-Exit codes: 0 done; 1 the bag is damaged (estimates made before the damage are written); 2 bad
-options or unreadable bag; 3 the bag was read but gave no estimate (the reason is printed).
+Live (default): publish the bag's messages into the ROS graph in log-time order with the recorded
+timing divided by --rate (0: as fast as --max-rate allows), each topic with its recorded QoS,
+optionally remapped (--remap /gps/fix:=/car/gps/fix) or restricted (--topics).
+`--offline`: straight through the engine, no ROS, one JSON line per estimate.
+
+Exit codes: 0 done; 1 the bag is damaged (offline: estimates made before the damage are written);
+2 bad options or unreadable bag; 3 (offline) the bag was read but gave no estimate (the reason is printed).
 """
 from __future__ import annotations
 
@@ -9,6 +14,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 from tqdm import tqdm
 
@@ -96,21 +102,107 @@ def run_offline(args) -> int:
     return code
 
 
+def live_qos(profiles):
+    """The recorded offered QoS as an rclpy profile (reliable/volatile, depth 100, when none was recorded)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    if not profiles:
+        return QoSProfile(depth=100)
+    q = profiles[0]
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(100, int(q.depth)),
+                      reliability=ReliabilityPolicy(q.reliability.value) if q.reliability.value in (1, 2)
+                      else ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy(q.durability.value) if q.durability.value in (1, 2)
+                      else DurabilityPolicy.VOLATILE)
+
+
+def run_live(args) -> int:
+    import time
+
+    import rclpy
+    from rosbags.rosbag2 import Reader
+
+    from msgs_adapters.types import message_class
+
+    remap = {}
+    for item in args.remap:
+        src, sep, dst = item.partition(":=")
+        if not sep:
+            print(f"replay: --remap takes FROM:=TO, got {item!r}", file=sys.stderr)
+            return 2
+        remap[src] = dst
+    try:
+        reader = Reader(args.bag)
+        reader.open()
+    except Exception as exc:
+        print(f"replay: cannot read {args.bag}: {exc} (a damaged bag can still be salvaged with --offline)",
+              file=sys.stderr)
+        return 2
+    rclpy.init()
+    node = rclpy.create_node("aoa_replay")
+    code, sent = 0, 0
+    try:
+        pubs = {}
+        for conn in reader.connections:
+            if args.topics and conn.topic not in args.topics:
+                continue
+            cls = message_class(conn.msgtype)
+            if cls is None:
+                print(f"replay: skipping {conn.topic}: type {conn.msgtype} is not installed", file=sys.stderr)
+                continue
+            pubs[conn.id] = node.create_publisher(cls, remap.get(conn.topic, conn.topic),
+                                                  live_qos(conn.ext.offered_qos_profiles))
+        deadline = time.monotonic() + args.wait
+        while time.monotonic() < deadline and not all(p.get_subscription_count() for p in pubs.values()):
+            rclpy.spin_once(node, timeout_sec=0.05)
+        conns = [c for c in reader.connections if c.id in pubs]
+        t_wall0, t_log0 = time.monotonic(), None
+        for conn, log_time, raw in reader.messages(connections=conns):
+            if not rclpy.ok():
+                break
+            t_log0 = log_time if t_log0 is None else t_log0
+            delay = (t_wall0 + (log_time - t_log0) * 1e-9 / args.rate - time.monotonic()) if args.rate > 0 \
+                else 1.0 / args.max_rate
+            if delay > 0:
+                time.sleep(delay)
+            pubs[conn.id].publish(bytes(raw))
+            sent += 1
+        time.sleep(0.5)  # let the last messages leave
+        print(f"replayed {sent} messages from {args.bag}", file=sys.stderr)
+    except KeyboardInterrupt:
+        code = 0
+    except Exception as exc:  # a damaged chunk part-way
+        print(f"replay: {args.bag}: damaged after {sent} messages: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        reader.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.replay", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("bag", help="rosbag2 MCAP bag (directory with metadata.yaml, or a .mcap file)")
     parser.add_argument("--offline", action="store_true", help="run the engine on the bag without ROS")
+    parser.add_argument("--rate", type=float, default=1.0, help="live: playback rate (0: as fast as --max-rate)")
+    parser.add_argument("--max-rate", type=float, default=400.0, help="live, --rate 0: messages per second")
+    parser.add_argument("--remap", action="append", default=[], metavar="FROM:=TO", help="live: rename a topic")
+    parser.add_argument("--topics", nargs="+", help="live: play only these topics")
+    parser.add_argument("--wait", type=float, default=3.0, help="live: seconds to wait for every topic to have a subscriber")
     parser.add_argument("--output", default="-", help="JSON-lines file for the estimates (default: stdout)")
     parser.add_argument("--fix-topic", default="/gps/fix")
     parser.add_argument("--bearing-topic", default="/df/bearing")
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
-    if not args.offline:
-        print("replay: live replay into a ROS graph is not built yet (issue 3); use --offline", file=sys.stderr)
+    if args.offline:
+        return run_offline(args)
+    if not args.bag or not Path(args.bag).exists():
+        print(f"replay: no bag at {args.bag}", file=sys.stderr)
         return 2
-    return run_offline(args)
+    return run_live(args)
 
 
 if __name__ == "__main__":

@@ -43,6 +43,7 @@ class Scenario:
     df_rate_hz: float = 10.0
     gps_rate_hz: float = 1.0
     gps_noise_m: float = 0.0
+    gps_dropout_prob: float = 0.0  # share of fixes lost (drop-outs)
     gps_clock_offset_s: float = 0.37
     df_clock_offset_s: float = 0.05
     datum: tuple[float, float, float] = DATUM
@@ -145,6 +146,9 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
 
     # GPS fixes: true positions plus noise, as lat/lon.
     gps_enu = traj.at(t_gps) + sc.gps_noise_m * rng.standard_normal((t_gps.size, 2))
+    if sc.gps_dropout_prob:
+        kept = rng.random(t_gps.size) >= sc.gps_dropout_prob
+        t_gps, gps_enu = t_gps[kept], gps_enu[kept]
     lat, lon, alt = frame.to_geodetic(gps_enu[:, 0], gps_enu[:, 1], np.zeros(t_gps.size))
     fixes = np.column_stack([t_gps, lat, lon, alt])
 

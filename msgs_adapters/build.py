@@ -1,10 +1,16 @@
 """Engine records -> messages, by field name: the caller passes the message classes it uses
-(rosbags' typestore classes to write bags, rclpy's to publish), so one function serves both."""
+(rosbags' typestore classes to write bags, rclpy's to publish), so one function serves both.
+The outputs of the node (pose, fix, particles, markers, diagnostics) are built with rclpy's classes."""
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 
+import numpy as np
+
 from .fields import seconds_to_stamp
+
+ELLIPSE_POINTS = 64
 
 
 def rosbags_types(typestore) -> SimpleNamespace:
@@ -18,6 +24,22 @@ def rosbags_types(typestore) -> SimpleNamespace:
     )
 
 
+def rclpy_types() -> SimpleNamespace:
+    """rclpy's message classes under the same short names, plus the node's output types."""
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from geometry_msgs.msg import (Point, PointStamped, Pose, PoseArray, PoseWithCovariance,
+                                   PoseWithCovarianceStamped, Quaternion, Vector3, Vector3Stamped)
+    from sensor_msgs.msg import NavSatFix, NavSatStatus
+    from std_msgs.msg import ColorRGBA, Header
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    return SimpleNamespace(**{c.__name__: c for c in (
+        Time, Header, NavSatFix, NavSatStatus, Vector3Stamped, Vector3, PointStamped, Point, Pose, PoseArray,
+        PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, ColorRGBA, Marker, MarkerArray,
+        DiagnosticArray, DiagnosticStatus, KeyValue)})
+
+
 def header(T, stamp: float, frame_id: str):
     sec, nanosec = seconds_to_stamp(stamp)
     return T.Header(stamp=T.Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
@@ -26,11 +48,9 @@ def header(T, stamp: float, frame_id: str):
 def navsatfix(T, stamp: float, lat: float, lon: float, alt: float, status: int = 0,
               frame_id: str = "gps", covariance=None, covariance_type: int = 0):
     """sensor_msgs/NavSatFix (service 1 = GPS)."""
-    import numpy as np
-
     cov = np.zeros(9) if covariance is None else np.asarray(covariance, float).reshape(9)
     return T.NavSatFix(header=header(T, stamp, frame_id), status=T.NavSatStatus(status=status, service=1),
-                       latitude=lat, longitude=lon, altitude=alt, position_covariance=cov,
+                       latitude=float(lat), longitude=float(lon), altitude=float(alt), position_covariance=cov,
                        position_covariance_type=covariance_type)
 
 
@@ -38,9 +58,81 @@ def df_record(T, stamp: float, azimuth_deg: float, quality: float, frequency_hz:
               frame_id: str = "df_antenna"):
     """geometry_msgs/Vector3Stamped DF record."""
     return T.Vector3Stamped(header=header(T, stamp, frame_id),
-                            vector=T.Vector3(x=azimuth_deg, y=quality, z=frequency_hz))
+                            vector=T.Vector3(x=float(azimuth_deg), y=float(quality), z=float(frequency_hz)))
+
+
+def pose_bearing(T, stamp: float, yaw_rad: float, variance_rad2: float, frame_id: str = "df_antenna"):
+    """geometry_msgs/PoseWithCovarianceStamped bearing (the `pose` encoding): yaw in the orientation,
+    its variance in covariance[35]."""
+    cov = np.zeros(36)
+    cov[35] = variance_rad2
+    q = T.Quaternion(x=0.0, y=0.0, z=math.sin(yaw_rad / 2), w=math.cos(yaw_rad / 2))
+    return T.PoseWithCovarianceStamped(header=header(T, stamp, frame_id),
+                                       pose=T.PoseWithCovariance(pose=T.Pose(orientation=q), covariance=cov))
 
 
 def point_stamped(T, stamp: float, x: float, y: float, z: float = 0.0, frame_id: str = "map"):
     """geometry_msgs/PointStamped."""
-    return T.PointStamped(header=header(T, stamp, frame_id), point=T.Point(x=x, y=y, z=z))
+    return T.PointStamped(header=header(T, stamp, frame_id), point=T.Point(x=float(x), y=float(y), z=float(z)))
+
+
+def emitter_pose(T, est, frame_id: str = "map"):
+    """emitter/pose: x east, y north, the 2x2 covariance in the x/y block (other entries 0: not estimated)."""
+    cov = np.zeros(36)
+    cov[[0, 1, 6, 7]] = np.asarray(est.cov, float).reshape(4)
+    pose = T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0))
+    return T.PoseWithCovarianceStamped(header=header(T, est.stamp, frame_id),
+                                       pose=T.PoseWithCovariance(pose=pose, covariance=cov))
+
+
+def emitter_fix(T, est, alt: float):
+    """emitter/fix: lat/lon with the ENU covariance (m^2), COVARIANCE_TYPE_APPROXIMATED."""
+    cov = np.zeros(9)
+    cov[[0, 1, 3, 4]] = np.asarray(est.cov, float).reshape(4)
+    return navsatfix(T, est.stamp, est.lat, est.lon, alt, status=0, frame_id="map", covariance=cov,
+                     covariance_type=1)
+
+
+def particle_array(T, est, frame_id: str = "map"):
+    """emitter/particles: one pose per particle."""
+    poses = [T.Pose(position=T.Point(x=float(x), y=float(y), z=0.0), orientation=T.Quaternion(w=1.0))
+             for x, y in est.particles]
+    return T.PoseArray(header=header(T, est.stamp, frame_id), poses=poses)
+
+
+def ellipse_points(mean, cov, scale: float, n: int = ELLIPSE_POINTS) -> np.ndarray:
+    """Closed polygon (n+1, 2) of the ellipse x^T cov^-1 x = scale around mean."""
+    vals, vecs = np.linalg.eigh(np.asarray(cov, float))
+    a = np.linspace(0.0, 2 * math.pi, n + 1)
+    unit = np.stack([np.cos(a), np.sin(a)], axis=1) * np.sqrt(scale * np.maximum(vals, 0.0))
+    return np.asarray(mean, float) + unit @ vecs.T
+
+
+def markers(T, est, rays, ellipse_scale: float, frame_id: str = "map"):
+    """emitter/markers: the estimate (sphere), its 95 % ellipse (line strip), the bearing rays (line list).
+
+    rays: (M, 3) of antenna east, north and ENU bearing of the latest observation points.
+    """
+    h = header(T, est.stamp, frame_id)
+    colour = lambda r, g, b: T.ColorRGBA(r=r, g=g, b=b, a=1.0)  # noqa: E731
+    sphere = T.Marker(header=h, ns="estimate", id=0, type=2, action=0, scale=T.Vector3(x=4.0, y=4.0, z=4.0),
+                      color=colour(1.0, 0.1, 0.1),
+                      pose=T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0)))
+    ring = [T.Point(x=float(x), y=float(y), z=0.0) for x, y in ellipse_points((est.east, est.north), est.cov, ellipse_scale)]
+    ellipse = T.Marker(header=h, ns="ellipse95", id=1, type=4, action=0, scale=T.Vector3(x=1.0),
+                       color=colour(1.0, 0.8, 0.0), pose=T.Pose(orientation=T.Quaternion(w=1.0)), points=ring)
+    segments = []
+    for e, n, theta in rays:
+        length = 1.2 * math.hypot(est.east - e, est.north - n) + 50.0
+        segments += [T.Point(x=float(e), y=float(n), z=0.0),
+                     T.Point(x=float(e + length * math.cos(theta)), y=float(n + length * math.sin(theta)), z=0.0)]
+    ray_marker = T.Marker(header=h, ns="bearings", id=2, type=5, action=0, scale=T.Vector3(x=0.5),
+                          color=colour(0.2, 0.6, 1.0), pose=T.Pose(orientation=T.Quaternion(w=1.0)), points=segments)
+    return T.MarkerArray(markers=[sphere, ellipse, ray_marker])
+
+
+def diagnostic_array(T, stamp: float, name: str, level: int, message: str, values: dict):
+    """/diagnostics with one status; values become KeyValue strings."""
+    status = T.DiagnosticStatus(level=bytes([level]), name=name, message=message, hardware_id="aoa_localizer",
+                                values=[T.KeyValue(key=str(k), value=str(v)) for k, v in values.items()])
+    return T.DiagnosticArray(header=header(T, stamp, ""), status=[status])

@@ -55,3 +55,39 @@ def df_from_vector3stamped(msg) -> DfRecord:
     """geometry_msgs/Vector3Stamped DF record -> DfRecord (x azimuth deg, y quality, z frequency Hz)."""
     v = msg.vector
     return DfRecord(stamp_seconds(msg.header), _float(v.x), _float(v.y), _float(v.z))
+
+
+class PoseBearing(NamedTuple):
+    """A bearing in the `pose` encoding: REP-103 yaw (rad, CCW from east) and its variance (rad^2)."""
+
+    stamp: float
+    yaw_rad: float
+    variance_rad2: float
+
+
+def yaw_of(q) -> float:
+    """Yaw (rad) of a geometry_msgs/Quaternion, by field name."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def bearing_from_pose(msg) -> PoseBearing:
+    """geometry_msgs/PoseWithCovarianceStamped bearing -> PoseBearing (variance from covariance[35])."""
+    return PoseBearing(stamp_seconds(msg.header), yaw_of(msg.pose.pose.orientation), _float(msg.pose.covariance[35]))
+
+
+def estimate_from_pose(msg) -> tuple[float, float, float, list[list[float]]]:
+    """emitter/pose -> (stamp, east, north, 2x2 covariance)."""
+    c = msg.pose.covariance
+    return (stamp_seconds(msg.header), msg.pose.pose.position.x, msg.pose.pose.position.y,
+            [[c[0], c[1]], [c[6], c[7]]])
+
+
+def diagnostics_values(msg) -> dict[str, dict[str, str]]:
+    """DiagnosticArray -> {status name: {key: value, 'level': .., 'message': ..}}."""
+    out = {}
+    for st in msg.status:
+        values = {kv.key: kv.value for kv in st.values}
+        level = st.level if isinstance(st.level, int) else int.from_bytes(bytes(st.level), "little")
+        values.update(level=str(level), message=st.message)
+        out[st.name] = values
+    return out

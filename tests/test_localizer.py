@@ -188,3 +188,27 @@ def test_garbage_never_raises():
                               for v in (k * 0.1, azimuth(k, 0.5 * k), 80.0)))
     loc.flush()
     assert sum(loc.rejected.values()) > 0
+
+
+def test_pose_encoding_bearing_is_a_yaw_from_east_with_its_own_variance(loc):
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_fix(1.0, *fix_at(0.0, 0.0))
+    loc.add_bearing_enu(0.5, math.radians(30.0), math.radians(2.0) ** 2)
+    (reading,) = loc.builder.readings
+    assert reading.theta == pytest.approx(math.radians(30.0), abs=1e-6)
+    assert reading.sigma == pytest.approx(math.radians(2.0))
+    assert loc.unknown_quality == 1
+    loc.add_bearing_enu(0.6, float("nan"))
+    assert loc.rejected == {"bad_azimuth": 1}
+
+
+def test_a_later_fix_closes_the_open_point_so_a_stopped_vehicle_gets_its_estimate():
+    loc = Localizer(LocalizerConfig(seed=2, init_bearings=3, prior_east=EMITTER[0], prior_north=EMITTER[1],
+                                    prior_sigma_m=200.0, datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
+    loc.add_fix(0.0, *fix_at(0.0, 0.0))
+    loc.add_fix(1.0, *fix_at(0.0, 0.0))
+    loc.add_bearing(0.2, azimuth(0.0, 0.0), 90.0)
+    loc.add_bearing(0.3, azimuth(0.0, 0.0), 90.0)
+    assert loc.add_fix(2.0, *fix_at(0.0, 0.0)) is None  # 1.8 s after the point's first reading: still open
+    est = loc.add_fix(3.0, *fix_at(0.0, 0.0))  # 2.8 s > obs_max_duration_s
+    assert est is not None and est.points_used == 1 and est.bearings_used == 2

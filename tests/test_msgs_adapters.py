@@ -1,0 +1,105 @@
+"""Message conversions on both flavours: rclpy classes and rosbags-deserialised dataclasses."""
+import math
+
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+
+from aoa_localizer.crlb import ELLIPSE_95
+from aoa_localizer.types import Estimate
+from msgs_adapters import build
+from msgs_adapters.bag import typestore
+from msgs_adapters.fields import (bearing_from_pose, df_from_vector3stamped, diagnostics_values, estimate_from_pose,
+                                  fix_from_navsatfix)
+
+RCLPY = build.rclpy_types()
+TS = typestore()
+ROSBAGS = build.rosbags_types(TS)
+
+
+def via_bag(msg, type_name):
+    """An rclpy message as a bag holds it and rosbags reads it back."""
+    return TS.deserialize_cdr(bytes(serialize_message(msg)), type_name)
+
+
+def flavours(msg, type_name):
+    return [msg, via_bag(msg, type_name)]
+
+
+@pytest.fixture
+def estimate():
+    return Estimate(stamp=12.25, east=1200.5, north=-800.25, lat=39.1072, lon=117.2139,
+                    cov=np.array([[4.0, 1.5], [1.5, 9.0]]), bearings_used=30, points_used=6, ess=77.0,
+                    algorithm="afsa", particles=np.array([[1.0, 2.0], [3.0, 4.0]]), weights=np.array([0.5, 0.5]))
+
+
+@pytest.mark.parametrize("T", [RCLPY, ROSBAGS], ids=["rclpy", "rosbags"])
+def test_navsatfix_and_df_record_read_the_same_from_either_class(T):
+    fix = build.navsatfix(T, 10.5, 39.1, 117.2, 5.0, status=-1)
+    df = build.df_record(T, 10.75, 359.5, 88.0, 433.92e6)
+    assert fix_from_navsatfix(fix) == (10.5, 39.1, 117.2, 5.0, -1)
+    assert df_from_vector3stamped(df) == (10.75, 359.5, 88.0, 433.92e6)
+
+
+def test_inputs_survive_the_trip_through_a_bag():
+    fix = build.navsatfix(RCLPY, 1.000000001, -33.9, -70.6, 520.0)
+    back = fix_from_navsatfix(via_bag(fix, "sensor_msgs/msg/NavSatFix"))
+    assert back == pytest.approx(fix_from_navsatfix(fix))
+    df = build.df_record(RCLPY, 2.5, 12.0, float("nan"))
+    back = df_from_vector3stamped(via_bag(df, "geometry_msgs/msg/Vector3Stamped"))
+    assert back.azimuth_deg == 12.0 and math.isnan(back.quality)
+
+
+@pytest.mark.parametrize("yaw", [0.3, -2.9, math.pi / 2])
+def test_pose_encoding_bearing_round_trip(yaw):
+    msg = build.pose_bearing(RCLPY, 3.0, yaw, 0.0004)
+    for m in flavours(msg, "geometry_msgs/msg/PoseWithCovarianceStamped"):
+        r = bearing_from_pose(m)
+        assert r.stamp == 3.0 and r.yaw_rad == pytest.approx(yaw) and r.variance_rad2 == pytest.approx(0.0004)
+
+
+def test_emitter_pose_carries_the_estimate_and_its_covariance(estimate):
+    msg = build.emitter_pose(RCLPY, estimate)
+    assert msg.header.frame_id == "map"
+    for m in flavours(msg, "geometry_msgs/msg/PoseWithCovarianceStamped"):
+        stamp, east, north, cov = estimate_from_pose(m)
+        assert (stamp, east, north) == (12.25, 1200.5, -800.25)
+        assert np.array(cov) == pytest.approx(estimate.cov)
+
+
+def test_emitter_fix_is_lat_lon_with_an_approximated_enu_covariance(estimate):
+    msg = build.emitter_fix(RCLPY, estimate, alt=5.0)
+    for m in flavours(msg, "sensor_msgs/msg/NavSatFix"):
+        r = fix_from_navsatfix(m)
+        assert (r.lat, r.lon, r.alt) == (39.1072, 117.2139, 5.0)
+        assert m.position_covariance_type == 1
+        assert np.array(m.position_covariance).reshape(3, 3)[:2, :2] == pytest.approx(estimate.cov)
+
+
+def test_particles_become_poses(estimate):
+    msg = build.particle_array(RCLPY, estimate)
+    for m in flavours(msg, "geometry_msgs/msg/PoseArray"):
+        assert [(p.position.x, p.position.y) for p in m.poses] == [(1.0, 2.0), (3.0, 4.0)]
+
+
+def test_markers_hold_the_estimate_a_closed_95_percent_ellipse_and_the_rays(estimate):
+    rays = np.array([[0.0, 0.0, 0.5], [100.0, 0.0, 1.0]])
+    msg = build.markers(RCLPY, estimate, rays, ELLIPSE_95)
+    for m in flavours(msg, "visualization_msgs/msg/MarkerArray"):
+        sphere, ellipse, lines = m.markers
+        assert (sphere.pose.position.x, sphere.pose.position.y) == (1200.5, -800.25)
+        ring = np.array([(p.x, p.y) for p in ellipse.points])
+        assert ring[0] == pytest.approx(ring[-1])
+        # Shoelace area against pi a b of the 95 % ellipse (64 segments: within 1 %).
+        area = 0.5 * abs(np.dot(ring[:-1, 0], ring[1:, 1]) - np.dot(ring[1:, 0], ring[:-1, 1]))
+        assert area == pytest.approx(math.pi * ELLIPSE_95 * math.sqrt(np.linalg.det(estimate.cov)), rel=0.01)
+        assert len(lines.points) == 4 and (lines.points[0].x, lines.points[0].y) == (0.0, 0.0)
+        direction = math.atan2(lines.points[3].y - lines.points[2].y, lines.points[3].x - lines.points[2].x)
+        assert direction == pytest.approx(1.0)
+
+
+def test_diagnostics_round_trip():
+    msg = build.diagnostic_array(RCLPY, 5.0, "aoa_localizer: localizer", 1, "waiting", {"bearings_used": 12, "ess": 3.5})
+    for m in flavours(msg, "diagnostic_msgs/msg/DiagnosticArray"):
+        d = diagnostics_values(m)["aoa_localizer: localizer"]
+        assert d == {"bearings_used": "12", "ess": "3.5", "level": "1", "message": "waiting"}

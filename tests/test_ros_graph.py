@@ -1,0 +1,248 @@
+"""Launch tests: the real node, vehicle, launcher and replay as processes over Fast DDS, each test in its
+own ROS domain; children are killed by process group whether the test passes or not."""
+import itertools
+import json
+import math
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.qos import QoSProfile
+from std_srvs.srv import Trigger
+
+from aoa_localizer.geodesy import LocalFrame
+from msgs_adapters import build
+from msgs_adapters.fields import diagnostics_values, estimate_from_pose
+
+ROOT = Path(__file__).resolve().parent.parent
+T = build.rclpy_types()
+DATUM = (39.1, 117.2, 5.0)
+_domains = itertools.count(random.Random(os.getpid()).randrange(101))
+
+
+@pytest.fixture
+def domain():
+    """A ROS domain of this test's own (1-101, the range ROS recommends)."""
+    return 1 + next(_domains) % 101
+
+
+def ros_env(domain):
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+
+
+@pytest.fixture
+def spawn(tmp_path):
+    """Start `python -m ...` in a domain; every process is stopped at teardown, pass or fail."""
+    started = []
+
+    def start(module_args, domain):
+        log = open(tmp_path / f"proc{len(started)}.log", "w")
+        p = subprocess.Popen([sys.executable, "-m", *module_args], env=ros_env(domain), cwd=ROOT, stdout=log,
+                             stderr=subprocess.STDOUT, start_new_session=True)
+        p.log_path = log.name
+        started.append((p, log))
+        return p
+
+    yield start
+    for p, log in started:
+        for sig in (signal.SIGINT, signal.SIGKILL):
+            if p.poll() is None:
+                try:
+                    os.killpg(p.pid, sig)
+                    p.wait(5)
+                except (ProcessLookupError, subprocess.TimeoutExpired):
+                    pass
+        log.close()
+
+
+@contextmanager
+def client(domain, name="test_client"):
+    """An rclpy node in its own context in `domain`."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node(name, context=ctx)
+    executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def spin_until(executor, predicate, timeout):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        executor.spin_once(timeout_sec=0.05)
+    return predicate()
+
+
+def call(executor, node, srv_type, name, request, timeout=10.0):
+    cli = node.create_client(srv_type, name)
+    assert cli.wait_for_service(timeout_sec=timeout), f"no service {name}"
+    future = cli.call_async(request)
+    assert spin_until(executor, future.done, timeout)
+    return future.result()
+
+
+def launch(args, timeout=180):
+    return subprocess.run([sys.executable, "-m", "aoa_localizer.launch", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def no_process_with(marker: str) -> bool:
+    out = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
+    return marker not in out
+
+
+def test_vehicle_and_node_converge_and_the_launcher_leaves_no_process(tmp_path, domain):
+    marker = f"marker_rays:={40 + domain}"  # a node argument no other test uses
+    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 2, "--domain-id", domain,
+                  "-p", marker.replace(":=", "="), "--result", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    result = json.loads((tmp_path / "r.json").read_text())
+    assert result["converged"] and result["error_m"] < 10.0
+    assert "error against the simulated truth" in res.stdout
+    assert no_process_with(marker)
+
+
+def test_pose_encoding_end_to_end(tmp_path, domain):
+    res = launch(["--scenario", "homing", "--speedup", 40, "--seed", 3, "--domain-id", domain,
+                  "-p", "bearing_encoding=pose", "--vehicle-param", "bearing_encoding=pose", "--result", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert json.loads((tmp_path / "r.json").read_text())["error_m"] < 10.0
+
+
+def test_sigterm_to_the_launcher_stops_everything(domain):
+    marker = f"marker_rays:={150 + domain}"
+    p = subprocess.Popen([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "urban", "--speedup", "2",
+                          "--domain-id", str(domain), "-p", marker.replace(":=", "=")], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        time.sleep(5)
+        assert p.poll() is None
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=30)
+        assert p.returncode == 2 and "stopped by SIGTERM" in err
+        assert no_process_with(marker)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+
+
+def test_sample_bag_through_the_live_node_gives_the_offline_estimate(tmp_path, domain):
+    res = launch(["--bag", ROOT / "bags/seed", "--rate", 2, "--seed", 5, "--domain-id", domain, "--result", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    live = json.loads((tmp_path / "r.json").read_text())
+    off = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", ROOT / "bags/seed", "--offline",
+                          "--output", tmp_path / "off.jsonl", "--seed", "5"], cwd=ROOT, capture_output=True, text=True)
+    assert off.returncode == 0, off.stderr
+    last = json.loads((tmp_path / "off.jsonl").read_text().splitlines()[-1])
+    assert live["east"] == pytest.approx(last["east"], abs=1e-6)
+    assert live["north"] == pytest.approx(last["north"], abs=1e-6)
+    assert np.allclose(live["cov"], last["cov"], atol=1e-9)
+
+
+def _publish_drive(node, executor, emitter, seconds=60.0, speed=20.0, df_hz=10.0):
+    """An outside client's vehicle: NavSatFix and DF records per INTERFACE.md, paced 2 ms apart."""
+    frame = LocalFrame(*DATUM)
+    pub_fix = node.create_publisher(T.NavSatFix, "gps/fix", QoSProfile(depth=100))
+    pub_df = node.create_publisher(T.Vector3Stamped, "df/bearing", QoSProfile(depth=100))
+    assert spin_until(executor, lambda: pub_fix.get_subscription_count() and pub_df.get_subscription_count(), 10)
+    spin_until(executor, lambda: False, 1.0)  # both ends of the match settled: nothing lost at the start
+    rng = np.random.default_rng(0)
+    for k in range(int(seconds * df_hz) + 1):
+        t = k / df_hz
+        if k % int(df_hz) == 0:
+            lat, lon, alt = frame.to_geodetic(speed * t, 0.0, 0.0)
+            pub_fix.publish(build.navsatfix(T, 1000.0 + t, float(lat), float(lon), float(alt)))
+        az = math.degrees(math.atan2(emitter[0] - speed * t, emitter[1])) % 360
+        pub_df.publish(build.df_record(T, 1000.0 + t, az + rng.normal(0, 1.0), 90.0))
+        executor.spin_once(timeout_sec=0.002)
+
+
+def test_an_outside_client_gets_pose_and_fix_near_the_truth(spawn, domain):
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1"], domain)
+    emitter = (600.0, 400.0)
+    with client(domain) as (node, executor):
+        got = {}
+        latched = QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+        node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: got.update(pose=m), latched)
+        node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: got.update(fix=m), 10)
+        _publish_drive(node, executor, emitter)
+        assert spin_until(executor, lambda: "pose" in got and "fix" in got, 10), open(node_p.log_path).read()
+        spin_until(executor, lambda: False, 2.0)  # the last points
+        _, east, north, cov = estimate_from_pose(got["pose"])
+        assert got["pose"].header.frame_id == "map"
+        assert math.hypot(east - emitter[0], north - emitter[1]) < 15.0
+        e, n = LocalFrame(*DATUM).to_enu(got["fix"].latitude, got["fix"].longitude)
+        assert math.hypot(e - emitter[0], n - emitter[1]) < 15.0
+        assert got["fix"].position_covariance_type == 1
+    assert node_p.poll() is None
+
+
+def test_bad_messages_leave_the_node_running_and_are_counted(spawn, domain):
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "diagnostics_period_s:=0.5"], domain)
+    frame = LocalFrame(*DATUM)
+    with client(domain) as (node, executor), client(domain, "wrong_type_publisher") as (other, _):
+        diag = {}
+        node.create_subscription(T.DiagnosticArray, "/diagnostics",
+                                 lambda m: diag.update(diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        pub_fix = node.create_publisher(T.NavSatFix, "gps/fix", QoSProfile(depth=100))
+        pub_df = node.create_publisher(T.Vector3Stamped, "df/bearing", QoSProfile(depth=100))
+        other.create_publisher(T.PoseWithCovarianceStamped, "df/bearing", 10)  # a wrong encoding on the topic
+        assert spin_until(executor, lambda: pub_fix.get_subscription_count() and pub_df.get_subscription_count(), 10)
+        spin_until(executor, lambda: False, 1.0)  # both ends of the match settled: nothing lost at the start
+        lat, lon, _ = frame.to_geodetic(0.0, 0.0, 0.0)
+        sequence = [
+            (pub_fix, build.navsatfix(T, 100.0, float(lat), float(lon), 5.0)),
+            (pub_fix, build.navsatfix(T, 101.0, float(lat), float(lon), 5.0, status=-1)),  # no fix
+            (pub_df, build.df_record(T, 100.5, float("nan"), 90.0)),  # NaN azimuth
+            (pub_df, build.df_record(T, 100.6, 45.0, 90.0)),
+            (pub_df, build.df_record(T, 100.4, 45.0, 90.0)),  # stamp going backwards
+            (pub_df, build.df_record(T, 100.7, 45.0, 250.0)),  # quality out of range
+            (pub_fix, build.navsatfix(T, 102.0, float("nan"), float(lon), 5.0)),  # NaN position
+            (pub_fix, build.navsatfix(T, 102.5, float(lat), float(lon), 5.0)),
+        ]
+        for pub, msg in sequence:
+            pub.publish(msg)
+            spin_until(executor, lambda: False, 0.05)
+        expected = {"rejected.bad_azimuth": "1", "rejected.fix_no_fix": "1", "rejected.bearing_out_of_order": "1",
+                    "rejected.bad_quality": "1", "rejected.fix_bad_position": "1"}
+        assert spin_until(executor, lambda: all(diag.get(k) == v for k, v in expected.items())
+                          and "wrong_encoding" in diag, 10), json.dumps(diag)
+        assert "PoseWithCovarianceStamped" in diag["wrong_encoding"] and diag["level"] == "1"
+        assert diag["bearings_received"] == "4" and diag["fixes_received"] == "4"
+        assert node_p.poll() is None
+
+        reset = call(executor, node, Trigger, "/aoa_localizer/reset", Trigger.Request())
+        assert reset.success
+        bad = SetParameters.Request(parameters=[Parameter(name="algorithm", value=ParameterValue(
+            type=ParameterType.PARAMETER_STRING, string_value="kalman"))])
+        result = call(executor, node, SetParameters, "/aoa_localizer/set_parameters", bad).results[0]
+        assert not result.successful and "algorithm must be one of" in result.reason
+        good = SetParameters.Request(parameters=[Parameter(name="num_particles", value=ParameterValue(
+            type=ParameterType.PARAMETER_INTEGER, integer_value=200))])
+        assert call(executor, node, SetParameters, "/aoa_localizer/set_parameters", good).results[0].successful
+    assert node_p.poll() is None
+
+
+def test_node_refuses_to_start_with_an_invalid_parameter(tmp_path, domain):
+    params = tmp_path / "p.yaml"
+    params.write_text("aoa_localizer:\n  ros__parameters:\n    datum_lat: 39.1\n")
+    res = subprocess.run([sys.executable, "-m", "aoa_localizer.node", "--ros-args", "--params-file", str(params)],
+                         env=ros_env(domain), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and "datum_lat and datum_lon are set together" in res.stderr
