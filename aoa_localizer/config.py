@@ -12,7 +12,7 @@ from numbers import Integral, Real
 # sqrt(3.801e-4 rad^2), the AFSA paper's bearing noise, in degrees.
 PAPER_BEARING_SIGMA_DEG = math.degrees(math.sqrt(3.801e-4))
 
-ALGORITHMS = ("afsa", "sir")
+ALGORITHMS = ("afsa", "sir", "espf", "gfapf")
 RESAMPLING = ("systematic", "stratified", "residual", "multinomial")
 LIKELIHOODS = ("mixture", "gaussian")
 SIGMA_MODELS = ("constant", "quality")
@@ -36,6 +36,27 @@ class AfsaConfig:
     try_number: int = 50
     max_iterations: int = 5
     tolerance: float = 1e-3
+
+
+@dataclass(frozen=True)
+class EspfConfig:
+    """ESPF settings: the SBX distribution index lambda (any non-negative real in the paper; docs/seed_tables.md)."""
+
+    sbx_lambda: float = 2.0
+
+
+@dataclass(frozen=True)
+class GfapfConfig:
+    """GFA-PF settings (paper sec. 2): attraction M, rotation factor maximum, D iterations, the dead zone of the
+    attraction and the range of the repulsion. `scale`: `absolute` reads the two distances in state units (the
+    paper's 1-D models); `spread` in standard deviations of the cloud (the emitter problem, any scale)."""
+
+    attraction: float = 0.0618
+    rotation_max: float = 0.3
+    iterations: int = 8
+    attract_min: float = 0.5
+    repel_max: float = 0.2
+    scale: str = "spread"
 
 
 @dataclass(frozen=True)
@@ -81,6 +102,8 @@ class LocalizerConfig:
     ess_threshold: float = 0.5
     history_points: int = 300
     afsa: AfsaConfig = field(default_factory=AfsaConfig)
+    espf: EspfConfig = field(default_factory=EspfConfig)
+    gfapf: GfapfConfig = field(default_factory=GfapfConfig)
 
     def __post_init__(self):
         _validate(self)
@@ -98,27 +121,31 @@ class LocalizerConfig:
         return LocalizerConfig.from_dict({**self.to_dict(), **changes})
 
     def to_dict(self) -> dict:
-        """Flat dict with `afsa.<name>` keys: the node's parameter names."""
+        """Flat dict with `group.<name>` keys (afsa., espf., gfapf.): the node's parameter names."""
         d = asdict(self)
-        afsa = d.pop("afsa")
-        d.update({f"afsa.{k}": v for k, v in afsa.items()})
+        for group in GROUPS:
+            d.update({f"{group}.{k}": v for k, v in d.pop(group).items()})
         return d
 
     @classmethod
     def from_dict(cls, values: dict) -> "LocalizerConfig":
         """Build from a flat or nested dict; unknown keys are refused with their names."""
         values = dict(values)
-        afsa_values = dict(values.pop("afsa", None) or {})
-        for key in [k for k in values if k.startswith("afsa.")]:
-            afsa_values[key[5:]] = values.pop(key)
-        known = {f.name for f in fields(cls)} - {"afsa"}
-        afsa_known = {f.name for f in fields(AfsaConfig)}
-        unknown = sorted(set(values) - known) + [f"afsa.{k}" for k in sorted(set(afsa_values) - afsa_known)]
+        groups, unknown = {}, []
+        for group, group_cls in GROUPS.items():
+            given = dict(values.pop(group, None) or {})
+            for key in [k for k in values if k.startswith(f"{group}.")]:
+                given[key[len(group) + 1:]] = values.pop(key)
+            known = {f.name for f in fields(group_cls)}
+            unknown += [f"{group}.{k}" for k in sorted(set(given) - known)]
+            groups[group] = {k: v for k, v in given.items() if k in known}
+        unknown = sorted(set(values) - {f.name for f in fields(cls)}) + unknown
         if unknown:
             raise ConfigError(f"unknown parameter(s): {', '.join(unknown)}")
-        afsa = replace(AfsaConfig(), **afsa_values)
-        _validate_afsa(afsa)
-        return cls(**values, afsa=afsa)
+        built = {group: replace(GROUPS[group](), **given) for group, given in groups.items()}
+        for group, obj in built.items():
+            VALIDATORS[group](obj)
+        return cls(**values, **built)
 
 
 def _check(ok: bool, message: str):
@@ -195,8 +222,9 @@ def _validate(cfg: LocalizerConfig):
         _check(-90 <= cfg.datum_lat <= 90, f"datum_lat must be in [-90, 90], got {cfg.datum_lat!r}")
         _check(-180 <= cfg.datum_lon <= 180, f"datum_lon must be in [-180, 180], got {cfg.datum_lon!r}")
     _check(cfg.datum_alt is None or _is_real(cfg.datum_alt), f"datum_alt must be a finite number, got {cfg.datum_alt!r}")
-    _check(isinstance(cfg.afsa, AfsaConfig), "afsa must be an AfsaConfig")
-    _validate_afsa(cfg.afsa)
+    for group, group_cls in GROUPS.items():
+        _check(isinstance(getattr(cfg, group), group_cls), f"{group} must be a {group_cls.__name__}")
+        VALIDATORS[group](getattr(cfg, group))
 
 
 def _validate_afsa(a: AfsaConfig):
@@ -207,3 +235,20 @@ def _validate_afsa(a: AfsaConfig):
     for name in ("try_number", "max_iterations"):
         v = getattr(a, name)
         _check(_is_int(v) and v >= 1, f"afsa.{name} must be an integer >= 1, got {v!r}")
+
+
+def _validate_espf(e: EspfConfig):
+    v = e.sbx_lambda
+    _check(_is_real(v) and v >= 0, f"espf.sbx_lambda must be a finite number >= 0, got {v!r}")
+
+
+def _validate_gfapf(g: GfapfConfig):
+    for name in ("attraction", "rotation_max", "attract_min", "repel_max"):
+        v = getattr(g, name)
+        _check(_is_real(v) and v >= 0, f"gfapf.{name} must be a finite number >= 0, got {v!r}")
+    _check(_is_int(g.iterations) and g.iterations >= 0, f"gfapf.iterations must be an integer >= 0, got {g.iterations!r}")
+    _check(g.scale in ("spread", "absolute"), f"gfapf.scale must be spread or absolute; got {g.scale!r}")
+
+
+GROUPS = {"afsa": AfsaConfig, "espf": EspfConfig, "gfapf": GfapfConfig}
+VALIDATORS = {"afsa": _validate_afsa, "espf": _validate_espf, "gfapf": _validate_gfapf}

@@ -81,3 +81,25 @@ def score(data: ScenarioData, result: RunResult) -> dict:
         "steps": len(result.estimates),
         "errors": errors.tolist(),
     }
+
+
+def run_model(model, algorithm: str, n: int, steps: int, data_seed: int, filter_seed: int,
+              jump: tuple[int, float] | None = None, **changes) -> tuple[np.ndarray, np.ndarray, float]:
+    """One run of a filter on a benchmark model: (true states x_1..x_T, estimates, filter seconds).
+
+    Data from `data_seed`, the filter from `filter_seed`, so filters compared with the same seeds see the
+    same data. `changes` are LocalizerConfig fields (flat `group.name` keys allowed).
+    """
+    from .filters import make_filter
+
+    x_true, zs = model.simulate(steps, np.random.default_rng(data_seed), jump)
+    cfg = LocalizerConfig(algorithm=algorithm, num_particles=n, seed=filter_seed).with_changes(**changes)
+    rng = np.random.default_rng(filter_seed)
+    f = make_filter(cfg, rng, model)
+    f.initialise(model.initial(n, rng))
+    est = np.empty((steps, model.dim))
+    t0 = time.perf_counter()
+    for k, z in enumerate(zs):
+        f.update(z)
+        est[k] = f.estimate()[0]
+    return x_true[1:], est, time.perf_counter() - t0

@@ -25,7 +25,7 @@ from std_srvs.srv import Trigger
 from msgs_adapters import build
 from msgs_adapters.fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix
 
-from .config import AfsaConfig, ConfigError, LocalizerConfig
+from .config import GROUPS, ConfigError, LocalizerConfig
 from .crlb import ELLIPSE_95
 from .localizer import Localizer
 
@@ -35,7 +35,7 @@ INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometr
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
 
 DESCRIPTIONS = {
-    "algorithm": "filter: afsa (AFSA-PF) or sir (bootstrap)",
+    "algorithm": "filter: afsa (AFSA-PF), sir (bootstrap), espf (evolution sampling), gfapf (gravitation field)",
     "num_particles": "number of particles N",
     "seed": "filter seed; unset: random. The same seed reproduces a run",
     "bearing_sigma_deg": "bearing noise sigma per reading (deg) for sigma_model constant",
@@ -75,6 +75,13 @@ DESCRIPTIONS = {
     "afsa.try_number": "prey tries per fish and round, paper variant",
     "afsa.max_iterations": "school rounds (paper) or MCMC sweeps (mcmc)",
     "afsa.tolerance": "stop the paper school when the mean log-objective change is smaller",
+    "espf.sbx_lambda": "ESPF: distribution index of the simulated binary crossover (larger: children nearer their parents)",
+    "gfapf.attraction": "GFA-PF: attraction weight M towards the central dust",
+    "gfapf.rotation_max": "GFA-PF: largest rotation factor f of the repulsion",
+    "gfapf.iterations": "GFA-PF: gravitation iterations D per measurement",
+    "gfapf.attract_min": "GFA-PF: no attraction closer than this to the centre (scale units)",
+    "gfapf.repel_max": "GFA-PF: no repulsion farther than this from the centre (scale units)",
+    "gfapf.scale": "GFA-PF: absolute (state units) or spread (standard deviations of the cloud)",
 }
 # Node-only parameters (not engine settings).
 NODE_PARAMS = {
@@ -103,7 +110,8 @@ def _descriptor(name: str, default) -> ParameterDescriptor:
 
 
 def engine_parameter_names() -> list[str]:
-    return [f.name for f in fields(LocalizerConfig) if f.name != "afsa"] + [f"afsa.{f.name}" for f in fields(AfsaConfig)]
+    names = [f.name for f in fields(LocalizerConfig) if f.name not in GROUPS]
+    return names + [f"{group}.{f.name}" for group, cls in GROUPS.items() for f in fields(cls)]
 
 
 class LocalizerNode(Node):
@@ -202,7 +210,7 @@ class LocalizerNode(Node):
         self.pub_pose.publish(build.emitter_pose(T, est))
         self.pub_fix.publish(build.emitter_fix(T, est, self.loc.frame.alt0))
         self.pub_particles.publish(build.particle_array(T, est))
-        rays = self.loc.filter.history.data[-self.get_parameter("marker_rays").value:, :3]
+        rays = self.loc.filter.model.history.data[-self.get_parameter("marker_rays").value:, :3]
         self.pub_markers.publish(build.markers(T, est, rays, ELLIPSE_95))
 
     def diagnostics(self) -> tuple[int, str, dict]:

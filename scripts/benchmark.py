@@ -35,6 +35,8 @@ FILTERS = {
     "afsa-gaussian": {"algorithm": "afsa", "likelihood": "gaussian"},
     "afsa-paper": {"algorithm": "afsa", "afsa.variant": "paper"},
     "sir": {"algorithm": "sir"},
+    "espf": {"algorithm": "espf"},
+    "gfapf": {"algorithm": "gfapf"},
 }
 PEERS = ("particles-bootstrap", "particles-ibis")
 # AFSA paper, Table 1 (relative error x / y in %, seconds for 60 steps, "large errors" of 60 estimates).
@@ -44,7 +46,7 @@ PAPER_TABLE1 = {"sir": (0.266, 0.206, 0.183, 16), "afsa": (0.101, 0.091, 0.352, 
 def peer_runs(data, res, truth_engine, n, seed):
     """Run the particles peers on the points our filter used; returns {name: (estimates, step_s)}."""
     f = res.localizer.filter
-    points = f.history.data
+    points = f.model.history.data
     cfg = res.localizer.cfg
     if cfg.has_prior:
         mean, cov = np.array([cfg.prior_east, cfg.prior_north]), cfg.prior_sigma_m**2 * np.eye(2)

@@ -39,3 +39,13 @@ def test_flat_and_nested_dicts_build_the_same_config():
     nested = LocalizerConfig.from_dict({"algorithm": "sir", "afsa": {"step": 0.5}})
     assert flat == nested and flat.afsa == AfsaConfig(step=0.5)
     assert LocalizerConfig.from_dict(flat.to_dict()) == flat
+
+
+def test_seed_filter_groups_validate_and_round_trip():
+    c = LocalizerConfig.from_dict({"algorithm": "gfapf", "gfapf.iterations": 4, "espf": {"sbx_lambda": 5.0}})
+    assert c.gfapf.iterations == 4 and c.espf.sbx_lambda == 5.0
+    assert LocalizerConfig.from_dict(c.to_dict()) == c
+    with pytest.raises(ConfigError, match="espf.sbx_lambda"):
+        LocalizerConfig().with_changes(**{"espf.sbx_lambda": -1.0})
+    with pytest.raises(ConfigError, match="gfapf.scale"):
+        LocalizerConfig().with_changes(**{"gfapf.scale": "metres"})

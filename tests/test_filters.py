@@ -116,9 +116,9 @@ def test_cached_posterior_of_each_fish_equals_a_fresh_evaluation():
 
     res = run(simulate("straight", 1), LocalizerConfig(seed=5))
     f = res.localizer.filter
-    assert f.history.appended == 60 and f.target_points >= 0
+    assert f.model.history.appended == 60 and f.target_points >= 0
     fresh = f.log_target(f.x)
-    if f.target_points == f.history.appended:
+    if f.target_points == f.model.history.appended:
         assert np.allclose(f.target, fresh)
     f.move()  # a move always starts from a correct cache and leaves one behind
     assert np.allclose(f.target, f.log_target(f.x))

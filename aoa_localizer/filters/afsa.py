@@ -46,8 +46,8 @@ class AfsaFilter(ParticleFilter):
 
     name = "afsa"
 
-    def __init__(self, cfg, rng):
-        super().__init__(cfg, rng)
+    def __init__(self, cfg, rng, model=None):
+        super().__init__(cfg, rng, model)
         self.paper = cfg.afsa.variant == "paper"
         self.acceptance = float("nan")  # share of accepted moves in the last mcmc move stage
         self.school_rounds = 0  # rounds the paper school swam at the last step
@@ -65,12 +65,16 @@ class AfsaFilter(ParticleFilter):
     # -- the paper's school ---------------------------------------------------------------------
     def initialise(self, particles, prior_mean, prior_cov):
         super().initialise(particles, prior_mean, prior_cov)
-        self.target, self.target_points = self.log_target(self.x), self.history.appended
+        self.target, self.target_points = self.log_target(self.x), self.model.history.appended
+
+    def log_target(self, x: np.ndarray) -> np.ndarray:
+        """The posterior the moves keep invariant: the emitter model's, over its kept points."""
+        return self.model.log_posterior(x)
 
     def after_weight(self, p: ObservationPoint):
         if not self.paper:
             # The fish did not move since the last point: their posterior gains this point's likelihood.
-            fresh = self.target_points == self.history.appended - 1 and self.history.dropped == 0
+            fresh = self.target_points == self.model.history.appended - 1 and self.model.history.dropped == 0
             if fresh:
                 self.target = self.target + self.last_ll
                 self.target_points += 1
@@ -132,9 +136,9 @@ class AfsaFilter(ParticleFilter):
         """Prey looks accepted by Metropolis-Hastings on the posterior, `max_iterations` sweeps."""
         a, rng, n = self.cfg.afsa, self.rng, self.n
         chol = np.linalg.cholesky(self.spread + _MIN_SPREAD_M2 * np.eye(2))
-        if self.target_points != self.history.appended or self.history.dropped:
+        if self.target_points != self.model.history.appended or self.model.history.dropped:
             self.target = self.log_target(self.x)
-        self.target_points = self.history.appended
+        self.target_points = self.model.history.appended
         target = self.target
         accepted = 0
         for _ in range(a.max_iterations):

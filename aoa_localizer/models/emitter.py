@@ -1,0 +1,70 @@
+"""The emitter problem: a static 2-D emitter seen through bearings from known antenna positions."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..config import LocalizerConfig
+from ..filters.likelihood import BearingLikelihood
+from ..types import ObservationPoint
+from .base import StateSpaceModel
+
+
+class PointHistory:
+    """The last `size` observation points as arrays, for evaluating the posterior of a static emitter."""
+
+    def __init__(self, size: int):
+        self.size = size
+        self.data = np.empty((0, 4))  # east, north, theta, sigma
+        self.appended = 0  # points ever appended (the window may have dropped some)
+
+    def append(self, p: ObservationPoint):
+        row = np.array([[p.east, p.north, p.theta, p.sigma]])
+        self.data = np.concatenate([self.data[-(self.size - 1):] if self.size > 1 else self.data[:0], row])
+        self.appended += 1
+
+    @property
+    def dropped(self) -> int:
+        return self.appended - len(self)
+
+    def __len__(self):
+        return self.data.shape[0]
+
+
+class EmitterModel(StateSpaceModel):
+    """X_k = X_{k-1} + N(0, q^2 I) (paper eq. 17); z = bearing from the point's antenna (eq. 18)."""
+
+    dim = 2
+
+    def __init__(self, cfg: LocalizerConfig):
+        self.q = cfg.process_noise_m
+        self.lik = BearingLikelihood(cfg.likelihood, cfg.outlier_prob, cfg.gps_sigma_m)
+        self.history = PointHistory(cfg.history_points)
+        self.prior_mean = np.zeros(2)
+        self.prior_prec = np.zeros((2, 2))  # precision of the Gaussian prior; zero = flat
+
+    def set_prior(self, mean, cov):
+        self.prior_mean = np.asarray(mean, float)
+        self.prior_prec = np.linalg.inv(np.asarray(cov, float))
+
+    def transition(self, x, k, rng):
+        return x + self.q * rng.standard_normal(x.shape) if self.q > 0 else x
+
+    def loglik(self, x, p: ObservationPoint, k=None):
+        return self.lik.log(x, p.east, p.north, p.theta, p.sigma)
+
+    def usable(self, p: ObservationPoint) -> bool:
+        return math.isfinite(p.theta) and p.sigma > 0 and math.isfinite(p.east) and math.isfinite(p.north)
+
+    def observe(self, p: ObservationPoint):
+        self.history.append(p)
+
+    def log_posterior(self, x: np.ndarray) -> np.ndarray:
+        """Log posterior of a static emitter over the kept history (up to a constant), for move steps."""
+        d = x - self.prior_mean
+        lp = -0.5 * np.einsum("...i,ij,...j->...", d, self.prior_prec, d)
+        h = self.history.data
+        if len(h):
+            lp = lp + self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3]).sum(axis=-1)
+        return lp

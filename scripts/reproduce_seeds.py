@@ -1,0 +1,134 @@
+"""Reproduce the seed papers' tables on their own benchmark models and print ours next to theirs.
+
+    python scripts/reproduce_seeds.py                 # the papers' run counts
+    python scripts/reproduce_seeds.py --runs 10 --json seeds.json
+
+RMSE: at each step k the root mean square error over the runs, then the mean over the steps (the
+papers' "mean RMSE"); for the coordinated-turn model per position axis. Run r uses data seed r and
+filter seed 1000 + r, so every filter sees the same data. The bootstrap rows ("pf") resample at every
+step, as the papers' PF does; GFA-PF resamples when N_eff < N/2 and reads its distances in state units.
+JSON: {"meta": {...}, "rows": [{paper, table, model, algorithm, N, metric, ours, paper_value}, ...]}.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from aoa_localizer.evaluation import run_model
+from aoa_localizer.models import benchmarks as B
+
+# Per algorithm, how the table runs it (LocalizerConfig changes).
+SETTINGS = {"pf": ("sir", {"ess_threshold": 1.0}), "espf": ("espf", {}),
+            "gfapf": ("gfapf", {"gfapf.scale": "absolute"})}
+
+
+@dataclass
+class Cell:
+    """One table cell group: a model run by one algorithm with one N; metrics are filled from the runs."""
+
+    paper: str
+    table: str
+    model: str
+    make: object
+    algorithm: str
+    n: int
+    steps: int
+    runs: int
+    paper_values: dict  # metric -> the paper's number (None where it gives none)
+    jump: tuple | None = None
+    changes: dict = field(default_factory=dict)
+
+
+def cells(runs_override: int | None) -> list[Cell]:
+    r = lambda paper_runs: runs_override or paper_runs  # noqa: E731
+    out = []
+    for model, make, values in (("Model 1 (Gamma)", B.espf_model1, {"pf": 0.1135, "espf": 0.0788}),
+                                ("Model 2 (UNGM)", B.espf_model2, {"pf": 3.6609, "espf": 3.6180})):
+        for algo in ("pf", "espf"):
+            out.append(Cell("espf", "Table 1", model, make, algo, 200, 60, r(50), {"rmse": values[algo]}))
+    table2 = {200: {"pf": (0.3370, 0.4170), "espf": (0.2748, 0.3268)},
+              500: {"pf": (0.3161, 0.3417), "espf": (0.2526, 0.2852)},
+              800: {"pf": (0.2951, 0.3277), "espf": (0.2456, 0.2661)}}
+    for n, values in table2.items():
+        for algo in ("pf", "espf"):
+            px, py = values[algo]
+            out.append(Cell("espf", "Table 2", "Model 3 (coordinated turn)", B.espf_model3, algo, n, 60, r(50),
+                            {"rmse_x": px, "rmse_y": py}))
+    for lam in (0.0, 2.0, 10.0, 50.0):
+        for model, make in (("Model 1 (Gamma)", B.espf_model1), ("Model 2 (UNGM)", B.espf_model2)):
+            out.append(Cell("espf", f"SBX lambda = {lam:g} (ours)", model, make, "espf", 200, 60, r(50),
+                            {"rmse": None}, changes={"espf.sbx_lambda": lam}))
+    for rv, values in ((0.1, {"pf": 2.772, "gfapf": 0.509}), (0.001, {"pf": 2.182, "gfapf": 0.122})):
+        for algo in ("pf", "gfapf"):
+            out.append(Cell("gfapf", "Table 2", f"Model 1 (Gamma), sigma_v^2 = {rv:g}", lambda rv=rv: B.gfapf_model1(rv),
+                            algo, 50, 100, r(50), {"rmse": values[algo], "time_s": None}))
+    for algo, value in (("pf", None), ("gfapf", 0.2031)):
+        out.append(Cell("gfapf", "Table 3", "UNGM", B.gfapf_ungm, algo, 50, 100, r(50), {"rmse": value, "time_s": None}))
+    for algo, value in (("pf", 1.8828), ("gfapf", 0.5825)):
+        out.append(Cell("gfapf", "Table 4", "UNGM, state jump of 10 at k = 25", B.gfapf_ungm, algo, 50, 100, r(50),
+                        {"rmse": value, "time_s": None}, jump=(25, 10.0)))
+    return out
+
+
+def run_cell(c: Cell, bar) -> list[dict]:
+    algorithm, changes = SETTINGS[c.algorithm]
+    model = c.make()
+    sq, seconds = [], []
+    for run in range(c.runs):
+        truth, est, t = run_model(model, algorithm, c.n, c.steps, run, 1000 + run, jump=c.jump,
+                                  **{**changes, **c.changes})
+        sq.append((truth - est) ** 2)
+        seconds.append(t)
+        bar.update()
+    rmse_k = np.sqrt(np.mean(sq, axis=0))  # (steps, dim)
+    ours = {"rmse": float(rmse_k[:, 0].mean()), "time_s": float(np.mean(seconds))}
+    if model.dim == 4:
+        ours.update(rmse_x=float(rmse_k[:, 0].mean()), rmse_y=float(rmse_k[:, 2].mean()))
+    return [{"paper": c.paper, "table": c.table, "model": c.model, "algorithm": c.algorithm, "N": c.n,
+             "metric": metric, "ours": ours[metric], "paper_value": paper_value, "runs": c.runs}
+            for metric, paper_value in c.paper_values.items()]
+
+
+def print_rows(rows):
+    print("| paper | table | model | algorithm | N | metric | ours | paper |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        pv = "-" if r["paper_value"] is None else f"{r['paper_value']:g}"
+        print(f"| {r['paper']} | {r['table']} | {r['model']} | {r['algorithm']} | {r['N']} | {r['metric']} | "
+              f"{r['ours']:.4g} | {pv} |")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=int, help="Monte Carlo runs per cell (default: each paper's own)")
+    parser.add_argument("--papers", nargs="+", default=["espf", "gfapf"], choices=["espf", "gfapf"])
+    parser.add_argument("--json", metavar="OUT", help="write the rows as JSON")
+    args = parser.parse_args(argv)
+    todo = [c for c in cells(args.runs) if c.paper in args.papers]
+    t0 = time.time()
+    rows = []
+    with tqdm(total=sum(c.runs for c in todo), unit="run", file=sys.stderr) as bar:
+        for c in todo:
+            bar.set_description(f"{c.paper} {c.table}")
+            rows += run_cell(c, bar)
+    print_rows(rows)
+    meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
+            "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
+            "wall_s": round(time.time() - t0, 1)}
+    print(f"\n{meta['wall_s']} s, {meta['machine']}, {meta['cores']} cores, {meta['date']}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
