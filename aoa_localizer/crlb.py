@@ -35,3 +35,21 @@ def nees(error, cov) -> float:
 def inside_ellipse(error, cov, level_chi2: float = ELLIPSE_95) -> bool:
     """Whether the truth lies inside the published ellipse."""
     return nees(error, cov) <= level_chi2
+
+
+def ellipse_points(mean, cov, scale: float = ELLIPSE_95, n: int = 64) -> np.ndarray:
+    """Closed polygon (n+1, 2) of the ellipse x^T cov^-1 x = scale around mean (the 95 % ellipse by default)."""
+    vals, vecs = np.linalg.eigh(np.asarray(cov, float))
+    a = np.linspace(0.0, 2 * np.pi, n + 1)
+    unit = np.stack([np.cos(a), np.sin(a)], axis=1) * np.sqrt(scale * np.maximum(vals, 0.0))
+    ring = np.asarray(mean, float) + unit @ vecs.T
+    ring[-1] = ring[0]  # exactly closed
+    return ring
+
+
+def ellipse_axes(cov, scale: float = ELLIPSE_95) -> tuple[float, float, float]:
+    """Semi-major and semi-minor axes (m) and the major axis's azimuth (deg from north, 0-180) of the ellipse."""
+    vals, vecs = np.linalg.eigh(np.asarray(cov, float))
+    major = vecs[:, 1]
+    azimuth = float(np.degrees(np.arctan2(major[0], major[1])) % 180.0)
+    return float(np.sqrt(scale * max(vals[1], 0.0))), float(np.sqrt(scale * max(vals[0], 0.0))), azimuth

@@ -50,6 +50,15 @@ REASONS = {
 }
 
 
+class Trace:
+    """What a report draws: every accepted fix (stamp, east, north) and every reading paired with a position
+    (stamp, east, north, theta, sigma, kept), `kept` False for readings gated out as wild."""
+
+    def __init__(self):
+        self.fixes: list[tuple] = []
+        self.readings: list[tuple] = []
+
+
 def _as_float(value) -> float:
     try:
         return float(value)
@@ -60,8 +69,10 @@ def _as_float(value) -> float:
 class Localizer:
     """Pairs bearings with the interpolated GPS track, builds observation points, starts and runs a filter."""
 
-    def __init__(self, config: LocalizerConfig | None = None):
+    def __init__(self, config: LocalizerConfig | None = None, keep_trace: bool = False):
+        """`keep_trace`: also keep every fix (ENU) and every paired reading with its fate, for reports."""
         self.cfg = config or LocalizerConfig()
+        self.trace = Trace() if keep_trace else None
         self.rng = np.random.default_rng(self.cfg.seed)
         self.frame: LocalFrame | None = None
         if self.cfg.has_datum:
@@ -102,6 +113,8 @@ class Localizer:
         reason = self.track.add(stamp, float(east), float(north), float(self.frame.north_angle(lat, lon)))
         if reason:
             return self._reject(reason)
+        if self.trace is not None:
+            self.trace.fixes.append((stamp, float(east), float(north)))
         if self.status == "waiting for a GPS fix":
             self.status = "collecting bearings"
         estimate = self._release_pending()
@@ -187,9 +200,11 @@ class Localizer:
     def _use_points(self, groups: list[list[Reading]]) -> Estimate | None:
         estimate = None
         for readings in groups:
-            point, wild = make_point(readings, self.cfg)
-            for _ in range(wild):
+            point, kept = make_point(readings, self.cfg)
+            for _ in range(int((~kept).sum())):
                 self._reject("point_outlier")
+            if self.trace is not None:
+                self.trace.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k)) for r, k in zip(readings, kept)]
             if self.filter is None:
                 self.init_points.append(point)
                 estimate = self._try_start() or estimate

@@ -82,8 +82,8 @@ def point_outliers(theta: np.ndarray, sigma: np.ndarray, gate: float) -> np.ndar
     return np.abs(wrap_pi(theta - median)) > gate * sigma
 
 
-def make_point(readings: list[Reading], cfg: LocalizerConfig) -> tuple[ObservationPoint, int]:
-    """Corrected bearing of one observation point and the number of readings gated out as wild.
+def make_point(readings: list[Reading], cfg: LocalizerConfig) -> tuple[ObservationPoint, np.ndarray]:
+    """Corrected bearing of one observation point and the mask of the readings it kept (the rest: wild).
 
     `point_weighting` "paper" is eqs. 19-21; "inverse_variance" is the best linear combination when
     the sigma model is calibrated (sigma_model "quality"). Angles are averaged on the tangent at their circular mean, positions and stamps with the same
@@ -109,7 +109,7 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig) -> tuple[Observati
         sigma=float(math.sqrt(a @ cov @ a)),
         n_readings=len(kept),
     )
-    return point, int((~keep).sum())
+    return point, keep
 
 
 class PointBuilder:

@@ -57,8 +57,46 @@ def summary(loc: Localizer, truth, datum) -> list[str]:
     return lines
 
 
-def run_offline(args) -> int:
+class BagRun:
+    """What running a bag through the engine left: the truth and datum it carried, and the damage if any."""
+
+    def __init__(self):
+        self.truth = None  # (stamp, east, north) in the scenario's map
+        self.datum = None  # (lat, lon, alt) of that map
+        self.damage: str | None = None
+        self.messages = 0
+
+
+def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay") -> BagRun:
+    """Feed a bag's fixes and bearings to `loc` in log-time order, call on_estimate(est) for each estimate
+    (the final flush included). Raises BagError when nothing could be read; damage later is recorded."""
     from msgs_adapters.bag import BagError, read_bag
+
+    result = BagRun()
+    with tqdm(desc=desc, unit="msg", disable=None, file=sys.stderr) as bar:
+        try:
+            for event in read_bag(bag, topics):
+                bar.update()
+                result.messages += 1
+                if event.kind == "truth":
+                    result.truth = event.record
+                elif event.kind == "datum":
+                    result.datum = (event.record.lat, event.record.lon, event.record.alt)
+                est = feed(loc, event)
+                if est is not None:
+                    on_estimate(est)
+        except BagError as exc:
+            if not result.messages:
+                raise
+            result.damage = str(exc)
+    est = loc.flush()
+    if est is not None:
+        on_estimate(est)
+    return result
+
+
+def run_offline(args) -> int:
+    from msgs_adapters.bag import BagError
 
     try:
         cfg = config_from_args(args, LocalizerConfig())
@@ -66,40 +104,31 @@ def run_offline(args) -> int:
         print(f"replay: {exc}", file=sys.stderr)
         return 2
     loc = Localizer(cfg)
-    topics = {"fix": args.fix_topic, "bearing": args.bearing_topic}
-    truth = datum = None
-    code, written = 0, 0
+    written = 0
     out = open(args.output, "w") if args.output != "-" else sys.stdout
+
+    def write(est):
+        nonlocal written
+        out.write(json.dumps(est.to_json_dict()) + "\n")
+        out.flush()
+        written += 1
+
     try:
-        with tqdm(desc="replay", unit="msg", disable=None, file=sys.stderr) as bar:
-            try:
-                for event in read_bag(args.bag, topics):
-                    bar.update()
-                    if event.kind == "truth":
-                        truth = event.record
-                    elif event.kind == "datum":
-                        datum = (event.record.lat, event.record.lon, event.record.alt)
-                    est = feed(loc, event)
-                    if est is not None:
-                        out.write(json.dumps(est.to_json_dict()) + "\n")
-                        out.flush()
-                        written += 1
-            except BagError as exc:
-                print(f"replay: {exc}", file=sys.stderr)
-                code = 1 if written or bar.n else 2
-        est = loc.flush()
-        if est is not None:
-            out.write(json.dumps(est.to_json_dict()) + "\n")
-            written += 1
+        run = run_bag(args.bag, {"fix": args.fix_topic, "bearing": args.bearing_topic}, loc, write)
+    except BagError as exc:
+        print(f"replay: {exc}", file=sys.stderr)
+        return 2
     finally:
         if out is not sys.stdout:
             out.close()
-    for line in summary(loc, truth, datum):
+    if run.damage:
+        print(f"replay: {run.damage}", file=sys.stderr)
+    for line in summary(loc, run.truth, run.datum):
         print(line, file=sys.stderr)
     print(f"{written} estimates written to {args.output}", file=sys.stderr)
-    if code == 0 and loc.estimate is None:
-        return 3
-    return code
+    if run.damage:
+        return 1
+    return 0 if loc.estimate is not None else 3
 
 
 def live_qos(profiles):

@@ -8,10 +8,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from aoa_localizer.crlb import ellipse_points
+
 from .fields import seconds_to_stamp
-
-ELLIPSE_POINTS = 64
-
 
 def rosbags_types(typestore) -> SimpleNamespace:
     """The message classes of a rosbags typestore under short names."""
@@ -98,14 +97,6 @@ def particle_array(T, est, frame_id: str = "map"):
     poses = [T.Pose(position=T.Point(x=float(x), y=float(y), z=0.0), orientation=T.Quaternion(w=1.0))
              for x, y in est.particles]
     return T.PoseArray(header=header(T, est.stamp, frame_id), poses=poses)
-
-
-def ellipse_points(mean, cov, scale: float, n: int = ELLIPSE_POINTS) -> np.ndarray:
-    """Closed polygon (n+1, 2) of the ellipse x^T cov^-1 x = scale around mean."""
-    vals, vecs = np.linalg.eigh(np.asarray(cov, float))
-    a = np.linspace(0.0, 2 * math.pi, n + 1)
-    unit = np.stack([np.cos(a), np.sin(a)], axis=1) * np.sqrt(scale * np.maximum(vals, 0.0))
-    return np.asarray(mean, float) + unit @ vecs.T
 
 
 def markers(T, est, rays, ellipse_scale: float, frame_id: str = "map"):

@@ -60,12 +60,12 @@ def peer_runs(data, res, truth_engine, n, seed):
     return out
 
 
-def peer_scores(estimates, step_s, truth_engine, crlb, sample_cov_from=None):
+def peer_scores(estimates, step_s, truth_engine, crlb):
     err = np.array(estimates[-1]) - truth_engine
     errors = [float(np.hypot(*(np.array(e) - truth_engine))) for e in estimates]
     return {"converged": True, "error": float(np.hypot(*err)), "err_east": float(err[0]), "err_north": float(err[1]),
             "crlb": crlb, "large_errors": int(sum(e > LARGE_ERROR_M for e in errors)), "steps": len(estimates),
-            "step_s": step_s}
+            "step_s": step_s, "errors": errors, "points": list(range(1, len(estimates) + 1))}
 
 
 def aggregate(rows, truth) -> dict:
@@ -106,7 +106,6 @@ def bench_scenario(name, runs, n, filters, with_peers, bar):
             cfg = LocalizerConfig(seed=10000 + r, num_particles=n).with_changes(**FILTERS[fname])
             res = run(data, cfg)
             s = dict(res.scores, step_s=res.step_s, wall_s=res.wall_s)
-            s.pop("errors", None)
             rows[fname].append(s)
             if with_peers and fname == "afsa" and s["converged"]:
                 frame = res.localizer.frame
@@ -115,7 +114,29 @@ def bench_scenario(name, runs, n, filters, with_peers, bar):
                     rows[peer].append(peer_scores(est, step_s, truth_engine, s["crlb"]))
             bar.update()
     truth = SCENARIOS[name].emitter
-    return {f: aggregate(v, truth) for f, v in rows.items() if v}
+    return {f: aggregate(v, truth) for f, v in rows.items() if v}, rows
+
+
+def rmse_by_point(runs: list[dict], key: str = "errors"):
+    """(point index, RMS over the runs that have an estimate at that point) for one filter."""
+    by_point = {}
+    for r in runs:
+        for p, e in zip(r.get("points", []), r.get(key, [])):
+            by_point.setdefault(p, []).append(e)
+    pts = sorted(p for p, v in by_point.items() if len(v) >= max(1, len(runs) // 2))
+    return np.array(pts), np.array([np.sqrt(np.mean(np.square(by_point[p]))) for p in pts])
+
+
+def plot_scenarios(plot_dir: Path, raw: dict):
+    from aoa_localizer.plots import rmse_curves
+
+    plot_dir.mkdir(parents=True, exist_ok=True)
+    for scenario, rows in raw.items():
+        curves = {f: rmse_by_point(v) for f, v in rows.items() if v}
+        ours = [v for f, v in rows.items() if f in FILTERS and v]
+        bound = rmse_by_point(ours[0], "crlb_steps") if ours else None
+        rmse_curves(plot_dir / f"{scenario}.png", f"{scenario}: RMSE over runs at each observation point, N = 100",
+                    {f: c for f, c in curves.items() if len(c[0])}, bound)
 
 
 def print_tables(results):
@@ -158,17 +179,20 @@ def main(argv=None):
     parser.add_argument("--particles", type=int, default=100, help="N for every filter (default 100)")
     parser.add_argument("--no-peers", action="store_true", help="skip the particles package's filters")
     parser.add_argument("--json", metavar="OUT", help="write all figures as JSON")
+    parser.add_argument("--plot", metavar="DIR", help="write RMSE-against-step plots with the CRLB, one per scenario")
     args = parser.parse_args(argv)
     with_peers = particles_peers.AVAILABLE and not args.no_peers
     if not particles_peers.AVAILABLE and not args.no_peers:
         print("note: the `particles` package is not installed (pip install -e '.[bench]'): no peer rows", file=sys.stderr)
     t0 = time.time()
-    results = {}
+    results, raw = {}, {}
     with tqdm(total=args.runs * len(args.scenarios) * len(args.filters), unit="run", file=sys.stderr) as bar:
         for name in args.scenarios:
             bar.set_description(name)
-            results[name] = bench_scenario(name, args.runs, args.particles, args.filters, with_peers, bar)
+            results[name], raw[name] = bench_scenario(name, args.runs, args.particles, args.filters, with_peers, bar)
     print_tables(results)
+    if args.plot:
+        plot_scenarios(Path(args.plot), raw)
     meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
             "processor": platform.processor() or platform.machine(), "cores": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__, "runs": args.runs,

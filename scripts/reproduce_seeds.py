@@ -47,6 +47,7 @@ class Cell:
     paper_values: dict  # metric -> the paper's number (None where it gives none)
     jump: tuple | None = None
     changes: dict = field(default_factory=dict)
+    curve: np.ndarray | None = None  # RMSE of the first state at each k, filled by run_cell
 
 
 def cells(runs_override: int | None) -> list[Cell]:
@@ -91,12 +92,32 @@ def run_cell(c: Cell, bar) -> list[dict]:
         seconds.append(t)
         bar.update()
     rmse_k = np.sqrt(np.mean(sq, axis=0))  # (steps, dim)
+    c.curve = rmse_k[:, 0]  # the first state (x position for the turn model), for --plot
     ours = {"rmse": float(rmse_k[:, 0].mean()), "time_s": float(np.mean(seconds))}
     if model.dim == 4:
         ours.update(rmse_x=float(rmse_k[:, 0].mean()), rmse_y=float(rmse_k[:, 2].mean()))
     return [{"paper": c.paper, "table": c.table, "model": c.model, "algorithm": c.algorithm, "N": c.n,
              "metric": metric, "ours": ours[metric], "paper_value": paper_value, "runs": c.runs}
             for metric, paper_value in c.paper_values.items()]
+
+
+def plot_cells(plot_dir: Path, done: list[Cell]):
+    """One figure per paper table, model and N: RMSE of the first state against k, one line per algorithm."""
+    import re
+
+    from aoa_localizer.plots import rmse_curves
+
+    plot_dir.mkdir(parents=True, exist_ok=True)
+    groups = {}
+    for c in done:
+        if "ours" in c.table:
+            continue
+        groups.setdefault((c.paper, c.table, c.model, c.n), []).append(c)
+    for (paper, table, model, n), cs in groups.items():
+        slug = re.sub(r"[^a-z0-9]+", "_", f"{paper} {table} {model} n{n}".lower()).strip("_")
+        rmse_curves(plot_dir / f"{slug}.png", f"{paper} {table}: {model}, N = {n}, {cs[0].runs} runs",
+                    {c.algorithm: (np.arange(1, len(c.curve) + 1), c.curve) for c in cs},
+                    xlabel="k", ylabel="RMSE of x (first state)", log=False)
 
 
 def print_rows(rows):
@@ -113,6 +134,7 @@ def main(argv=None):
     parser.add_argument("--runs", type=int, help="Monte Carlo runs per cell (default: each paper's own)")
     parser.add_argument("--papers", nargs="+", default=["espf", "gfapf"], choices=["espf", "gfapf"])
     parser.add_argument("--json", metavar="OUT", help="write the rows as JSON")
+    parser.add_argument("--plot", metavar="DIR", help="write RMSE-against-k plots, one per table, model and N")
     args = parser.parse_args(argv)
     todo = [c for c in cells(args.runs) if c.paper in args.papers]
     t0 = time.time()
@@ -122,6 +144,8 @@ def main(argv=None):
             bar.set_description(f"{c.paper} {c.table}")
             rows += run_cell(c, bar)
     print_rows(rows)
+    if args.plot:
+        plot_cells(Path(args.plot), todo)
     meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
             "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
             "wall_s": round(time.time() - t0, 1)}

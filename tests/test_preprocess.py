@@ -47,8 +47,8 @@ def _reading(theta_deg, q=90.0, sigma_deg=1.0, t=0.0, e=0.0, n=0.0):
 
 def test_point_bearing_is_circular_across_the_wrap():
     cfg = LocalizerConfig(point_weighting="equal")
-    p, wild = make_point([_reading(179.0), _reading(-179.0), _reading(179.5), _reading(-179.5)], cfg)
-    assert wild == 0
+    p, kept = make_point([_reading(179.0), _reading(-179.0), _reading(179.5), _reading(-179.5)], cfg)
+    assert kept.all()
     assert abs(abs(p.theta) - math.pi) < 1e-9  # 180 deg, not 0
 
 
@@ -72,8 +72,8 @@ def test_inverse_variance_weights_and_position_follow_the_coefficients():
 
 def test_wild_reading_inside_a_point_is_gated_and_counted():
     readings = [_reading(30.0), _reading(30.5), _reading(29.5), _reading(200.0), _reading(30.2)]
-    p, wild = make_point(readings, LocalizerConfig())
-    assert wild == 1 and p.n_readings == 4
+    p, kept = make_point(readings, LocalizerConfig())
+    assert kept.tolist() == [True, True, True, False, True] and p.n_readings == 4
     assert math.degrees(p.theta) == pytest.approx(30.05, abs=0.3)
 
 

@@ -1,0 +1,141 @@
+"""Pictures a monitoring engineer reads: the map of a localisation, its error against the bound, and the
+benchmarks' RMSE curves. matplotlib with the Agg backend (headless)."""
+from __future__ import annotations
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar  # noqa: E402
+
+from .crlb import ellipse_axes, ellipse_points  # noqa: E402
+
+RAYS_MAX = 400  # used rays drawn (evenly thinned beyond that); every gated-out one is drawn
+
+
+def nice_length(span: float) -> float:
+    """A 1-2-5 length near a fifth of span, for the scale bar."""
+    target = max(span / 5.0, 1e-9)
+    exp = math.floor(math.log10(target))
+    return min((m * 10**exp for m in (1, 2, 5, 10)), key=lambda v: abs(v - target))
+
+
+def _rays(readings: np.ndarray, target, keep_all: bool, t_range, colour) -> LineCollection:
+    """Segments from each antenna along its bearing, 1.2 x the distance to the target, fading with age."""
+    t0, t1 = t_range
+    seg, rgba = [], []
+    for stamp, e, n, theta, _sigma in readings:
+        length = 1.2 * math.hypot(target[0] - e, target[1] - n) + 20.0
+        seg.append([(e, n), (e + length * math.cos(theta), n + length * math.sin(theta))])
+        age = (stamp - t0) / (t1 - t0) if t1 > t0 else 1.0
+        rgba.append((*colour, 0.08 + (0.25 if keep_all else 0.45) * age))
+    return LineCollection(seg, colors=rgba, linewidths=0.6 if not keep_all else 0.9,
+                          linestyles="dashed" if keep_all else "solid")
+
+
+def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.ndarray, est,
+               truth=None, title_extra: str = ""):
+    """map.png: track, bearing rays (used: blue, fading with age; gated out as wild: red dashed), particles,
+    estimate with its 95 % ellipse, truth if known; metres at the datum, scale bar, an inset around the estimate."""
+    fig, ax = plt.subplots(figsize=(9, 8), dpi=110)
+    target = (est.east, est.north)
+    t_range = (readings[:, 0].min(), readings[:, 0].max()) if len(readings) else (0.0, 1.0)
+    used, wild = readings[kept], readings[~kept]
+    if len(used) > RAYS_MAX:
+        used = used[np.linspace(0, len(used) - 1, RAYS_MAX).astype(int)]
+    if len(used):
+        ax.add_collection(_rays(used, target, False, t_range, (0.12, 0.35, 0.85)))
+    if len(wild):
+        ax.add_collection(_rays(wild, target, True, t_range, (0.85, 0.1, 0.1)))
+    if len(fixes):
+        ax.plot(fixes[:, 1], fixes[:, 2], color="0.25", lw=1.6, label="vehicle track")
+        ax.plot(fixes[0, 1], fixes[0, 2], "o", color="0.25", ms=5)
+    ring = ellipse_points(target, est.cov)
+    if est.particles is not None:
+        ax.scatter(est.particles[:, 0], est.particles[:, 1], s=4, color="0.45", alpha=0.6, label="particles", zorder=3)
+    ax.plot(ring[:, 0], ring[:, 1], color="orange", lw=1.5, label="95 % ellipse", zorder=4)
+    ax.plot(*target, "x", color="red", ms=10, mew=2, label="estimate", zorder=5)
+    if truth is not None:
+        ax.plot(*truth, "*", color="green", ms=14, label="truth", zorder=6)
+    ax.plot([], [], color=(0.12, 0.35, 0.85), lw=1, label="bearings used (older: fainter)")
+    ax.plot([], [], color=(0.85, 0.1, 0.1), lw=1, ls="--", label="bearings gated out as wild")
+    pts = [fixes[:, 1:3]] if len(fixes) else []
+    pts.append(np.array([target]))
+    if truth is not None:
+        pts.append(np.array([truth]))
+    allp = np.vstack(pts)
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    pad = 0.08 * max(hi - lo) + 50.0
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    span = ax.get_xlim()[1] - ax.get_xlim()[0]
+    bar = nice_length(span)
+    ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower left", pad=0.6, frameon=False, size_vertical=0))
+    a, b, _ = ellipse_axes(est.cov)
+    ax.set_title(f"Emitter at {est.lat:.6f}, {est.lon:.6f} ({est.algorithm}; 95 % ellipse {a:.1f} x {b:.1f} m)\n"
+                 f"map frame: ENU metres at datum {frame.lat0:.6f}, {frame.lon0:.6f}{title_extra}", fontsize=10)
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
+    # Inset around the estimate: the ellipse is metres wide on a map kilometres wide.
+    half = max(4 * a, 10.0)
+    if truth is not None:
+        half = max(half, 1.3 * math.hypot(truth[0] - target[0], truth[1] - target[1]))
+    ins = ax.inset_axes([0.64, 0.03, 0.34, 0.34])
+    rel = lambda xy: (np.asarray(xy)[..., 0] - target[0], np.asarray(xy)[..., 1] - target[1])  # noqa: E731
+    if est.particles is not None:
+        ins.scatter(*rel(est.particles), s=5, color="0.45", alpha=0.6)
+    ins.plot(*rel(ring), color="orange", lw=1.5)
+    ins.plot(0.0, 0.0, "x", color="red", ms=9, mew=2)
+    if truth is not None:
+        ins.plot(*rel(np.array(truth)), "*", color="green", ms=12)
+    ins.set_xlim(-half, half)
+    ins.set_ylim(-half, half)
+    ins.set_aspect("equal")
+    ins.locator_params(nbins=5)
+    ins.tick_params(labelsize=6)
+    ins.set_title("metres from the estimate", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def error_figure(path, t, error, bound, major):
+    """error.png: error against time with the CRLB of the bearings used so far and the ellipse's semi-major axis."""
+    fig, ax = plt.subplots(figsize=(9, 4.5), dpi=110)
+    t = np.asarray(t) - t[0]
+    ax.semilogy(t, error, color="red", lw=1.5, label="error of the estimate")
+    ax.semilogy(t, bound, color="black", lw=1.2, ls="--", label="CRLB of the bearings used so far (RMSE bound)")
+    ax.semilogy(t, major, color="orange", lw=1.2, label="95 % ellipse, semi-major axis")
+    ax.set_xlabel("time since the first estimate (s)")
+    ax.set_ylabel("metres")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Is the filter as good as the bearings allow? (error near the bound, inside the ellipse)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def rmse_curves(path, title: str, curves: dict, bound=None, xlabel="observation point", ylabel="RMSE (m)", log=True):
+    """RMSE against step, one line per filter, and the bound if given: the benchmarks' --plot."""
+    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
+    for name, (x, y) in curves.items():
+        ax.plot(x, y, lw=1.3, label=name)
+    if bound is not None:
+        ax.plot(bound[0], bound[1], color="black", ls="--", lw=1.2, label="CRLB")
+    if log:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,166 @@
+"""A localisation report a monitoring engineer can use: map, error plot, KML, GeoJSON and a summary.
+
+    python -m aoa_localizer.report bags/urban --out report/ --params-file bags/urban.params.yaml
+    python -m aoa_localizer.report estimates.jsonl --bag bags/seed --out report/
+
+INPUT is a rosbag2 MCAP bag (run through the engine offline, with the options of offline replay) or
+a JSON-lines file of estimates (offline replay's output) with --bag, the bag it came from (for the
+track and the bearings; the estimates are the file's). Writes map.png, emitter.kml, emitter.geojson,
+summary.md, and error.png when the bag carries the truth (sim/truth). Exit codes: 0 written; 1 the bag
+is damaged (the report covers what came before the damage); 2 unreadable input or no estimate.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .cli import add_engine_args, config_from_args, setup_logging
+from .config import ConfigError
+from .crlb import crlb_rmse, ellipse_axes, fisher_information, inside_ellipse
+from .geodesy import LocalFrame
+from .localizer import REASONS, Localizer
+from .replay import run_bag
+from .types import Estimate
+
+
+def estimates_from_jsonl(path: Path, frame_of) -> list[Estimate]:
+    """Estimates of an offline-replay JSON-lines file, placed in our frame through their lat/lon."""
+    out = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            d = json.loads(line)
+            east, north = frame_of.to_enu(d["lat"], d["lon"])
+            out.append(Estimate(stamp=float(d["stamp"]), east=float(east), north=float(north), lat=float(d["lat"]),
+                                lon=float(d["lon"]), cov=np.array(d["cov"], float), bearings_used=int(d["bearings_used"]),
+                                points_used=int(d.get("points_used", 0)), ess=float(d.get("ess", float("nan"))),
+                                algorithm=str(d.get("algorithm", "?"))))
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{path}:{n}: not an estimate line ({exc})") from exc
+    return out
+
+
+def error_series(estimates, readings: np.ndarray, truth) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per estimate: time, error, the CRLB of the readings used up to it (their modelled sigma), 95 % semi-major."""
+    t = np.array([e.stamp for e in estimates])
+    err = np.array([math.hypot(e.east - truth[0], e.north - truth[1]) for e in estimates])
+    major = np.array([ellipse_axes(e.cov)[0] for e in estimates])
+    bound = np.full(len(t), np.inf)
+    if len(readings):
+        order = np.argsort(readings[:, 0])
+        r = readings[order]
+        per = np.array([fisher_information(truth, r[i:i + 1, 1:3], r[i:i + 1, 4]) for i in range(len(r))])
+        cum = np.cumsum(per, axis=0)
+        upto = np.searchsorted(r[:, 0], t, side="right") - 1
+        for i, k in enumerate(upto):
+            if k >= 0 and np.linalg.cond(cum[k]) < 1e12:
+                bound[i] = math.sqrt(np.trace(np.linalg.inv(cum[k])))
+    return t, err, bound, major
+
+
+def write_summary(path: Path, inp, loc: Localizer, est: Estimate, truth, bound, damage):
+    a, b, azimuth = ellipse_axes(est.cov)
+    used = int(sum(1 for r in loc.trace.readings if r[5]))
+    lines = [f"# Emitter localisation: {Path(inp).name}", "",
+             f"* **Estimate**: {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
+             f"of the datum {loc.frame.lat0:.7f}, {loc.frame.lon0:.7f})",
+             f"* **95 % error ellipse**: semi-axes {a:.1f} m x {b:.1f} m, major axis at {azimuth:.0f} deg from north",
+             f"* **Algorithm**: {est.algorithm}, N = {loc.cfg.num_particles}, seed {loc.cfg.seed}",
+             f"* **Bearings used**: {est.bearings_used} in {est.points_used} observation points "
+             f"(of {len(loc.trace.readings)} paired with a GPS position; {used} kept inside their points)"]
+    if truth is not None:
+        err = np.array([est.east - truth[0], est.north - truth[1]])
+        lines.append(f"* **Final error against the truth**: {math.hypot(*err):.2f} m; Cramer-Rao bound of the bearings "
+                     f"used {bound:.2f} m; the truth is {'inside' if inside_ellipse(err, est.cov) else 'outside'} the 95 % ellipse")
+    if damage:
+        lines.append(f"* **Input damaged**: {damage}; this report covers the data before the damage")
+    lines += ["", "## Inputs not used", ""]
+    if loc.rejected:
+        lines += ["| reason | count | meaning |", "|---|---|---|"]
+        lines += [f"| `{k}` | {v} | {REASONS[k]} |" for k, v in sorted(loc.rejected.items())]
+    else:
+        lines.append("none")
+    lines += ["", "Files: `map.png`, `emitter.kml`, `emitter.geojson`" + (", `error.png`" if truth is not None else ""), ""]
+    path.write_text("\n".join(lines))
+
+
+def main(argv=None) -> int:
+    from msgs_adapters.bag import BagError
+
+    from . import export, plots
+
+    parser = argparse.ArgumentParser(prog="python -m aoa_localizer.report", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("input", type=Path, help="rosbag2 MCAP bag, or a JSON-lines file of estimates with --bag")
+    parser.add_argument("--bag", type=Path, help="with a JSON-lines INPUT: the bag the estimates came from")
+    parser.add_argument("--out", type=Path, required=True, help="directory for the report's files")
+    parser.add_argument("--fix-topic", default="/gps/fix")
+    parser.add_argument("--bearing-topic", default="/df/bearing")
+    add_engine_args(parser)
+    args = parser.parse_args(argv)
+    setup_logging(args.verbose)
+    jsonl = args.input.suffix in (".jsonl", ".json")
+    bag = args.bag if jsonl else args.input
+    if jsonl and bag is None:
+        print("report: a JSON-lines input needs --bag, the bag it came from", file=sys.stderr)
+        return 2
+    if not args.input.exists() or (bag is not None and not bag.exists()):
+        print(f"report: no such input: {args.input if not args.input.exists() else bag}", file=sys.stderr)
+        return 2
+    try:
+        cfg = config_from_args(args)
+    except ConfigError as exc:
+        print(f"report: {exc}", file=sys.stderr)
+        return 2
+    loc = Localizer(cfg, keep_trace=True)
+    estimates = []
+    try:
+        run = run_bag(bag, {"fix": args.fix_topic, "bearing": args.bearing_topic}, loc, estimates.append, desc="report")
+    except BagError as exc:
+        print(f"report: {exc}", file=sys.stderr)
+        return 2
+    if run.damage:
+        print(f"report: {run.damage}; reporting what came before", file=sys.stderr)
+    if loc.frame is None:
+        print("report: the bag holds no usable GPS fix", file=sys.stderr)
+        return 2
+    if jsonl:
+        try:
+            estimates = estimates_from_jsonl(args.input, loc.frame)
+        except (OSError, ValueError) as exc:
+            print(f"report: {exc}", file=sys.stderr)
+            return 2
+    if not estimates:
+        print(f"report: no estimate ({loc.status})", file=sys.stderr)
+        return 2
+    est = estimates[-1]
+    truth = None
+    if run.truth is not None and run.datum is not None:
+        lat, lon, _ = LocalFrame(*run.datum).to_geodetic(run.truth[1], run.truth[2], 0.0)
+        truth = tuple(float(v) for v in loc.frame.to_enu(lat, lon))
+    fixes = np.array(loc.trace.fixes).reshape(-1, 3)
+    readings = np.array(loc.trace.readings, dtype=float).reshape(-1, 6)
+    kept = readings[:, 5].astype(bool)
+    args.out.mkdir(parents=True, exist_ok=True)
+    plots.map_figure(args.out / "map.png", loc.frame, fixes, readings[:, :5], kept, est, truth)
+    bound = None
+    if truth is not None:
+        t, err, bounds, major = error_series(estimates, readings[kept][:, :5], truth)
+        plots.error_figure(args.out / "error.png", t, err, bounds, major)
+        bound = crlb_rmse(truth, readings[kept][:, 1:3], readings[kept][:, 4]) if kept.any() else float("inf")
+    track = fixes[:, 1:3]
+    (args.out / "emitter.kml").write_text(export.kml(loc.frame, est, track))
+    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(loc.frame, est, track), indent=1))
+    write_summary(args.out / "summary.md", args.input, loc, est, truth, bound, run.damage)
+    print(f"report written to {args.out}: " + ", ".join(sorted(p.name for p in args.out.iterdir())), file=sys.stderr)
+    return 1 if run.damage else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

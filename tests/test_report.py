@@ -1,0 +1,121 @@
+"""The localisation report: files written, KML and GeoJSON as GIS tools read them, the ellipse's area."""
+import json
+import math
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aoa_localizer.crlb import ELLIPSE_95
+from aoa_localizer.export import KML_NS, geojson, kml
+from aoa_localizer.geodesy import LocalFrame
+from aoa_localizer.types import Estimate
+
+ROOT = Path(__file__).resolve().parent.parent
+FRAME = LocalFrame(39.1, 117.2, 5.0)
+
+
+@pytest.fixture
+def estimate():
+    cov = np.array([[30.0, 12.0], [12.0, 10.0]])
+    lat, lon, _ = FRAME.to_geodetic(1200.0, 800.0, 0.0)
+    return Estimate(stamp=1795000000.5, east=1200.0, north=800.0, lat=float(lat), lon=float(lon), cov=cov,
+                    bearings_used=300, points_used=60, ess=80.0, algorithm="afsa")
+
+
+TRACK = np.array([[0.0, 0.0], [1000.0, 400.0], [1500.0, 600.0]])
+
+
+def inside(point, ring) -> bool:
+    """Ray casting in (lon, lat)."""
+    x, y = point
+    hit = False
+    for (x1, y1), (x2, y2) in zip(ring[:-1], ring[1:]):
+        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
+            hit = not hit
+    return hit
+
+
+def enu_area(ring):
+    lon, lat = np.array(ring).T
+    e, n = FRAME.to_enu(lat, lon)
+    return 0.5 * abs(np.dot(e[:-1], n[1:]) - np.dot(e[1:], n[:-1]))
+
+
+def test_kml_is_kml_with_a_closed_ellipse_around_the_estimate(estimate):
+    root = ET.fromstring(kml(FRAME, estimate, TRACK))
+    ns = {"k": KML_NS}
+    assert root.tag == f"{{{KML_NS}}}kml"
+    names = [p.findtext("k:name", namespaces=ns) for p in root.iter(f"{{{KML_NS}}}Placemark")]
+    assert names == ["emitter estimate", "95 % error ellipse", "vehicle track"]
+    ring_text = root.find(".//k:Polygon/k:outerBoundaryIs/k:LinearRing/k:coordinates", ns).text
+    ring = [tuple(map(float, c.split(",")[:2])) for c in ring_text.split()]
+    assert ring[0] == ring[-1] and inside((estimate.lon, estimate.lat), ring)
+    data = {d.get("name"): d.findtext("k:value", namespaces=ns) for d in root.iter(f"{{{KML_NS}}}Data")}
+    assert data["algorithm"] == "afsa" and data["bearings_used"] == "300" and data["time"].startswith("2026")
+    assert root.find(".//k:LineString/k:coordinates", ns).text.split()[0].startswith("117.2")
+
+
+def test_geojson_structure_lon_lat_order_and_ellipse_area(estimate):
+    gj = json.loads(json.dumps(geojson(FRAME, estimate, TRACK)))
+    assert gj["type"] == "FeatureCollection"
+    kinds = {f["geometry"]["type"]: f for f in gj["features"]}
+    assert set(kinds) == {"Point", "Polygon", "LineString"}
+    lon, lat = kinds["Point"]["geometry"]["coordinates"]
+    assert (lon, lat) == pytest.approx((estimate.lon, estimate.lat)) and 117 < lon < 118 and 39 < lat < 40
+    ring = kinds["Polygon"]["geometry"]["coordinates"][0]
+    assert ring[0] == ring[-1] and len(ring) >= 4 and inside((lon, lat), ring)
+    assert all(117 < p[0] < 118 and 39 < p[1] < 40 for p in ring)  # (lon, lat), not (lat, lon)
+    assert len(kinds["LineString"]["geometry"]["coordinates"]) == 3
+    assert kinds["Polygon"]["properties"]["bearings_used"] == 300
+    a, b = np.sqrt(ELLIPSE_95 * np.linalg.eigvalsh(estimate.cov))
+    assert enu_area(ring) == pytest.approx(math.pi * a * b, rel=0.01)
+
+
+def report(*args):
+    return subprocess.run([sys.executable, "-m", "aoa_localizer.report", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=240)
+
+
+def test_report_on_a_sample_bag_writes_every_file(tmp_path):
+    res = report(ROOT / "bags/seed", "--out", tmp_path / "r", "--seed", 1)
+    assert res.returncode == 0, res.stderr
+    files = {p.name for p in (tmp_path / "r").iterdir()}
+    assert files == {"map.png", "error.png", "emitter.kml", "emitter.geojson", "summary.md"}
+    assert (tmp_path / "r/map.png").read_bytes()[:4] == b"\x89PNG"
+    summary = (tmp_path / "r/summary.md").read_text()
+    assert "Final error against the truth" in summary and "Inputs not used" in summary
+
+
+def test_report_from_estimates_and_their_bag(tmp_path):
+    out = tmp_path / "e.jsonl"
+    rep = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", ROOT / "bags/seed", "--offline", "--output", out,
+                          "--seed", "2"], cwd=ROOT, capture_output=True, text=True)
+    assert rep.returncode == 0, rep.stderr
+    res = report(out, "--bag", ROOT / "bags/seed", "--out", tmp_path / "r")
+    assert res.returncode == 0, res.stderr
+    last = json.loads(out.read_text().splitlines()[-1])
+    gj = json.loads((tmp_path / "r/emitter.geojson").read_text())
+    point = next(f for f in gj["features"] if f["geometry"]["type"] == "Point")
+    assert point["geometry"]["coordinates"] == pytest.approx([last["lon"], last["lat"]])
+
+
+@pytest.mark.parametrize("case", ["garbage", "missing", "jsonl_without_bag", "bad_jsonl"])
+def test_broken_input_exits_non_zero_with_a_message(tmp_path, case):
+    if case == "garbage":
+        (tmp_path / "bag").mkdir()
+        (tmp_path / "bag/x.mcap").write_bytes(b"not a bag" * 50)
+        args = [tmp_path / "bag"]
+    elif case == "missing":
+        args = [tmp_path / "nothing"]
+    elif case == "jsonl_without_bag":
+        (tmp_path / "e.jsonl").write_text("{}\n")
+        args = [tmp_path / "e.jsonl"]
+    else:
+        (tmp_path / "e.jsonl").write_text("{\"stamp\": 1}\n")
+        args = [tmp_path / "e.jsonl", "--bag", ROOT / "bags/seed"]
+    res = report(*args, "--out", tmp_path / "r")
+    assert res.returncode == 2 and "report:" in res.stderr
