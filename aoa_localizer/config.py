@@ -12,7 +12,7 @@ from numbers import Integral, Real
 # sqrt(3.801e-4 rad^2), the AFSA paper's bearing noise, in degrees.
 PAPER_BEARING_SIGMA_DEG = math.degrees(math.sqrt(3.801e-4))
 
-ALGORITHMS = ("afsa", "sir", "espf", "gfapf")
+ALGORITHMS = ("afsa", "sir", "espf", "gfapf", "upfde", "upf", "pfde", "agapf")
 RESAMPLING = ("systematic", "stratified", "residual", "multinomial")
 LIKELIHOODS = ("mixture", "gaussian")
 SIGMA_MODELS = ("constant", "quality")
@@ -60,6 +60,27 @@ class GfapfConfig:
 
 
 @dataclass(frozen=True)
+class DeConfig:
+    """Differential evolution of UPF-DE and PF-DE: V = F1 X_r1 + F2 (X_r2 - X_r3), binomial crossover Cr, G generations."""
+
+    f1: float = 1.0
+    f2: float = 0.9
+    cr: float = 0.6
+    generations: int = 20
+
+
+@dataclass(frozen=True)
+class AgapfConfig:
+    """AGA-PF's adaptive crossover and mutation probabilities (eqs. 18-19)."""
+
+    pc1: float = 0.95
+    pc2: float = 0.5
+    pm1: float = 0.07
+    pm2: float = 0.001
+    a: float = 9.9034
+
+
+@dataclass(frozen=True)
 class LocalizerConfig:
     """All engine parameters. Defaults are the AFSA paper's where it gives one (see docs/design.md)."""
 
@@ -104,6 +125,8 @@ class LocalizerConfig:
     afsa: AfsaConfig = field(default_factory=AfsaConfig)
     espf: EspfConfig = field(default_factory=EspfConfig)
     gfapf: GfapfConfig = field(default_factory=GfapfConfig)
+    de: DeConfig = field(default_factory=DeConfig)
+    agapf: AgapfConfig = field(default_factory=AgapfConfig)
 
     def __post_init__(self):
         _validate(self)
@@ -250,5 +273,21 @@ def _validate_gfapf(g: GfapfConfig):
     _check(g.scale in ("spread", "absolute"), f"gfapf.scale must be spread or absolute; got {g.scale!r}")
 
 
-GROUPS = {"afsa": AfsaConfig, "espf": EspfConfig, "gfapf": GfapfConfig}
-VALIDATORS = {"afsa": _validate_afsa, "espf": _validate_espf, "gfapf": _validate_gfapf}
+def _validate_de(d: DeConfig):
+    for name in ("f1", "f2"):
+        v = getattr(d, name)
+        _check(_is_real(v) and v > 0, f"de.{name} must be a finite number > 0, got {v!r}")
+    _check(_is_real(d.cr) and 0 <= d.cr <= 1, f"de.cr must be in [0, 1], got {d.cr!r}")
+    _check(_is_int(d.generations) and d.generations >= 0, f"de.generations must be an integer >= 0, got {d.generations!r}")
+
+
+def _validate_agapf(g: AgapfConfig):
+    for name in ("pc1", "pc2", "pm1", "pm2"):
+        v = getattr(g, name)
+        _check(_is_real(v) and 0 <= v <= 1, f"agapf.{name} must be in [0, 1], got {v!r}")
+    _check(_is_real(g.a) and g.a > 0, f"agapf.a must be a finite number > 0, got {g.a!r}")
+
+
+GROUPS = {"afsa": AfsaConfig, "espf": EspfConfig, "gfapf": GfapfConfig, "de": DeConfig, "agapf": AgapfConfig}
+VALIDATORS = {"afsa": _validate_afsa, "espf": _validate_espf, "gfapf": _validate_gfapf, "de": _validate_de,
+              "agapf": _validate_agapf}

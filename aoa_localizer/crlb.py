@@ -27,9 +27,13 @@ def crlb_rmse(emitter, sensors, sigmas) -> float:
 
 
 def nees(error, cov) -> float:
-    """Normalised estimation error squared e^T P^-1 e (mean 2 for an honest 2-D filter)."""
+    """Normalised estimation error squared e^T P^-1 e (mean 2 for an honest 2-D filter); inf for a collapsed
+    (singular) covariance that does not hold the error."""
     e = np.asarray(error, float)
-    return float(e @ np.linalg.solve(np.asarray(cov, float), e))
+    try:
+        return float(e @ np.linalg.solve(np.asarray(cov, float), e))
+    except np.linalg.LinAlgError:
+        return 0.0 if not e.any() else float("inf")
 
 
 def inside_ellipse(error, cov, level_chi2: float = ELLIPSE_95) -> bool:

@@ -42,6 +42,7 @@ REASONS = {
     "init_buffer_full": "geometry stayed too poor to start; oldest points dropped (init_max_points)",
     "weights_degenerate": "no particle could explain the point; measurement skipped",
     "internal_error": "an unexpected error in the filter; measurement skipped, state kept",
+    "filter_diverged": "the filter's particles or estimate were not finite; not published, the filter restarts",
     "fix_bad_stamp": "fix stamp is not a finite number",
     "fix_no_fix": "NavSatFix status below STATUS_FIX",
     "fix_bad_position": "fix latitude/longitude NaN, infinite or out of range",
@@ -254,15 +255,20 @@ class Localizer:
             return self._reject("internal_error")
         finally:
             self.last_update_s = time.perf_counter() - t0
+        mean, cov = self.filter.estimate()
+        if not (np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+            self.filter = None
+            self.status = "filter diverged: restarting from new bearings"
+            log.error("filter %s diverged (non-finite particles or estimate); restarting", self.cfg.algorithm)
+            return self._reject("filter_diverged")
         if not ok:
             return self._reject("weights_degenerate")
         self.points_used += 1
         self.bearings_used += point.n_readings
-        self.estimate = self._make_estimate(point.stamp)
+        self.estimate = self._make_estimate(point.stamp, mean, cov)
         return self.estimate
 
-    def _make_estimate(self, stamp: float) -> Estimate:
-        mean, cov = self.filter.estimate()
+    def _make_estimate(self, stamp: float, mean, cov) -> Estimate:
         lat, lon, _ = self.frame.to_geodetic(mean[0], mean[1])
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
                         cov=cov, bearings_used=self.bearings_used, points_used=self.points_used,

@@ -35,7 +35,8 @@ INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometr
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
 
 DESCRIPTIONS = {
-    "algorithm": "filter: afsa (AFSA-PF), sir (bootstrap), espf (evolution sampling), gfapf (gravitation field)",
+    "algorithm": "filter: afsa (AFSA-PF), sir (bootstrap), espf (evolution sampling), gfapf (gravitation field), "
+                 "upfde (UKF proposal + differential evolution), upf, pfde, agapf (adaptive genetic)",
     "num_particles": "number of particles N",
     "seed": "filter seed; unset: random. The same seed reproduces a run",
     "bearing_sigma_deg": "bearing noise sigma per reading (deg) for sigma_model constant",
@@ -82,6 +83,15 @@ DESCRIPTIONS = {
     "gfapf.attract_min": "GFA-PF: no attraction closer than this to the centre (scale units)",
     "gfapf.repel_max": "GFA-PF: no repulsion farther than this from the centre (scale units)",
     "gfapf.scale": "GFA-PF: absolute (state units) or spread (standard deviations of the cloud)",
+    "de.f1": "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)",
+    "de.f2": "UPF-DE/PF-DE: scale F2 of the difference vector",
+    "de.cr": "UPF-DE/PF-DE: binomial crossover rate",
+    "de.generations": "UPF-DE/PF-DE: DE generations G per measurement",
+    "agapf.pc1": "AGA-PF: crossover probability below the average fitness",
+    "agapf.pc2": "AGA-PF: crossover probability floor for the fittest",
+    "agapf.pm1": "AGA-PF: mutation probability below the average fitness",
+    "agapf.pm2": "AGA-PF: mutation probability floor for the fittest",
+    "agapf.a": "AGA-PF: steepness A of the adaptive curves",
 }
 # Node-only parameters (not engine settings).
 NODE_PARAMS = {

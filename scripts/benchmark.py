@@ -37,6 +37,10 @@ FILTERS = {
     "sir": {"algorithm": "sir"},
     "espf": {"algorithm": "espf"},
     "gfapf": {"algorithm": "gfapf"},
+    "upfde": {"algorithm": "upfde"},
+    "upf": {"algorithm": "upf"},
+    "pfde": {"algorithm": "pfde"},
+    "agapf": {"algorithm": "agapf"},
 }
 PEERS = ("particles-bootstrap", "particles-ibis")
 # AFSA paper, Table 1 (relative error x / y in %, seconds for 60 steps, "large errors" of 60 estimates).

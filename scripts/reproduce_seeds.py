@@ -4,7 +4,9 @@
     python scripts/reproduce_seeds.py --runs 10 --json seeds.json
 
 RMSE: at each step k the root mean square error over the runs, then the mean over the steps (the
-papers' "mean RMSE"); for the coordinated-turn model per position axis. Run r uses data seed r and
+papers' "mean RMSE"); for the coordinated-turn model per position axis, for the truck-trailer per state.
+UPF-DE's and AGA-PF's tables give the mean (and variance, maximum) over runs of each run's RMSE over
+time: those cells are scored that way. Run r uses data seed r and
 filter seed 1000 + r, so every filter sees the same data. The bootstrap rows ("pf") resample at every
 step, as the papers' PF does; GFA-PF resamples when N_eff < N/2 and reads its distances in state units.
 JSON: {"meta": {...}, "rows": [{paper, table, model, algorithm, N, metric, ours, paper_value}, ...]}.
@@ -29,7 +31,8 @@ from aoa_localizer.models import benchmarks as B
 
 # Per algorithm, how the table runs it (LocalizerConfig changes).
 SETTINGS = {"pf": ("sir", {"ess_threshold": 1.0}), "espf": ("espf", {}),
-            "gfapf": ("gfapf", {"gfapf.scale": "absolute"})}
+            "gfapf": ("gfapf", {"gfapf.scale": "absolute"}), "upfde": ("upfde", {}), "upf": ("upf", {}),
+            "pfde": ("pfde", {}), "agapf": ("agapf", {})}
 
 
 @dataclass
@@ -47,6 +50,8 @@ class Cell:
     paper_values: dict  # metric -> the paper's number (None where it gives none)
     jump: tuple | None = None
     changes: dict = field(default_factory=dict)
+    per_run: bool = False  # RMSE over time per run, then mean (and variance, max) over runs
+    transform: object = None  # maps states before scoring (the truck-trailer's derived x1)
     curve: np.ndarray | None = None  # RMSE of the first state at each k, filled by run_cell
 
 
@@ -78,6 +83,29 @@ def cells(runs_override: int | None) -> list[Cell]:
     for algo, value in (("pf", 1.8828), ("gfapf", 0.5825)):
         out.append(Cell("gfapf", "Table 4", "UNGM, state jump of 10 at k = 25", B.gfapf_ungm, algo, 50, 100, r(50),
                         {"rmse": value, "time_s": None}, jump=(25, 10.0)))
+    upfde = {"pf": (0.9485, 0.0324, 0.0348), "pfde": (0.8054, 0.0320, 0.3088), "upf": (0.4893, 0.0100, 0.3742),
+             "upfde": (0.2580, 0.0084, 0.6372)}
+    for algo, (mean, var, secs) in upfde.items():
+        out.append(Cell("upfde", "Tables 1-2", "Gamma model, switch at t = 30", B.upfde_model, algo, 10, 50, r(500),
+                        {"rmse": mean, "rmse_var": var, "time_s": secs}, per_run=True))
+    out.append(Cell("upfde", "Tables 1-2", "Gamma model, switch at t = 30", B.upfde_model, "pf", 200, 50, r(500),
+                    {"rmse": 0.4398, "rmse_var": None, "time_s": 0.6284}, per_run=True))
+    aga = {False: {100: 1.01, 300: 0.82, 500: 0.71}, True: {100: 4.02, 300: 3.90, 500: 3.46}}
+    for jumped, values in aga.items():
+        for n, value in values.items():
+            for algo in ("pf", "agapf"):
+                out.append(Cell("agapf", "Table 3" if jumped else "Table 2",
+                                "1-D model" + (", state jump of 10 at k = 50" if jumped else ""), B.agapf_ungm, algo, n,
+                                100, r(20), {"rmse": value if algo == "agapf" else None, "rmse_max": None},
+                                jump=(50, 10.0) if jumped else None, per_run=True))
+    truck = {"pf": (0.8126, 0.7696, 1.0642, 22.1793, 26.6928), "agapf": (0.6412, 0.6172, 0.7015, 2.2361, 2.1793)}
+    for algo, values in truck.items():
+        out.append(Cell("agapf", "Table 4", "truck-trailer, jump of 20 m at k = 50", B.TruckTrailerModel, algo, 300,
+                        100, r(20), {f"rmse_x{i}": v for i, v in enumerate(values)},
+                        jump=(50, np.array([0.0, 0.0, 20.0, 20.0])), transform=B.TruckTrailerModel.five))
+    for algo in ("pf", "agapf"):
+        out.append(Cell("agapf", "bearings-only tracking (ours)", "Gordon 1993 model, 24 steps", B.BearingsOnlyModel,
+                        algo, 300, 24, r(20), {"rmse_x": None, "rmse_y": None}))
     return out
 
 
@@ -91,11 +119,17 @@ def run_cell(c: Cell, bar) -> list[dict]:
         sq.append((truth - est) ** 2)
         seconds.append(t)
         bar.update()
+    if c.transform is not None:
+        sq = [c.transform(np.sqrt(e)) ** 2 for e in sq]
     rmse_k = np.sqrt(np.mean(sq, axis=0))  # (steps, dim)
     c.curve = rmse_k[:, 0]  # the first state (x position for the turn model), for --plot
     ours = {"rmse": float(rmse_k[:, 0].mean()), "time_s": float(np.mean(seconds))}
-    if model.dim == 4:
+    if c.per_run:
+        per_run = np.sqrt(np.mean(np.array(sq)[:, :, 0], axis=1))
+        ours.update(rmse=float(per_run.mean()), rmse_var=float(per_run.var()), rmse_max=float(per_run.max()))
+    if model.dim == 4 and c.transform is None:
         ours.update(rmse_x=float(rmse_k[:, 0].mean()), rmse_y=float(rmse_k[:, 2].mean()))
+    ours.update({f"rmse_x{i}": float(rmse_k[:, i].mean()) for i in range(rmse_k.shape[1])} if c.transform else {})
     return [{"paper": c.paper, "table": c.table, "model": c.model, "algorithm": c.algorithm, "N": c.n,
              "metric": metric, "ours": ours[metric], "paper_value": paper_value, "runs": c.runs}
             for metric, paper_value in c.paper_values.items()]
@@ -132,7 +166,8 @@ def print_rows(rows):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, help="Monte Carlo runs per cell (default: each paper's own)")
-    parser.add_argument("--papers", nargs="+", default=["espf", "gfapf"], choices=["espf", "gfapf"])
+    parser.add_argument("--papers", nargs="+", default=["espf", "gfapf", "upfde", "agapf"],
+                        choices=["espf", "gfapf", "upfde", "agapf"])
     parser.add_argument("--json", metavar="OUT", help="write the rows as JSON")
     parser.add_argument("--plot", metavar="DIR", help="write RMSE-against-k plots, one per table, model and N")
     args = parser.parse_args(argv)

@@ -21,3 +21,7 @@ def test_nees_and_ellipse():
     cov = np.diag([4.0, 1.0])
     assert nees([2.0, 1.0], cov) == pytest.approx(2.0)
     assert inside_ellipse([2.0, 1.0], cov) and not inside_ellipse([5.0, 0.0], cov)
+
+
+def test_a_collapsed_covariance_scores_infinite_nees():
+    assert nees([1.0, 0.0], np.zeros((2, 2))) == float("inf") and not inside_ellipse([1.0, 0.0], np.zeros((2, 2)))

@@ -21,18 +21,19 @@ def azimuth(east, north):
     return math.degrees(math.atan2(EMITTER[0] - east, EMITTER[1] - north)) % 360
 
 
-def drive(loc, seconds=120, speed=10.0, df_hz=5, noise_deg=0.5, seed=0, track=lambda t: (10.0 * t, 0.3 * 10.0 * t)):
-    """A vehicle on a straight-ish road: 1 Hz fixes, DF readings in between; returns the last estimate."""
+def drive(loc, seconds=120, speed=10.0, df_hz=5, noise_deg=0.5, seed=0, track=lambda t: (10.0 * t, 0.3 * 10.0 * t),
+          t0=0.0):
+    """A vehicle on a straight-ish road: 1 Hz fixes, DF readings in between, stamps from t0; the last estimate."""
     rng = np.random.default_rng(seed)
     est = None
     for k in range(seconds):
         e, n = track(k)
-        est = loc.add_fix(k, *fix_at(e, n), 5.0) or est
+        est = loc.add_fix(t0 + k, *fix_at(e, n), 5.0) or est
         for j in range(df_hz):
             t = k + (j + 0.5) / df_hz
             e, n = track(t)
-            est = loc.add_bearing(t, azimuth(e, n) + rng.normal(0, noise_deg), 90.0) or est
-    est = loc.add_fix(seconds, *fix_at(*track(seconds)), 5.0) or est  # brackets the last readings
+            est = loc.add_bearing(t0 + t, azimuth(e, n) + rng.normal(0, noise_deg), 90.0) or est
+    est = loc.add_fix(t0 + seconds, *fix_at(*track(seconds)), 5.0) or est  # brackets the last readings
     return loc.flush() or est
 
 
@@ -212,3 +213,15 @@ def test_a_later_fix_closes_the_open_point_so_a_stopped_vehicle_gets_its_estimat
     assert loc.add_fix(2.0, *fix_at(0.0, 0.0)) is None  # 1.8 s after the point's first reading: still open
     est = loc.add_fix(3.0, *fix_at(0.0, 0.0))  # 2.8 s > obs_max_duration_s
     assert est is not None and est.points_used == 1 and est.bearings_used == 2
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the infinite particles are the point of the test
+def test_a_diverged_filter_is_never_published_and_restarts():
+    loc = Localizer(LocalizerConfig(seed=3, datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
+    drive(loc, seconds=90, track=curved)
+    assert loc.filter is not None
+    published = loc.estimate
+    loc.filter.x[:] = np.inf  # what a run-away move step leaves behind
+    est = drive(loc, seconds=100, track=lambda t: curved(t + 90), t0=1000.0)
+    assert loc.rejected["filter_diverged"] == 1
+    assert est is not None and np.isfinite(est.east) and est.stamp > published.stamp

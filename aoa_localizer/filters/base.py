@@ -1,8 +1,9 @@
 """The particle-filter skeleton every algorithm plugs into: predict, log-domain weights, ESS, resampling,
 estimate and covariance, over any StateSpaceModel (the emitter problem, or a paper's benchmark model).
 
-One `update(z)` is one measurement: predict -> weight -> `after_weight` hook -> resample when
-`should_resample()` -> `after_resample` hook. A filter module overrides the hooks, nothing else.
+One `update(z)` is one measurement: propose (by default: predict with the model's transition) -> weight
+-> `after_weight` hook -> resample when `should_resample()` -> `after_resample` hook. A filter module
+overrides the hooks, nothing else.
 """
 from __future__ import annotations
 
@@ -48,6 +49,11 @@ class ParticleFilter:
         """Draw x_k from the model's transition."""
         self.x = self.model.transition(self.x, self.k, self.rng)
 
+    def propose(self, z):
+        """Draw the new particles; returns log p(x | x_prev) - log q(x) per particle (0: the prior is the proposal)."""
+        self.predict()
+        return 0.0
+
     def loglik(self, x: np.ndarray, z) -> np.ndarray:
         return self.model.loglik(x, z, self.k)
 
@@ -81,10 +87,10 @@ class ParticleFilter:
         self.k += 1
         self.model.observe(z)
         self.x_prev = self.x
-        self.predict()
+        correction = self.propose(z)
         self.prev_logw = self.logw
         self.last_ll = ll = self.loglik(self.x, z)
-        new = self.logw + ll
+        new = self.logw + ll + correction
         top = new.max()
         if not np.isfinite(top):
             self.skipped += 1

@@ -51,5 +51,6 @@ class BearingLikelihood:
             c, s = np.cos(theta), np.sin(theta)
         r = np.arctan2(dx * s - dy * c, dx * c + dy * s)
         if self.gps_var:
-            sigma = np.sqrt(sigma**2 + self.gps_var / np.maximum(dx * dx + dy * dy, 1.0))
+            with np.errstate(over="ignore"):  # a particle run off to 1e200 m: its GPS term is simply 0
+                sigma = np.sqrt(sigma**2 + self.gps_var / np.maximum(dx * dx + dy * dy, 1.0))
         return mixture_loglik(r, sigma, self.outlier_prob)

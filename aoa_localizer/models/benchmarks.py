@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import gammaln
 
 from .base import StateSpaceModel
 
@@ -65,9 +66,19 @@ class GrowthModel(BenchmarkModel):
         self.dim = 1
         self.x0, self.p0 = np.array([self.x0_value]), np.array([self.p0_value])
 
+    def drift(self, x, k):
+        return self.a * x + self.b * x / (1 + x * x) + self.c * math.cos(1.2 * (k - self.k_offset))
+
     def transition(self, x, k, rng):
-        drift = self.a * x + self.b * x / (1 + x * x) + self.c * math.cos(1.2 * (k - self.k_offset))
-        return drift + math.sqrt(self.q) * rng.standard_normal(x.shape)
+        return self.drift(x, k) + math.sqrt(self.q) * rng.standard_normal(x.shape)
+
+    def transition_logpdf(self, x, x_prev, k):
+        return gauss_loglik(x[..., 0] - self.drift(x_prev, k)[..., 0], self.q)
+
+    def ukf(self, k, z):
+        """(f, Q, h, R, angles, z) for an unscented proposal: transition mean, its noise, the measurement."""
+        return (lambda X: self.drift(X, k), np.array([[self.q]]), lambda X: X**2 / self.kappa,
+                np.array([[self.r]]), None, np.atleast_1d(z))
 
     def loglik(self, x, z, k):
         return gauss_loglik(z - x[..., 0] ** 2 / self.kappa, self.r)
@@ -102,9 +113,24 @@ class GammaSineModel(BenchmarkModel):
         self.dim = 1
         self.x0, self.p0 = np.array([self.x0_value]), np.array([self.p0_value])
 
+    def drift(self, x, k):
+        return 1.0 + math.sin(self.omega * math.pi * (k - self.k_offset)) + self.phi * x
+
     def transition(self, x, k, rng):
-        drift = 1.0 + math.sin(self.omega * math.pi * (k - self.k_offset)) + self.phi * x
-        return drift + rng.gamma(self.shape, 1.0 / self.rate, size=x.shape)
+        return self.drift(x, k) + rng.gamma(self.shape, 1.0 / self.rate, size=x.shape)
+
+    def transition_logpdf(self, x, x_prev, k):
+        """Gamma(shape, rate) density of the step; -inf where the step is not positive."""
+        e = x[..., 0] - self.drift(x_prev, k)[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lp = (self.shape - 1) * np.log(e) - self.rate * e + self.shape * math.log(self.rate) - gammaln(self.shape)
+        return np.where(e > 0, lp, -np.inf)
+
+    def ukf(self, k, z):
+        """(f, Q, h, R, angles, z): the Gamma noise enters the unscented proposal by its mean and variance."""
+        mean, var = self.shape / self.rate, self.shape / self.rate**2
+        return (lambda X: self.drift(X, k) + mean, np.array([[var]]), lambda X: self.h(X, k),
+                np.array([[self.r]]), None, np.atleast_1d(z))
 
     def h(self, x, k):
         if self.switch_k is None or k <= self.switch_k:
@@ -181,6 +207,92 @@ def gfapf_ungm() -> GrowthModel:
     return GrowthModel(a=1.0, b=12.0, c=8.0, kappa=20.0, q=1.0, r=1.0, x0_value=0.5, p0_value=5.0)
 
 
+def upfde_model() -> GammaSineModel:
+    """UPF-DE's model (eq. 12): sin(0.4 pi (t-1)) as printed (the classic form has 0.04), Gamma(3, 2),
+    z = 0.2 x^2 (t <= 30), 0.5 x - 2 (t > 30), N(0, 1e-5); x0 = 1 (P0 = 0.75 ours)."""
+    return GammaSineModel(omega=0.4, shape=3.0, rate=2.0, switch_k=30, r=1e-5, x0_value=1.0, p0_value=0.75)
+
+
+def agapf_ungm() -> GrowthModel:
+    """AGA-PF's 1-D model (eqs. 20-21): c = (1, 12, 7), x0 = 0. Noise variances are not in the text: we take
+    N(0, 1) for both, as GFA-PF's UNGM (the classic q = 10 gives errors five times the paper's); P0 = 5 ours."""
+    return GrowthModel(a=1.0, b=12.0, c=7.0, kappa=20.0, q=1.0, r=1.0, x0_value=0.0, p0_value=5.0)
+
+
 def gfapf_model1(r: float) -> GammaSineModel:
     """GFA-PF Model 1: Gamma(3, 2) noise, z = 0.2 x^2 (k <= 30), 0.5 x - 2 (k > 30), N(0, r); x0 = 0.5, P0 = 5."""
     return GammaSineModel(shape=3.0, rate=2.0, switch_k=30, r=r, x0_value=0.5, p0_value=5.0)
+
+
+@dataclass
+class BearingsOnlyModel(BenchmarkModel):
+    """AGA-PF's 2-D bearings-only tracking model (Gordon et al. 1993): [x, vx, y, vy], constant velocity with
+    acceleration noise sigma_w, z = atan2(y, x) + N(0, sigma_v^2); the paper's (0, 0.001) and (0, 0.005) read
+    as standard deviations, as in Gordon's paper, with his start and prior."""
+
+    sigma_w: float = 0.001
+    sigma_v: float = 0.005
+    start: tuple = (-0.05, 0.001, 0.7, -0.055)
+    prior_mean: tuple = (0.0, 0.0, 0.4, -0.05)
+    p0_diag: tuple = (0.5**2, 0.005**2, 0.3**2, 0.01**2)
+
+    def __post_init__(self):
+        self.dim = 4
+        self.x0, self.p0 = np.array(self.start), np.array(self.p0_diag)
+        self.F = np.array([[1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]], float)
+        self.G = np.array([[0.5, 0], [1, 0], [0, 0.5], [0, 1]])
+
+    def initial(self, n, rng):
+        return np.array(self.prior_mean) + np.sqrt(self.p0) * rng.standard_normal((n, 4))
+
+    def transition(self, x, k, rng):
+        return x @ self.F.T + self.sigma_w * rng.standard_normal((x.shape[0], 2)) @ self.G.T
+
+    def loglik(self, x, z, k):
+        r = (z - np.arctan2(x[..., 2], x[..., 0]) + math.pi) % (2 * math.pi) - math.pi
+        return gauss_loglik(r, self.sigma_v**2)
+
+    def measure(self, x, k, rng):
+        return float(math.atan2(x[2], x[0]) + self.sigma_v * rng.standard_normal())
+
+
+@dataclass
+class TruckTrailerModel(BenchmarkModel):
+    """AGA-PF's truck with one trailer (eqs. 26-31). State [x0, x2, x3, x4]: truck angle, trailer angle, trailer
+    vertical and horizontal position; x1 = x0 - x2 (eq. 27) is derived. Measured: all four, plus N(0, r).
+    The text gives Q = R = diag(1^2, ...) and nothing else: speed v, period t, truck length w, trailer length
+    length_l and the steering input u(k) = steer sin(0.05 k) are ours."""
+
+    v: float = 1.0
+    t: float = 1.0
+    w: float = 2.0
+    length_l: float = 4.0
+    steer: float = 0.1
+    q: float = 1.0
+    r: float = 1.0
+    p0_diag: tuple = (1.0, 1.0, 1.0, 1.0)
+
+    def __post_init__(self):
+        self.dim = 4
+        self.x0, self.p0 = np.zeros(4), np.array(self.p0_diag)
+
+    def transition(self, x, k, rng):
+        a0, a2, y, xx = x[..., 0], x[..., 1], x[..., 2], x[..., 3]
+        a1 = a0 - a2
+        n0 = a0 + self.v * self.t / self.w * math.tan(self.steer * math.sin(0.05 * k))
+        n2 = a2 + self.v * self.t / self.length_l * np.sin(a1)
+        mid = (n2 + a2) / 2
+        n3 = y + self.v * self.t * np.cos(a1) * np.sin(mid)
+        n4 = xx + self.v * self.t * np.cos(a1) * np.cos(mid)
+        return np.stack([n0, n2, n3, n4], axis=-1) + math.sqrt(self.q) * rng.standard_normal(x.shape)
+
+    def loglik(self, x, z, k):
+        return gauss_loglik(np.asarray(z) - x, self.r).sum(axis=-1)
+
+    def measure(self, x, k, rng):
+        return x + math.sqrt(self.r) * rng.standard_normal(4)
+
+    @staticmethod
+    def five(x: np.ndarray) -> np.ndarray:
+        """[x0, x1, x2, x3, x4] from the filter state (x1 = x0 - x2)."""
+        return np.stack([x[..., 0], x[..., 0] - x[..., 1], x[..., 1], x[..., 2], x[..., 3]], axis=-1)

@@ -51,6 +51,17 @@ class EmitterModel(StateSpaceModel):
     def transition(self, x, k, rng):
         return x + self.q * rng.standard_normal(x.shape) if self.q > 0 else x
 
+    def transition_logpdf(self, x, x_prev, k):
+        d = x - x_prev
+        q2 = max(self.q, 1e-9) ** 2
+        return -0.5 * np.sum(d * d, axis=-1) / q2 - math.log(2 * math.pi * q2)
+
+    def ukf(self, k, p: ObservationPoint):
+        """(f, Q, h, R, angles, z): random walk, the bearing from the point's antenna (an angle)."""
+        h = lambda X: np.arctan2(X[..., 1] - p.north, X[..., 0] - p.east)[..., None]  # noqa: E731
+        return (lambda X: X, max(self.q, 1e-3) ** 2 * np.eye(2), h, np.array([[p.sigma**2]]), [True],
+                np.array([p.theta]))
+
     def loglik(self, x, p: ObservationPoint, k=None):
         return self.lik.log(x, p.east, p.north, p.theta, p.sigma)
 
