@@ -26,6 +26,22 @@ def crlb_rmse(emitter, sensors, sigmas) -> float:
     return float(np.sqrt(np.trace(np.linalg.inv(j))))
 
 
+def crlb_so_far(truth, sensors, sigmas, stamps, at) -> np.ndarray:
+    """CRLB of the readings stamped up to each time in `at` (stamps sorted; cumulative Fisher information,
+    inf while it is singular)."""
+    d = np.asarray(truth, float) - np.asarray(sensors, float)
+    r2 = np.sum(d * d, axis=1)
+    t = np.arctan2(d[:, 1], d[:, 0])
+    g = np.stack([-np.sin(t), np.cos(t)], axis=1) / np.sqrt(r2)[:, None]
+    cum = np.cumsum(np.einsum("ki,kj->kij", g / np.asarray(sigmas)[:, None] ** 2, g), axis=0)
+    out = np.full(len(at), np.inf)
+    idx = np.searchsorted(np.asarray(stamps), np.asarray(at), side="right") - 1
+    for i, k in enumerate(idx):
+        if k >= 0 and np.linalg.cond(cum[k]) < 1e12:
+            out[i] = float(np.sqrt(np.trace(np.linalg.inv(cum[k]))))
+    return out
+
+
 def nees(error, cov) -> float:
     """Normalised estimation error squared e^T P^-1 e (mean 2 for an honest 2-D filter); inf for a collapsed
     (singular) covariance that does not hold the error."""

@@ -7,22 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import LocalizerConfig
-from .crlb import crlb_rmse, inside_ellipse, nees
-
-
-def crlb_so_far(truth, sensors, sigmas, stamps, at) -> np.ndarray:
-    """CRLB of the readings stamped up to each time in `at` (cumulative Fisher information; inf before it is finite)."""
-    d = np.asarray(truth, float) - np.asarray(sensors, float)
-    r2 = np.sum(d * d, axis=1)
-    t = np.arctan2(d[:, 1], d[:, 0])
-    g = np.stack([-np.sin(t), np.cos(t)], axis=1) / np.sqrt(r2)[:, None]
-    cum = np.cumsum(np.einsum("ki,kj->kij", g / np.asarray(sigmas)[:, None] ** 2, g), axis=0)
-    out = np.full(len(at), np.inf)
-    idx = np.searchsorted(np.asarray(stamps), np.asarray(at), side="right") - 1
-    for i, k in enumerate(idx):
-        if k >= 0 and np.linalg.cond(cum[k]) < 1e12:
-            out[i] = float(np.sqrt(np.trace(np.linalg.inv(cum[k]))))
-    return out
+from .crlb import crlb_rmse, crlb_so_far, inside_ellipse, nees
 from .localizer import Localizer
 from .scenarios import ScenarioData
 from .types import Estimate

@@ -16,18 +16,27 @@ from dataclasses import fields
 
 import numpy as np
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
 from msgs_adapters import build
-from msgs_adapters.fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix
+from msgs_adapters.fields import (
+    bearing_from_pose,
+    df_from_vector3stamped,
+    fix_from_navsatfix,
+)
 
 from .config import GROUPS, ConfigError, LocalizerConfig
 from .crlb import ELLIPSE_95
 from .localizer import Localizer
+from .ros_main import run_node
 
 NODE_NAME = "aoa_localizer"
 DIAG_NAME = "aoa_localizer: localizer"
@@ -275,21 +284,7 @@ class LocalizerNode(Node):
 
 
 def main(argv=None) -> int:
-    rclpy.init(args=argv)
-    try:
-        node = LocalizerNode()
-    except (ConfigError, rclpy.exceptions.ParameterException) as exc:
-        print(f"aoa_localizer: refusing to start: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(NODE_NAME, LocalizerNode, rclpy.spin, (ConfigError,), argv)
 
 
 if __name__ == "__main__":

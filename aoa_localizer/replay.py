@@ -35,8 +35,9 @@ def feed(loc: Localizer, event):
 
 def summary(loc: Localizer, truth, datum) -> list[str]:
     """Human-readable closing lines: estimate, ellipse, counts, and error when the bag carries the truth."""
-    from .crlb import ELLIPSE_95
     import numpy as np
+
+    from .crlb import ELLIPSE_95
 
     lines = []
     est = loc.estimate

@@ -21,7 +21,7 @@ import numpy as np
 
 from .cli import add_engine_args, config_from_args, setup_logging
 from .config import ConfigError
-from .crlb import crlb_rmse, ellipse_axes, fisher_information, inside_ellipse
+from .crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
 from .geodesy import LocalFrame
 from .localizer import REASONS, Localizer
 from .replay import run_bag
@@ -51,16 +51,8 @@ def error_series(estimates, readings: np.ndarray, truth) -> tuple[np.ndarray, np
     t = np.array([e.stamp for e in estimates])
     err = np.array([math.hypot(e.east - truth[0], e.north - truth[1]) for e in estimates])
     major = np.array([ellipse_axes(e.cov)[0] for e in estimates])
-    bound = np.full(len(t), np.inf)
-    if len(readings):
-        order = np.argsort(readings[:, 0])
-        r = readings[order]
-        per = np.array([fisher_information(truth, r[i:i + 1, 1:3], r[i:i + 1, 4]) for i in range(len(r))])
-        cum = np.cumsum(per, axis=0)
-        upto = np.searchsorted(r[:, 0], t, side="right") - 1
-        for i, k in enumerate(upto):
-            if k >= 0 and np.linalg.cond(cum[k]) < 1e12:
-                bound[i] = math.sqrt(np.trace(np.linalg.inv(cum[k])))
+    r = readings[np.argsort(readings[:, 0])]
+    bound = crlb_so_far(truth, r[:, 1:3], r[:, 4], r[:, 0], t) if len(r) else np.full(len(t), np.inf)
     return t, err, bound, major
 
 

@@ -18,12 +18,12 @@ import time
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from msgs_adapters import build
 
+from .ros_main import run_node
 from .scenarios import SCENARIOS, simulate
 
 # Scenario fields a parameter may override (unset: the scenario's own value).
@@ -139,21 +139,7 @@ class SimVehicle(Node):
 
 
 def main(argv=None) -> int:
-    rclpy.init(args=argv)
-    try:
-        node = SimVehicle()
-    except (ValueError, TypeError, rclpy.exceptions.ParameterException) as exc:
-        print(f"sim_vehicle: refusing to start: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        node.play()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("sim_vehicle", SimVehicle, SimVehicle.play, (ValueError, TypeError), argv)
 
 
 if __name__ == "__main__":

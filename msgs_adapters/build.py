@@ -12,6 +12,7 @@ from aoa_localizer.crlb import ellipse_points
 
 from .fields import seconds_to_stamp
 
+
 def rosbags_types(typestore) -> SimpleNamespace:
     """The message classes of a rosbags typestore under short names."""
     t = typestore.types
@@ -27,8 +28,17 @@ def rclpy_types() -> SimpleNamespace:
     """rclpy's message classes under the same short names, plus the node's output types."""
     from builtin_interfaces.msg import Time
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-    from geometry_msgs.msg import (Point, PointStamped, Pose, PoseArray, PoseWithCovariance,
-                                   PoseWithCovarianceStamped, Quaternion, Vector3, Vector3Stamped)
+    from geometry_msgs.msg import (
+        Point,
+        PointStamped,
+        Pose,
+        PoseArray,
+        PoseWithCovariance,
+        PoseWithCovarianceStamped,
+        Quaternion,
+        Vector3,
+        Vector3Stamped,
+    )
     from sensor_msgs.msg import NavSatFix, NavSatStatus
     from std_msgs.msg import ColorRGBA, Header
     from visualization_msgs.msg import Marker, MarkerArray

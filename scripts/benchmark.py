@@ -24,7 +24,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import particles_peers  # noqa: E402
 
 from aoa_localizer import LocalizerConfig  # noqa: E402
-from aoa_localizer.crlb import ELLIPSE_95, nees  # noqa: E402
 from aoa_localizer.evaluation import LARGE_ERROR_M, run  # noqa: E402
 from aoa_localizer.scenarios import SCENARIOS, simulate  # noqa: E402
 

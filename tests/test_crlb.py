@@ -25,3 +25,14 @@ def test_nees_and_ellipse():
 
 def test_a_collapsed_covariance_scores_infinite_nees():
     assert nees([1.0, 0.0], np.zeros((2, 2))) == float("inf") and not inside_ellipse([1.0, 0.0], np.zeros((2, 2)))
+
+
+def test_crlb_so_far_grows_into_the_batch_bound():
+    from aoa_localizer.crlb import crlb_so_far
+
+    sensors = np.array([[0.0, -100.0], [0.0, -150.0], [-200.0, 0.0], [-250.0, 10.0]])
+    sigmas = np.full(4, 0.01)
+    stamps = np.array([1.0, 2.0, 3.0, 4.0])
+    bound = crlb_so_far([0.0, 0.0], sensors, sigmas, stamps, [0.5, 2.5, 4.0])
+    assert bound[0] == float("inf") and bound[1] == float("inf")  # nothing yet; then two collinear rays only
+    assert bound[2] == pytest.approx(crlb_rmse([0.0, 0.0], sensors, sigmas))

@@ -6,7 +6,11 @@ import pytest
 from aoa_localizer.config import LocalizerConfig
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.afsa import AfsaFilter, uniform_disc
-from aoa_localizer.filters.likelihood import BearingLikelihood, gaussian_loglik, mixture_loglik
+from aoa_localizer.filters.likelihood import (
+    BearingLikelihood,
+    gaussian_loglik,
+    mixture_loglik,
+)
 from aoa_localizer.types import ObservationPoint
 
 

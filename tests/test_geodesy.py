@@ -1,7 +1,14 @@
 import numpy as np
 import pytest
 
-from aoa_localizer.geodesy import LocalFrame, azimuth_to_enu, circular_mean, enu_to_azimuth, wrap_360, wrap_pi
+from aoa_localizer.geodesy import (
+    LocalFrame,
+    azimuth_to_enu,
+    circular_mean,
+    enu_to_azimuth,
+    wrap_360,
+    wrap_pi,
+)
 
 
 @pytest.mark.parametrize("datum", [(39.1, 117.2, 5.0), (-33.9, -70.6, 520.0), (-12.0, -77.0, 0.0), (51.5, -0.1, 30.0)])

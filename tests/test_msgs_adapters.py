@@ -9,8 +9,13 @@ from aoa_localizer.crlb import ELLIPSE_95
 from aoa_localizer.types import Estimate
 from msgs_adapters import build
 from msgs_adapters.bag import typestore
-from msgs_adapters.fields import (bearing_from_pose, df_from_vector3stamped, diagnostics_values, estimate_from_pose,
-                                  fix_from_navsatfix)
+from msgs_adapters.fields import (
+    bearing_from_pose,
+    df_from_vector3stamped,
+    diagnostics_values,
+    estimate_from_pose,
+    fix_from_navsatfix,
+)
 
 RCLPY = build.rclpy_types()
 TS = typestore()

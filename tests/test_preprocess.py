@@ -4,8 +4,15 @@ import numpy as np
 import pytest
 
 from aoa_localizer.config import LocalizerConfig
-from aoa_localizer.preprocess import (PointBuilder, corrected_mean_coefficients, make_point, point_coefficients,
-                                      quality_weight, reading_sigma, recursive_corrected_mean)
+from aoa_localizer.preprocess import (
+    PointBuilder,
+    corrected_mean_coefficients,
+    make_point,
+    point_coefficients,
+    quality_weight,
+    reading_sigma,
+    recursive_corrected_mean,
+)
 from aoa_localizer.types import Reading
 
 

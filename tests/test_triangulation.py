@@ -3,7 +3,13 @@ import math
 import numpy as np
 import pytest
 
-from aoa_localizer.triangulation import good_pairs, initial_particles, intersect_rays, intersect_tan, sorted_pairs
+from aoa_localizer.triangulation import (
+    good_pairs,
+    initial_particles,
+    intersect_rays,
+    intersect_tan,
+    sorted_pairs,
+)
 from aoa_localizer.types import ObservationPoint
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ParticleFilter
+from .base import ParticleFilter, ReplacesResampling
 
 
 def adaptive_pc(f_parent, f_avg: float, f_max: float, pc1: float, pc2: float, a: float):
@@ -37,15 +37,8 @@ def adaptive_pm(f, f_avg: float, f_max: float, pm1: float, pm2: float, a: float)
     return np.where(f >= f_avg, above, pm1)
 
 
-class AgaPfFilter(ParticleFilter):
+class AgaPfFilter(ReplacesResampling, ParticleFilter):
     name = "agapf"
-
-    def propose(self, z):
-        self.logw = np.zeros(self.n)
-        return super().propose(z)
-
-    def should_resample(self) -> bool:
-        return False
 
     def after_weight(self, z):
         g, rng, n = self.cfg.agapf, self.rng, self.n

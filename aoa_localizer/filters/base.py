@@ -119,3 +119,15 @@ class ParticleFilter:
         d = self.x - mean
         cov = (w[:, None] * d).T @ d
         return mean, cov
+
+
+class ReplacesResampling:
+    """Mixin for filters whose own step stands in for resampling (DE, the genetic algorithm): they never
+    resample, and every step starts from equal weights, as after a resampling."""
+
+    def propose(self, z):
+        self.logw = np.zeros(self.n)
+        return super().propose(z)
+
+    def should_resample(self) -> bool:
+        return False

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ParticleFilter
+from .base import ParticleFilter, ReplacesResampling
 from .de import evolve
 from .ukf import BatchedUKF, gauss_logpdf
 
@@ -56,15 +56,8 @@ class UpfFilter(UkfProposalFilter):
         return idx
 
 
-class DeInsteadOfResampling:
-    """Mixin: evolve the weighted particles instead of resampling; start every step from equal weights."""
-
-    def propose(self, z):
-        self.logw = np.zeros(self.n)
-        return super().propose(z)
-
-    def should_resample(self) -> bool:
-        return False
+class DeInsteadOfResampling(ReplacesResampling):
+    """Mixin: evolve the weighted particles instead of resampling."""
 
     def after_weight(self, z):
         fit = np.where(np.isfinite(self.logw), self.logw, -np.inf)
