@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .crlb import ELLIPSE_95
+from .crlb import ELLIPSE_95, ellipse_axes
+from .crlb import nees as crlb_nees
 from .scenarios import SCENARIOS
 
 CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by this
@@ -186,8 +187,7 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
         status = state.get("diag", {}).get("status", "no diagnostics received")
         return False, f"no estimate was published ({status})", {}
     cov = np.array(state["cov"])
-    major = math.sqrt(ELLIPSE_95 * max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
-    minor = math.sqrt(ELLIPSE_95 * max(float(np.linalg.eigvalsh(cov)[0]), 0.0))
+    major, minor, _ = ellipse_axes(cov)
     figures = {"east": state["east"], "north": state["north"], "ellipse95_m": [major, minor],
                "lat": state.get("lat"), "lon": state.get("lon"), "cov": state["cov"]}
     if major > max_ellipse:
@@ -195,8 +195,7 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
     if "truth" in state:
         err = np.array([state["east"] - state["truth"][0], state["north"] - state["truth"][1]])
         figures["error_m"] = float(np.hypot(*err))
-        nees = float(err @ np.linalg.solve(cov, err))
-        figures["nees"] = nees
+        figures["nees"] = nees = crlb_nees(err, cov)
         if nees > CONVERGE_SCALE**2 * ELLIPSE_95:
             return False, f"the truth is {figures['error_m']:.1f} m off, outside {CONVERGE_SCALE:g}x the 95 % ellipse", figures
     return True, "converged", figures

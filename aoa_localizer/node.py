@@ -9,12 +9,10 @@ a changed parameter restarts the track with the new settings, an invalid one is 
 """
 from __future__ import annotations
 
-import math
 import sys
 import time
 from dataclasses import fields
 
-import numpy as np
 import rclpy
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -34,7 +32,7 @@ from msgs_adapters.fields import (
 )
 
 from .config import GROUPS, ConfigError, LocalizerConfig
-from .crlb import ELLIPSE_95
+from .crlb import ELLIPSE_95, ellipse_axes
 from .localizer import Localizer
 from .ros_main import run_node
 
@@ -133,6 +131,9 @@ def engine_parameter_names() -> list[str]:
     return names + [f"{group}.{f.name}" for group, cls in GROUPS.items() for f in fields(cls)]
 
 
+ENGINE_PARAMS = frozenset(engine_parameter_names())
+
+
 class LocalizerNode(Node):
     """Runs the Localizer on the node's inputs and publishes what it makes."""
 
@@ -175,7 +176,7 @@ class LocalizerNode(Node):
         return LocalizerConfig.from_dict(values)
 
     def on_set_parameters(self, params) -> SetParametersResult:
-        changes = {p.name: p.value for p in params if p.name in DESCRIPTIONS}
+        changes = {p.name: p.value for p in params if p.name in ENGINE_PARAMS}
         if not changes:
             return SetParametersResult(successful=True)
         try:
@@ -249,7 +250,7 @@ class LocalizerNode(Node):
         if est is not None:
             values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * loc.last_update_s:.3f}",
                           east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}", lon=f"{est.lon:.7f}",
-                          ellipse95_major_m=f"{math.sqrt(ELLIPSE_95 * max(float(np.linalg.eigvalsh(est.cov)[-1]), 0.0)):.2f}")
+                          ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
         wrong = self._wrong_publishers()
         if wrong:
             values["wrong_encoding"] = "; ".join(wrong)

@@ -35,17 +35,15 @@ def feed(loc: Localizer, event):
 
 def summary(loc: Localizer, truth, datum) -> list[str]:
     """Human-readable closing lines: estimate, ellipse, counts, and error when the bag carries the truth."""
-    import numpy as np
 
-    from .crlb import ELLIPSE_95
+    from .crlb import ellipse_axes
 
     lines = []
     est = loc.estimate
     if est is None:
         lines.append(f"no estimate: {loc.status}")
     else:
-        vals, _ = np.linalg.eigh(est.cov)
-        a, b = np.sqrt(ELLIPSE_95 * np.maximum(vals[::-1], 0))
+        a, b, _ = ellipse_axes(est.cov)
         lines.append(f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} (E {est.east:.1f} m, N {est.north:.1f} m), "
                      f"95% ellipse {a:.1f} x {b:.1f} m, {est.bearings_used} bearings in {est.points_used} points")
         if truth is not None and datum is not None:

@@ -13,7 +13,7 @@ import numpy as np
 
 from .cli import add_engine_args, config_from_args, setup_logging
 from .config import ConfigError
-from .crlb import ELLIPSE_95
+from .crlb import ellipse_axes
 from .evaluation import run, scenario_config
 from .scenarios import SCENARIOS, simulate
 
@@ -48,8 +48,7 @@ def main(argv=None) -> int:
         print(f"no estimate: {loc.status}")
         return 1
     est = res.estimates[-1]
-    vals = np.linalg.eigvalsh(est.cov)
-    a, b = np.sqrt(ELLIPSE_95 * np.maximum(vals[::-1], 0))
+    a, b, _ = ellipse_axes(est.cov)
     print(f"estimate ({loc.cfg.algorithm}, N={loc.cfg.num_particles}): lat {est.lat:.7f} lon {est.lon:.7f}, "
           f"95% ellipse {a:.1f} m x {b:.1f} m")
     print(f"error {s['error']:.2f} m (east {s['err_east']:+.2f}, north {s['err_north']:+.2f}); "

@@ -34,7 +34,6 @@ class BearingLikelihood:
     """
 
     def __init__(self, kind: str, outlier_prob: float, gps_sigma_m: float = 0.0):
-        self.kind = kind
         self.outlier_prob = outlier_prob if kind == "mixture" else 0.0
         self.gps_var = gps_sigma_m**2
 
