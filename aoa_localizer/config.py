@@ -19,6 +19,7 @@ SIGMA_MODELS = ("constant", "quality")
 POINT_WEIGHTINGS = ("paper", "inverse_variance", "equal")
 AFSA_VARIANTS = ("mcmc", "paper")
 BEARING_ENCODINGS = ("df_record", "pose")
+INIT_METHODS = ("global", "triangulation")
 
 
 class ConfigError(ValueError):
@@ -97,13 +98,14 @@ class LocalizerConfig:
     process_noise_m: float = 1.0
     # Bearing pre-processing (paper sec. 3.2) and what one observation point is.
     quality_min: float = 40.0
-    point_weighting: str = "paper"
+    point_weighting: str = "inverse_variance"
     obs_max_duration_s: float = 2.0
     obs_max_distance_m: float = 10.0
     obs_max_readings: int = 50
     df_correlation: float = 0.0
     point_gate_sigma: float = 4.0
-    # Start: triangulation (paper sec. 3.3) unless a Gaussian prior is given.
+    # Start: global search of the robust posterior (or the paper's triangulation), unless a prior is given.
+    init_method: str = "global"
     init_bearings: int = 10
     init_min_crossing_deg: float = 10.0
     init_min_support: float = 0.6
@@ -122,6 +124,15 @@ class LocalizerConfig:
     resampling: str = "systematic"
     ess_threshold: float = 0.5
     history_points: int = 300
+    # Robustness (docs/design.md "Never confidently wrong"): noise self-calibration, global-mode safety,
+    # emitter-moved test.
+    calibrate_noise: bool = True
+    global_safety: bool = True
+    health_window: int = 10
+    health_p_value: float = 1e-3
+    restart_log_odds: float = 10.0
+    moved_min_points: int = 8
+    moved_log_odds: float = 20.0
     afsa: AfsaConfig = field(default_factory=AfsaConfig)
     espf: EspfConfig = field(default_factory=EspfConfig)
     gfapf: GfapfConfig = field(default_factory=GfapfConfig)
@@ -222,6 +233,14 @@ def _validate(cfg: LocalizerConfig):
     _choice(cfg, "likelihood", LIKELIHOODS)
     _choice(cfg, "resampling", RESAMPLING)
     _choice(cfg, "bearing_encoding", BEARING_ENCODINGS)
+    _choice(cfg, "init_method", INIT_METHODS)
+    for name in ("calibrate_noise", "global_safety"):
+        _check(isinstance(getattr(cfg, name), bool), f"{name} must be true or false, got {getattr(cfg, name)!r}")
+    _int_at_least(cfg, "health_window", 3)
+    _int_at_least(cfg, "moved_min_points", 3)
+    _fraction(cfg, "health_p_value", low_open=True, high_open=True)
+    for name in ("restart_log_odds", "moved_log_odds"):
+        _positive(cfg, name)
     _fraction(cfg, "init_min_support", low_open=False, high_open=False)
     _fraction(cfg, "outlier_prob", low_open=False, high_open=True)
     _fraction(cfg, "ess_threshold", low_open=False, high_open=False)

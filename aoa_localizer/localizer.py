@@ -14,19 +14,13 @@ from collections import Counter, deque
 import numpy as np
 
 from .config import LocalizerConfig
-from .filters import make_filter
 from .geodesy import LocalFrame, azimuth_to_enu
 from .gps_track import GpsTrack, Where
-from .preprocess import PointBuilder, make_point, reading_sigma
-from .triangulation import initial_particles
+from .preprocess import PointBuilder, reading_sigma
+from .track import EmitterTrack
 from .types import Estimate, ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
-
-# Broad Gaussian prior after a triangulation start, in multiples of the range to the first cloud:
-# it only keeps the bearing-only posterior proper (a flat prior has infinite mass along the rays).
-_PRIOR_RANGE_FACTOR = 10.0
-_PRIOR_MIN_SIGMA_M = 100.0
 
 REASONS = {
     "bad_stamp": "stamp is not a finite number",
@@ -40,6 +34,7 @@ REASONS = {
     "no_fix_after": "no later fix came to bracket the bearing before the end of data",
     "point_outlier": "wild reading inside an observation point (point_gate_sigma)",
     "init_buffer_full": "geometry stayed too poor to start; oldest points dropped (init_max_points)",
+    "emitter_moved": "bearings from before the emitter moved, dropped when the track re-started from the recent ones",
     "weights_degenerate": "no particle could explain the point; measurement skipped",
     "internal_error": "an unexpected error in the filter; measurement skipped, state kept",
     "filter_diverged": "the filter's particles or estimate were not finite; not published, the filter restarts",
@@ -87,14 +82,50 @@ class Localizer:
         # (stamp, azimuth deg, quality, sigma rad or NaN) of bearings awaiting a fix after them
         self.pending: deque[tuple[float, float, float, float]] = deque()
         self.builder = PointBuilder(self.cfg)
-        self.init_points: list[ObservationPoint] = []
-        self.filter = None
+        self.emitter = EmitterTrack(self.cfg, self.rng, self._reject_many)
         self.last_bearing_stamp = -math.inf
-        self.bearings_used = 0
-        self.points_used = 0
         self.estimate: Estimate | None = None
-        self.status = "waiting for a GPS fix"
-        self.last_update_s = float("nan")
+        self._status = "waiting for a GPS fix"
+
+    # -- what programs read ------------------------------------------------------------------------
+    @property
+    def filter(self):
+        """The running particle filter, or None before the start."""
+        return self.emitter.filter
+
+    @property
+    def status(self) -> str:
+        """One line on the state: waiting for a fix, collecting bearings, waiting for geometry, tracking, checking."""
+        return self._status if self._status == "waiting for a GPS fix" else self.emitter.status
+
+    @property
+    def init_points(self) -> list[ObservationPoint]:
+        """Observation points buffered while waiting to start."""
+        return [p for _, p, _ in self.emitter.window] if self.emitter.filter is None else []
+
+    @property
+    def bearings_used(self) -> int:
+        return self.emitter.bearings_used
+
+    @property
+    def points_used(self) -> int:
+        return self.emitter.points_used
+
+    @property
+    def last_update_s(self) -> float:
+        return self.emitter.last_update_s
+
+    @property
+    def events(self) -> Counter:
+        """Robustness events: alarm, global_restart, emitter_moved, recalibrated."""
+        return self.emitter.events
+
+    def noise_summary(self) -> dict:
+        """The self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier rates."""
+        cfg = self.cfg
+        summary = self.emitter.noise.summary(lambda q: math.degrees(reading_sigma(q, cfg)))
+        summary["point_outlier_prob"] = round(self.emitter.outlier_prob, 4)
+        return summary
 
     # -- public API -----------------------------------------------------------------------------
     def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0) -> Estimate | None:
@@ -116,8 +147,8 @@ class Localizer:
             return self._reject(reason)
         if self.trace is not None:
             self.trace.fixes.append((stamp, float(east), float(north)))
-        if self.status == "waiting for a GPS fix":
-            self.status = "collecting bearings"
+        if self._status == "waiting for a GPS fix":
+            self._status = "collecting bearings"
         estimate = self._release_pending()
         # A fix well after the open point's first reading closes it: a vehicle that stopped taking
         # readings still gets its estimate, without waiting for the next reading.
@@ -198,79 +229,25 @@ class Localizer:
                 estimate = self._use_points(closed) or estimate
         return estimate
 
+    def _reject_many(self, reason: str, count: int):
+        for _ in range(count):
+            self._reject(reason)
+
     def _use_points(self, groups: list[list[Reading]]) -> Estimate | None:
         estimate = None
         for readings in groups:
-            point, kept = make_point(readings, self.cfg)
-            for _ in range(int((~kept).sum())):
-                self._reject("point_outlier")
             if self.trace is not None:
+                _, kept = self.emitter.make(readings)
                 self.trace.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k)) for r, k in zip(readings, kept)]
-            if self.filter is None:
-                self.init_points.append(point)
-                estimate = self._try_start() or estimate
-            else:
-                estimate = self._update(point) or estimate
+            if self.emitter.add(readings):
+                mean, cov = self.filter.estimate()
+                self.estimate = estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
         return estimate
-
-    def _try_start(self) -> Estimate | None:
-        """Start the filter from a prior or from triangulation once the geometry allows; then run the buffered points."""
-        cfg = self.cfg
-        if cfg.has_prior:
-            mean = np.array([cfg.prior_east, cfg.prior_north])
-            cov = cfg.prior_sigma_m**2 * np.eye(2)
-            particles = mean + cfg.prior_sigma_m * self.rng.standard_normal((cfg.num_particles, 2))
-        else:
-            if len(self.init_points) > cfg.init_max_points:
-                del self.init_points[0]
-                self._reject("init_buffer_full")
-            if len(self.init_points) < cfg.init_bearings:
-                self.status = f"collecting bearings: {len(self.init_points)} of {cfg.init_bearings} points"
-                return None
-            particles, why = initial_particles(self.init_points, cfg.num_particles, cfg.init_min_crossing_deg,
-                                                cfg.init_min_support, self.rng)
-            if particles is None:
-                self.status = f"waiting for geometry: {why}"
-                return None
-            mean = particles.mean(axis=0)
-            last = self.init_points[-1]
-            sigma = max(_PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(mean[0] - last.east, mean[1] - last.north))
-            cov = sigma**2 * np.eye(2)
-        self.filter = make_filter(cfg, self.rng)
-        self.filter.initialise(particles, mean, cov)
-        self.status = "tracking"
-        log.info("filter %s started after %d observation points", cfg.algorithm, len(self.init_points))
-        estimate = None
-        points, self.init_points = self.init_points, []
-        for point in points:
-            estimate = self._update(point) or estimate
-        return estimate
-
-    def _update(self, point: ObservationPoint) -> Estimate | None:
-        t0 = time.perf_counter()
-        try:
-            ok = self.filter.update(point)
-        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
-            log.exception("filter update failed; point skipped")
-            return self._reject("internal_error")
-        finally:
-            self.last_update_s = time.perf_counter() - t0
-        mean, cov = self.filter.estimate()
-        if not (np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
-            self.filter = None
-            self.status = "filter diverged: restarting from new bearings"
-            log.error("filter %s diverged (non-finite particles or estimate); restarting", self.cfg.algorithm)
-            return self._reject("filter_diverged")
-        if not ok:
-            return self._reject("weights_degenerate")
-        self.points_used += 1
-        self.bearings_used += point.n_readings
-        self.estimate = self._make_estimate(point.stamp, mean, cov)
-        return self.estimate
 
     def _make_estimate(self, stamp: float, mean, cov) -> Estimate:
         lat, lon, _ = self.frame.to_geodetic(mean[0], mean[1])
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
                         cov=cov, bearings_used=self.bearings_used, points_used=self.points_used,
                         ess=self.filter.ess(), algorithm=self.cfg.algorithm,
-                        particles=self.filter.x.copy(), weights=self.filter.weights)
+                        particles=self.filter.x.copy(), weights=self.filter.weights,
+                        modes=self.emitter.mode_masses(), noise=self.noise_summary() if self.cfg.calibrate_noise else None)

@@ -82,18 +82,23 @@ def point_outliers(theta: np.ndarray, sigma: np.ndarray, gate: float) -> np.ndar
     return np.abs(wrap_pi(theta - median)) > gate * sigma
 
 
-def make_point(readings: list[Reading], cfg: LocalizerConfig) -> tuple[ObservationPoint, np.ndarray]:
+def make_point(readings: list[Reading], cfg: LocalizerConfig,
+               sigma: np.ndarray | None = None) -> tuple[ObservationPoint, np.ndarray]:
     """Corrected bearing of one observation point and the mask of the readings it kept (the rest: wild).
 
     `point_weighting` "paper" is eqs. 19-21; "inverse_variance" is the best linear combination when
     the sigma model is calibrated (sigma_model "quality"). Angles are averaged on the tangent at their circular mean, positions and stamps with the same
     coefficients (the bearing is nearly linear in position over a few metres, so the corrected
     bearing belongs to the equally-weighted position). Variance: a^T C a with C the readings'
-    covariance under `df_correlation`.
+    covariance under `df_correlation`. `sigma`: the readings' sigmas when not their own (self-calibrated noise);
+    the gate uses the larger of the two.
     """
     theta = np.array([r.theta for r in readings])
-    sigma = np.array([r.sigma for r in readings])
-    keep = ~point_outliers(theta, sigma, cfg.point_gate_sigma)
+    own = np.array([r.sigma for r in readings])
+    sigma = own if sigma is None else np.asarray(sigma, float)
+    # The gate is never stricter than the configured sigma: the readings of a moving vehicle's point also
+    # differ by its motion, which a small calibrated sigma would call wild.
+    keep = ~point_outliers(theta, np.maximum(sigma, own), cfg.point_gate_sigma)
     kept = [r for r, k in zip(readings, keep) if k]
     theta, sigma = theta[keep], sigma[keep]
     quality = np.array([r.quality for r in kept])

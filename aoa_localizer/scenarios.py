@@ -13,7 +13,7 @@ on without stopping.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pymap3d import vincenty
@@ -38,6 +38,13 @@ class Scenario:
     sigma_rad: float = PAPER_SIGMA_RAD  # constant bearing noise, unless sigma_q is set
     sigma_q_deg: tuple[float, float] | None = None  # (sigma at Q=100, sigma at Q=40), linear in Q
     wild_share: float = 0.0
+    # Multipath off one building: this share of readings points at `reflector` (a consistent ghost) instead.
+    reflector: tuple[float, float] | None = None
+    reflector_share: float = 0.0
+    quality_known: bool = True  # False: the receiver reports NaN quality (the noise still follows `sigma_*`)
+    # The emitter is switched off at `moved_at_s` and another comes up at `moved_to` (None: one emitter).
+    moved_to: tuple[float, float] | None = None
+    moved_at_s: float = 0.0
     speed: float = 10.0
     dwell_s: float = 3.0
     df_rate_hz: float = 10.0
@@ -63,6 +70,23 @@ SCENARIOS = {
     "homing": Scenario("homing", (1500, 1500), ((0, 0), (1200, 1200), (1600, 1000), (2000, 1700)),
                        readings_per_point=3),
 }
+
+
+def robustness_cells() -> dict[str, Scenario]:
+    """The robustness benchmark's cells: the `seed` track, 120 points 10 s apart, 3 readings each,
+    quality U(40, 100), noise 1 deg at Q 100 to 8 deg at Q 40, then one kind of mess per cell."""
+    base = Scenario("robust", (1200, 800), SEED_TRACK, points=120, readings_per_point=3, quality=(40.0, 100.0),
+                    sigma_q_deg=(1.0, 8.0), speed=10.0, dwell_s=8.0)
+    cells = {f"wild{int(100 * w)}": replace(base, name=f"wild{int(100 * w)}", wild_share=w)
+             for w in (0.0, 0.1, 0.2, 0.3, 0.4)}
+    cells["reflector"] = replace(base, name="reflector", reflector=(300.0, 1100.0), reflector_share=0.2,
+                                 wild_share=0.05)
+    for k in (0.5, 2.0, 4.0):  # a constant noise k times the configured default sigma
+        name = f"sigma_x{k:g}"
+        cells[name] = replace(base, name=name, sigma_q_deg=None, sigma_rad=k * PAPER_SIGMA_RAD)
+    cells["quality_nan"] = replace(base, name="quality_nan", sigma_q_deg=None, sigma_rad=math.radians(3.0),
+                                   quality_known=False)
+    return cells
 
 
 @dataclass
@@ -160,9 +184,29 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
     lo, hi = sc.quality
     quality = np.full(t_df.size, lo) if lo == hi else rng.uniform(lo, hi, t_df.size)
     sigma = _sigma_of_quality(quality, sc.sigma_q_deg) if sc.sigma_q_deg else np.full(t_df.size, sc.sigma_rad)
-    az = np.asarray(az_true) + np.degrees(sigma * rng.standard_normal(t_df.size))
+    az_true = np.asarray(az_true, float)
+    emitter = np.array(sc.emitter, float)
+    if sc.moved_to is not None:
+        emitter = np.array(sc.moved_to, float)
+        late = t_df >= sc.moved_at_s
+        az_true = np.where(late, _azimuths(frame, sensor, s_lat, s_lon, emitter), az_true)
+    az = az_true + np.degrees(sigma * rng.standard_normal(t_df.size))
     wild = rng.random(t_df.size) < sc.wild_share
     az = np.where(wild, rng.uniform(0, 360, t_df.size), az)
+    if sc.reflector is not None:
+        ghost = ~wild & (rng.random(t_df.size) < sc.reflector_share / max(1e-12, 1.0 - sc.wild_share))
+        az_ghost = _azimuths(frame, sensor, s_lat, s_lon, np.array(sc.reflector, float))
+        az = np.where(ghost, az_ghost + np.degrees(sigma * rng.standard_normal(t_df.size)), az)
+        wild = wild | ghost
+    if not sc.quality_known:
+        quality = np.full(t_df.size, np.nan)
     bearings = np.column_stack([t_df, wrap_360(az), quality])
-    return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, np.array(sc.emitter, float),
-                        (float(e_lat), float(e_lon)))
+    e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1], 0.0)
+    return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)))
+
+
+def _azimuths(frame: LocalFrame, sensor: np.ndarray, s_lat, s_lon, target: np.ndarray) -> np.ndarray:
+    """Geodesic azimuths (deg) from each sensor position to one ENU target."""
+    t_lat, t_lon, _ = frame.to_geodetic(target[0], target[1], 0.0)
+    _, az = vincenty.vdist(s_lat, s_lon, np.full(sensor.shape[0], t_lat), np.full(sensor.shape[0], t_lon))
+    return np.asarray(az, float)

@@ -46,6 +46,9 @@ class Estimate:
     algorithm: str
     particles: np.ndarray = field(repr=False, default=None)  # (N, 2) east/north
     weights: np.ndarray = field(repr=False, default=None)  # (N,), normalised
+    # Alternative hypotheses: (east, north, mass) of each posterior mode holding >= 1 % of the cloud
+    modes: list = field(default_factory=list)
+    noise: dict | None = None  # the self-calibrated noise (Localizer.noise_summary), when calibration is on
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of INTERFACE.md (offline replay output)."""
@@ -60,4 +63,6 @@ class Estimate:
             "points_used": self.points_used,
             "ess": self.ess,
             "algorithm": self.algorithm,
+            "modes": [[round(e, 3), round(n, 3), round(m, 4)] for e, n, m in self.modes],
+            "noise": self.noise,
         }

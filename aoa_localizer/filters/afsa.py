@@ -67,9 +67,8 @@ class AfsaFilter(ParticleFilter):
         super().initialise(particles, prior_mean, prior_cov)
         self.target, self.target_points = self.log_target(self.x), self.model.history.appended
 
-    def log_target(self, x: np.ndarray) -> np.ndarray:
-        """The posterior the moves keep invariant: the emitter model's, over its kept points."""
-        return self.model.log_posterior(x)
+    def invalidate(self):
+        self.target_points = -1
 
     def after_weight(self, p: ObservationPoint):
         if not self.paper:

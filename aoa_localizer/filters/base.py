@@ -104,6 +104,46 @@ class ParticleFilter:
             self.after_resample(z)
         return True
 
+    # -- moves on the posterior over all kept points (models with a `log_posterior`: the emitter) -----------
+    def log_target(self, x: np.ndarray) -> np.ndarray:
+        """The posterior the safety moves keep invariant: the model's, over its kept points."""
+        return self.model.log_posterior(x)
+
+    def rejuvenate(self, sweeps: int, proposal=None):
+        """`sweeps` random-walk MH moves scaled by the cloud, then one independence MH move from `proposal`
+        (a ModeProposal) if given. Each leaves the posterior invariant, so the weighted cloud stays a sample of
+        it; the weights are untouched. Returns the share of accepted moves."""
+        from ..safety import independence_sweep, random_walk_sweep
+
+        target = self.log_target(self.x)
+        accepted, tried = 0, 0
+        cov = self.estimate()[1]
+        for _ in range(sweeps):
+            self.x, target, a = random_walk_sweep(self.x, target, self.log_target, cov, self.rng)
+            accepted, tried = accepted + a, tried + self.n
+        if proposal is not None:
+            self.x, target, a = independence_sweep(self.x, target, self.log_target, proposal, self.rng)
+            accepted, tried = accepted + a, tried + self.n
+        self.invalidate()
+        return accepted / max(tried, 1)
+
+    def reweight(self, log_ratio: np.ndarray):
+        """Multiply the weights by exp(log_ratio) (the target changed: new noise model, new outlier rate)."""
+        new = self.logw + log_ratio
+        top = new.max()
+        if np.isfinite(top):
+            self.logw = new - top
+        self.invalidate()
+
+    def replace_cloud(self, particles: np.ndarray):
+        """Equal-weight particles from elsewhere (a start or re-start from the global search)."""
+        self.x = np.array(particles, float).reshape(self.n, self.model.dim)
+        self.logw = np.zeros(self.n)
+        self.invalidate()
+
+    def invalidate(self):
+        """The particles or the target changed outside the filter's own step: drop cached values."""
+
     # -- hooks ----------------------------------------------------------------------------------
     def after_weight(self, z):
         """Called after weighting with the new measurement (the fish school runs here in the paper)."""

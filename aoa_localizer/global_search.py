@@ -1,0 +1,262 @@
+"""Global search of the robust emitter posterior: every mode of p(x | all kept points), not just the nearest.
+
+A static emitter has a 2-D posterior, so it can be searched whole. The robust (mixture) log posterior is
+scored on a polar grid around the track, log-spaced in range (metres to hundreds of kilometres); each
+bearing's variance is widened by the cell's size as seen from its antenna, so a peak narrower than a
+cell is not missed between cell centres. The best local maxima are refined by iteratively re-weighted
+Gauss-Newton (the mixture's EM weights, with the widening annealed to zero), and each refined mode gets
+its Laplace approximation: mean, covariance, log posterior and log mass. The Localizer starts from these
+modes, the safety layer proposes from them, and the benchmark uses the best one as its batch reference.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geodesy import TWO_PI
+
+_LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
+# Grid: azimuth cells, log-range cells, and the range span relative to the track's extent.
+_N_AZ, _N_R = 72, 44
+_R_MIN_FACTOR, _R_MAX_FACTOR = 0.01, 200.0
+_R_MIN_M, _R_MAX_M = 1.0, 5000.0
+_MAX_GRID_POINTS = 120  # the coarse score is smoothed anyway: at most this many points, evenly spread
+_MAX_STARTS = 6  # local maxima refined
+# Widening of the bearings' variance by the cell size, annealed to zero over the refinement.
+_ANNEAL = (1.0, 0.3, 0.1, 0.03, 0.01, 0.0)
+_ITER_PER_STAGE = 3
+_STEPS = np.array([1.0, 0.5, 0.2])
+_MERGE_MAHALANOBIS2 = 9.0
+_MIN_STEP_LIMIT_M = 100.0
+
+
+@dataclass
+class Points:
+    """Observation points as arrays: antenna east/north (m), bearing theta (ENU rad) and its sigma (rad)."""
+
+    east: np.ndarray
+    north: np.ndarray
+    theta: np.ndarray
+    sigma: np.ndarray
+
+    def __post_init__(self):
+        self.cos, self.sin = np.cos(self.theta), np.sin(self.theta)
+
+    @classmethod
+    def of(cls, rows: np.ndarray) -> "Points":
+        """From a (K, 4) array of east, north, theta, sigma (the emitter model's history)."""
+        rows = np.asarray(rows, float).reshape(-1, 4)
+        return cls(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
+
+    def __len__(self) -> int:
+        return self.east.size
+
+    def take(self, idx) -> "Points":
+        return Points(self.east[idx], self.north[idx], self.theta[idx], self.sigma[idx])
+
+
+@dataclass(frozen=True)
+class Robust:
+    """What the robust posterior needs besides the points: the outlier share, GPS noise and the prior."""
+
+    outlier_prob: float
+    gps_sigma_m: float = 0.0
+    prior_mean: np.ndarray | None = None
+    prior_prec: np.ndarray | None = None
+
+
+@dataclass
+class Mode:
+    """One mode of the posterior: Laplace mean and covariance, log posterior at the mean, log mass,
+    the number of points it explains (EM weight > 1/2) and the steepest crossing among those points."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    log_post: float
+    log_mass: float
+    inliers: int
+    crossing_deg: float
+
+
+def _residuals(x: np.ndarray, pts: Points):
+    """Residuals theta - bearing(x) in (-pi, pi] (the angle from the antenna->x direction to the measured one,
+    no wrapping needed), offsets dx, dy and squared ranges, for x of shape (..., 2) against the K points."""
+    dx = x[..., None, 0] - pts.east
+    dy = x[..., None, 1] - pts.north
+    c, s = pts.cos, pts.sin
+    resid = np.arctan2(dx * s - dy * c, dx * c + dy * s)
+    return resid, dx, dy, np.maximum(dx * dx + dy * dy, 1e-6)
+
+
+def _geometry(x: np.ndarray, pts: Points):
+    """Residuals, squared ranges, and the bearing's gradient d bearing / d x (..., K, 2)."""
+    resid, dx, dy, r2 = _residuals(x, pts)
+    return resid, r2, np.stack([-dy / r2, dx / r2], axis=-1)
+
+
+def _terms(resid, var, eps: float):
+    """Per-point log mixture density and EM inlier weight."""
+    g = -0.5 * resid**2 / var - 0.5 * np.log(var) - _LOG_SQRT_2PI + math.log1p(-eps)
+    if eps <= 0:
+        return g, np.ones_like(g)
+    ll = np.logaddexp(g, math.log(eps / TWO_PI))
+    return ll, np.exp(g - ll)
+
+
+def _prior(x: np.ndarray, rob: Robust):
+    if rob.prior_prec is None:
+        return 0.0
+    d = x - rob.prior_mean
+    return -0.5 * np.einsum("...i,ij,...j->...", d, rob.prior_prec, d)
+
+
+def log_posterior(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
+    """Robust log posterior (up to a constant) at x (..., 2); `widen2` (..., K) adds to each bearing variance."""
+    resid, _, _, r2 = _residuals(x, pts)
+    var = pts.sigma**2 + widen2
+    if rob.gps_sigma_m:
+        var = var + rob.gps_sigma_m**2 / np.maximum(r2, 1.0)
+    ll, _ = _terms(resid, var, rob.outlier_prob)
+    return ll.sum(axis=-1) + _prior(x, rob)
+
+
+def _grid(pts: Points):
+    """Cell centres (A, R, 2), the cell radius (R,), and the polar grid's centre."""
+    centre = np.array([pts.east.mean(), pts.north.mean()])
+    extent = max(10.0, float(np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
+    r_lo = max(_R_MIN_M, _R_MIN_FACTOR * extent)
+    r_hi = max(_R_MAX_M, _R_MAX_FACTOR * extent)
+    log_r = np.linspace(math.log(r_lo), math.log(r_hi), _N_R)
+    az = (np.arange(_N_AZ) + 0.5) * TWO_PI / _N_AZ
+    d_log = log_r[1] - log_r[0]
+    r = np.exp(log_r)
+    cells = centre + r[None, :, None] * np.stack([np.cos(az)[:, None] + 0 * r, np.sin(az)[:, None] + 0 * r], axis=-1)
+    radius = 0.5 * r * math.hypot(TWO_PI / _N_AZ, d_log)
+    return cells, radius, centre
+
+
+def _local_maxima(score: np.ndarray) -> np.ndarray:
+    """Flat indices of cells at least as good as their 8 neighbours (azimuth wraps), best first."""
+    padded = np.pad(score, ((1, 1), (0, 0)), mode="wrap")
+    padded = np.pad(padded, ((0, 0), (1, 1)), constant_values=-np.inf)
+    best = np.ones(score.shape, dtype=bool)
+    a, r = score.shape
+    for da in (-1, 0, 1):
+        for dr in (-1, 0, 1):
+            if da or dr:
+                best &= score >= padded[1 + da:1 + da + a, 1 + dr:1 + dr + r]
+    idx = np.flatnonzero(best & np.isfinite(score))
+    return idx[np.argsort(-score.ravel()[idx])]
+
+
+def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
+    """IRLS Gauss-Newton from each start (M, 2), annealing the widening radius (M,) to zero.
+
+    Returns means (M, 2), covariances (M, 2, 2) (the Laplace approximation, inverse of the EM-weighted
+    information plus the prior's precision) and EM inlier weights (M, K).
+    """
+    x = np.array(starts, float)
+    prec = rob.prior_prec if rob.prior_prec is not None else np.zeros((2, 2))
+    for level in _ANNEAL:
+        for _ in range(_ITER_PER_STAGE):
+            x, info, _ = _gn_step(x, pts, rob, level * widen, prec)
+    resid, r2, grad = _geometry(x, pts)
+    var = pts.sigma**2 + rob.gps_sigma_m**2 / np.maximum(r2, 1.0)
+    _, gamma = _terms(resid, var, rob.outlier_prob)
+    info = np.einsum("mk,mki,mkj->mij", gamma / var, grad, grad) + prec + 1e-12 * np.eye(2)
+    good = np.all(np.isfinite(info), axis=(1, 2)) & (np.linalg.det(np.where(np.isfinite(info), info, 1.0)) > 0)
+    cov = np.full(info.shape, np.nan)
+    cov[good] = np.linalg.inv(info[good])
+    return x, cov, gamma
+
+
+def _gn_step(x, pts: Points, rob: Robust, widen_m, prec):
+    """One damped Gauss-Newton step with the EM weights: keeps the best of a few step lengths (or none)."""
+    resid, r2, grad = _geometry(x, pts)
+    var = pts.sigma**2 + rob.gps_sigma_m**2 / np.maximum(r2, 1.0) + (widen_m[:, None] ** 2) / r2
+    _, gamma = _terms(resid, var, rob.outlier_prob)
+    w = gamma / var
+    info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-9 * np.eye(2)
+    info = np.where(np.isfinite(info), info, 0.0) + 1e-9 * np.eye(2)
+    rhs = np.einsum("mk,mki->mi", w * resid, grad)
+    if rob.prior_prec is not None:
+        rhs = rhs - (x - rob.prior_mean) @ prec.T
+    delta = np.linalg.solve(info, rhs[..., None])[..., 0]
+    # Along a ray the bearing-only posterior is nearly flat: never step farther than the distance from the
+    # points (plus a margin), so a nearly singular information cannot throw x to 1e150 m.
+    reach = np.hypot(x[:, 0] - pts.east.mean(), x[:, 1] - pts.north.mean()) + _MIN_STEP_LIMIT_M
+    length = np.linalg.norm(delta, axis=1)
+    delta = delta * np.minimum(1.0, reach / np.maximum(length, 1e-300))[:, None]
+    delta = np.where(np.isfinite(delta), delta, 0.0)
+    trial = x[:, None, :] + _STEPS[None, :, None] * delta[:, None, :]
+    cand = np.concatenate([x[:, None, :], trial], axis=1)  # step 0 = stay
+    widen2 = (widen_m[:, None, None] ** 2) / _residuals(cand, pts)[3]
+    lp = log_posterior(cand, pts, rob, widen2)
+    pick = np.argmax(np.where(np.isfinite(lp), lp, -np.inf), axis=1)
+    return cand[np.arange(x.shape[0]), pick], info, gamma
+
+
+def steepest_crossing_deg(x: np.ndarray, pts: Points, inlier: np.ndarray) -> float:
+    """Largest angle (deg, 0-90) between two inlier bearing lines through x: how well x is determined."""
+    phi = np.arctan2(x[1] - pts.north[inlier], x[0] - pts.east[inlier])
+    if phi.size < 2:
+        return 0.0
+    c, s = np.cos(2 * phi), np.sin(2 * phi)  # lines: angles mod pi
+    # Largest |sin(phi_i - phi_j)| over pairs = half the widest spread of the doubled angles.
+    ang = np.sort(np.arctan2(s, c))
+    gaps = np.diff(np.concatenate([ang, [ang[0] + TWO_PI]]))
+    spread = TWO_PI - gaps.max()  # arc covered by the doubled angles
+    return float(math.degrees(min(spread, math.pi) / 2))
+
+
+def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]:
+    """All distinct modes of the robust posterior over `pts`, most massive first (empty for < 2 points).
+
+    `by_density`: highest posterior density first. Under a flat prior (before the start) a far, poorly
+    determined mode gains Laplace mass from its sheer size (the bearing-only posterior is improper along the
+    rays), so the start ranks by density; once the prior is proper, mass is the right order."""
+    if len(pts) < 2:
+        return []
+    coarse = pts
+    if len(pts) > _MAX_GRID_POINTS:
+        coarse = pts.take(np.linspace(0, len(pts) - 1, _MAX_GRID_POINTS).round().astype(int))
+    cells, radius, _ = _grid(coarse)
+    r2 = _residuals(cells, coarse)[3]
+    widen2 = (radius[None, :, None] ** 2) / r2
+    score = log_posterior(cells, coarse, rob, widen2)
+    top = _local_maxima(score)[:_MAX_STARTS]
+    if top.size == 0:
+        return []
+    a_idx, r_idx = np.unravel_index(top, score.shape)
+    means, covs, gamma = refine(cells[a_idx, r_idx], radius[r_idx], pts, rob)
+    lp = log_posterior(means, pts, rob)
+    modes = []
+    for m in np.argsort(-lp):
+        if not (np.isfinite(lp[m]) and np.all(np.isfinite(means[m])) and np.all(np.isfinite(covs[m]))):
+            continue
+        sign, logdet = np.linalg.slogdet(covs[m])
+        if sign <= 0:
+            continue
+        if any(_same(means[m], o) for o in modes):
+            continue
+        inlier = gamma[m] > 0.5
+        if inlier.sum() < 2:  # a flat far-away "mode" that explains no bearing
+            continue
+        modes.append(Mode(means[m].copy(), covs[m].copy(), float(lp[m]), float(lp[m] + 0.5 * (logdet + 2 * math.log(TWO_PI))),
+                          int(inlier.sum()), steepest_crossing_deg(means[m], pts, inlier)))
+    modes.sort(key=lambda md: -(md.log_post if by_density else md.log_mass))
+    return modes
+
+
+def _same(x: np.ndarray, mode: Mode) -> bool:
+    d = x - mode.mean
+    return float(d @ np.linalg.solve(mode.cov, d)) < _MERGE_MAHALANOBIS2
+
+
+def masses(modes: list[Mode]) -> np.ndarray:
+    """Laplace masses of the modes, normalised to one."""
+    lm = np.array([m.log_mass for m in modes])
+    w = np.exp(lm - lm.max())
+    return w / w.sum()

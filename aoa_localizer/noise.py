@@ -1,0 +1,148 @@
+"""Self-calibrated bearing noise: what the receiver's sigma(Q) and outlier rate really are, learned from its data.
+
+The configured sigma model is the starting guess. Given the readings' residuals at the current estimate,
+EM on the mixture (Gaussian inliers, uniform outliers on the circle) fits a scale factor k per quality
+band (40-50, ..., 90-100, and one for unknown quality), so sigma(Q) = k(Q) x configured sigma(Q), with k
+interpolated between band centres. Each band is shrunk towards a straight line in Q fitted across the bands
+(weighted by their readings; the pooled scale when fewer than two bands have data), so a thin band borrows
+from its neighbours without flattening a real slope. This
+covers a receiver whose sigma is mis-stated by a constant factor, one whose noise depends on quality
+while the config says constant, and one that reports no quality at all. EM starts from a robust scale
+(1.4826 x median |residual|), from above, where it cannot lock onto a narrow core and call the rest wild.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .geodesy import TWO_PI
+
+BAND_EDGES = np.arange(40.0, 101.0, 10.0)  # quality bands; below 40 joins the first, NaN has its own
+N_BANDS = BAND_EDGES.size - 1
+UNKNOWN = N_BANDS  # index of the unknown-quality band
+_CENTRES = 0.5 * (BAND_EDGES[:-1] + BAND_EDGES[1:])
+_SHRINK_READINGS = 10.0  # pseudo-readings at the shrinkage target in every band
+_MIN_READINGS = 60  # fewer readings: keep the current calibration
+_EM_ITERATIONS = 25
+_K_RANGE = (0.05, 50.0)
+OUTLIER_RANGE = (0.01, 0.6)
+
+
+def band_of(quality: np.ndarray) -> np.ndarray:
+    """Band index of each quality (UNKNOWN for NaN)."""
+    q = np.asarray(quality, float)
+    band = np.clip(((np.nan_to_num(q, nan=40.0) - 40.0) // 10.0).astype(int), 0, N_BANDS - 1)
+    return np.where(np.isnan(q), UNKNOWN, band)
+
+
+class NoiseModel:
+    """Scale factors on the configured reading sigma, per quality band, and the reading outlier rate."""
+
+    def __init__(self, outlier_prob: float):
+        self.k = np.ones(N_BANDS + 1)
+        self.reading_outlier_prob = outlier_prob
+        self.fits = 0  # calibrations made
+        self.readings = np.zeros(N_BANDS + 1)  # EM inlier weight per band at the last fit
+
+    def scale(self, quality: np.ndarray) -> np.ndarray:
+        """k(Q): interpolated between band centres for known quality, the unknown band's for NaN."""
+        q = np.asarray(quality, float)
+        known = np.interp(np.nan_to_num(q, nan=40.0), _CENTRES, self.k[:N_BANDS])
+        return np.where(np.isnan(q), self.k[UNKNOWN], known)
+
+    def fit(self, resid: np.ndarray, quality: np.ndarray, base_sigma: np.ndarray) -> float:
+        """EM on reading residuals (rad) at a candidate emitter position. Returns the log likelihood of the
+        readings under the fitted model (NaN, nothing changed, with too few readings)."""
+        resid, base_sigma = np.asarray(resid, float), np.asarray(base_sigma, float)
+        ok = np.isfinite(resid) & np.isfinite(base_sigma) & (base_sigma > 0)
+        if ok.sum() < _MIN_READINGS:
+            return float("nan")
+        resid, base_sigma, band = resid[ok], base_sigma[ok], band_of(np.asarray(quality, float)[ok])
+        best = max((_em(resid, base_sigma, band, k0) for k0 in self._starts(resid / base_sigma)), key=lambda t: t[0])
+        ll, k2, eps, w = best
+        self.k = np.sqrt(k2)
+        self.reading_outlier_prob = eps
+        self.readings = w
+        self.fits += 1
+        return ll
+
+    def copy(self) -> "NoiseModel":
+        other = NoiseModel(self.reading_outlier_prob)
+        other.k, other.readings, other.fits = self.k.copy(), self.readings.copy(), self.fits
+        return other
+
+    def _starts(self, z: np.ndarray) -> list[float]:
+        """EM starting scales: the current one, the robust scale of the residuals, and a ladder from 1/4 to 32:
+        the mixture's likelihood has local optima (a wide core that swallows a ghost's bearings, or a narrow one
+        that calls good bearings wild), so the best of several runs is kept."""
+        robust = 1.4826 * float(np.median(np.abs(z)))
+        return [float(np.median(self.k[:N_BANDS])), robust] + [2.0**e for e in range(-2, 6)]
+
+    def summary(self, base_sigma_deg) -> dict:
+        """Calibrated sigma (deg) per band that has data, keyed by the band's centre quality ("nan" for unknown),
+        and the reading outlier rate. `base_sigma_deg(q)` is the configured sigma at quality q."""
+        sig = {}
+        for b in range(N_BANDS + 1):
+            if self.readings[b] >= 1.0:
+                q = float("nan") if b == UNKNOWN else float(_CENTRES[b])
+                key = "nan" if b == UNKNOWN else f"{q:g}"
+                sig[key] = round(float(self.k[b] * base_sigma_deg(q)), 3)
+        return {"sigma_deg": sig, "reading_outlier_prob": round(self.reading_outlier_prob, 4), "fits": self.fits}
+
+
+def _em(resid: np.ndarray, base_sigma: np.ndarray, band: np.ndarray, k0: float):
+    """EM from the scale k0 in every band: (log likelihood, k^2 per band, outlier rate, inlier weight per band)."""
+    z2 = (resid / base_sigma) ** 2
+    k2 = np.full(N_BANDS + 1, float(np.clip(k0, *_K_RANGE)) ** 2)
+    eps = 0.2
+    for _ in range(_EM_ITERATIONS):
+        var = k2[band] * base_sigma**2
+        g = (1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var)
+        gamma = g / (g + eps / TWO_PI)
+        w = np.bincount(band, weights=gamma, minlength=N_BANDS + 1)
+        s = np.bincount(band, weights=gamma * z2, minlength=N_BANDS + 1)
+        k2 = np.clip((s + _SHRINK_READINGS * _shrink_target(w, s)) / (w + _SHRINK_READINGS), _K_RANGE[0] ** 2,
+                     _K_RANGE[1] ** 2)
+        eps = float(np.clip(1.0 - gamma.mean(), *OUTLIER_RANGE))
+    var = k2[band] * base_sigma**2
+    ll = float(np.sum(np.log((1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var) + eps / TWO_PI)))
+    return ll, k2, eps, w
+
+
+def _shrink_target(w: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Per band, the k^2 a thin band is shrunk towards: a weighted line k(Q) over the quality bands, pooled for
+    the unknown band (and for all when fewer than two quality bands have readings)."""
+    pooled = float(s.sum() / max(w.sum(), 1e-12))
+    target = np.full(N_BANDS + 1, pooled)
+    wq, sq = w[:N_BANDS], s[:N_BANDS]
+    has = wq >= 1.0
+    if has.sum() >= 2:
+        k = np.sqrt(sq[has] / wq[has])
+        slope, icpt = np.polyfit(_CENTRES[has], k, 1, w=np.sqrt(wq[has]))
+        target[:N_BANDS] = np.maximum(icpt + slope * _CENTRES, _K_RANGE[0]) ** 2
+    if w[UNKNOWN] >= 1.0:
+        target[UNKNOWN] = s[UNKNOWN] / w[UNKNOWN]
+    return target
+
+
+def point_outlier_prob(resid: np.ndarray, sigma: np.ndarray, current: float) -> float:
+    """EM estimate of the share of observation points the likelihood should treat as wild (sigma fixed)."""
+    resid, sigma = np.asarray(resid, float), np.asarray(sigma, float)
+    if resid.size < 10:
+        return current
+    eps = max(current, 0.1)
+    for _ in range(_EM_ITERATIONS):
+        g = (1 - eps) * np.exp(-0.5 * (resid / sigma) ** 2) / (np.sqrt(TWO_PI) * sigma)
+        gamma = g / (g + eps / TWO_PI)
+        eps = float(np.clip(1.0 - gamma.mean(), *OUTLIER_RANGE))
+    return eps
+
+
+def sentence(summary: dict) -> str:
+    """'your receiver's sigma looks like 3.1 deg at Q 95, ...; 12 % of readings look wild'."""
+    parts = [f"{v:.2g} deg at {'unknown quality' if k == 'nan' else 'Q ' + k}" for k, v in summary["sigma_deg"].items()]
+    if not parts:
+        return "noise not calibrated yet"
+    return (f"your receiver's sigma looks like {', '.join(parts)}; "
+            f"{100 * summary['reading_outlier_prob']:.0f} % of readings look wild")
