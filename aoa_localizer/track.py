@@ -100,6 +100,7 @@ class EmitterTrack:
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:
         """One closed group of readings; True when the filter took it (or started) and has a new estimate."""
+        t0 = time.perf_counter()
         point, kept = self.make(readings)
         self.last_stamp = point.stamp
         gated = int((~kept).sum())
@@ -108,8 +109,12 @@ class EmitterTrack:
         self.points_seen += 1
         if self.filter is None:
             self.window.append((readings, point, gated))
-            return self._try_start()
-        return self._update(readings, point, gated)
+            took = self._try_start()
+        else:
+            took = self._update(readings, point, gated)
+        # What this point cost, searches and calibration included.
+        self.last_update_s = time.perf_counter() - t0
+        return took
 
     def _try_start(self):
         cfg = self.cfg
@@ -216,7 +221,6 @@ class EmitterTrack:
         f = self.filter
         before = f.model.history.appended
         logw_before = f.logw.copy()
-        t0 = time.perf_counter()
         try:
             ok = f.update(point)
             if ok and f.model.history.appended > before:
@@ -232,8 +236,6 @@ class EmitterTrack:
             log.exception("filter update failed; point skipped")
             self._reject("internal_error", 1)
             return False
-        finally:
-            self.last_update_s = time.perf_counter() - t0
         if not self._finite():
             self.filter = None
             self.window.clear()
