@@ -27,6 +27,7 @@ _MAX_STARTS = 6  # local maxima refined
 # Widening of the bearings' variance by the cell size, annealed to zero over the refinement.
 _ANNEAL = (1.0, 0.3, 0.1, 0.03, 0.01, 0.0)
 _ITER_PER_STAGE = 3
+_POLISH_ITERATIONS = 6  # from a start already near its mode
 _STEPS = np.array([1.0, 0.5, 0.2])
 _MERGE_MAHALANOBIS2 = 9.0
 _MIN_STEP_LIMIT_M = 100.0
@@ -105,6 +106,13 @@ def _terms(resid, var, eps: float):
     return ll, np.exp(g - ll)
 
 
+def inlier_share(x: np.ndarray, pts: Points, rob: Robust) -> float:
+    """Share of the points whose EM inlier weight at the place x (2,) is above one half."""
+    resid, _, _, r2 = _residuals(np.asarray(x, float), pts)
+    var = pts.sigma**2 + rob.gps_sigma_m**2 / np.maximum(r2, 1.0)
+    return float(np.mean(_terms(resid, var, rob.outlier_prob)[1] > 0.5))
+
+
 def _prior(x: np.ndarray, rob: Robust):
     if rob.prior_prec is None:
         return 0.0
@@ -158,9 +166,11 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
     information plus the prior's precision) and EM inlier weights (M, K).
     """
     x = np.array(starts, float)
+    widen = np.asarray(widen, float)
     prec = rob.prior_prec if rob.prior_prec is not None else np.zeros((2, 2))
-    for level in _ANNEAL:
-        for _ in range(_ITER_PER_STAGE):
+    levels = _ANNEAL if widen.any() else _ANNEAL[-1:]  # nothing to anneal from a start next to its mode
+    for level in levels:
+        for _ in range(_ITER_PER_STAGE if len(levels) > 1 else _POLISH_ITERATIONS):
             x, info, _ = _gn_step(x, pts, rob, level * widen, prec)
     resid, r2, grad = _geometry(x, pts)
     var = pts.sigma**2 + rob.gps_sigma_m**2 / np.maximum(r2, 1.0)

@@ -188,12 +188,17 @@ class Localizer:
         return self._release_pending()
 
     def flush(self) -> Estimate | None:
-        """End of data: bearings still waiting for a fix are dropped, the open observation point is used."""
+        """End of data: bearings still waiting for a fix are dropped, the open observation point is used, and a
+        last global check (calibration, modes, moves) makes the final estimate reflect all the data."""
         while self.pending:
             self.pending.popleft()
             self._reject("no_fix_after")
         group = self.builder.flush()
-        return self._use_points([group]) if group else None
+        estimate = self._use_points([group]) if group else None
+        if self.emitter.finish():
+            mean, cov = self.filter.estimate()
+            self.estimate = estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
+        return estimate
 
     def reset(self):
         """Drop the track, the points and the filter; keep the datum and the counters (the node's ~/reset)."""

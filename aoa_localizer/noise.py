@@ -23,7 +23,7 @@ N_BANDS = BAND_EDGES.size - 1
 UNKNOWN = N_BANDS  # index of the unknown-quality band
 _CENTRES = 0.5 * (BAND_EDGES[:-1] + BAND_EDGES[1:])
 _SHRINK_READINGS = 10.0  # pseudo-readings at the shrinkage target in every band
-_MIN_READINGS = 60  # fewer readings: keep the current calibration
+_MIN_READINGS = 40  # fewer readings: keep the current calibration
 _EM_ITERATIONS = 25
 _K_RANGE = (0.05, 50.0)
 OUTLIER_RANGE = (0.01, 0.6)
@@ -59,8 +59,7 @@ class NoiseModel:
         if ok.sum() < _MIN_READINGS:
             return float("nan")
         resid, base_sigma, band = resid[ok], base_sigma[ok], band_of(np.asarray(quality, float)[ok])
-        best = max((_em(resid, base_sigma, band, k0) for k0 in self._starts(resid / base_sigma)), key=lambda t: t[0])
-        ll, k2, eps, w = best
+        ll, k2, eps, w = _em(resid, base_sigma, band, self._starts(resid / base_sigma))
         self.k = np.sqrt(k2)
         self.reading_outlier_prob = eps
         self.readings = w
@@ -72,12 +71,12 @@ class NoiseModel:
         other.k, other.readings, other.fits = self.k.copy(), self.readings.copy(), self.fits
         return other
 
-    def _starts(self, z: np.ndarray) -> list[float]:
+    def _starts(self, z: np.ndarray) -> np.ndarray:
         """EM starting scales: the current one, the robust scale of the residuals, and a ladder from 1/4 to 32:
         the mixture's likelihood has local optima (a wide core that swallows a ghost's bearings, or a narrow one
         that calls good bearings wild), so the best of several runs is kept."""
         robust = 1.4826 * float(np.median(np.abs(z)))
-        return [float(np.median(self.k[:N_BANDS])), robust] + [2.0**e for e in range(-2, 6)]
+        return np.array([float(np.median(self.k[:N_BANDS])), robust] + [2.0**e for e in range(-2, 6)])
 
     def summary(self, base_sigma_deg) -> dict:
         """Calibrated sigma (deg) per band that has data, keyed by the band's centre quality ("nan" for unknown),
@@ -91,38 +90,53 @@ class NoiseModel:
         return {"sigma_deg": sig, "reading_outlier_prob": round(self.reading_outlier_prob, 4), "fits": self.fits}
 
 
-def _em(resid: np.ndarray, base_sigma: np.ndarray, band: np.ndarray, k0: float):
-    """EM from the scale k0 in every band: (log likelihood, k^2 per band, outlier rate, inlier weight per band)."""
+def _em(resid: np.ndarray, base_sigma: np.ndarray, band: np.ndarray, k0: np.ndarray):
+    """EM from each starting scale in k0 (S,), all at once. Returns the best run's (log likelihood, k^2 per band,
+    outlier rate, inlier weight per band)."""
     z2 = (resid / base_sigma) ** 2
-    k2 = np.full(N_BANDS + 1, float(np.clip(k0, *_K_RANGE)) ** 2)
-    eps = 0.2
+    onehot = np.zeros((resid.size, N_BANDS + 1))
+    onehot[np.arange(resid.size), band] = 1.0
+    k2 = np.repeat(np.clip(k0, *_K_RANGE)[:, None] ** 2, N_BANDS + 1, axis=1)  # (S, B)
+    eps = np.full((k0.size, 1), 0.2)
     for _ in range(_EM_ITERATIONS):
-        var = k2[band] * base_sigma**2
-        g = (1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var)
-        gamma = g / (g + eps / TWO_PI)
-        w = np.bincount(band, weights=gamma, minlength=N_BANDS + 1)
-        s = np.bincount(band, weights=gamma * z2, minlength=N_BANDS + 1)
+        gamma, _ = _responsibilities(resid, base_sigma, k2[:, band], eps)
+        w, s = gamma @ onehot, (gamma * z2) @ onehot
         k2 = np.clip((s + _SHRINK_READINGS * _shrink_target(w, s)) / (w + _SHRINK_READINGS), _K_RANGE[0] ** 2,
                      _K_RANGE[1] ** 2)
-        eps = float(np.clip(1.0 - gamma.mean(), *OUTLIER_RANGE))
-    var = k2[band] * base_sigma**2
-    ll = float(np.sum(np.log((1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var) + eps / TWO_PI)))
-    return ll, k2, eps, w
+        eps = np.clip(1.0 - gamma.mean(axis=1, keepdims=True), *OUTLIER_RANGE)
+    gamma, dens = _responsibilities(resid, base_sigma, k2[:, band], eps)
+    ll = np.log(dens).sum(axis=1)
+    b = int(np.argmax(ll))
+    return float(ll[b]), k2[b], float(eps[b, 0]), gamma[b] @ onehot
+
+
+def _responsibilities(resid, base_sigma, k2_per_reading, eps):
+    """Inlier weights and mixture densities of the readings (S, n) under each run's scales and outlier rate."""
+    var = k2_per_reading * base_sigma**2
+    g = (1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var)
+    dens = g + eps / TWO_PI
+    return g / dens, dens
 
 
 def _shrink_target(w: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Per band, the k^2 a thin band is shrunk towards: a weighted line k(Q) over the quality bands, pooled for
-    the unknown band (and for all when fewer than two quality bands have readings)."""
-    pooled = float(s.sum() / max(w.sum(), 1e-12))
-    target = np.full(N_BANDS + 1, pooled)
-    wq, sq = w[:N_BANDS], s[:N_BANDS]
+    """Per run and band (S, B), the k^2 a thin band is shrunk towards: a line k(Q) over the quality bands weighted
+    by their readings, pooled for the unknown band (and for all when fewer than two quality bands have readings)."""
+    pooled = s.sum(axis=1, keepdims=True) / np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
+    target = np.repeat(pooled, N_BANDS + 1, axis=1)
+    wq, sq = w[:, :N_BANDS], s[:, :N_BANDS]
     has = wq >= 1.0
-    if has.sum() >= 2:
-        k = np.sqrt(sq[has] / wq[has])
-        slope, icpt = np.polyfit(_CENTRES[has], k, 1, w=np.sqrt(wq[has]))
-        target[:N_BANDS] = np.maximum(icpt + slope * _CENTRES, _K_RANGE[0]) ** 2
-    if w[UNKNOWN] >= 1.0:
-        target[UNKNOWN] = s[UNKNOWN] / w[UNKNOWN]
+    k = np.sqrt(np.where(has, sq / np.maximum(wq, 1e-12), 0.0))
+    ww = np.where(has, np.sqrt(wq), 0.0)  # weights of the line fit
+    sw, sx, sy = ww.sum(1), ww @ _CENTRES, (ww * k).sum(1)
+    sxx, sxy = ww @ _CENTRES**2, (ww * k * _CENTRES).sum(1)
+    det = sw * sxx - sx**2
+    line = (has.sum(axis=1) >= 2) & (det > 1e-9)
+    slope = np.where(line, (sw * sxy - sx * sy) / np.where(line, det, 1.0), 0.0)
+    icpt = np.where(line, (sy - slope * sx) / np.maximum(sw, 1e-12), 0.0)
+    fitted = np.maximum(icpt[:, None] + slope[:, None] * _CENTRES, _K_RANGE[0]) ** 2
+    target[:, :N_BANDS] = np.where(line[:, None], fitted, target[:, :N_BANDS])
+    unknown = w[:, UNKNOWN] >= 1.0
+    target[:, UNKNOWN] = np.where(unknown, s[:, UNKNOWN] / np.maximum(w[:, UNKNOWN], 1e-12), target[:, UNKNOWN])
     return target
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from .config import LocalizerConfig
 from .crlb import ELLIPSE_95
 from .filters import make_filter
-from .global_search import Mode, Points, Robust, find_modes, log_posterior, refine
+from .global_search import Mode, Points, Robust, find_modes, inlier_share, log_posterior, refine
 from .noise import NoiseModel, point_outlier_prob
 from .preprocess import make_point
 from .safety import HealthMonitor, ModeProposal, importance_sample
@@ -47,7 +47,8 @@ _ALARM_SEARCH_EVERY = 5  # points between global searches while in alarm
 _MIN_INLIERS = 3  # a start mode must explain at least this many points
 _MODE_MIN_MASS = 0.01  # modes reported
 _MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
-_START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
+_START_RETRY_MAX = 5
+_MOVED_MAX_OLD_SHARE = 0.2  # most recent points that may still agree with the old place in a move  # most points between two start attempts that found no determined mode
 
 
 class EmitterTrack:
@@ -287,6 +288,14 @@ class EmitterTrack:
         elif alarm:
             f.rejuvenate(_ALARM_SWEEPS, self.proposal)
 
+    def finish(self) -> bool:
+        """End of data: one more global check over everything kept (unless the last point just had one).
+        True when it ran (the estimate changed)."""
+        if self.filter is None or not self.cfg.global_safety or self.last_search_point == self.points_seen:
+            return False
+        self._global_check(self.health.alarm_since is not None)
+        return self.filter is not None
+
     def _global_check(self, alarm: bool):
         f = self.filter
         self.last_search_point = self.points_seen
@@ -394,6 +403,8 @@ class EmitterTrack:
         m = self.points_seen - since + 1 if since is not None else 0
         if m < self.cfg.moved_min_points or m >= len(self.window):
             return False
+        if self.cfg.calibrate_noise and not self.noise.fits:
+            return False  # disagreement means nothing before the outlier rate is known
         pts = self.points()
         k = len(pts)
         recent, old = pts.take(np.arange(k - m, k)), pts.take(np.arange(k - m))
@@ -403,6 +414,11 @@ class EmitterTrack:
             return False
         x_new = modes[0].mean
         x_old = self.filter.estimate()[0]
+        # A moved emitter leaves (almost) no recent point agreeing with the old place; a second, stationary
+        # source (a reflection) keeps about its share of them: that is a second mode, not a move.
+        still = inlier_share(x_old, recent, rob)
+        if still > _MOVED_MAX_OLD_SHARE:
+            return False
         pair = np.stack([x_new, x_old])
         lr_recent = float(np.subtract(*log_posterior(pair, recent, rob)))
         lr_old = -float(np.subtract(*log_posterior(pair, old, rob)))

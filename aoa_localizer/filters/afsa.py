@@ -70,6 +70,9 @@ class AfsaFilter(ParticleFilter):
     def invalidate(self):
         self.target_points = -1
 
+    def targets_known(self, target: np.ndarray):
+        self.target, self.target_points = target, self.model.history.appended
+
     def after_weight(self, p: ObservationPoint):
         if not self.paper:
             # The fish did not move since the last point: their posterior gains this point's likelihood.

@@ -124,7 +124,7 @@ class ParticleFilter:
         if proposal is not None:
             self.x, target, a = independence_sweep(self.x, target, self.log_target, proposal, self.rng)
             accepted, tried = accepted + a, tried + self.n
-        self.invalidate()
+        self.targets_known(target)
         return accepted / max(tried, 1)
 
     def reweight(self, log_ratio: np.ndarray):
@@ -143,6 +143,10 @@ class ParticleFilter:
 
     def invalidate(self):
         """The particles or the target changed outside the filter's own step: drop cached values."""
+
+    def targets_known(self, target: np.ndarray):
+        """The particles moved outside the filter's step, and `target` is their log posterior now."""
+        self.invalidate()
 
     # -- hooks ----------------------------------------------------------------------------------
     def after_weight(self, z):

@@ -1,0 +1,157 @@
+"""Never confidently wrong: rescue from a wrong lock, noise self-calibration, modes, a moved emitter, the start."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from aoa_localizer import LocalizerConfig
+from aoa_localizer.evaluation import run
+from aoa_localizer.global_search import Points, Robust, find_modes
+from aoa_localizer.localizer import Localizer
+from aoa_localizer.noise import NoiseModel
+from aoa_localizer.safety import HealthMonitor, ModeProposal, independence_sweep
+from aoa_localizer.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
+
+BASE = robustness_cells()["wild0"]
+
+
+def feed(loc: Localizer, data, until_s=np.inf, after_s=-np.inf):
+    """Feed a scenario's events with stamps in (after_s, until_s]; returns the estimates made."""
+    out = []
+    for kind, row in data.events():
+        if not after_s < row[0] <= until_s:
+            continue
+        est = loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
+        if est is not None:
+            out.append(est)
+    return out
+
+
+def truth_in_engine(loc, data):
+    return np.array(loc.frame.to_enu(*data.emitter_lat_lon))
+
+
+@pytest.mark.parametrize("safety", [True, False])
+def test_a_cloud_locked_1_km_off_under_the_outlier_floor(safety):
+    """A confident cloud 1 km off: every new point sits at the outlier floor there. With the safety layer it
+    is rescued within 20 points; without it the cloud never moves (the freeze the issue measured)."""
+    data = simulate(BASE, 3)
+    loc = Localizer(LocalizerConfig(seed=5, global_safety=safety))
+    half = data.bearings[len(data.bearings) // 2, 0]
+    feed(loc, data, until_s=half)
+    truth = truth_in_engine(loc, data)
+    assert np.hypot(*(np.array([loc.estimate.east, loc.estimate.north]) - truth)) < 30
+    wrong = truth + np.array([-800.0, -600.0])
+    loc.filter.replace_cloud(wrong + 3.0 * np.random.default_rng(0).standard_normal((loc.cfg.num_particles, 2)))
+    estimates = feed(loc, data, after_s=half)
+    errors = [np.hypot(e.east - truth[0], e.north - truth[1]) for e in estimates]
+    if safety:
+        assert max(errors[20:]) < 30, errors  # rescued within 20 points, and stays
+        assert loc.events["global_restart"] + loc.events["alarm"] >= 1
+    else:
+        assert min(errors[:20]) > 900, errors  # the freeze: no particle explains the points, nothing moves
+
+
+def test_self_calibrated_sigma_of_a_3_degree_receiver():
+    """Quality unknown, real noise 3 deg, configured 1.117 deg: the calibrated sigma lands within 10 % of 3 deg
+    and the published ellipse holds the truth."""
+    sc = replace(BASE, name="nan3", sigma_q_deg=None, sigma_rad=np.radians(3.0), quality_known=False, points=150)
+    res = run(simulate(sc, 1), LocalizerConfig(seed=1))
+    noise = res.localizer.noise_summary()
+    assert noise["sigma_deg"]["nan"] == pytest.approx(3.0, rel=0.10), noise
+    assert res.scores["inside95"] and res.scores["error"] < 3 * res.scores["crlb"]
+
+
+def test_calibration_learns_how_sigma_falls_with_quality():
+    """The default config says one sigma; the receiver's runs from 8 deg at Q 40 to 1 deg at Q 100."""
+    rng = np.random.default_rng(0)
+    q = rng.uniform(40, 100, 3000)
+    true = np.radians(8 + (1 - 8) * (q - 40) / 60)
+    resid = true * rng.standard_normal(q.size)
+    wild = rng.random(q.size) < 0.2
+    resid[wild] = rng.uniform(-np.pi, np.pi, wild.sum())
+    noise = NoiseModel(0.05)
+    noise.fit(resid, q, np.full(q.size, np.radians(1.117)))
+    got = np.degrees(np.radians(1.117) * noise.scale(np.array([45.0, 70.0, 95.0])))
+    assert got == pytest.approx([7.4, 4.5, 1.6], rel=0.15)
+    assert noise.reading_outlier_prob == pytest.approx(0.2, abs=0.04)
+
+
+def test_two_modes_are_reported_with_their_masses():
+    """A straight road through the datum, one reading per stop. Even stops see the emitter, odd stops its
+    mirror image across the datum's meridian, with the mirrored noise of the mirrored stop: the data are
+    exactly symmetric, so the posterior has two modes of equal mass, and both must be reported."""
+    sc = Scenario("twin", (-300.0, 800.0), ((-1000.0, 0.0), (1000.0, 0.0)), points=80, readings_per_point=1,
+                  quality=(90.0, 90.0), sigma_rad=np.radians(1.0), dwell_s=8.0)
+    data = simulate(sc, 2)
+    az = data.bearings[:, 1]
+    mirrored = (360.0 - az[::-1]) % 360.0  # stop i seen from stop n-1-i, reflected
+    data.bearings[:, 1] = np.where(np.arange(az.size) % 2 == 0, az, mirrored)
+    loc = Localizer(LocalizerConfig(seed=2))
+    feed(loc, data)
+    est = loc.flush() or loc.estimate
+    modes = est.modes
+    assert len(modes) == 2, modes
+    assert sum(m[2] for m in modes) == pytest.approx(1.0, abs=1e-6)
+    assert min(m[2] for m in modes) > 0.2, modes
+    places = np.array(sorted(data.frame.to_enu(*loc.frame.to_geodetic(m[0], m[1])[:2]) for m in modes))
+    assert np.hypot(*(places - [[-300.0, 800.0], [300.0, 800.0]]).T).max() < 25, places
+
+
+def test_an_emitter_moved_400_m_is_noticed_and_re_found():
+    sc = Scenario("moved", (1200, 800), SEED_TRACK, points=120, readings_per_point=3, quality=(70.0, 100.0),
+                  sigma_q_deg=(1.0, 3.0), dwell_s=8.0, moved_to=(1400.0, 1150.0), moved_at_s=700.0)
+    data = simulate(sc, 4)
+    loc = Localizer(LocalizerConfig(seed=4))
+    estimates = feed(loc, data)
+    est = loc.flush() or estimates[-1]
+    new = truth_in_engine(loc, data)
+    assert loc.events["emitter_moved"] == 1
+    assert loc.rejected["emitter_moved"] > 0
+    assert np.hypot(est.east - new[0], est.north - new[1]) < 20
+    assert len(est.modes) == 1
+
+
+def test_the_start_never_uses_a_crossing_a_clear_majority_contradicts():
+    """Three wild bearings cross steeply at P; twelve agree on the emitter. The global start takes the
+    emitter, never P (the paper's support-free triangulation would take any steep pair)."""
+    rng = np.random.default_rng(1)
+    emitter, p = np.array([1000.0, 500.0]), np.array([300.0, -400.0])
+    east = np.linspace(0, 900, 15)
+    north = np.zeros(15)
+    theta = np.arctan2(emitter[1] - north, emitter[0] - east) + np.radians(0.5) * rng.standard_normal(15)
+    for i in (2, 7, 12):
+        theta[i] = np.arctan2(p[1] - north[i], p[0] - east[i])
+    modes = find_modes(Points(east, north, theta, np.full(15, np.radians(1.0))), Robust(0.05), by_density=True)
+    assert np.hypot(*(modes[0].mean - emitter)) < 20
+    assert modes[0].inliers >= 12
+
+
+def test_health_monitor_alarms_on_an_implausible_outlier_share():
+    h = HealthMonitor(window=10, p_value=1e-3)
+    for i in range(10):  # 3 of 10 with a 30 % outlier rate: normal
+        assert not h.push(i % 3 == 0, i, 0.3)
+    for i in range(10, 20):  # 10 of 10: not at 30 %
+        alarm = h.push(True, i, 0.3)
+    assert alarm and h.alarm_since is not None
+
+
+def test_independence_moves_keep_a_known_posterior():
+    """From a start far away, independence MH with the mode proposal lands on N(mu, S): mean and covariance."""
+    from aoa_localizer.global_search import Mode
+
+    mu, cov = np.array([10.0, -5.0]), np.array([[4.0, 1.0], [1.0, 2.0]])
+    prec = np.linalg.inv(cov)
+
+    def log_target(x):
+        d = x - mu
+        return -0.5 * np.einsum("ni,ij,nj->n", d, prec, d)
+
+    rng = np.random.default_rng(0)
+    prop = ModeProposal([Mode(mu + 1.0, 2.0 * cov, 0.0, 0.0, 10, 90.0)], broad_sigma_m=20.0)
+    x = np.full((4000, 2), 100.0)
+    target = log_target(x)
+    for _ in range(30):
+        x, target, _ = independence_sweep(x, target, log_target, prop, rng)
+    assert x.mean(axis=0) == pytest.approx(mu, abs=0.15)
+    assert np.cov(x.T) == pytest.approx(cov, abs=0.3)
