@@ -1,9 +1,16 @@
-"""Benchmark the public scenarios of BENCHMARKS.md: accuracy against the CRLB, honesty of the ellipse, speed.
+"""Benchmark the public scenarios (docs/interface.md) and the robustness cells: accuracy against the CRLB,
+honesty of the ellipse, speed.
 
-Runs r = 0..runs-1 of each scenario (data seeded r, filters 10000 + r, so all filters see the same data)
-through the engine with each filter, plus the `particles` package's bootstrap and IBIS filters on the
-same observation points when it is installed (pip install -e '.[bench]'). Prints one table per scenario
+Public section: runs r = 0..runs-1 of each scenario (data seeded r, filters 10000 + r, so all filters see the
+same data) through the engine with each filter, plus the `particles` package's bootstrap and IBIS filters on
+the same observation points when it is installed (pip install -e '.[bench]'). Prints one table per scenario
 and the AFSA paper's Table 1 next to ours for `seed`.
+
+Robustness section (`--section robustness`): the cells of scenarios.robustness_cells() (uniform wild share
+0-40 %, a consistent reflector, noise mis-stated by 0.5x/2x/4x, quality unknown), every filter with the
+default configuration, and the robust batch maximum-likelihood reference (`batch-ml`). Columns: RMSE over the
+oracle CRLB of the inlier readings, gross failures (> 10x CRLB), runs without an estimate, NEES, 95 % ellipse
+coverage, time per run. `--jobs` runs cells in parallel processes.
 """
 from __future__ import annotations
 
@@ -11,10 +18,12 @@ import argparse
 import datetime
 import json
 import logging
+import multiprocessing
 import os
 import platform
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import particles_peers  # noqa: E402
 
 from aoa_localizer import LocalizerConfig  # noqa: E402
-from aoa_localizer.evaluation import LARGE_ERROR_M, run  # noqa: E402
-from aoa_localizer.scenarios import SCENARIOS, simulate  # noqa: E402
+from aoa_localizer.evaluation import LARGE_ERROR_M, run, run_batch_ml  # noqa: E402
+from aoa_localizer.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
 
 logging.getLogger("aoa_localizer").setLevel(logging.ERROR)  # per-run first-rejection notes would flood the table
 
@@ -174,16 +183,92 @@ def print_tables(results):
                       f"{pl} | {m['large_errors_per_run']:.1f} |")
 
 
+ROBUST_FILTERS = ("afsa", "sir", "espf", "gfapf", "upfde", "upf", "pfde", "agapf", "batch-ml")
+GROSS_FACTOR = 10.0
+
+
+def robust_task(task):
+    """One (cell, run, filter): the final estimate's scores and the run's wall time."""
+    cell, r, fname = task
+    logging.getLogger("aoa_localizer").setLevel(logging.ERROR)
+    warnings.simplefilter("ignore")  # numpy RuntimeWarnings of diverging peers must not break the progress bar
+    data = simulate(robustness_cells()[cell], r)
+    cfg = LocalizerConfig(seed=10000 + r)
+    if fname == "batch-ml":
+        return cell, fname, run_batch_ml(data, cfg)
+    res = run(data, cfg.with_changes(algorithm=fname))
+    s = res.scores
+    out = {k: s[k] for k in ("converged", "crlb", "error", "nees", "inside95") if k in s}
+    out["wall_s"] = res.wall_s
+    return cell, fname, out
+
+
+def robust_aggregate(rows: list[dict]) -> dict:
+    ok = [r for r in rows if r["converged"]]
+    out = {"runs": len(rows), "no_estimate": len(rows) - len(ok),
+           "time_ms": float(1e3 * np.mean([r["wall_s"] for r in rows]))}
+    if ok:
+        err = np.array([r["error"] for r in ok])
+        crlb = np.array([r["crlb"] for r in ok])
+        out.update(rmse_over_crlb=float(np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(crlb**2))),
+                   median_over_crlb=float(np.median(err / crlb)),
+                   gross=int(np.sum(err > GROSS_FACTOR * crlb)),
+                   nees_mean=float(np.mean([min(r["nees"], 1e6) for r in ok])),
+                   nees_median=float(np.median([r["nees"] for r in ok])),
+                   coverage95_pct=float(100 * np.mean([r["inside95"] for r in ok])))
+    return out
+
+
+def bench_robustness(runs: int, filters, jobs: int) -> dict:
+    cells = list(robustness_cells())
+    tasks = [(c, r, f) for c in cells for r in range(runs) for f in filters]
+    rows = {c: {f: [] for f in filters} for c in cells}
+    with tqdm(total=len(tasks), unit="run", file=sys.stderr, desc="robustness") as bar:
+        if jobs > 1:
+            with multiprocessing.get_context("spawn").Pool(jobs) as pool:
+                for cell, fname, out in pool.imap_unordered(robust_task, tasks, chunksize=4):
+                    rows[cell][fname].append(out)
+                    bar.update()
+        else:
+            for task in tasks:
+                cell, fname, out = robust_task(task)
+                rows[cell][fname].append(out)
+                bar.update()
+    return {c: {f: robust_aggregate(v) for f, v in by.items()} for c, by in rows.items()}
+
+
+def print_robustness(results: dict):
+    cols = [("rmse_over_crlb", "RMSE/CRLB", "{:.2f}"), ("median_over_crlb", "median/CRLB", "{:.2f}"),
+            ("gross", "gross", "{}"), ("no_estimate", "no est.", "{}"), ("nees_mean", "NEES mean", "{:.2f}"),
+            ("nees_median", "NEES med.", "{:.2f}"), ("coverage95_pct", "cov95 %", "{:.0f}"),
+            ("time_ms", "ms/run", "{:.0f}"), ("runs", "runs", "{}")]
+    filters = list(next(iter(results.values())))
+    for fname in filters:
+        print(f"\n## robustness: {fname}")
+        print("| cell | " + " | ".join(c[1] for c in cols) + " |")
+        print("|---" * (len(cols) + 1) + "|")
+        for cell, by in results.items():
+            m = by[fname]
+            print(f"| {cell} | " + " | ".join(fmt.format(m[k]) if k in m else "-" for k, _, fmt in cols) + " |")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per scenario (default 100)")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
-    parser.add_argument("--filters", nargs="+", default=list(FILTERS), choices=list(FILTERS))
+    parser.add_argument("--filters", nargs="+", default=list(FILTERS), choices=list(FILTERS),
+                        help="filters to run (the robustness section also always runs the batch-ml reference)")
     parser.add_argument("--particles", type=int, default=100, help="N for every filter (default 100)")
     parser.add_argument("--no-peers", action="store_true", help="skip the particles package's filters")
     parser.add_argument("--json", metavar="OUT", help="write all figures as JSON")
     parser.add_argument("--plot", metavar="DIR", help="write RMSE-against-step plots with the CRLB, one per scenario")
+    parser.add_argument("--section", choices=("public", "robustness", "all"), default="all",
+                        help="public scenarios, robustness cells, or both (default)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="parallel processes for the robustness section (default: the cores)")
     args = parser.parse_args(argv)
+    if args.section == "robustness":
+        return robustness_main(args)
     with_peers = particles_peers.AVAILABLE and not args.no_peers
     if not particles_peers.AVAILABLE and not args.no_peers:
         print("note: the `particles` package is not installed (pip install -e '.[bench]'): no peer rows", file=sys.stderr)
@@ -202,8 +287,26 @@ def main(argv=None):
             "particles": args.particles, "wall_s": round(time.time() - t0, 1)}
     print(f"\n{meta['runs']} runs per scenario, N = {args.particles}, {meta['wall_s']} s, {meta['machine']}, "
           f"{meta['cores']} cores, {meta['date']}")
+    robust = {}
+    if args.section == "all":
+        robust = bench_robustness(args.runs, [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"],
+                                  args.jobs)
+        print_robustness(robust)
     if args.json:
-        Path(args.json).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
+        Path(args.json).write_text(json.dumps({"meta": meta, "results": results, "robustness": robust}, indent=1))
+
+
+def robustness_main(args):
+    t0 = time.time()
+    filters = [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"]
+    robust = bench_robustness(args.runs, filters, args.jobs)
+    print_robustness(robust)
+    meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
+            "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
+            "runs": args.runs, "jobs": args.jobs, "wall_s": round(time.time() - t0, 1)}
+    print(f"\n{args.runs} runs per cell, {meta['wall_s']} s, {meta['machine']}, {meta['cores']} cores, {meta['date']}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"meta": meta, "robustness": robust}, indent=1))
 
 
 if __name__ == "__main__":
