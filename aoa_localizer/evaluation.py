@@ -30,7 +30,7 @@ def scenario_config(data: ScenarioData, base: LocalizerConfig) -> LocalizerConfi
 
 
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
-    """Feed a scenario's fixes and bearings in stamp order, flush at the end, keep every estimate."""
+    """Feed a scenario's fixes and bearings in stamp order, flush and finish at the end, keep every estimate."""
     loc = Localizer(scenario_config(data, cfg))
     estimates, step_s = [], []
     t0 = time.perf_counter()
@@ -43,6 +43,10 @@ def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
             estimates.append(est)
             step_s.append(loc.last_update_s)
     est = loc.flush()
+    if est is not None:
+        estimates.append(est)
+        step_s.append(loc.last_update_s)
+    est = loc.finish()
     if est is not None:
         estimates.append(est)
         step_s.append(loc.last_update_s)
@@ -62,7 +66,7 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
             loc.add_fix(row[0], row[1], row[2], row[3])
         else:
             loc.add_bearing(row[0], row[1], row[2])
-    loc.flush()
+    loc.flush()  # no finish(): no filter runs; the batch estimate is the end-of-data search
     mode = loc.emitter.batch_estimate()
     wall = time.perf_counter() - t0
     truth = data.emitter_enu

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from collections import Counter, deque
 
 import numpy as np
@@ -16,6 +15,7 @@ import numpy as np
 from .config import LocalizerConfig
 from .geodesy import LocalFrame, azimuth_to_enu
 from .gps_track import GpsTrack, Where
+from .noise import sentence as noise_sentence
 from .preprocess import PointBuilder, reading_sigma
 from .track import EmitterTrack
 from .types import Estimate, ObservationPoint, Reading
@@ -127,6 +127,20 @@ class Localizer:
         summary["point_outlier_prob"] = round(self.emitter.outlier_prob, 4)
         return summary
 
+    def robustness_lines(self) -> list[str]:
+        """Human lines on what the robustness layer saw: the receiver's noise, alternative hypotheses, events."""
+        lines = []
+        if self.cfg.calibrate_noise:
+            lines.append(noise_sentence(self.noise_summary()))
+        est = self.estimate
+        if est is not None and len(est.modes) > 1:
+            lines.append("alternative hypotheses: " + "; ".join(
+                f"E {e:.1f} N {n:.1f} ({100 * m:.0f} %)" for e, n, m in est.modes))
+        events = {k: v for k, v in self.events.items() if k != "alarm_points"}
+        if events:
+            lines.append("robustness events: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
+        return lines
+
     # -- public API -----------------------------------------------------------------------------
     def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0) -> Estimate | None:
         """A NavSatFix's content. Returns the newest estimate this fix made possible, if any."""
@@ -188,17 +202,23 @@ class Localizer:
         return self._release_pending()
 
     def flush(self) -> Estimate | None:
-        """End of data: bearings still waiting for a fix are dropped, the open observation point is used, and a
-        last global check (calibration, modes, moves) makes the final estimate reflect all the data."""
+        """End of data: bearings still waiting for a fix are dropped, the open observation point is used."""
         while self.pending:
             self.pending.popleft()
             self._reject("no_fix_after")
         group = self.builder.flush()
-        estimate = self._use_points([group]) if group else None
-        if self.emitter.finish():
-            mean, cov = self.filter.estimate()
-            self.estimate = estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
-        return estimate
+        return self._use_points([group]) if group else None
+
+    def finish(self) -> Estimate | None:
+        """After flush(), offline: one last global check over all the data (calibration, modes, moves), so the
+        final estimate and its modes reflect everything; its Estimate has `end_of_data` set (None if no filter
+        runs, or the last point just had a check). A live node never sees the end of data and never calls it."""
+        if not self.emitter.finish():
+            return None
+        mean, cov = self.filter.estimate()
+        self.estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
+        self.estimate.end_of_data = True
+        return self.estimate
 
     def reset(self):
         """Drop the track, the points and the filter; keep the datum and the counters (the node's ~/reset)."""

@@ -34,6 +34,7 @@ from msgs_adapters.fields import (
 from .config import GROUPS, ConfigError, LocalizerConfig
 from .crlb import ELLIPSE_95, ellipse_axes
 from .localizer import Localizer
+from .noise import sentence as noise_sentence
 from .ros_main import run_node
 
 NODE_NAME = "aoa_localizer"
@@ -260,14 +261,34 @@ class LocalizerNode(Node):
             values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * loc.last_update_s:.3f}",
                           east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}", lon=f"{est.lon:.7f}",
                           ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
+        values.update(self._robustness_values())
         wrong = self._wrong_publishers()
         if wrong:
             values["wrong_encoding"] = "; ".join(wrong)
         level = 0 if est is not None else 1
+        if loc.emitter.health.alarm_since is not None:
+            level = max(level, 1)  # the cloud no longer explains the newest points: a global check is under way
         if wrong:
             level = max(level, 1)
         message = loc.status if not wrong else f"{loc.status}; {wrong[0]}"
         return level, message, values
+
+    def _robustness_values(self) -> dict:
+        """Self-calibrated noise, modes, the health test and the robustness events, as diagnostic values."""
+        loc, values = self.loc, {}
+        if self.cfg.calibrate_noise:
+            noise = loc.noise_summary()
+            values["noise"] = noise_sentence(noise)
+            values.update({f"noise.sigma_deg.q{k}": v for k, v in noise["sigma_deg"].items()})
+            values.update({"noise.reading_outlier_prob": noise["reading_outlier_prob"],
+                           "noise.point_outlier_prob": noise["point_outlier_prob"]})
+        values["health.recent_outlier_share"] = f"{loc.emitter.health.share:.2f}"
+        est = loc.estimate
+        if est is not None:
+            values["modes"] = len(est.modes)
+            values.update({f"mode.{i + 1}": f"E {e:.1f} N {n:.1f} mass {m:.3f}" for i, (e, n, m) in enumerate(est.modes)})
+        values.update({f"events.{k}": v for k, v in sorted(loc.events.items())})
+        return values
 
     def _wrong_publishers(self) -> list[str]:
         """Publishers on our input topics with another message type (DDS never delivers them)."""

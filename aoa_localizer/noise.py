@@ -12,7 +12,6 @@ while the config says constant, and one that reports no quality at all. EM start
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

@@ -59,6 +59,11 @@ def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.nd
         ax.scatter(est.particles[:, 0], est.particles[:, 1], s=4, color="0.45", alpha=0.6, label="particles", zorder=3)
     ax.plot(ring[:, 0], ring[:, 1], color="orange", lw=1.5, label="95 % ellipse", zorder=4)
     ax.plot(*target, "x", color="red", ms=10, mew=2, label="estimate", zorder=5)
+    for i, (e, n, mass) in enumerate(getattr(est, "modes", None) or []):
+        if len(est.modes) > 1:
+            ax.plot(e, n, "D", color="purple", ms=7, mfc="none", mew=1.5, zorder=5,
+                    label="posterior modes (probability)" if i == 0 else None)
+            ax.annotate(f"{100 * mass:.0f} %", (e, n), textcoords="offset points", xytext=(6, 6), color="purple")
     if truth is not None:
         ax.plot(*truth, "*", color="green", ms=14, label="truth", zorder=6)
     ax.plot([], [], color=(0.12, 0.35, 0.85), lw=1, label="bearings used (older: fainter)")

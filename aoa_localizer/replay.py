@@ -53,7 +53,7 @@ def summary(loc: Localizer, truth, datum) -> list[str]:
             lines.append(f"error against the bag's truth: {math.hypot(e - truth[1], n - truth[2]):.2f} m")
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(loc.rejected.items())) or "none"
     lines.append(f"inputs not used: {rejected}")
-    return lines
+    return lines + loc.robustness_lines()
 
 
 class BagRun:
@@ -88,9 +88,9 @@ def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay"
             if not result.messages:
                 raise
             result.damage = str(exc)
-    est = loc.flush()
-    if est is not None:
-        on_estimate(est)
+    for est in (loc.flush(), loc.finish()):
+        if est is not None:
+            on_estimate(est)
     return result
 
 

@@ -23,6 +23,7 @@ from .cli import add_engine_args, config_from_args, setup_logging
 from .config import ConfigError
 from .crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
 from .geodesy import LocalFrame
+from .noise import sentence as noise_sentence
 from .localizer import REASONS, Localizer
 from .replay import run_bag
 from .types import Estimate
@@ -72,6 +73,15 @@ def write_summary(path: Path, inp, loc: Localizer, est: Estimate, truth, bound, 
                      f"used {bound:.2f} m; the truth is {'inside' if inside_ellipse(err, est.cov) else 'outside'} the 95 % ellipse")
     if damage:
         lines.append(f"* **Input damaged**: {damage}; this report covers the data before the damage")
+    if loc.cfg.calibrate_noise:
+        lines.append(f"* **Receiver noise (self-calibrated)**: {noise_sentence(loc.noise_summary())}")
+    if len(est.modes) > 1:
+        lines.append("* **Alternative hypotheses** (posterior modes and their probability): " + "; ".join(
+            f"{lat:.7f}, {lon:.7f} ({100 * m:.0f} %)" for (lat, lon), (_, _, m) in
+            zip((loc.frame.to_geodetic(e, n)[:2] for e, n, _ in est.modes), est.modes)))
+    events = {k: v for k, v in loc.events.items() if k != "alarm_points"}
+    if events:
+        lines.append("* **Robustness events**: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
     lines += ["", "## Inputs not used", ""]
     if loc.rejected:
         lines += ["| reason | count | meaning |", "|---|---|---|"]

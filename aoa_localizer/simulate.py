@@ -56,6 +56,8 @@ def main(argv=None) -> int:
     print(f"{est.bearings_used} readings in {est.points_used} observation points; median step "
           f"{1e3 * float(np.median(res.step_s)):.3f} ms; inputs not used: "
           f"{', '.join(f'{k} {v}' for k, v in sorted(loc.rejected.items())) or 'none'}")
+    for line in loc.robustness_lines():
+        print(line)
     ok = s["error"] <= 5 * s["crlb"] + 1.0 and math.isfinite(s["error"])
     return 0 if ok else 1
 

@@ -47,8 +47,8 @@ _ALARM_SEARCH_EVERY = 5  # points between global searches while in alarm
 _MIN_INLIERS = 3  # a start mode must explain at least this many points
 _MODE_MIN_MASS = 0.01  # modes reported
 _MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
-_START_RETRY_MAX = 5
-_MOVED_MAX_OLD_SHARE = 0.2  # most recent points that may still agree with the old place in a move  # most points between two start attempts that found no determined mode
+_START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
+_MOVED_MAX_OLD_SHARE = 0.2  # most recent points that may still agree with the old place in a move
 
 
 class EmitterTrack:
@@ -58,7 +58,8 @@ class EmitterTrack:
         self.cfg, self.rng, self._reject = cfg, rng, reject
         self.noise = NoiseModel(cfg.outlier_prob)
         self.outlier_prob = cfg.outlier_prob  # point level, in the likelihood
-        # (readings, point, readings gated out) per point: the points waiting for a start, then the filter's history
+        # (readings, point, readings gated out) per point: the points waiting for a start, then the filter's
+        # history
         self.window: deque[tuple[list[Reading], ObservationPoint, int]] = deque()
         self.filter = None
         self.health = HealthMonitor(cfg.health_window, cfg.health_p_value)
@@ -293,7 +294,9 @@ class EmitterTrack:
         True when it ran (the estimate changed)."""
         if self.filter is None or not self.cfg.global_safety or self.last_search_point == self.points_seen:
             return False
+        t0 = time.perf_counter()
         self._global_check(self.health.alarm_since is not None)
+        self.last_update_s = time.perf_counter() - t0
         return self.filter is not None
 
     def _global_check(self, alarm: bool):

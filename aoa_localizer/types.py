@@ -49,6 +49,7 @@ class Estimate:
     # Alternative hypotheses: (east, north, mass) of each posterior mode holding >= 1 % of the cloud
     modes: list = field(default_factory=list)
     noise: dict | None = None  # the self-calibrated noise (Localizer.noise_summary), when calibration is on
+    end_of_data: bool = False  # made by Localizer.finish(), the offline end-of-data global check
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of INTERFACE.md (offline replay output)."""
@@ -65,4 +66,5 @@ class Estimate:
             "algorithm": self.algorithm,
             "modes": [[round(e, 3), round(n, 3), round(m, 4)] for e, n, m in self.modes],
             "noise": self.noise,
+            "end_of_data": self.end_of_data,
         }

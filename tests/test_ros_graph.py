@@ -150,10 +150,15 @@ def test_sample_bag_through_the_live_node_gives_the_offline_estimate(tmp_path, d
     off = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", ROOT / "bags/seed", "--offline",
                           "--output", tmp_path / "off.jsonl", "--seed", "5"], cwd=ROOT, capture_output=True, text=True)
     assert off.returncode == 0, off.stderr
-    last = json.loads((tmp_path / "off.jsonl").read_text().splitlines()[-1])
-    assert live["east"] == pytest.approx(last["east"], abs=1e-6)
-    assert live["north"] == pytest.approx(last["north"], abs=1e-6)
-    assert np.allclose(live["cov"], last["cov"], atol=1e-9)
+    lines = [json.loads(line) for line in (tmp_path / "off.jsonl").read_text().splitlines()]
+    assert lines[-1]["end_of_data"]  # offline ends with the end-of-data global check, which a live node never sees
+    last = [d for d in lines if not d["end_of_data"]][-1]
+    # Same engine, same data: the same place well inside the ellipse. Not to the last digit at --rate 2: while a
+    # global check runs (tens of ms) the node's two input queues fill and are served out of the bag's log order,
+    # which moves observation-point boundaries (docs/ros.md; at --rate 0.5 it matched to the last digit).
+    assert np.hypot(live["east"] - last["east"], live["north"] - last["north"]) < 0.5
+    axes = [np.sqrt(np.linalg.eigvalsh(np.array(c))) for c in (live["cov"], last["cov"])]
+    assert np.allclose(axes[0], axes[1], rtol=0.25), axes
 
 
 def _publish_drive(node, executor, emitter, seconds=60.0, speed=20.0, df_hz=10.0):
@@ -220,8 +225,11 @@ def test_bad_messages_leave_the_node_running_and_are_counted(spawn, domain):
         for pub, msg in sequence:
             pub.publish(msg)
             spin_until(executor, lambda: False, 0.05)
+        # The counts of received messages belong in the wait: the last message (a good fix) changes no rejection
+        # counter, so a snapshot taken between the rejections and that fix showed fixes_received 3 (the flake).
         expected = {"rejected.bad_azimuth": "1", "rejected.fix_no_fix": "1", "rejected.bearing_out_of_order": "1",
-                    "rejected.bad_quality": "1", "rejected.fix_bad_position": "1"}
+                    "rejected.bad_quality": "1", "rejected.fix_bad_position": "1", "bearings_received": "4",
+                    "fixes_received": "4"}
         assert spin_until(executor, lambda: all(diag.get(k) == v for k, v in expected.items())
                           and "wrong_encoding" in diag, 10), json.dumps(diag)
         assert "PoseWithCovarianceStamped" in diag["wrong_encoding"] and diag["level"] == "1"
