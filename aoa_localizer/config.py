@@ -118,6 +118,7 @@ class LocalizerConfig:
     datum_lon: float | None = None
     datum_alt: float | None = None
     gps_max_gap_s: float = 2.0
+    max_stamp_jump_s: float = 300.0
     gps_sigma_m: float = 0.0
     bearing_encoding: str = "df_record"
     # Particle-filter skeleton.
@@ -224,7 +225,7 @@ def _validate(cfg: LocalizerConfig):
     _check(cfg.seed is None or (_is_int(cfg.seed) and cfg.seed >= 0),
            f"seed must be a non-negative integer or unset, got {cfg.seed!r}")
     for name in ("bearing_sigma_deg", "sigma_q100_deg", "sigma_q40_deg", "obs_max_duration_s",
-                 "gps_max_gap_s", "init_min_crossing_deg"):
+                 "gps_max_gap_s", "init_min_crossing_deg", "max_stamp_jump_s"):
         _positive(cfg, name)
     for name in ("process_noise_m", "obs_max_distance_m", "point_gate_sigma", "gps_sigma_m"):
         _positive(cfg, name, allow_zero=True)

@@ -15,12 +15,18 @@ import numpy as np
 from .config import LocalizerConfig
 from .geodesy import LocalFrame, azimuth_to_enu
 from .gps_track import GpsTrack, Where
+from .input_guard import StreamClock, Verdict, confirms, implausible_fix
 from .noise import sentence as noise_sentence
 from .preprocess import PointBuilder, reading_sigma
 from .track import EmitterTrack
 from .types import Estimate, ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
+
+_RECENT_INPUTS = 50  # inputs whose fate the status watches ...
+_RECENT_MIN = 20  # ... once at least this many came
+_MAX_PENDING = 100_000  # bearings waiting for a fix, at most (the age limit normally binds long before)
+_CLOCK_REASONS = {Verdict.REPEATED: "repeated", Verdict.OUT_OF_ORDER: "out_of_order", Verdict.AHEAD: "stamp_jump"}
 
 REASONS = {
     "bad_stamp": "stamp is not a finite number",
@@ -43,6 +49,14 @@ REASONS = {
     "fix_bad_position": "fix latitude/longitude NaN, infinite or out of range",
     "fix_out_of_order": "fix stamp older than the previous fix",
     "fix_repeated": "fix stamp equal to the previous fix",
+    "fix_bad_altitude": "fix altitude outside -1000..20000 m",
+    "fix_near_pole": "fix within 0.01 deg of a pole (no local north)",
+    "fix_null_island": "fix at exactly 0, 0 (a receiver without a fix)",
+    "fix_unconfirmed": "a first fix the next fix contradicts (farther than 100 m + 150 m/s): not taken as the datum",
+    "fix_stamp_jump": "fix stamp more than max_stamp_jump_s ahead of the GPS stream: not adopted",
+    "bearing_stamp_jump": "bearing stamp more than max_stamp_jump_s ahead of the DF stream: not adopted",
+    "clock_jump": "a bearing of the old timeline still waiting for a fix when the DF clock jumped",
+    "covariance_degenerate": "the filter's covariance was not positive definite: estimate not published",
 }
 
 
@@ -53,6 +67,15 @@ class Trace:
     def __init__(self):
         self.fixes: list[tuple] = []
         self.readings: list[tuple] = []
+
+
+def _positive_definite(cov) -> bool:
+    """Finite and full rank to working precision (a cloud of 2 particles, or all on one line, is not)."""
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)):
+        return False
+    low, high = np.linalg.eigvalsh(cov)[[0, -1]]
+    return bool(high > 0 and low > 1e-9 * high)
 
 
 def _as_float(value) -> float:
@@ -74,6 +97,9 @@ class Localizer:
         if self.cfg.has_datum:
             self.frame = LocalFrame(self.cfg.datum_lat, self.cfg.datum_lon, self.cfg.datum_alt or 0.0)
         self.rejected: Counter = Counter()
+        self.input_events: Counter = Counter()  # fix_clock_jump, df_clock_jump
+        # Fate of the latest inputs (None: used, else the reason): the status says when most are refused.
+        self._recent: deque[str | None] = deque(maxlen=_RECENT_INPUTS)
         self.unknown_quality = 0  # readings used with NaN quality (no correction, default sigma)
         self._reset_track()
 
@@ -83,7 +109,9 @@ class Localizer:
         self.pending: deque[tuple[float, float, float, float]] = deque()
         self.builder = PointBuilder(self.cfg)
         self.emitter = EmitterTrack(self.cfg, self.rng, self._reject_many)
-        self.last_bearing_stamp = -math.inf
+        self.fix_clock = StreamClock(self.cfg.max_stamp_jump_s)
+        self.df_clock = StreamClock(self.cfg.max_stamp_jump_s)
+        self._datum_candidate: tuple[float, float, float, float] | None = None  # first fix, until confirmed
         self.estimate: Estimate | None = None
         self._status = "waiting for a GPS fix"
 
@@ -95,8 +123,14 @@ class Localizer:
 
     @property
     def status(self) -> str:
-        """One line on the state: waiting for a fix, collecting bearings, waiting for geometry, tracking, checking."""
-        return self._status if self._status == "waiting for a GPS fix" else self.emitter.status
+        """One line on the state: waiting for a fix, collecting bearings, waiting for geometry, tracking, checking;
+        and, when more than half of the latest inputs were refused, the commonest reason."""
+        base = self._status if self._status.startswith("waiting for") and "GPS" in self._status else self.emitter.status
+        refused = [r for r in self._recent if r is not None]
+        if len(self._recent) >= _RECENT_MIN and len(refused) > len(self._recent) / 2:
+            reason, n = Counter(refused).most_common(1)[0]
+            base += f"; most inputs refused: {reason} ({n} of the last {len(self._recent)})"
+        return base
 
     @property
     def init_points(self) -> list[ObservationPoint]:
@@ -117,8 +151,9 @@ class Localizer:
 
     @property
     def events(self) -> Counter:
-        """Robustness events: alarm, global_restart, emitter_moved, recalibrated."""
-        return self.emitter.events
+        """Robustness events (alarm, global_restart, emitter_moved, recalibrated) and input events
+        (fix_clock_jump, df_clock_jump)."""
+        return self.emitter.events + self.input_events
 
     def noise_summary(self) -> dict:
         """The self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier rates."""
@@ -151,17 +186,44 @@ class Localizer:
             return self._reject("fix_no_fix")
         if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
             return self._reject("fix_bad_position")
+        why = implausible_fix(lat, lon, alt)
+        if why:
+            return self._reject(why)
+        verdict = self.fix_clock.admit(stamp)
+        if verdict in _CLOCK_REASONS:
+            return self._reject("fix_" + _CLOCK_REASONS[verdict])
+        if verdict is Verdict.CLOCK_JUMP:
+            self.input_events["fix_clock_jump"] += 1
+            log.warning("the GPS clock jumped to %.3f: the track starts again on the new timeline", stamp)
+            self.track = GpsTrack(self.cfg.gps_max_gap_s)
+            self._datum_candidate = None  # a first fix on the old timeline confirms nothing now
         if self.frame is None:
-            datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)
-            self.frame = LocalFrame(lat, lon, datum_alt)
-            log.info("datum set from the first valid fix: %.7f, %.7f, %.1f m", lat, lon, datum_alt)
+            candidate = self._datum_candidate
+            if candidate is None or not confirms(candidate[:3], (stamp, lat, lon), self.cfg.max_stamp_jump_s):
+                if candidate is not None:
+                    self._reject("fix_unconfirmed")
+                self._datum_candidate = (stamp, lat, lon, alt)
+                self._status = "waiting for a second GPS fix to confirm the datum"
+                return None
+            self._set_datum(*candidate)
+            self._store_fix(*candidate)
+        return self._store_fix(stamp, lat, lon, alt)
+
+    def _set_datum(self, stamp, lat, lon, alt):
+        datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)
+        self.frame = LocalFrame(lat, lon, datum_alt)
+        self._datum_candidate = None
+        log.info("datum set from the first valid fix, confirmed by the next: %.7f, %.7f, %.1f m", lat, lon, datum_alt)
+
+    def _store_fix(self, stamp, lat, lon, alt) -> Estimate | None:
         east, north = self.frame.to_enu(lat, lon)
         reason = self.track.add(stamp, float(east), float(north), float(self.frame.north_angle(lat, lon)))
         if reason:
             return self._reject(reason)
+        self._recent.append(None)
         if self.trace is not None:
             self.trace.fixes.append((stamp, float(east), float(north)))
-        if self._status == "waiting for a GPS fix":
+        if self._status.startswith("waiting for") and "GPS" in self._status:
             self._status = "collecting bearings"
         estimate = self._release_pending()
         # A fix well after the open point's first reading closes it: a vehicle that stopped taking
@@ -193,11 +255,19 @@ class Localizer:
             return self._reject("bad_quality")
         if quality < self.cfg.quality_min:  # False for NaN: unknown quality passes, counted below
             return self._reject("low_quality")
-        if stamp <= self.last_bearing_stamp:
-            return self._reject("bearing_repeated" if stamp == self.last_bearing_stamp else "bearing_out_of_order")
-        if not len(self.track) or stamp < self.track.t[0]:
+        verdict = self.df_clock.admit(stamp)
+        if verdict in _CLOCK_REASONS:
+            return self._reject("bearing_" + _CLOCK_REASONS[verdict])
+        if verdict is Verdict.CLOCK_JUMP:
+            self.input_events["df_clock_jump"] += 1
+            log.warning("the DF clock jumped to %.3f: bearings go on on the new timeline", stamp)
+            while self.pending:  # waiting on the old timeline: no fix will place them in order any more
+                self.pending.popleft()
+                self._reject("clock_jump")
+        first = self.track.t[0] if len(self.track) else (self._datum_candidate or (math.inf,))[0]
+        if stamp < first:
             return self._reject("before_first_fix")
-        self.last_bearing_stamp = stamp
+        self._recent.append(None)
         self.pending.append((stamp, azimuth % 360.0, quality, sigma))
         return self._release_pending()
 
@@ -216,17 +286,24 @@ class Localizer:
         if not self.emitter.finish():
             return None
         mean, cov = self.filter.estimate()
+        if not _positive_definite(cov):
+            return self._reject("covariance_degenerate")
         self.estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
         self.estimate.end_of_data = True
         return self.estimate
 
-    def reset(self):
-        """Drop the track, the points and the filter; keep the datum and the counters (the node's ~/reset)."""
+    def reset(self, drop_datum: bool = False):
+        """Drop the track, the points and the filter; keep the counters (the node's ~/reset). The datum is kept,
+        so the map frame stays put, unless `drop_datum` and it was not configured: then the next confirmed fix
+        sets a new one (the way out of a datum taken from a bad fix)."""
         self._reset_track()
+        if drop_datum and not self.cfg.has_datum:
+            self.frame = None
 
     # -- pipeline -------------------------------------------------------------------------------
     def _reject(self, reason: str) -> None:
         self.rejected[reason] += 1
+        self._recent.append(reason)
         if self.rejected[reason] == 1:
             log.warning("input not used: %s (%s); further ones are counted", reason, REASONS[reason])
         return None
@@ -234,8 +311,16 @@ class Localizer:
     def _release_pending(self) -> Estimate | None:
         """Pair held bearings with the track in stamp order; stop at the first one still waiting for a fix."""
         estimate = None
+        newest = self.df_clock.last if self.df_clock.last is not None else -math.inf
         while self.pending:
             stamp, azimuth, quality, sigma = self.pending[0]
+            # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s behind the DF stream, no fix will come.
+            if newest - stamp > 2 * self.cfg.gps_max_gap_s or len(self.pending) > _MAX_PENDING:
+                self.pending.popleft()
+                self._reject("gps_gap" if len(self.track) else "before_first_fix")
+                continue
+            if not len(self.track):
+                break  # the datum waits for its confirming fix
             where, at = self.track.locate(stamp)
             if where is Where.WAIT:
                 break
@@ -266,6 +351,9 @@ class Localizer:
                 self.trace.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k)) for r, k in zip(readings, kept)]
             if self.emitter.add(readings):
                 mean, cov = self.filter.estimate()
+                if not _positive_definite(cov):
+                    self._reject("covariance_degenerate")
+                    continue
                 self.estimate = estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
         return estimate
 

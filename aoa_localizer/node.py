@@ -73,6 +73,7 @@ DESCRIPTIONS = {
     "datum_lon": "longitude of the map origin (deg); unset: the first valid fix",
     "datum_alt": "altitude of the map origin (m); unset: the first valid fix's",
     "gps_max_gap_s": "longest fix gap a bearing may be interpolated across (s)",
+    "max_stamp_jump_s": "a stamp this far ahead of its stream is refused, not adopted; a clock step is followed after 3 agreeing stamps (s)",
     "gps_sigma_m": "GPS position noise (m), added to each bearing's variance by range",
     "bearing_encoding": "df_record (Vector3Stamped: azimuth deg, quality) or pose (PoseWithCovarianceStamped yaw)",
     "resampling": "systematic, stratified, residual or multinomial",

@@ -28,8 +28,12 @@ class DfRecord(NamedTuple):
 
 
 def stamp_seconds(header) -> float:
-    """header.stamp (sec, nanosec) as float seconds."""
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
+    """header.stamp (sec, nanosec) as float seconds; NaN (refused as a bad stamp) when nanosec is outside
+    [0, 1e9), which builtin_interfaces/Time does not allow and which would shift the stamp by up to 4.3 s."""
+    nanosec = header.stamp.nanosec
+    if not 0 <= nanosec < 1_000_000_000:
+        return math.nan
+    return header.stamp.sec + nanosec * 1e-9
 
 
 def seconds_to_stamp(t: float) -> tuple[int, int]:

@@ -148,6 +148,8 @@ def test_datum_comes_from_the_first_valid_fix_when_unset():
     loc = Localizer(LocalizerConfig())
     loc.add_fix(0.0, float("nan"), 0.0)
     loc.add_fix(1.0, -33.9, -70.6, 520.0)
+    assert loc.frame is None and "confirm the datum" in loc.status  # one fix alone never sets the datum
+    loc.add_fix(2.0, -33.90001, -70.6, 521.0)  # 1 m away a second later: confirms it
     assert (loc.frame.lat0, loc.frame.lon0, loc.frame.alt0) == (-33.9, -70.6, 520.0)
 
 

@@ -1,0 +1,81 @@
+"""Input guards a single bad message must not get past: stamps off the stream's timeline, implausible fixes.
+
+* `StreamClock`: the timeline of one input stream (fixes, or DF readings). A stamp slightly older than the
+  newest is out of order (rejected, as always); a stamp far ahead (`max_stamp_jump_s`) is not adopted as the
+  new newest (one record stamped in 2038 used to make every later input "out of order"). When the stream
+  really moved to another timeline (a receiver clock stepped back, or forward), `confirm` consecutive
+  stamps that agree with each other but not with the old timeline switch it over: `clock_jump`.
+* `implausible_fix`: what no vehicle's GPS reports: an altitude outside [-1000, 20000] m, a latitude within
+  0.01 deg of a pole (no local north), and (0, 0) exactly, the "null island" of receivers without a fix.
+* `confirms`: whether a second fix agrees with a first (the datum is never taken from a single fix).
+"""
+from __future__ import annotations
+
+import math
+from enum import Enum
+
+ALT_RANGE_M = (-1000.0, 20000.0)
+POLE_MARGIN_DEG = 0.01
+_CONFIRM_DISTANCE_M = 100.0  # two fixes agree when closer than this ...
+_CONFIRM_SPEED_MPS = 150.0  # ... plus this speed times the time between them
+_EARTH_RADIUS_M = 6_371_000.0
+
+
+class Verdict(Enum):
+    """What a stream clock says of a stamp."""
+
+    OK = "ok"
+    REPEATED = "repeated"
+    OUT_OF_ORDER = "out_of_order"
+    AHEAD = "stamp_jump"  # far ahead of the timeline: not adopted
+    CLOCK_JUMP = "clock_jump"  # the stream moved to a new timeline: this stamp starts it
+
+
+class StreamClock:
+    """Newest stamp of one input stream, guarded against single stamps off its timeline."""
+
+    def __init__(self, max_jump_s: float, confirm: int = 3):
+        self.max_jump_s, self.confirm = max_jump_s, confirm
+        self.last: float | None = None
+        self.candidates: list[float] = []  # consecutive stamps off the timeline that agree with each other
+
+    def admit(self, stamp: float) -> Verdict:
+        if self.last is None or 0 < stamp - self.last <= self.max_jump_s:
+            self.last = stamp
+            self.candidates.clear()
+            return Verdict.OK
+        if stamp == self.last:
+            return Verdict.REPEATED
+        if self.candidates and 0 < stamp - self.candidates[-1] <= self.max_jump_s:
+            self.candidates.append(stamp)
+        else:
+            self.candidates = [stamp]
+        if len(self.candidates) >= self.confirm:
+            self.last = stamp
+            self.candidates.clear()
+            return Verdict.CLOCK_JUMP
+        return Verdict.AHEAD if stamp > self.last else Verdict.OUT_OF_ORDER
+
+
+def implausible_fix(lat: float, lon: float, alt: float) -> str | None:
+    """Why a finite, in-range fix cannot be a vehicle's position, or None."""
+    if math.isfinite(alt) and not ALT_RANGE_M[0] <= alt <= ALT_RANGE_M[1]:
+        return "fix_bad_altitude"
+    if abs(lat) > 90.0 - POLE_MARGIN_DEG:
+        return "fix_near_pole"
+    if lat == 0.0 and lon == 0.0:
+        return "fix_null_island"
+    return None
+
+
+def confirms(first: tuple[float, float, float], second: tuple[float, float, float], max_gap_s: float) -> bool:
+    """Whether fix `second` (stamp, lat, lon) agrees with `first`: at most `max_gap_s` later, and within 100 m
+    plus 150 m/s of travel."""
+    (t1, lat1, lon1), (t2, lat2, lon2) = first, second
+    if not 0 < t2 - t1 <= max_gap_s:
+        return False
+    p1, p2 = math.radians(lat1), math.radians(lat2)
+    dl = math.radians(lon2 - lon1)
+    a = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
+    distance = 2 * _EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(a)))
+    return distance <= _CONFIRM_DISTANCE_M + _CONFIRM_SPEED_MPS * abs(t2 - t1)
