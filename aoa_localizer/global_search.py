@@ -35,27 +35,34 @@ _MIN_STEP_LIMIT_M = 100.0
 
 @dataclass
 class Points:
-    """Observation points as arrays: antenna east/north (m), bearing theta (ENU rad) and its sigma (rad)."""
+    """Observation points as arrays: antenna east/north (m), bearing theta (ENU rad), its sigma (rad), and the
+    antenna position's own sigma (m, from the fixes; 0 when not known)."""
 
     east: np.ndarray
     north: np.ndarray
     theta: np.ndarray
     sigma: np.ndarray
+    gps: np.ndarray | float = 0.0
 
     def __post_init__(self):
         self.cos, self.sin = np.cos(self.theta), np.sin(self.theta)
+        self.gps = np.broadcast_to(np.asarray(self.gps, float), self.east.shape)
 
     @classmethod
     def of(cls, rows: np.ndarray) -> "Points":
-        """From a (K, 4) array of east, north, theta, sigma (the emitter model's history)."""
-        rows = np.asarray(rows, float).reshape(-1, 4)
-        return cls(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3])
+        """From a (K, 5) array of east, north, theta, sigma, gps sigma (the emitter model's history)."""
+        rows = np.asarray(rows, float).reshape(-1, 5)
+        return cls(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4])
 
     def __len__(self) -> int:
         return self.east.size
 
     def take(self, idx) -> "Points":
-        return Points(self.east[idx], self.north[idx], self.theta[idx], self.sigma[idx])
+        return Points(self.east[idx], self.north[idx], self.theta[idx], self.sigma[idx], self.gps[idx])
+
+    def gps_var(self, rob: "Robust") -> np.ndarray:
+        """Variance of each antenna position (m^2): configured and per point."""
+        return rob.gps_sigma_m**2 + self.gps**2
 
 
 @dataclass(frozen=True)
@@ -109,7 +116,7 @@ def _terms(resid, var, eps: float):
 def inlier_share(x: np.ndarray, pts: Points, rob: Robust) -> float:
     """Share of the points whose EM inlier weight at the place x (2,) is above one half."""
     resid, _, _, r2 = _residuals(np.asarray(x, float), pts)
-    var = pts.sigma**2 + rob.gps_sigma_m**2 / np.maximum(r2, 1.0)
+    var = pts.sigma**2 + pts.gps_var(rob) / np.maximum(r2, 1.0)
     return float(np.mean(_terms(resid, var, rob.outlier_prob)[1] > 0.5))
 
 
@@ -124,8 +131,9 @@ def log_posterior(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.nda
     """Robust log posterior (up to a constant) at x (..., 2); `widen2` (..., K) adds to each bearing variance."""
     resid, _, _, r2 = _residuals(x, pts)
     var = pts.sigma**2 + widen2
-    if rob.gps_sigma_m:
-        var = var + rob.gps_sigma_m**2 / np.maximum(r2, 1.0)
+    gps_var = pts.gps_var(rob)
+    if np.any(gps_var):
+        var = var + gps_var / np.maximum(r2, 1.0)
     ll, _ = _terms(resid, var, rob.outlier_prob)
     return ll.sum(axis=-1) + _prior(x, rob)
 
@@ -173,7 +181,7 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
         for _ in range(_ITER_PER_STAGE if len(levels) > 1 else _POLISH_ITERATIONS):
             x, info, _ = _gn_step(x, pts, rob, level * widen, prec)
     resid, r2, grad = _geometry(x, pts)
-    var = pts.sigma**2 + rob.gps_sigma_m**2 / np.maximum(r2, 1.0)
+    var = pts.sigma**2 + pts.gps_var(rob) / np.maximum(r2, 1.0)
     _, gamma = _terms(resid, var, rob.outlier_prob)
     info = np.einsum("mk,mki,mkj->mij", gamma / var, grad, grad) + prec + 1e-12 * np.eye(2)
     good = np.all(np.isfinite(info), axis=(1, 2)) & (np.linalg.det(np.where(np.isfinite(info), info, 1.0)) > 0)
@@ -185,7 +193,7 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
 def _gn_step(x, pts: Points, rob: Robust, widen_m, prec):
     """One damped Gauss-Newton step with the EM weights: keeps the best of a few step lengths (or none)."""
     resid, r2, grad = _geometry(x, pts)
-    var = pts.sigma**2 + rob.gps_sigma_m**2 / np.maximum(r2, 1.0) + (widen_m[:, None] ** 2) / r2
+    var = pts.sigma**2 + pts.gps_var(rob) / np.maximum(r2, 1.0) + (widen_m[:, None] ** 2) / r2
     _, gamma = _terms(resid, var, rob.outlier_prob)
     w = gamma / var
     info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-9 * np.eye(2)

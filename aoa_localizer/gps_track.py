@@ -26,31 +26,34 @@ class GpsTrack:
         self.e: list[float] = []
         self.n: list[float] = []
         self.north: list[float] = []  # ENU angle of true north at each fix
+        self.sigma: list[float] = []  # horizontal position sigma of each fix (m; 0: not known)
 
     def __len__(self):
         return len(self.t)
 
-    def add(self, stamp: float, east: float, north: float, north_angle: float) -> str | None:
+    def add(self, stamp: float, east: float, north: float, north_angle: float, sigma: float = 0.0) -> str | None:
         """Append a fix; returns a rejection reason if its stamp is not after the newest one."""
         if self.t and stamp <= self.t[-1]:
             return "fix_repeated" if stamp == self.t[-1] else "fix_out_of_order"
-        for column, value in ((self.t, stamp), (self.e, east), (self.n, north), (self.north, north_angle)):
+        for column, value in ((self.t, stamp), (self.e, east), (self.n, north), (self.north, north_angle),
+                              (self.sigma, sigma)):
             column.append(value)
             if len(column) > 2 * _KEEP_FIXES:
                 del column[:-_KEEP_FIXES]
         return None
 
-    def locate(self, stamp: float) -> tuple[Where, tuple[float, float, float] | None]:
-        """(east, north, north angle) at `stamp` if the track brackets it closely enough, else the reason it does not."""
+    def locate(self, stamp: float) -> tuple[Where, tuple[float, float, float, float] | None]:
+        """(east, north, north angle, position sigma) at `stamp` if the track brackets it closely enough, else the
+        reason it does not."""
         if not self.t or stamp < self.t[0]:
             return Where.BEFORE, None
         k = bisect.bisect_left(self.t, stamp)
         if k < len(self.t) and self.t[k] == stamp:
-            return Where.OK, (self.e[k], self.n[k], self.north[k])
+            return Where.OK, (self.e[k], self.n[k], self.north[k], self.sigma[k])
         if k == len(self.t):
             return (Where.GAP if stamp - self.t[-1] > self.max_gap_s else Where.WAIT), None
         t0, t1 = self.t[k - 1], self.t[k]
         if t1 - t0 > self.max_gap_s:
             return Where.GAP, None
         f = (stamp - t0) / (t1 - t0)
-        return Where.OK, tuple(c[k - 1] + f * (c[k] - c[k - 1]) for c in (self.e, self.n, self.north))
+        return Where.OK, tuple(c[k - 1] + f * (c[k] - c[k - 1]) for c in (self.e, self.n, self.north, self.sigma))

@@ -111,7 +111,7 @@ class Localizer:
         self.emitter = EmitterTrack(self.cfg, self.rng, self._reject_many)
         self.fix_clock = StreamClock(self.cfg.max_stamp_jump_s)
         self.df_clock = StreamClock(self.cfg.max_stamp_jump_s)
-        self._datum_candidate: tuple[float, float, float, float] | None = None  # first fix, until confirmed
+        self._datum_candidate: tuple[float, float, float, float, float] | None = None  # first fix, until confirmed
         self.estimate: Estimate | None = None
         self._status = "waiting for a GPS fix"
 
@@ -177,9 +177,12 @@ class Localizer:
         return lines
 
     # -- public API -----------------------------------------------------------------------------
-    def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0) -> Estimate | None:
-        """A NavSatFix's content. Returns the newest estimate this fix made possible, if any."""
-        stamp, lat, lon, alt = map(_as_float, (stamp, lat, lon, alt))
+    def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0, sigma_m=float("nan")) -> Estimate | None:
+        """A NavSatFix's content; `sigma_m` the horizontal position sigma from its covariance (NaN: unknown).
+        Returns the newest estimate this fix made possible, if any."""
+        stamp, lat, lon, alt, sigma_m = map(_as_float, (stamp, lat, lon, alt, sigma_m))
+        # gps_sigma_m, when set, overrides the fixes' own covariances (it enters the likelihood as a constant)
+        sigma_m = sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 and not self.cfg.gps_sigma_m else 0.0
         if not math.isfinite(stamp):
             return self._reject("fix_bad_stamp")
         if status < 0:
@@ -202,22 +205,22 @@ class Localizer:
             if candidate is None or not confirms(candidate[:3], (stamp, lat, lon), self.cfg.max_stamp_jump_s):
                 if candidate is not None:
                     self._reject("fix_unconfirmed")
-                self._datum_candidate = (stamp, lat, lon, alt)
+                self._datum_candidate = (stamp, lat, lon, alt, sigma_m)
                 self._status = "waiting for a second GPS fix to confirm the datum"
                 return None
             self._set_datum(*candidate)
             self._store_fix(*candidate)
-        return self._store_fix(stamp, lat, lon, alt)
+        return self._store_fix(stamp, lat, lon, alt, sigma_m)
 
-    def _set_datum(self, stamp, lat, lon, alt):
+    def _set_datum(self, stamp, lat, lon, alt, _sigma_m=0.0):
         datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)
         self.frame = LocalFrame(lat, lon, datum_alt)
         self._datum_candidate = None
         log.info("datum set from the first valid fix, confirmed by the next: %.7f, %.7f, %.1f m", lat, lon, datum_alt)
 
-    def _store_fix(self, stamp, lat, lon, alt) -> Estimate | None:
+    def _store_fix(self, stamp, lat, lon, alt, sigma_m=0.0) -> Estimate | None:
         east, north = self.frame.to_enu(lat, lon)
-        reason = self.track.add(stamp, float(east), float(north), float(self.frame.north_angle(lat, lon)))
+        reason = self.track.add(stamp, float(east), float(north), float(self.frame.north_angle(lat, lon)), sigma_m)
         if reason:
             return self._reject(reason)
         self._recent.append(None)
@@ -328,12 +331,13 @@ class Localizer:
             if where is not Where.OK:
                 self._reject(where.value)
                 continue
-            east, north, north_angle = at
+            east, north, north_angle, gps_sigma = at
             if math.isnan(quality):
                 self.unknown_quality += 1
             if math.isnan(sigma):
                 sigma = reading_sigma(quality, self.cfg)
-            reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality, sigma, east, north)
+            reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality, sigma, east, north,
+                              float(gps_sigma))
             closed = self.builder.add(reading)
             if closed:
                 estimate = self._use_points(closed) or estimate

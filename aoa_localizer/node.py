@@ -74,7 +74,7 @@ DESCRIPTIONS = {
     "datum_alt": "altitude of the map origin (m); unset: the first valid fix's",
     "gps_max_gap_s": "longest fix gap a bearing may be interpolated across (s)",
     "max_stamp_jump_s": "a stamp this far ahead of its stream is refused, not adopted; a clock step is followed after 3 agreeing stamps (s)",
-    "gps_sigma_m": "GPS position noise (m), added to each bearing's variance by range",
+    "gps_sigma_m": "GPS position noise (m), added to each bearing's variance by range; 0: each fix's own position_covariance",
     "bearing_encoding": "df_record (Vector3Stamped: azimuth deg, quality) or pose (PoseWithCovarianceStamped yaw)",
     "resampling": "systematic, stratified, residual or multinomial",
     "ess_threshold": "resample when the effective sample size falls below this share of N",
@@ -209,7 +209,7 @@ class LocalizerNode(Node):
         except (AttributeError, TypeError, ValueError):
             self.counts["adapter_errors"] += 1
             return
-        self._publish(self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status))
+        self._publish(self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m))
         self._timed(t0)
 
     def on_bearing(self, msg):

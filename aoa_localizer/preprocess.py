@@ -113,6 +113,8 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig,
         theta=float(wrap_pi(ref + a @ wrap_pi(theta - ref))),
         sigma=float(math.sqrt(a @ cov @ a)),
         n_readings=len(kept),
+        # GPS errors at one place are the same error: the point's antenna is as uncertain as its readings'.
+        gps_sigma=float(a @ np.array([r.gps_sigma for r in kept])),
     )
     return point, keep
 

@@ -27,7 +27,7 @@ def feed(loc: Localizer, event):
     """Give one bag event to the engine; returns an estimate or None."""
     r = event.record
     if event.kind == "fix":
-        return loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status)
+        return loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m)
     if event.kind == "bearing":
         return loc.add_bearing(r.stamp, r.azimuth_deg, r.quality)
     return None

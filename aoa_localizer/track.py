@@ -88,7 +88,7 @@ class EmitterTrack:
         return make_point(readings, self.cfg, self.sigmas(readings))
 
     def points(self) -> Points:
-        return Points.of(np.array([[p.east, p.north, p.theta, p.sigma] for _, p, _ in self.window]))
+        return Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for _, p, _ in self.window]))
 
     def robust(self, prior: bool = True) -> Robust:
         model = self.filter.model if self.filter is not None else None
@@ -332,7 +332,7 @@ class EmitterTrack:
             for group, _, _ in self.window:
                 sig = np.array([r.sigma for r in group]) * noise.scale(np.array([r.quality for r in group]))
                 p = make_point(group, self.cfg, sig)[0]
-                rows.append([p.east, p.north, p.theta, p.sigma])
+                rows.append([p.east, p.north, p.theta, p.sigma, p.gps_sigma])
             pts = Points.of(np.array(rows))
         means, _, _ = refine(x[None, :], np.zeros(1), pts, self.robust())
         return means[0]
@@ -355,7 +355,7 @@ class EmitterTrack:
         base = np.array([r.sigma for r in readings])
         if len(readings) < 2:
             return False
-        pts = Points.of(np.array([[p.east, p.north, p.theta, p.sigma] for p in
+        pts = Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for p in
                                   (make_point(g, self.cfg, base_g)[0] for g, base_g in
                                    ((g, np.array([r.sigma for r in g])) for g, _, _ in self.window))]))
         narrow = find_modes(pts, Robust(self.cfg.outlier_prob, self.cfg.gps_sigma_m), by_density=by_density)
@@ -390,7 +390,7 @@ class EmitterTrack:
         self.outlier_prob = point_outlier_prob(resid_pts, pts.sigma, self.outlier_prob)
         self.events["recalibrated"] += 1
         if f is not None:
-            f.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma])
+            f.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
             f.model.lik.outlier_prob = self.outlier_prob
             f.reweight(f.log_target(f.x) - old)
             if f.ess() < self.cfg.ess_threshold * f.n:

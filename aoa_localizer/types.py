@@ -16,6 +16,7 @@ class Reading:
     sigma: float  # standard deviation of this reading's bearing error, rad
     east: float
     north: float
+    gps_sigma: float = 0.0  # horizontal sigma of the antenna position from the fixes (m; 0: not known)
 
 
 @dataclass(frozen=True)
@@ -28,6 +29,7 @@ class ObservationPoint:
     theta: float  # corrected bearing, ENU rad
     sigma: float  # its standard deviation, rad, from the readings' sigmas and correlation
     n_readings: int
+    gps_sigma: float = 0.0  # horizontal sigma of its antenna position (m), from the fixes' covariances
 
 
 @dataclass

@@ -16,6 +16,7 @@ class FixRecord(NamedTuple):
     lon: float
     alt: float
     status: int
+    sigma_m: float = math.nan  # horizontal position sigma from position_covariance (NaN: type unknown)
 
 
 class DfRecord(NamedTuple):
@@ -52,7 +53,17 @@ def _float(v) -> float:
 def fix_from_navsatfix(msg) -> FixRecord:
     """sensor_msgs/NavSatFix -> FixRecord."""
     return FixRecord(stamp_seconds(msg.header), _float(msg.latitude), _float(msg.longitude),
-                     _float(msg.altitude), int(msg.status.status))
+                     _float(msg.altitude), int(msg.status.status), horizontal_sigma(msg))
+
+
+def horizontal_sigma(msg) -> float:
+    """sqrt of the mean of the east and north variances of position_covariance (ENU, row-major), or NaN when
+    position_covariance_type is COVARIANCE_TYPE_UNKNOWN (0) or the values are not usable."""
+    if int(msg.position_covariance_type) <= 0:
+        return math.nan
+    c = msg.position_covariance
+    var = (_float(c[0]) + _float(c[4])) / 2
+    return math.sqrt(var) if math.isfinite(var) and var >= 0 else math.nan
 
 
 def df_from_vector3stamped(msg) -> DfRecord:

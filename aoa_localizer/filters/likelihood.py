@@ -30,14 +30,15 @@ def mixture_loglik(residual, sigma, outlier_prob: float):
 class BearingLikelihood:
     """L(z | x) for a bearing z taken at (east, north) with standard deviation sigma.
 
-    An antenna position known to `gps_sigma_m` adds (gps_sigma_m / range)^2 to the bearing variance.
+    An antenna position known to `gps_sigma_m` (configured, for every point) or to each point's own `gps_sigma`
+    (from its fixes' covariances) adds (sigma / range)^2 to the bearing variance.
     """
 
     def __init__(self, kind: str, outlier_prob: float, gps_sigma_m: float = 0.0):
         self.outlier_prob = outlier_prob if kind == "mixture" else 0.0
         self.gps_var = gps_sigma_m**2
 
-    def log(self, particles: np.ndarray, east, north, theta, sigma) -> np.ndarray:
+    def log(self, particles: np.ndarray, east, north, theta, sigma, gps_sigma=0.0) -> np.ndarray:
         """Log-likelihood; broadcasting (N, 1, 2) particles against (K,) points gives (N, K).
 
         The residual z - bearing(x) is the angle from the antenna->particle direction d to the
@@ -49,7 +50,8 @@ class BearingLikelihood:
         else:
             c, s = np.cos(theta), np.sin(theta)
         r = np.arctan2(dx * s - dy * c, dx * c + dy * s)
-        if self.gps_var:
+        gps_var = self.gps_var + np.square(gps_sigma)
+        if np.any(gps_var):
             with np.errstate(over="ignore"):  # a particle run off to 1e200 m: its GPS term is simply 0
-                sigma = np.sqrt(sigma**2 + self.gps_var / np.maximum(dx * dx + dy * dy, 1.0))
+                sigma = np.sqrt(sigma**2 + gps_var / np.maximum(dx * dx + dy * dy, 1.0))
         return mixture_loglik(r, sigma, self.outlier_prob)

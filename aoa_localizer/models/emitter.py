@@ -16,11 +16,11 @@ class PointHistory:
 
     def __init__(self, size: int):
         self.size = size
-        self.data = np.empty((0, 4))  # east, north, theta, sigma
+        self.data = np.empty((0, 5))  # east, north, theta, sigma, gps_sigma
         self.appended = 0  # points ever appended (the window may have dropped some)
 
     def append(self, p: ObservationPoint):
-        row = np.array([[p.east, p.north, p.theta, p.sigma]])
+        row = np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma]])
         self.data = np.concatenate([self.data[-(self.size - 1):] if self.size > 1 else self.data[:0], row])
         self.appended += 1
 
@@ -63,7 +63,7 @@ class EmitterModel(StateSpaceModel):
                 np.array([p.theta]))
 
     def loglik(self, x, p: ObservationPoint, k=None):
-        return self.lik.log(x, p.east, p.north, p.theta, p.sigma)
+        return self.lik.log(x, p.east, p.north, p.theta, p.sigma, p.gps_sigma)
 
     def usable(self, p: ObservationPoint) -> bool:
         return math.isfinite(p.theta) and p.sigma > 0 and math.isfinite(p.east) and math.isfinite(p.north)
@@ -77,5 +77,5 @@ class EmitterModel(StateSpaceModel):
         lp = -0.5 * np.einsum("...i,ij,...j->...", d, self.prior_prec, d)
         h = self.history.data
         if len(h):
-            lp = lp + self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3]).sum(axis=-1)
+            lp = lp + self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3], h[:, 4]).sum(axis=-1)
         return lp
