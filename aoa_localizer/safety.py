@@ -35,9 +35,16 @@ class HealthMonitor:
         self.flags: deque[bool] = deque(maxlen=window)
         self.window, self.p_value = window, p_value
         self.alarm_since: int | None = None  # index of the first flagged point of the current alarm
+        self._thresholds: dict[float, int] = {}
 
     def threshold(self, outlier_prob: float) -> int:
-        """Smallest count of flagged points in a full window with a binomial tail below p_value."""
+        """Smallest count of flagged points in a full window with a binomial tail below p_value (cached: the
+        outlier rate changes only when the noise is calibrated)."""
+        if outlier_prob not in self._thresholds:
+            self._thresholds[outlier_prob] = self._threshold(outlier_prob)
+        return self._thresholds[outlier_prob]
+
+    def _threshold(self, outlier_prob: float) -> int:
         k = np.arange(self.window + 1)
         tail = binom.sf(k - 1, self.window, min(outlier_prob, 0.99))
         return int(max(3, k[np.argmax(tail < self.p_value)] if (tail < self.p_value).any() else self.window + 1))

@@ -157,3 +157,14 @@ def test_independence_moves_keep_a_known_posterior():
         x, target, _ = independence_sweep(x, target, log_target, prop, rng)
     assert x.mean(axis=0) == pytest.approx(mu, abs=0.15)
     assert np.cov(x.T) == pytest.approx(cov, abs=0.3)
+
+
+def test_closed_form_2x2_inverse_equals_numpy():
+    from aoa_localizer.global_search import inverse_2x2
+
+    rng = np.random.default_rng(0)
+    m = rng.normal(size=(50, 2, 2))
+    spd = m @ m.transpose(0, 2, 1) + 1e-3 * np.eye(2)
+    assert inverse_2x2(spd) == pytest.approx(np.linalg.inv(spd), rel=1e-9)
+    bad = np.array([[[1.0, 1.0], [1.0, 1.0]], [[np.nan, 0.0], [0.0, 1.0]]])
+    assert np.isnan(inverse_2x2(bad)).all()
