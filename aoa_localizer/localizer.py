@@ -250,6 +250,7 @@ class Localizer:
 
     def _add_bearing(self, stamp, azimuth_deg, quality, sigma) -> Estimate | None:
         stamp, azimuth, quality = map(_as_float, (stamp, azimuth_deg, quality))
+        stamp += self.cfg.df_time_offset_s  # on the GPS clock
         if not math.isfinite(stamp):
             return self._reject("bad_stamp")
         if not math.isfinite(azimuth):

@@ -31,13 +31,14 @@ from msgs_adapters.fields import (
     fix_from_navsatfix,
 )
 
-from .config import GROUPS, ConfigError, LocalizerConfig
+from .config import GROUPS, MAX_PARTICLES, ConfigError, LocalizerConfig
 from .crlb import ELLIPSE_95, ellipse_axes
 from .localizer import Localizer
 from .noise import sentence as noise_sentence
 from .ros_main import run_node
 
 NODE_NAME = "aoa_localizer"
+_MAX_LOAD = 0.8  # share of wall time in input callbacks above which /diagnostics warns
 DIAG_NAME = "aoa_localizer: localizer"
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
@@ -74,6 +75,7 @@ DESCRIPTIONS = {
     "datum_alt": "altitude of the map origin (m); unset: the first valid fix's",
     "gps_max_gap_s": "longest fix gap a bearing may be interpolated across (s)",
     "max_stamp_jump_s": "a stamp this far ahead of its stream is refused, not adopted; a clock step is followed after 3 agreeing stamps (s)",
+    "df_time_offset_s": "added to every DF stamp to put it on the GPS clock (a receiver stamping 0.5 s late: -0.5)",
     "gps_sigma_m": "GPS position noise (m), added to each bearing's variance by range; 0: each fix's own position_covariance",
     "bearing_encoding": "df_record (Vector3Stamped: azimuth deg, quality) or pose (PoseWithCovarianceStamped yaw)",
     "resampling": "systematic, stratified, residual or multinomial",
@@ -117,7 +119,7 @@ NODE_PARAMS = {
     "diagnostics_period_s": (1.0, "period of /diagnostics (s)"),
 }
 RANGES = {
-    "num_particles": (2, 1_000_000), "quality_min": (0.0, 100.0), "outlier_prob": (0.0, 0.999),
+    "num_particles": (2, MAX_PARTICLES), "quality_min": (0.0, 100.0), "outlier_prob": (0.0, 0.999),
     "df_correlation": (0.0, 1.0), "init_min_support": (0.0, 1.0), "ess_threshold": (0.0, 1.0),
     "obs_max_readings": (1, 100_000), "init_bearings": (2, 100_000), "history_points": (1, 100_000),
     "health_window": (3, 1000), "moved_min_points": (3, 100_000), "health_p_value": (0.0, 1.0),
@@ -253,10 +255,11 @@ class LocalizerNode(Node):
                       bearings_rejected=sum(v for k, v in loc.rejected.items() if not k.startswith("fix_")),
                       fixes_rejected=sum(v for k, v in loc.rejected.items() if k.startswith("fix_")))
         values.update({f"rejected.{k}": v for k, v in sorted(loc.rejected.items())})
+        load = sum(self.callback_s) / self.get_parameter("diagnostics_period_s").value
         if self.callback_s:
             values.update(callback_mean_ms=f"{1e3 * sum(self.callback_s) / len(self.callback_s):.3f}",
                           callback_max_ms=f"{1e3 * self.callback_max_s:.3f}",
-                          callbacks_in_period=len(self.callback_s))
+                          callbacks_in_period=len(self.callback_s), load_pct=f"{100 * load:.0f}")
         est = loc.estimate
         if est is not None:
             values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * loc.last_update_s:.3f}",
@@ -269,9 +272,15 @@ class LocalizerNode(Node):
         level = 0 if est is not None else 1
         if loc.emitter.health.alarm_since is not None:
             level = max(level, 1)  # the cloud no longer explains the newest points: a global check is under way
+        if load > _MAX_LOAD:
+            level = max(level, 1)
+            values["overload"] = (f"input callbacks took {100 * load:.0f} % of the last period: the node cannot keep "
+                                  f"up (inputs queue, and past input_queue_depth are lost); fewer particles help")
         if wrong:
             level = max(level, 1)
         message = loc.status if not wrong else f"{loc.status}; {wrong[0]}"
+        if "overload" in values:
+            message += "; the node cannot keep up with its inputs"
         return level, message, values
 
     def _robustness_values(self) -> dict:

@@ -17,6 +17,13 @@ def test_defaults_are_the_papers():
 @pytest.mark.parametrize("change, words", [
     ({"num_particles": 0}, "num_particles"),
     ({"num_particles": 10.5}, "num_particles"),
+    ({"num_particles": 100_001}, "num_particles"),
+    ({"df_time_offset_s": float("nan")}, "df_time_offset_s"),
+    ({"max_stamp_jump_s": 0.0}, "max_stamp_jump_s"),
+    ({"calibrate_noise": "yes"}, "calibrate_noise"),
+    ({"init_method": "guess"}, "init_method"),
+    ({"health_window": 1}, "health_window"),
+    ({"health_p_value": 1.0}, "health_p_value"),
     ({"algorithm": "kalman"}, "algorithm"),
     ({"quality_min": 120}, "quality_min"),
     ({"bearing_sigma_deg": -1.0}, "bearing_sigma_deg"),
