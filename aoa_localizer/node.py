@@ -38,6 +38,7 @@ from .noise import sentence as noise_sentence
 from .ros_main import run_node
 
 NODE_NAME = "aoa_localizer"
+PAIRED = (("datum_lat", "datum_lon"), ("prior_east", "prior_north", "prior_sigma_m"))  # set together
 _MAX_LOAD = 0.8  # share of wall time in input callbacks above which /diagnostics warns
 DIAG_NAME = "aoa_localizer: localizer"
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
@@ -162,6 +163,7 @@ class LocalizerNode(Node):
         self.T = build.rclpy_types()
         self.counts = {"fixes_received": 0, "bearings_received": 0, "adapter_errors": 0}
         self.callback_s: list[float] = []
+        self.pending_params: dict = {}  # the first parameters of a group set together, held until it is complete
         self.callback_max_s = 0.0
 
         depth = self.get_parameter("input_queue_depth").value
@@ -195,12 +197,32 @@ class LocalizerNode(Node):
         try:
             cfg = self._config_from(changes)
         except ConfigError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
+            waiting = self._incomplete_pair(changes, str(exc))
+            if not waiting:
+                return SetParametersResult(successful=False, reason=str(exc))
+            # The standard set_parameters service sets a request's parameters one at a time: the first of a
+            # pair is accepted and held; the track keeps its settings until the pair is complete.
+            self.pending_params = {**self.pending_params, **changes}
+            self.get_logger().info(f"{', '.join(sorted(changes))} held until {', '.join(waiting)} "
+                                   "are set too (they belong together)")
+            return SetParametersResult(successful=True)
+        self.pending_params = {}
         if cfg.bearing_encoding != self.cfg.bearing_encoding:
             return SetParametersResult(successful=False, reason="bearing_encoding is fixed at start; restart the node")
         self.cfg, self.loc = cfg, Localizer(cfg)
         self.get_logger().info(f"parameters changed ({', '.join(sorted(changes))}): track restarted")
         return SetParametersResult(successful=True)
+
+    def _incomplete_pair(self, changes: dict, error: str) -> list[str]:
+        """The names still missing when every change belongs to one group of parameters set together and the
+        only fault is that the group is incomplete ([] otherwise: a real error)."""
+        if "set together" not in error:
+            return []
+        for group in PAIRED:
+            if set(changes) <= set(group):
+                given = set(changes) | set(self.pending_params)
+                return [name for name in group if name not in given]
+        return []
 
     # -- inputs -------------------------------------------------------------------------------------
     def on_fix(self, msg):
@@ -266,6 +288,8 @@ class LocalizerNode(Node):
                           east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}", lon=f"{est.lon:.7f}",
                           ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
         values.update(self._robustness_values())
+        if self.pending_params:
+            values["parameters_held"] = ", ".join(sorted(self.pending_params)) + " (waiting for the rest of the group)"
         wrong = self._wrong_publishers()
         if wrong:
             values["wrong_encoding"] = "; ".join(wrong)

@@ -274,3 +274,19 @@ def test_an_overloaded_node_says_so_in_its_diagnostics(domain):
         node.destroy_node()
     finally:
         rclpy.try_shutdown()
+
+
+def test_paired_parameters_set_through_the_standard_service(spawn, domain):
+    """Finding 10: datum_lat + datum_lon in one standard set_parameters request were each refused ("set
+    together ... or not at all"); only the atomic service worked. A wrong value is still refused."""
+    spawn(["aoa_localizer.node"], domain)
+    with client(domain) as (node, executor):
+        def req(**values):
+            return SetParameters.Request(parameters=[Parameter(name=k, value=ParameterValue(
+                type=ParameterType.PARAMETER_DOUBLE, double_value=v)) for k, v in values.items()])
+
+        results = call(executor, node, SetParameters, "/aoa_localizer/set_parameters",
+                       req(datum_lat=39.1, datum_lon=117.2)).results
+        assert [r.successful for r in results] == [True, True], [r.reason for r in results]
+        bad = call(executor, node, SetParameters, "/aoa_localizer/set_parameters", req(datum_lat=95.0)).results[0]
+        assert not bad.successful and "datum_lat" in bad.reason
