@@ -30,6 +30,8 @@ def feed(loc: Localizer, event):
         return loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m)
     if event.kind == "bearing":
         return loc.add_bearing(r.stamp, r.azimuth_deg, r.quality)
+    if event.kind == "bearing_pose":
+        return loc.add_bearing_enu(r.stamp, r.yaw_rad, r.variance_rad2)
     return None
 
 
@@ -64,6 +66,7 @@ class BagRun:
         self.datum = None  # (lat, lon, alt) of that map
         self.damage: str | None = None
         self.messages = 0
+        self.foreign: dict[str, int] = {}  # "topic (type)": messages of a type the topic should not carry
 
 
 def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay") -> BagRun:
@@ -81,6 +84,9 @@ def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay"
                     result.truth = event.record
                 elif event.kind == "datum":
                     result.datum = (event.record.lat, event.record.lon, event.record.alt)
+                elif event.kind == "foreign":
+                    key = "{} ({})".format(*event.record)
+                    result.foreign[key] = result.foreign.get(key, 0) + 1
                 est = feed(loc, event)
                 if est is not None:
                     on_estimate(est)
@@ -124,6 +130,9 @@ def run_offline(args) -> int:
         print(f"replay: {run.damage}", file=sys.stderr)
     for line in summary(loc, run.truth, run.datum):
         print(line, file=sys.stderr)
+    if run.foreign:
+        print("messages of a type their topic should not carry, skipped: "
+              + ", ".join(f"{k} {v}" for k, v in sorted(run.foreign.items())), file=sys.stderr)
     print(f"{written} estimates written to {args.output}", file=sys.stderr)
     if run.damage:
         return 1

@@ -23,7 +23,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from . import build
-from .fields import df_from_vector3stamped, fix_from_navsatfix, stamp_seconds
+from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, stamp_seconds
 
 log = logging.getLogger("aoa_localizer.bag")
 
@@ -48,9 +48,25 @@ def _qos(reliable: bool, latched: bool) -> Qos:
                zero, zero, QosLiveliness.AUTOMATIC, zero, False)
 
 
+# What each kind of topic may carry, by message type; anything else there is 'foreign': counted, skipped.
+_ACCEPTED = {"fix": ("sensor_msgs/msg/NavSatFix",),
+             "bearing": ("geometry_msgs/msg/Vector3Stamped", "geometry_msgs/msg/PoseWithCovarianceStamped"),
+             "truth": ("geometry_msgs/msg/PointStamped",), "datum": ("sensor_msgs/msg/NavSatFix",)}
+_POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+
+
+def event_kind(kind: str, msgtype: str) -> str:
+    """The event a message of `msgtype` on a `kind` topic makes: the kind itself, 'bearing_pose' for the pose
+    encoding of a bearing, or 'foreign' for a type the topic should not carry."""
+    if msgtype not in _ACCEPTED[kind]:
+        return "foreign"
+    return "bearing_pose" if msgtype == _POSE else kind
+
+
 @dataclass
 class BagEvent:
-    """One message of interest, converted: kind is 'fix', 'bearing', 'truth' or 'datum'."""
+    """One message of interest, converted: kind is 'fix', 'bearing' (DF record), 'bearing_pose' (PoseBearing),
+    'truth', 'datum', or 'foreign' (record: (topic, message type); not deserialised)."""
 
     kind: str
     log_time_ns: int
@@ -85,6 +101,8 @@ def _convert(kind: str, msg):
         return fix_from_navsatfix(msg)
     if kind == "bearing":
         return df_from_vector3stamped(msg)
+    if kind == "bearing_pose":
+        return bearing_from_pose(msg)
     return (stamp_seconds(msg.header), msg.point.x, msg.point.y)
 
 
@@ -110,8 +128,11 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None) -> Iterator
     try:
         conns = [c for c in reader.connections if c.topic in by_topic]
         for conn, log_time, raw in reader.messages(connections=conns):
-            kind = by_topic[conn.topic]
-            yield BagEvent(kind, log_time, _convert(kind, reader.deserialize(raw, conn.msgtype)))
+            kind = event_kind(by_topic[conn.topic], conn.msgtype)
+            if kind == "foreign":
+                yield BagEvent(kind, log_time, (conn.topic, conn.msgtype))
+            else:
+                yield BagEvent(kind, log_time, _convert(kind, reader.deserialize(raw, conn.msgtype)))
             count += 1
     except Exception as exc:
         raise BagError(f"{path}: damaged after {count} messages ({type(exc).__name__}: {exc})") from exc
@@ -147,11 +168,16 @@ def _read_mcap_stream(path: Path, by_topic: dict[str, str], opened_error: Except
                         channel = channels.get(record.channel_id)
                         if channel is None or channel.topic not in by_topic:
                             continue
+                        msgtype = schemas[channel.schema_id].name
+                        kind = event_kind(by_topic[channel.topic], msgtype)
+                        if kind == "foreign":
+                            yield BagEvent(kind, record.log_time, (channel.topic, msgtype))
+                            count += 1
+                            continue
                         if channel.id not in decoders:
                             decoders[channel.id] = decoder_factory.decoder_for(
                                 channel.message_encoding, schemas[channel.schema_id])
                         msg = decoders[channel.id](record.data)
-                        kind = by_topic[channel.topic]
                         yield BagEvent(kind, record.log_time, _convert(kind, msg))
                         count += 1
         except Exception as exc:

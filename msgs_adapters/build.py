@@ -21,6 +21,9 @@ def rosbags_types(typestore) -> SimpleNamespace:
         NavSatFix=t["sensor_msgs/msg/NavSatFix"], NavSatStatus=t["sensor_msgs/msg/NavSatStatus"],
         Vector3Stamped=t["geometry_msgs/msg/Vector3Stamped"], Vector3=t["geometry_msgs/msg/Vector3"],
         PointStamped=t["geometry_msgs/msg/PointStamped"], Point=t["geometry_msgs/msg/Point"],
+        Quaternion=t["geometry_msgs/msg/Quaternion"], Pose=t["geometry_msgs/msg/Pose"],
+        PoseWithCovariance=t["geometry_msgs/msg/PoseWithCovariance"],
+        PoseWithCovarianceStamped=t["geometry_msgs/msg/PoseWithCovarianceStamped"],
     )
 
 
@@ -77,7 +80,8 @@ def pose_bearing(T, stamp: float, yaw_rad: float, variance_rad2: float, frame_id
     cov[35] = variance_rad2
     q = T.Quaternion(x=0.0, y=0.0, z=math.sin(yaw_rad / 2), w=math.cos(yaw_rad / 2))
     return T.PoseWithCovarianceStamped(header=header(T, stamp, frame_id),
-                                       pose=T.PoseWithCovariance(pose=T.Pose(orientation=q), covariance=cov))
+                                       pose=T.PoseWithCovariance(pose=T.Pose(position=T.Point(x=0.0, y=0.0, z=0.0), orientation=q),
+                                                                 covariance=cov))
 
 
 def point_stamped(T, stamp: float, x: float, y: float, z: float = 0.0, frame_id: str = "map"):

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aoa_localizer import LocalizerConfig
+from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.evaluation import run
 from aoa_localizer.geodesy import LocalFrame
 from aoa_localizer.scenarios import SCENARIOS, Scenario, simulate
@@ -91,3 +91,59 @@ def test_main_job_prints_the_estimate_and_its_error():
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert "estimate (afsa" in res.stdout and "Cramer-Rao bound" in res.stdout
+
+
+def _bag_with(tmp_path, bearing_type: str, extra_string: bool):
+    """The seed scenario as a bag whose bearings are `bearing_type` (DF records, or the pose encoding), with one
+    std_msgs/String on /df/bearing in the middle if asked: written with rosbags, as ros2 bag would."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from msgs_adapters import build
+    from msgs_adapters.bag import typestore
+
+    data = simulate("seed", 0)
+    ts = typestore()
+    T = build.rosbags_types(ts)
+    rows = [(f[0], "/gps/fix", "sensor_msgs/msg/NavSatFix", build.navsatfix(T, *f[:4])) for f in data.fixes]
+    for b in data.bearings:
+        if bearing_type == "pose":
+            yaw = np.radians(90.0 - b[1])  # the yaw of an azimuth (the frame's small north rotation aside)
+            rows.append((b[0], "/df/bearing", "geometry_msgs/msg/PoseWithCovarianceStamped",
+                         build.pose_bearing(T, b[0], float(yaw), np.radians(1.117) ** 2)))
+        else:
+            rows.append((b[0], "/df/bearing", "geometry_msgs/msg/Vector3Stamped", build.df_record(T, *b[:3])))
+    if extra_string:
+        mid = data.bearings[len(data.bearings) // 2, 0] + 0.01
+        rows.append((mid, "/df/bearing", "std_msgs/msg/String", ts.types["std_msgs/msg/String"](data="hello")))
+    rows.sort(key=lambda r: r[0])
+    path = tmp_path / "bag"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {}
+        for stamp, topic, msgtype, msg in rows:
+            if (topic, msgtype) not in conns:
+                conns[topic, msgtype] = writer.add_connection(topic, msgtype, typestore=ts)
+            writer.write(conns[topic, msgtype], int(stamp * 1e9), ts.serialize_cdr(msg, msgtype))
+    return path
+
+
+def test_a_foreign_type_on_an_input_topic_is_counted_and_skipped(tmp_path):
+    """Finding 5: one std_msgs/String on /df/bearing used to end the replay as "damage" with 0 estimates."""
+    bag = _bag_with(tmp_path, "df_record", extra_string=True)
+    res = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", bag, "--offline", "--output",
+                          tmp_path / "o.jsonl", "--seed", "1"], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert "/df/bearing (std_msgs/msg/String) 1" in res.stderr
+    assert len((tmp_path / "o.jsonl").read_text().splitlines()) > 30
+
+
+def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
+    """Finding 5: a bag in the `pose` encoding (what the launcher records with bearing_encoding=pose) could not
+    be replayed offline at all."""
+    from aoa_localizer.replay import run_bag
+
+    bag = _bag_with(tmp_path, "pose", extra_string=False)
+    loc = Localizer(LocalizerConfig(seed=1))
+    estimates = []
+    run_bag(bag, {}, loc, estimates.append)
+    assert len(estimates) > 30 and loc.unknown_quality == 300
+    assert np.hypot(loc.estimate.east - 1200.0, loc.estimate.north - 800.0) < 10.0
