@@ -4,7 +4,7 @@
 
 Inputs `gps/fix`, `df/bearing` (sensor-data QoS: reliable and best-effort publishers both connect);
 outputs `emitter/pose` (latched), `emitter/fix`, `emitter/particles`, `emitter/markers`, `/diagnostics`
-at 1 Hz; service `~/reset`. Every LocalizerConfig field is a parameter (fish-school ones as `afsa.*`);
+at 1 Hz; services `~/reset` and `~/reset_datum`. Every LocalizerConfig field is a parameter (fish-school ones as `afsa.*`);
 a changed parameter restarts the track with the new settings, an invalid one is refused with its reason.
 """
 from __future__ import annotations
@@ -179,6 +179,7 @@ class LocalizerNode(Node):
         self.pub_markers = self.create_publisher(self.T.MarkerArray, "emitter/markers", 10)
         self.pub_diag = self.create_publisher(self.T.DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/reset", self.on_reset)
+        self.create_service(Trigger, "~/reset_datum", self.on_reset_datum)
         self.create_timer(self.get_parameter("diagnostics_period_s").value, self.publish_diagnostics)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.get_logger().info(f"started: algorithm {self.cfg.algorithm}, N = {self.cfg.num_particles}, "
@@ -344,6 +345,18 @@ class LocalizerNode(Node):
         self.loc.reset()
         response.success = True
         response.message = "track dropped; waiting for new bearings"
+        self.get_logger().info(response.message)
+        return response
+
+    def on_reset_datum(self, request, response):
+        """~/reset and, when the datum was not configured, drop it too: the next confirmed fix sets a new one."""
+        if self.cfg.has_datum:
+            response.success = False
+            response.message = "the datum is configured (datum_lat, datum_lon): change those parameters to move it"
+            return response
+        self.loc.reset(drop_datum=True)
+        response.success = True
+        response.message = "track and datum dropped; the next confirmed fix sets the datum"
         self.get_logger().info(response.message)
         return response
 

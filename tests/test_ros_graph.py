@@ -238,6 +238,8 @@ def test_bad_messages_leave_the_node_running_and_are_counted(spawn, domain):
 
         reset = call(executor, node, Trigger, "/aoa_localizer/reset", Trigger.Request())
         assert reset.success
+        dropped = call(executor, node, Trigger, "/aoa_localizer/reset_datum", Trigger.Request())
+        assert dropped.success and "datum dropped" in dropped.message  # it came from a fix, not the config
         bad = SetParameters.Request(parameters=[Parameter(name="algorithm", value=ParameterValue(
             type=ParameterType.PARAMETER_STRING, string_value="kalman"))])
         result = call(executor, node, SetParameters, "/aoa_localizer/set_parameters", bad).results[0]
@@ -290,3 +292,6 @@ def test_paired_parameters_set_through_the_standard_service(spawn, domain):
         assert [r.successful for r in results] == [True, True], [r.reason for r in results]
         bad = call(executor, node, SetParameters, "/aoa_localizer/set_parameters", req(datum_lat=95.0)).results[0]
         assert not bad.successful and "datum_lat" in bad.reason
+        # Now the datum is configured: ~/reset_datum refuses to drop it, and says how to move it.
+        refused = call(executor, node, Trigger, "/aoa_localizer/reset_datum", Trigger.Request())
+        assert not refused.success and "datum_lat" in refused.message
