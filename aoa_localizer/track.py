@@ -93,11 +93,17 @@ class EmitterTrack:
     def robust(self, prior: bool = True) -> Robust:
         model = self.filter.model if self.filter is not None else None
         if prior and model is not None and model.prior_prec.any():
-            return Robust(self.outlier_prob, self.cfg.gps_sigma_m, model.prior_mean, model.prior_prec)
+            return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, model.prior_mean, model.prior_prec)
         if prior and self.cfg.has_prior:
-            return Robust(self.outlier_prob, self.cfg.gps_sigma_m, np.array([self.cfg.prior_east, self.cfg.prior_north]),
+            return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, np.array([self.cfg.prior_east, self.cfg.prior_north]),
                           np.eye(2) / self.cfg.prior_sigma_m**2)
-        return Robust(self.outlier_prob, self.cfg.gps_sigma_m)
+        return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m)
+
+    @property
+    def lik_outlier_prob(self) -> float:
+        """The outlier share the likelihood uses: the calibrated one for `likelihood: mixture`, 0 for the paper's
+        Gaussian (which then stays Gaussian, in the filter and in the searches)."""
+        return self.outlier_prob if self.cfg.likelihood == "mixture" else 0.0
 
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:
@@ -143,7 +149,7 @@ class EmitterTrack:
         sigma = max(_PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(best.mean[0] - last.east, best.mean[1] - last.north))
         self.filter = make_filter(cfg, self.rng)
         self.filter.model.set_prior(best.mean, sigma**2 * np.eye(2))
-        self.filter.model.lik.outlier_prob = self.outlier_prob
+        self.filter.model.lik.outlier_prob = self.lik_outlier_prob
         for _, p, _ in self.window:
             self.filter.model.observe(p)
         self.filter.k = len(self.window)
@@ -204,7 +210,7 @@ class EmitterTrack:
 
     def _start_then_replay(self, particles, mean, cov, how: str):
         self.filter = make_filter(self.cfg, self.rng)
-        self.filter.model.lik.outlier_prob = self.outlier_prob
+        self.filter.model.lik.outlier_prob = self.lik_outlier_prob
         self.filter.initialise(particles, mean, cov)
         waiting, self.window = list(self.window), deque()
         self._started(how)
@@ -358,7 +364,8 @@ class EmitterTrack:
         pts = Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for p in
                                   (make_point(g, self.cfg, base_g)[0] for g, base_g in
                                    ((g, np.array([r.sigma for r in g])) for g, _, _ in self.window))]))
-        narrow = find_modes(pts, Robust(self.cfg.outlier_prob, self.cfg.gps_sigma_m), by_density=by_density)
+        eps = self.cfg.outlier_prob if self.cfg.likelihood == "mixture" else 0.0
+        narrow = find_modes(pts, Robust(eps, self.cfg.gps_sigma_m), by_density=by_density)
         best = None
         for x in list(candidates) + [m.mean for m in narrow[:1]]:
             trial = self.noise.copy()
@@ -391,7 +398,7 @@ class EmitterTrack:
         self.events["recalibrated"] += 1
         if f is not None:
             f.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
-            f.model.lik.outlier_prob = self.outlier_prob
+            f.model.lik.outlier_prob = self.lik_outlier_prob
             f.reweight(f.log_target(f.x) - old)
             if f.ess() < self.cfg.ess_threshold * f.n:
                 f.resample()
@@ -411,7 +418,7 @@ class EmitterTrack:
         pts = self.points()
         k = len(pts)
         recent, old = pts.take(np.arange(k - m, k)), pts.take(np.arange(k - m))
-        rob = Robust(self.outlier_prob, self.cfg.gps_sigma_m)
+        rob = Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m)
         modes = find_modes(recent, rob, by_density=True)
         if not modes or modes[0].crossing_deg < self.cfg.init_min_crossing_deg or modes[0].inliers < _MIN_INLIERS:
             return False

@@ -168,3 +168,11 @@ def test_closed_form_2x2_inverse_equals_numpy():
     assert inverse_2x2(spd) == pytest.approx(np.linalg.inv(spd), rel=1e-9)
     bad = np.array([[[1.0, 1.0], [1.0, 1.0]], [[np.nan, 0.0], [0.0, 1.0]]])
     assert np.isnan(inverse_2x2(bad)).all()
+
+
+def test_the_gaussian_likelihood_stays_gaussian():
+    """`likelihood: gaussian` (the paper's eq. 24) is not turned into a mixture by the calibrated outlier rate."""
+    res = run(simulate("seed", 0), LocalizerConfig(seed=1, likelihood="gaussian"))
+    assert res.localizer.filter.model.lik.outlier_prob == 0.0
+    assert res.localizer.emitter.robust().outlier_prob == 0.0
+    assert res.scores["error"] < 3 * res.scores["crlb"] + 1.0
