@@ -34,7 +34,8 @@ def final_error(loc, data) -> float:
                                    (10.0, 10.0, 5.0)])
 def test_an_absurd_first_fix_neither_crashes_nor_becomes_the_datum(first):
     """Finding 1: 1e190 m altitude used to raise OverflowError for good; a pole or null island used to give
-    estimates 1,000 km off with a small ellipse; a sane fix 3,000 km away is contradicted by the next one."""
+    estimates 1,000 km off with a small ellipse; a sane-looking fix 11,000 km away is contradicted by the next
+    one."""
     data = simulate("seed", 0)
     loc = Localizer(LocalizerConfig(seed=1))
     loc.add_fix(data.fixes[0, 0] - 0.5, *first)
