@@ -12,6 +12,7 @@ No process is left behind: children run in their own process groups and are stop
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import math
 import os
@@ -28,6 +29,8 @@ import numpy as np
 from .crlb import ELLIPSE_95, ellipse_axes
 from .crlb import nees as crlb_nees
 from .scenarios import SCENARIOS
+
+_PR_SET_PDEATHSIG = 1  # prctl option: a signal for this process when its parent dies
 
 CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by this
 
@@ -59,6 +62,16 @@ def parse_params(items) -> dict:
     return out
 
 
+def _die_with_parent():
+    """In the child before exec (Linux): SIGTERM when the launcher dies, even by SIGKILL, so no node or vehicle
+    is left running (elsewhere: nothing; the launcher's own cleanup still stops them on every other exit)."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except OSError:
+        pass
+
+
 class Child:
     """A child process in its own session, its output in a log file."""
 
@@ -66,7 +79,8 @@ class Child:
         self.name = name
         self.log_path = logdir / f"{name}.log"
         self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen(cmd, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.proc = subprocess.Popen(cmd, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True,
+                                     preexec_fn=_die_with_parent)
 
     def running(self) -> bool:
         return self.proc.poll() is None

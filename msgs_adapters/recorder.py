@@ -21,6 +21,7 @@ from .bag import typestore
 from .types import message_class
 
 log = logging.getLogger("aoa_localizer.recorder")
+_SEAL_EVERY_S = 1.0  # the open MCAP chunk is closed and flushed this often: a crash loses at most this much
 _INFINITE = QosTime(2147483647, 4294967295)  # how rosbag2 writes an infinite duration
 
 
@@ -57,9 +58,11 @@ class BagRecorder:
         self.writer = Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
         self.subs, self.conns, self.count = {}, {}, 0
+        self._sealed_at = time.monotonic()
 
     def poll(self):
-        """Subscribe to topics that appeared since the last call."""
+        """Subscribe to topics that appeared since the last call; seal the open chunk when it is due."""
+        self._seal_if_due()
         for topic, types in self.node.get_topic_names_and_types():
             if topic in self.subs or topic in self.exclude:
                 continue
@@ -81,6 +84,22 @@ class BagRecorder:
     def _write(self, topic: str, data: bytes):
         self.writer.write(self.conns[topic], time.time_ns(), data)
         self.count += 1
+        self._seal_if_due()
+
+    def _seal_if_due(self):
+        """Close the writer's open MCAP chunk and push it to the file about once a second, so a recorder killed
+        (SIGKILL, power) leaves a bag whose complete chunks replay. rosbags closes chunks only at 1 MiB and
+        writes metadata.yaml only at close; its MCAP writer's chunk is sealed through its own close_chunk()."""
+        now = time.monotonic()
+        if now - self._sealed_at < _SEAL_EVERY_S:
+            return
+        self._sealed_at = now
+        storage = getattr(self.writer, "storage", None)
+        chunk = getattr(storage, "chunk", None)
+        if chunk is None or not getattr(chunk, "msgs", None) or not hasattr(storage, "close_chunk"):
+            return  # nothing open, or a rosbags whose writer looks different: chunks close at 1 MiB as before
+        storage.close_chunk()
+        storage.bio.flush()
 
     def close(self):
         for sub in self.subs.values():

@@ -295,3 +295,37 @@ def test_paired_parameters_set_through_the_standard_service(spawn, domain):
         # Now the datum is configured: ~/reset_datum refuses to drop it, and says how to move it.
         refused = call(executor, node, Trigger, "/aoa_localizer/reset_datum", Trigger.Request())
         assert not refused.success and "datum_lat" in refused.message
+
+
+def test_a_killed_recording_leaves_a_bag_that_replays_and_no_process(tmp_path, domain):
+    """Reliability finding 3: SIGKILL of `launch --record` used to leave a 0-byte .mcap (nothing replayable)
+    and the node and vehicle running. Now the recorder seals a chunk about every second and the children die
+    with the launcher: the bag replays up to the last sealed chunk (exit 1: damaged at its end)."""
+    marker = f"marker_rays:={250 + domain}"
+    bag = tmp_path / "killed"
+    p = subprocess.Popen([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "seed", "--speedup", "20",
+                          "--domain-id", str(domain), "--record", str(bag), "-p", marker.replace(":=", "=")],
+                         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        mcap = bag / "killed.mcap"
+        assert wait_for(lambda: mcap.exists() and mcap.stat().st_size > 20_000, 60)  # the first sealed chunks
+        time.sleep(12.0)  # most of the drive (22 s at 20x), so the sealed chunks hold enough points to start
+        os.kill(p.pid, signal.SIGKILL)  # the launcher alone: its children must follow it
+        p.wait(10)
+        assert wait_for(lambda: no_process_with(marker), 15)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    res = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", bag, "--offline", "--output",
+                          tmp_path / "o.jsonl"], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode in (0, 1), res.stderr
+    assert len((tmp_path / "o.jsonl").read_text().splitlines()) > 0, res.stderr
+
+
+def wait_for(predicate, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.2)
+    return predicate()
