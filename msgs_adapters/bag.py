@@ -7,6 +7,7 @@ the damage are still delivered and the damage is reported as a BagError afterwar
 from __future__ import annotations
 
 import logging
+from io import BytesIO
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -140,46 +141,120 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None) -> Iterator
         reader.close()
 
 
+_MAGIC = b"\x89MCAP0\r\n"
+_CHUNK, _FOOTER, _DATA_END = 0x06, 0x02, 0x0F
+
+
+def salvage(data: bytes) -> tuple[bytes, str | None]:
+    """An MCAP byte string cut short or damaged, as a stream of its complete records: a cut chunk gives up every
+    complete record inside it (uncompressed chunks, what the rosbags writer makes; a compressed one is lost whole).
+    Returns (magic + records, what was wrong or None)."""
+    out, pos, damage = [_MAGIC], len(_MAGIC), None
+    if not data.startswith(_MAGIC):
+        return b"", "no MCAP magic"
+    while pos < len(data):
+        if pos + 9 > len(data):
+            damage = f"cut at byte {pos}"
+            break
+        op, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], "little")
+        body = data[pos + 9:pos + 9 + length]
+        cut = len(body) < length
+        if op == _CHUNK:
+            inner, why = _chunk_records(body)
+            out.append(inner)
+            if cut or why:
+                damage = f"{'cut' if cut else why} in the chunk at byte {pos}"
+                break
+        elif cut:
+            damage = f"cut at byte {pos}"
+            break
+        elif op in (_FOOTER, _DATA_END) or op == 0:
+            if op == 0:
+                damage = f"an invalid record (opcode 0) at byte {pos}"
+            break  # the summary after the data section repeats what the chunks hold
+        else:
+            out.append(data[pos:pos + 9 + length])
+        pos += 9 + length
+    return b"".join(out), damage
+
+
+def _chunk_records(body: bytes) -> tuple[bytes, str | None]:
+    """The complete records inside a (possibly cut) chunk body, and why it could not all be read, if so."""
+    head = 8 + 8 + 8 + 4
+    if len(body) < head + 4:
+        return b"", "cut"
+    n = int.from_bytes(body[head:head + 4], "little")
+    compression = body[head + 4:head + 4 + n].decode(errors="replace")
+    start = head + 4 + n + 8
+    if compression:
+        return b"", f"a compressed ({compression}) chunk"
+    records, pos, why = body[start:], 0, None
+    while pos + 9 <= len(records):
+        length = int.from_bytes(records[pos + 1:pos + 9], "little")
+        if records[pos] == 0 or pos + 9 + length > len(records):
+            why = "cut" if records[pos] else "an invalid record"
+            break
+        pos += 9 + length
+    return records[:pos], why
+
+
+def _stream_events(stream, by_topic: dict[str, str]) -> Iterator[BagEvent]:
+    """Events of an MCAP byte stream in record order (schemas and channels as they come)."""
+    from mcap.stream_reader import StreamReader
+    from mcap_ros2.decoder import DecoderFactory
+
+    decoder_factory = DecoderFactory()
+    schemas, channels, decoders = {}, {}, {}
+    for record in StreamReader(stream, skip_magic=False).records:
+        name = type(record).__name__
+        if name == "Schema":
+            schemas[record.id] = record
+        elif name == "Channel":
+            channels[record.id] = record
+        elif name == "Message":
+            channel = channels.get(record.channel_id)
+            if channel is None or channel.topic not in by_topic:
+                continue
+            msgtype = schemas[channel.schema_id].name
+            kind = event_kind(by_topic[channel.topic], msgtype)
+            if kind == "foreign":
+                yield BagEvent(kind, record.log_time, (channel.topic, msgtype))
+                continue
+            if channel.id not in decoders:
+                decoders[channel.id] = decoder_factory.decoder_for(channel.message_encoding, schemas[channel.schema_id])
+            yield BagEvent(kind, record.log_time, _convert(kind, decoders[channel.id](record.data)))
+
+
 def _mcap_files(path: Path) -> list[Path]:
     return sorted(path.glob("*.mcap")) if path.is_dir() else [path]
 
 
 def _read_mcap_stream(path: Path, by_topic: dict[str, str], opened_error: Exception) -> Iterator[BagEvent]:
-    """Record-by-record read with the mcap library: everything up to the first damaged record."""
-    from mcap.stream_reader import StreamReader
-    from mcap_ros2.decoder import DecoderFactory
-
+    """Record-by-record read with the mcap library. A file damaged part-way is read again from its salvaged
+    records (every complete record, inside a cut chunk too), then the damage is raised as a BagError."""
     files = _mcap_files(path)
     if not files or not all(f.is_file() for f in files):
         raise BagError(f"{path}: not a rosbag2 MCAP bag ({opened_error})")
-    decoder_factory = DecoderFactory()
     count = 0
     for file in files:
-        schemas, channels, decoders = {}, {}, {}
+        done = 0  # events of this file already delivered
         try:
             with open(file, "rb") as fh:
-                for record in StreamReader(fh, skip_magic=False).records:
-                    name = type(record).__name__
-                    if name == "Schema":
-                        schemas[record.id] = record
-                    elif name == "Channel":
-                        channels[record.id] = record
-                    elif name == "Message":
-                        channel = channels.get(record.channel_id)
-                        if channel is None or channel.topic not in by_topic:
-                            continue
-                        msgtype = schemas[channel.schema_id].name
-                        kind = event_kind(by_topic[channel.topic], msgtype)
-                        if kind == "foreign":
-                            yield BagEvent(kind, record.log_time, (channel.topic, msgtype))
-                            count += 1
-                            continue
-                        if channel.id not in decoders:
-                            decoders[channel.id] = decoder_factory.decoder_for(
-                                channel.message_encoding, schemas[channel.schema_id])
-                        msg = decoders[channel.id](record.data)
-                        yield BagEvent(kind, record.log_time, _convert(kind, msg))
+                for event in _stream_events(fh, by_topic):
+                    yield event
+                    done += 1
+                    count += 1
+        except Exception as exc:  # noqa: BLE001 - any failure of the stream reader means damage: salvage
+            stream, damage = salvage(file.read_bytes())
+            recovered = 0
+            try:
+                for i, event in enumerate(_stream_events(BytesIO(stream), by_topic)):
+                    if i >= done:
+                        yield event
+                        recovered += 1
                         count += 1
-        except Exception as exc:
-            raise BagError(f"{file}: damaged after {count} messages ({type(exc).__name__}: {exc})") from exc
+            except Exception:  # noqa: BLE001 - the salvaged stream simply ends where the damage was
+                pass
+            raise BagError(f"{file}: damaged after {count} messages ({damage or f'{type(exc).__name__}: {exc}'}; "
+                           f"{recovered} of them recovered from inside the damaged part)") from exc
     log.warning("%s: rosbags could not open it (%s); read all %d messages record by record", path, opened_error, count)
