@@ -39,8 +39,19 @@ class Stop(Exception):
     """SIGTERM or SIGINT to the launcher."""
 
 
-def _raise_stop(signum, frame):
-    raise Stop(signal.Signals(signum).name)
+class _StopOnce:
+    """Signal handler: the first SIGINT or SIGTERM raises Stop; later ones (a second Ctrl-C while the children
+    are being stopped) only say so, so the cleanup finishes instead of ending in a traceback."""
+
+    def __init__(self):
+        self.stopping = False
+
+    def __call__(self, signum, frame):
+        if self.stopping:
+            print("launch: already stopping; the children get a few seconds to exit", file=sys.stderr)
+            return
+        self.stopping = True
+        raise Stop(signal.Signals(signum).name)
 
 
 def ros_value(v) -> str:
@@ -252,7 +263,8 @@ def main(argv=None) -> int:
     print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {source_name}: "
           f"{args.bag if args.bag else f'scenario {args.scenario} at {args.speedup:g}x'}", flush=True)
 
-    old = {s: signal.signal(s, _raise_stop) for s in (signal.SIGTERM, signal.SIGINT)}
+    stop = _StopOnce()
+    old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
     children, monitor, code = [], None, 2
     try:
         monitor = Monitor(args.record)
@@ -290,6 +302,7 @@ def main(argv=None) -> int:
         print(f"launch: stopped by {exc}", file=sys.stderr)
         code = 2
     finally:
+        stop.stopping = True  # a Ctrl-C during the cleanup must not cut it short with a traceback
         for child in reversed(children):
             child.stop()
         if monitor is not None:

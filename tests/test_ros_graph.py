@@ -329,3 +329,23 @@ def wait_for(predicate, timeout: float) -> bool:
             return True
         time.sleep(0.2)
     return predicate()
+
+
+def test_two_ctrl_c_in_a_row_stop_the_launcher_cleanly(domain):
+    """Reliability finding 3: two Ctrl-C 0.3 s apart gave a launcher traceback and left the node running."""
+    marker = f"marker_rays:={350 + domain}"
+    p = subprocess.Popen([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "urban", "--speedup", "2",
+                          "--domain-id", str(domain), "-p", marker.replace(":=", "=")], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        time.sleep(5)
+        assert p.poll() is None
+        p.send_signal(signal.SIGINT)
+        time.sleep(0.3)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=30)
+        assert p.returncode == 2 and "stopped by SIGINT" in err and "Traceback" not in err, err
+        assert wait_for(lambda: no_process_with(marker), 10)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
