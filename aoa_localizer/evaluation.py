@@ -29,27 +29,26 @@ def scenario_config(data: ScenarioData, base: LocalizerConfig) -> LocalizerConfi
     return base.with_changes(**data.scenario.filter_overrides) if data.scenario.filter_overrides else base
 
 
+def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
+    """A scenario's fixes and bearings into `loc` in stamp order; on_result(what each call returned)."""
+    for kind, row in data.events():
+        on_result(loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2]))
+
+
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
     """Feed a scenario's fixes and bearings in stamp order, flush and finish at the end, keep every estimate."""
     loc = Localizer(scenario_config(data, cfg))
     estimates, step_s = [], []
-    t0 = time.perf_counter()
-    for kind, row in data.events():
-        if kind == "fix":
-            est = loc.add_fix(row[0], row[1], row[2], row[3])
-        else:
-            est = loc.add_bearing(row[0], row[1], row[2])
+
+    def keep(est):
         if est is not None:
             estimates.append(est)
             step_s.append(loc.last_update_s)
-    est = loc.flush()
-    if est is not None:
-        estimates.append(est)
-        step_s.append(loc.last_update_s)
-    est = loc.finish()
-    if est is not None:
-        estimates.append(est)
-        step_s.append(loc.last_update_s)
+
+    t0 = time.perf_counter()
+    feed(loc, data, keep)
+    keep(loc.flush())
+    keep(loc.finish())
     result = RunResult(estimates, step_s, loc, wall_s=time.perf_counter() - t0)
     result.scores = score(data, result)
     return result
@@ -61,11 +60,7 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
     big = 10**9
     loc = Localizer(scenario_config(data, cfg).with_changes(init_bearings=big, init_max_points=big))
     t0 = time.perf_counter()
-    for kind, row in data.events():
-        if kind == "fix":
-            loc.add_fix(row[0], row[1], row[2], row[3])
-        else:
-            loc.add_bearing(row[0], row[1], row[2])
+    feed(loc, data, lambda est: None)
     loc.flush()  # no finish(): no filter runs; the batch estimate is the end-of-data search
     mode = loc.emitter.batch_estimate()
     wall = time.perf_counter() - t0

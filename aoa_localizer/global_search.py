@@ -98,6 +98,11 @@ def _residuals(x: np.ndarray, pts: Points):
     return resid, dx, dy, np.maximum(dx * dx + dy * dy, 1e-6)
 
 
+def residuals(x, pts: Points) -> np.ndarray:
+    """theta - bearing(x) of every point (rad, in (-pi, pi]) at one place x (2,)."""
+    return _residuals(np.asarray(x, float), pts)[0]
+
+
 def _geometry(x: np.ndarray, pts: Points):
     """Residuals, squared ranges, and the bearing's gradient d bearing / d x (..., K, 2)."""
     resid, dx, dy, r2 = _residuals(x, pts)

@@ -125,12 +125,17 @@ class Localizer:
     def status(self) -> str:
         """One line on the state: waiting for a fix, collecting bearings, waiting for geometry, tracking, checking;
         and, when more than half of the latest inputs were refused, the commonest reason."""
-        base = self._status if self._status.startswith("waiting for") and "GPS" in self._status else self.emitter.status
+        base = self._status if self._waiting_for_gps else self.emitter.status
         refused = [r for r in self._recent if r is not None]
         if len(self._recent) >= _RECENT_MIN and len(refused) > len(self._recent) / 2:
             reason, n = Counter(refused).most_common(1)[0]
             base += f"; most inputs refused: {reason} ({n} of the last {len(self._recent)})"
         return base
+
+    @property
+    def _waiting_for_gps(self) -> bool:
+        """Before the datum: no fix yet, or the first one waiting for its confirmation."""
+        return self.frame is None or not len(self.track)
 
     @property
     def init_points(self) -> list[ObservationPoint]:
@@ -192,12 +197,10 @@ class Localizer:
         why = implausible_fix(lat, lon, alt)
         if why:
             return self._reject(why)
-        verdict = self.fix_clock.admit(stamp)
-        if verdict in _CLOCK_REASONS:
-            return self._reject("fix_" + _CLOCK_REASONS[verdict])
-        if verdict is Verdict.CLOCK_JUMP:
-            self.input_events["fix_clock_jump"] += 1
-            log.warning("the GPS clock jumped to %.3f: the track starts again on the new timeline", stamp)
+        verdict = self._admit(self.fix_clock, "fix", "fix_clock_jump", stamp)
+        if verdict is None:
+            return None
+        if verdict is Verdict.CLOCK_JUMP:  # the track starts again on the new timeline
             self.track = GpsTrack(self.cfg.gps_max_gap_s)
             self._datum_candidate = None  # a first fix on the old timeline confirms nothing now
         if self.frame is None:
@@ -211,6 +214,17 @@ class Localizer:
             self._set_datum(*candidate)
             self._store_fix(*candidate)
         return self._store_fix(stamp, lat, lon, alt, sigma_m)
+
+    def _admit(self, clock: StreamClock, kind: str, jump_event: str, stamp: float) -> Verdict | None:
+        """The stream clock's verdict on a stamp: None (refused, counted as `<kind>_<reason>`), OK, or
+        CLOCK_JUMP (counted under `jump_event`, logged); the caller moves to the new timeline."""
+        verdict = clock.admit(stamp)
+        if verdict in _CLOCK_REASONS:
+            return self._reject(f"{kind}_{_CLOCK_REASONS[verdict]}")
+        if verdict is Verdict.CLOCK_JUMP:
+            self.input_events[jump_event] += 1
+            log.warning("%s: the clock jumped to %.3f; going on on the new timeline", jump_event, stamp)
+        return verdict
 
     def _set_datum(self, stamp, lat, lon, alt, _sigma_m=0.0):
         datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)
@@ -226,8 +240,6 @@ class Localizer:
         self._recent.append(None)
         if self.trace is not None:
             self.trace.fixes.append((stamp, float(east), float(north)))
-        if self._status.startswith("waiting for") and "GPS" in self._status:
-            self._status = "collecting bearings"
         estimate = self._release_pending()
         # A fix well after the open point's first reading closes it: a vehicle that stopped taking
         # readings still gets its estimate, without waiting for the next reading.
@@ -259,12 +271,10 @@ class Localizer:
             return self._reject("bad_quality")
         if quality < self.cfg.quality_min:  # False for NaN: unknown quality passes, counted below
             return self._reject("low_quality")
-        verdict = self.df_clock.admit(stamp)
-        if verdict in _CLOCK_REASONS:
-            return self._reject("bearing_" + _CLOCK_REASONS[verdict])
+        verdict = self._admit(self.df_clock, "bearing", "df_clock_jump", stamp)
+        if verdict is None:
+            return None
         if verdict is Verdict.CLOCK_JUMP:
-            self.input_events["df_clock_jump"] += 1
-            log.warning("the DF clock jumped to %.3f: bearings go on on the new timeline", stamp)
             while self.pending:  # waiting on the old timeline: no fix will place them in order any more
                 self.pending.popleft()
                 self._reject("clock_jump")
@@ -351,10 +361,11 @@ class Localizer:
     def _use_points(self, groups: list[list[Reading]]) -> Estimate | None:
         estimate = None
         for readings in groups:
+            took = self.emitter.add(readings)
             if self.trace is not None:
-                _, kept = self.emitter.make(readings)
-                self.trace.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k)) for r, k in zip(readings, kept)]
-            if self.emitter.add(readings):
+                self.trace.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k))
+                                        for r, k in zip(readings, self.emitter.last_kept)]
+            if took:
                 mean, cov = self.filter.estimate()
                 if not _positive_definite(cov):
                     self._reject("covariance_degenerate")

@@ -26,7 +26,7 @@ import numpy as np
 from .config import LocalizerConfig
 from .crlb import ELLIPSE_95
 from .filters import make_filter
-from .global_search import Mode, Points, Robust, find_modes, inlier_share, log_posterior, refine
+from .global_search import Mode, Points, Robust, find_modes, inlier_share, log_posterior, refine, residuals
 from .noise import NoiseModel, point_outlier_prob
 from .preprocess import make_point
 from .safety import HealthMonitor, ModeProposal, importance_sample
@@ -111,6 +111,7 @@ class EmitterTrack:
         t0 = time.perf_counter()
         point, kept = self.make(readings)
         self.last_stamp = point.stamp
+        self.last_kept = kept  # which readings the point kept (the report's trace)
         gated = int((~kept).sum())
         if gated:
             self._reject("point_outlier", gated)
@@ -331,17 +332,19 @@ class EmitterTrack:
 
     def _refined(self, x: np.ndarray, noise: NoiseModel | None = None) -> np.ndarray:
         """The posterior mode nearest x (Gauss-Newton), under `noise` (default: the current noise model)."""
-        if noise is None:
-            pts = self.points()
-        else:
-            rows = []
-            for group, _, _ in self.window:
-                sig = np.array([r.sigma for r in group]) * noise.scale(np.array([r.quality for r in group]))
-                p = make_point(group, self.cfg, sig)[0]
-                rows.append([p.east, p.north, p.theta, p.sigma, p.gps_sigma])
-            pts = Points.of(np.array(rows))
+        pts = self.points() if noise is None else self._rebuilt_points(noise)
         means, _, _ = refine(x[None, :], np.zeros(1), pts, self.robust())
         return means[0]
+
+    def _rebuilt_points(self, noise: NoiseModel | None) -> Points:
+        """The kept points rebuilt from their readings with the sigmas of `noise` (None: the configured ones)."""
+        rows = []
+        for group, _, _ in self.window:
+            base = np.array([r.sigma for r in group])
+            sigma = base if noise is None else base * noise.scale(np.array([r.quality for r in group]))
+            p = make_point(group, self.cfg, sigma)[0]
+            rows.append([p.east, p.north, p.theta, p.sigma, p.gps_sigma])
+        return Points.of(np.array(rows))
 
     def _broad_sigma(self, centre: np.ndarray) -> float:
         pts = self.points()
@@ -354,16 +357,13 @@ class EmitterTrack:
         (a wrong place explained by a wide noise loses to the right place with the right noise). Then the points
         are rebuilt with it and the cloud re-weighted. True if a calibration was applied."""
         readings = [r for group, _, _ in self.window for r in group]
-        east = np.array([r.east for r in readings])
-        north = np.array([r.north for r in readings])
-        theta = np.array([r.theta for r in readings])
-        quality = np.array([r.quality for r in readings])
-        base = np.array([r.sigma for r in readings])
         if len(readings) < 2:
             return False
-        pts = Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for p in
-                                  (make_point(g, self.cfg, base_g)[0] for g, base_g in
-                                   ((g, np.array([r.sigma for r in g])) for g, _, _ in self.window))]))
+        quality = np.array([r.quality for r in readings])
+        base = np.array([r.sigma for r in readings])
+        at_readings = Points(np.array([r.east for r in readings]), np.array([r.north for r in readings]),
+                             np.array([r.theta for r in readings]), base)
+        pts = self._rebuilt_points(None)
         eps = self.cfg.outlier_prob if self.cfg.likelihood == "mixture" else 0.0
         narrow = find_modes(pts, Robust(eps, self.cfg.gps_sigma_m), by_density=by_density)
         best = None
@@ -371,9 +371,7 @@ class EmitterTrack:
             trial = self.noise.copy()
             ll = float("nan")
             for _ in range(2):  # alternate: noise at x, then x under that noise
-                resid = np.arctan2(np.sin(theta - np.arctan2(x[1] - north, x[0] - east)),
-                                   np.cos(theta - np.arctan2(x[1] - north, x[0] - east)))
-                ll = trial.fit(resid, quality, base)
+                ll = trial.fit(residuals(x, at_readings), quality, base)
                 if not np.isfinite(ll):
                     return False
                 x = self._refined(x, trial)
@@ -392,9 +390,7 @@ class EmitterTrack:
             self._reject("point_outlier", delta)
         self.window = rebuilt
         pts = self.points()
-        resid_pts = np.arctan2(np.sin(pts.theta - np.arctan2(at[1] - pts.north, at[0] - pts.east)),
-                               np.cos(pts.theta - np.arctan2(at[1] - pts.north, at[0] - pts.east)))
-        self.outlier_prob = point_outlier_prob(resid_pts, pts.sigma, self.outlier_prob)
+        self.outlier_prob = point_outlier_prob(residuals(at, pts), pts.sigma, self.outlier_prob)
         self.events["recalibrated"] += 1
         if f is not None:
             f.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])

@@ -126,21 +126,28 @@ def test_pose_encoding_end_to_end(tmp_path, domain):
     assert json.loads((tmp_path / "r.json").read_text())["error_m"] < 10.0
 
 
-def test_sigterm_to_the_launcher_stops_everything(domain):
-    marker = f"marker_rays:={150 + domain}"
+@contextmanager
+def running_launcher(domain, marker):
+    """`launch --scenario urban` at 2x, running for 5 s (marked by a node argument); killed if still running."""
     p = subprocess.Popen([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "urban", "--speedup", "2",
                           "--domain-id", str(domain), "-p", marker.replace(":=", "=")], cwd=ROOT,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         time.sleep(5)
         assert p.poll() is None
+        yield p
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+
+
+def test_sigterm_to_the_launcher_stops_everything(domain):
+    marker = f"marker_rays:={150 + domain}"
+    with running_launcher(domain, marker) as p:
         p.send_signal(signal.SIGTERM)
         _, err = p.communicate(timeout=30)
         assert p.returncode == 2 and "stopped by SIGTERM" in err
         assert no_process_with(marker)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
 
 
 def test_sample_bag_through_the_live_node_gives_the_offline_estimate(tmp_path, domain):
@@ -334,18 +341,10 @@ def wait_for(predicate, timeout: float) -> bool:
 def test_two_ctrl_c_in_a_row_stop_the_launcher_cleanly(domain):
     """Reliability finding 3: two Ctrl-C 0.3 s apart gave a launcher traceback and left the node running."""
     marker = f"marker_rays:={350 + domain}"
-    p = subprocess.Popen([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "urban", "--speedup", "2",
-                          "--domain-id", str(domain), "-p", marker.replace(":=", "=")], cwd=ROOT,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        time.sleep(5)
-        assert p.poll() is None
+    with running_launcher(domain, marker) as p:
         p.send_signal(signal.SIGINT)
         time.sleep(0.3)
         p.send_signal(signal.SIGINT)
         _, err = p.communicate(timeout=30)
         assert p.returncode == 2 and "stopped by SIGINT" in err and "Traceback" not in err, err
         assert wait_for(lambda: no_process_with(marker), 10)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
