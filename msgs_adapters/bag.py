@@ -1,13 +1,13 @@
-"""rosbag2 MCAP bags: write simulated runs with rosbags, read any rosbag2 MCAP bag back as engine records.
+"""rosbag2 bags: write simulated runs with rosbags; read any rosbag2 bag (MCAP or sqlite3, split, compressed, with
+or without metadata.yaml) back as engine records.
 
-Reading goes through rosbags; a bag it cannot open (truncated file, missing metadata.yaml) is read
-again record by record with the `mcap` stream reader and mcap-ros2-support, so the messages before
-the damage are still delivered and the damage is reported as a BagError afterwards.
+Each storage file is read by rosbags on its own (bag_files); a damaged MCAP file is read again record by record
+(mcap_salvage), so every trustworthy message is delivered and the damage is reported as a BagError afterwards.
 """
 from __future__ import annotations
 
 import logging
-from io import BytesIO
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -20,10 +20,13 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
+from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from . import build
+from .bag_files import BagFiles, BagFilesError, TopicInfo, describe_topics
+from .mcap_salvage import RawMessage, Salvage, read_salvaged
 from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, stamp_seconds
 
 log = logging.getLogger("aoa_localizer.bag")
@@ -31,6 +34,9 @@ log = logging.getLogger("aoa_localizer.bag")
 TOPICS = {"fix": "/gps/fix", "bearing": "/df/bearing", "truth": "/sim/truth", "datum": "/sim/datum"}
 _TYPES = {"fix": "sensor_msgs/msg/NavSatFix", "bearing": "geometry_msgs/msg/Vector3Stamped",
           "truth": "geometry_msgs/msg/PointStamped", "datum": "sensor_msgs/msg/NavSatFix"}
+
+
+SEAL_EVERY_S = 1.0  # an MCAP chunk is closed (with its CRC) and flushed this often: a crash loses at most this much
 
 
 class BagError(RuntimeError):
@@ -93,8 +99,35 @@ def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None):
             latched = kind in ("truth", "datum")
             conns[kind] = writer.add_connection(TOPICS[kind], _TYPES[kind], typestore=ts,
                                                 offered_qos_profiles=[_qos(reliable=True, latched=latched)])
+        sealed = t0
         for stamp, kind, msg in messages:
+            if stamp - sealed >= SEAL_EVERY_S:  # chunks of about a second, like a recording
+                seal_chunk(writer)
+                sealed = stamp
             writer.write(conns[kind], int(round(stamp * 1e9)), ts.serialize_cdr(msg, _TYPES[kind]))
+        seal_chunk(writer)
+
+
+_CRC_AT = 9 + 24  # a chunk record's uncompressed_crc: after opcode, length and three uint64 fields (MCAP spec)
+
+
+def seal_chunk(writer: Writer) -> bool:
+    """Close the open MCAP chunk of a rosbags writer, give it its CRC and push it to disk; False when nothing
+    was open (or the writer is not the MCAP one this knows). rosbags closes chunks only at 1 MiB and leaves their
+    CRC 0 ("not computed"), so without this a crash loses a whole chunk and damage inside one goes unnoticed."""
+    storage = getattr(writer, "storage", None)
+    chunk = getattr(storage, "chunk", None)
+    if chunk is None or not getattr(chunk, "msgs", None) or not hasattr(storage, "close_chunk"):
+        return False
+    crc = zlib.crc32(chunk.bio.getvalue())
+    start = storage.bio.tell()
+    storage.close_chunk()
+    end = storage.bio.tell()
+    storage.bio.seek(start + _CRC_AT)
+    storage.bio.write(crc.to_bytes(4, "little"))
+    storage.bio.seek(end)
+    storage.bio.flush()
+    return True
 
 
 def _convert(kind: str, msg):
@@ -107,154 +140,112 @@ def _convert(kind: str, msg):
     return (stamp_seconds(msg.header), msg.point.x, msg.point.y)
 
 
-def read_bag(path: Path | str, topics: dict[str, str] | None = None) -> Iterator[BagEvent]:
-    """Events of the given topics ({kind: topic}, default TOPICS) in log-time order.
+class BagTopicsError(BagError):
+    """A valid bag without the topics the engine needs: the message lists what it has and what it needs."""
 
-    Raises BagError for an unreadable bag; for a damaged one, after yielding what came before the damage.
+
+def _needs(topics: dict[str, str]) -> str:
+    return (f"{topics['fix']} ({' or '.join(_ACCEPTED['fix'])}) and "
+            f"{topics['bearing']} ({' or '.join(_ACCEPTED['bearing'])})")
+
+
+def read_bag(path: Path | str, topics: dict[str, str] | None = None) -> Iterator[BagEvent]:
+    """Events of the given topics ({kind: topic}, default TOPICS) of a rosbag2 bag (MCAP or sqlite3, split,
+    compressed), file by file in recording order, each file in log-time order.
+
+    Raises BagTopicsError before any event when the bag lacks the fix or the bearing topic, BagError for an
+    unreadable bag, and for a damaged one after yielding every message that could be trusted.
     """
     topics = {**TOPICS, **(topics or {})}
     by_topic = {t: k for k, t in topics.items()}
-    path = Path(path)
-    if not path.exists():
-        raise BagError(f"{path}: no such bag")
-    from rosbags.highlevel import AnyReader
-
     try:
-        reader = AnyReader([path], default_typestore=typestore())
-        reader.open()
-    except Exception as exc:  # rosbags refuses damaged or metadata-less bags: fall back to the stream
-        yield from _read_mcap_stream(path, by_topic, opened_error=exc)
-        return
-    count = 0
-    try:
-        conns = [c for c in reader.connections if c.topic in by_topic]
-        for conn, log_time, raw in reader.messages(connections=conns):
-            kind = event_kind(by_topic[conn.topic], conn.msgtype)
-            if kind == "foreign":
-                yield BagEvent(kind, log_time, (conn.topic, conn.msgtype))
-            else:
-                yield BagEvent(kind, log_time, _convert(kind, reader.deserialize(raw, conn.msgtype)))
-            count += 1
-    except Exception as exc:
-        raise BagError(f"{path}: damaged after {count} messages ({type(exc).__name__}: {exc})") from exc
-    finally:
-        reader.close()
+        with BagFiles(path) as files:
+            reader = RawReader(files)
+            inventory = reader.topics()
+            if not {topics["fix"], topics["bearing"]} <= {t.name for t in inventory}:
+                raise BagTopicsError(f"{path}: no usable fix and bearing topics; it has {describe_topics(inventory)}; "
+                                     f"the engine needs {_needs(topics)} (choose others with --fix-topic and "
+                                     "--bearing-topic)")
+            ts, count = typestore(), 0
+            for msg in reader.messages(set(by_topic)):
+                kind = event_kind(by_topic[msg.topic], msg.msgtype)
+                if kind == "foreign":
+                    yield BagEvent(kind, msg.log_time, (msg.topic, msg.msgtype))
+                else:
+                    try:
+                        decoded = ts.deserialize_cdr(msg.data, msg.msgtype)
+                    except Exception as exc:  # noqa: BLE001 - any decoding failure means these bytes are damaged
+                        reader.damage.append(f"an undecodable {msg.msgtype} on {msg.topic} "
+                                             f"({type(exc).__name__}: {exc})")
+                        reader.lost += 1
+                        continue
+                    yield BagEvent(kind, msg.log_time, _convert(kind, decoded))
+                count += 1
+    except BagFilesError as exc:
+        raise BagError(str(exc)) from exc
+    if reader.damage:
+        raise BagError(f"{path}: damaged after {count} messages ({'; '.join(reader.damage)}; "
+                       f"{reader.lost} messages known lost, {reader.recovered} recovered from inside the damaged part)")
 
 
-_MAGIC = b"\x89MCAP0\r\n"
-_CHUNK, _FOOTER, _DATA_END = 0x06, 0x02, 0x0F
+class RawReader:
+    """Every message of a bag's storage files as stored (topic, type, log time, CDR bytes). Each file is read by
+    rosbags on its own; a damaged MCAP file is read again record by record (mcap_salvage), so what comes before
+    the damage, and intact chunks after a CRC failure, are still delivered. `damage` says what was wrong."""
 
+    def __init__(self, files: BagFiles):
+        self.files = files
+        self.damage: list[str] = []
+        self.lost = 0  # messages known to be lost (in chunks that failed their CRC check)
+        self.recovered = 0  # messages read from the damaged part of a file
 
-def salvage(data: bytes) -> tuple[bytes, str | None]:
-    """An MCAP byte string cut short or damaged, as a stream of its complete records: a cut chunk gives up every
-    complete record inside it (uncompressed chunks, what the rosbags writer makes; a compressed one is lost whole).
-    Returns (magic + records, what was wrong or None)."""
-    out, pos, damage = [_MAGIC], len(_MAGIC), None
-    if not data.startswith(_MAGIC):
-        return b"", "no MCAP magic"
-    while pos < len(data):
-        if pos + 9 > len(data):
-            damage = f"cut at byte {pos}"
-            break
-        op, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], "little")
-        body = data[pos + 9:pos + 9 + length]
-        cut = len(body) < length
-        if op == _CHUNK:
-            inner, why = _chunk_records(body)
-            out.append(inner)
-            if cut or why:
-                damage = f"{'cut' if cut else why} in the chunk at byte {pos}"
-                break
-        elif cut:
-            damage = f"cut at byte {pos}"
-            break
-        elif op in (_FOOTER, _DATA_END) or op == 0:
-            if op == 0:
-                damage = f"an invalid record (opcode 0) at byte {pos}"
-            break  # the summary after the data section repeats what the chunks hold
-        else:
-            out.append(data[pos:pos + 9 + length])
-        pos += 9 + length
-    return b"".join(out), damage
-
-
-def _chunk_records(body: bytes) -> tuple[bytes, str | None]:
-    """The complete records inside a (possibly cut) chunk body, and why it could not all be read, if so."""
-    head = 8 + 8 + 8 + 4
-    if len(body) < head + 4:
-        return b"", "cut"
-    n = int.from_bytes(body[head:head + 4], "little")
-    compression = body[head + 4:head + 4 + n].decode(errors="replace")
-    start = head + 4 + n + 8
-    if compression:
-        return b"", f"a compressed ({compression}) chunk"
-    records, pos, why = body[start:], 0, None
-    while pos + 9 <= len(records):
-        length = int.from_bytes(records[pos + 1:pos + 9], "little")
-        if records[pos] == 0 or pos + 9 + length > len(records):
-            why = "cut" if records[pos] else "an invalid record"
-            break
-        pos += 9 + length
-    return records[:pos], why
-
-
-def _stream_events(stream, by_topic: dict[str, str]) -> Iterator[BagEvent]:
-    """Events of an MCAP byte stream in record order (schemas and channels as they come)."""
-    from mcap.stream_reader import StreamReader
-    from mcap_ros2.decoder import DecoderFactory
-
-    decoder_factory = DecoderFactory()
-    schemas, channels, decoders = {}, {}, {}
-    for record in StreamReader(stream, skip_magic=False).records:
-        name = type(record).__name__
-        if name == "Schema":
-            schemas[record.id] = record
-        elif name == "Channel":
-            channels[record.id] = record
-        elif name == "Message":
-            channel = channels.get(record.channel_id)
-            if channel is None or channel.topic not in by_topic:
-                continue
-            msgtype = schemas[channel.schema_id].name
-            kind = event_kind(by_topic[channel.topic], msgtype)
-            if kind == "foreign":
-                yield BagEvent(kind, record.log_time, (channel.topic, msgtype))
-                continue
-            if channel.id not in decoders:
-                decoders[channel.id] = decoder_factory.decoder_for(channel.message_encoding, schemas[channel.schema_id])
-            yield BagEvent(kind, record.log_time, _convert(kind, decoders[channel.id](record.data)))
-
-
-def _mcap_files(path: Path) -> list[Path]:
-    return sorted(path.glob("*.mcap")) if path.is_dir() else [path]
-
-
-def _read_mcap_stream(path: Path, by_topic: dict[str, str], opened_error: Exception) -> Iterator[BagEvent]:
-    """Record-by-record read with the mcap library. A file damaged part-way is read again from its salvaged
-    records (every complete record, inside a cut chunk too), then the damage is raised as a BagError."""
-    files = _mcap_files(path)
-    if not files or not all(f.is_file() for f in files):
-        raise BagError(f"{path}: not a rosbag2 MCAP bag ({opened_error})")
-    count = 0
-    for file in files:
-        done = 0  # events of this file already delivered
-        try:
-            with open(file, "rb") as fh:
-                for event in _stream_events(fh, by_topic):
-                    yield event
-                    done += 1
-                    count += 1
-        except Exception as exc:  # noqa: BLE001 - any failure of the stream reader means damage: salvage
-            stream, damage = salvage(file.read_bytes())
-            recovered = 0
+    def topics(self) -> list[TopicInfo]:
+        """The topics every file declares, with their message counts (a damaged file: as far as it can be read)."""
+        seen: dict[tuple[str, str], int] = {}
+        qos: dict[tuple[str, str], tuple] = {}
+        for file in self.files.files:
             try:
-                for i, event in enumerate(_stream_events(BytesIO(stream), by_topic)):
-                    if i >= done:
-                        yield event
-                        recovered += 1
-                        count += 1
-            except Exception:  # noqa: BLE001 - the salvaged stream simply ends where the damage was
-                pass
-            raise BagError(f"{file}: damaged after {count} messages ({damage or f'{type(exc).__name__}: {exc}'}; "
-                           f"{recovered} of them recovered from inside the damaged part)") from exc
-    log.warning("%s: rosbags could not open it (%s); read all %d messages record by record", path, opened_error, count)
+                with AnyReader([file], default_typestore=typestore()) as reader:
+                    for c in reader.connections:
+                        seen[(c.topic, c.msgtype)] = seen.get((c.topic, c.msgtype), 0) + c.msgcount
+                        qos.setdefault((c.topic, c.msgtype), tuple(getattr(c.ext, "offered_qos_profiles", ())))
+            except Exception:  # noqa: BLE001 - rosbags cannot open it: count what the record-by-record read finds
+                for msg in self._salvaged(file, Salvage()):
+                    seen[(msg.topic, msg.msgtype)] = seen.get((msg.topic, msg.msgtype), 0) + 1
+        return [TopicInfo(name, msgtype, n, qos.get((name, msgtype), ())) for (name, msgtype), n in sorted(seen.items())]
+
+    def messages(self, wanted: set[str]) -> Iterator[RawMessage]:
+        for file in self.files.files:
+            yield from self._file(file, wanted)
+
+    def _file(self, file: Path, wanted: set[str]) -> Iterator[RawMessage]:
+        done = 0
+        try:
+            with AnyReader([file], default_typestore=typestore()) as reader:
+                conns = [c for c in reader.connections if c.topic in wanted]
+                if not conns:  # rosbags reads every connection when given none
+                    return
+                for conn, log_time, raw in reader.messages(connections=conns):
+                    yield RawMessage(conn.topic, conn.msgtype, log_time, self.files.payload(raw))
+                    done += 1
+            return
+        except Exception as exc:  # noqa: BLE001 - rosbags refuses or stops: the record-by-record read decides
+            failure = exc
+        if file.suffix != ".mcap":
+            self.damage.append(f"{file.name}: {type(failure).__name__}: {failure}")
+            return
+        report = Salvage()
+        for i, msg in enumerate(m for m in self._salvaged(file, report) if m.topic in wanted):
+            if i >= done:
+                yield msg
+                self.recovered += 1
+        if report.damage:
+            self.damage.append(f"{file.name}: {'; '.join(report.damage)}")
+            self.lost += report.lost_messages
+        else:
+            log.warning("%s: rosbags could not read it (%s); read record by record", file,
+                        str(failure).splitlines()[0] if str(failure) else type(failure).__name__)
+
+    def _salvaged(self, file: Path, report: Salvage) -> Iterator[RawMessage]:
+        for msg in read_salvaged(file.read_bytes(), report):
+            yield RawMessage(msg.topic, msg.msgtype, msg.log_time, self.files.payload(msg.data))

@@ -8,7 +8,6 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from aoa_localizer.crlb import ellipse_points
 
 from .fields import seconds_to_stamp
 
@@ -113,17 +112,15 @@ def particle_array(T, est, frame_id: str = "map"):
     return T.PoseArray(header=header(T, est.stamp, frame_id), poses=poses)
 
 
-def markers(T, est, rays, ellipse_scale: float, frame_id: str = "map"):
-    """emitter/markers: the estimate (sphere), its 95 % ellipse (line strip), the bearing rays (line list).
-
-    rays: (M, 3) of antenna east, north and ENU bearing of the latest observation points.
-    """
+def markers(T, est, rays, ring, frame_id: str = "map"):
+    """emitter/markers: the estimate (sphere), its 95 % ellipse (line strip through `ring`, (P, 2) east/north
+    points), the bearing rays (line list; rays: (M, 3) antenna east, north and ENU bearing of the latest points)."""
     h = header(T, est.stamp, frame_id)
     colour = lambda r, g, b: T.ColorRGBA(r=r, g=g, b=b, a=1.0)  # noqa: E731
     sphere = T.Marker(header=h, ns="estimate", id=0, type=2, action=0, scale=T.Vector3(x=4.0, y=4.0, z=4.0),
                       color=colour(1.0, 0.1, 0.1),
                       pose=T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0)))
-    ring = [T.Point(x=float(x), y=float(y), z=0.0) for x, y in ellipse_points((est.east, est.north), est.cov, ellipse_scale)]
+    ring = [T.Point(x=float(x), y=float(y), z=0.0) for x, y in ring]
     ellipse = T.Marker(header=h, ns="ellipse95", id=1, type=4, action=0, scale=T.Vector3(x=1.0),
                        color=colour(1.0, 0.8, 0.0), pose=T.Pose(orientation=T.Quaternion(w=1.0)), points=ring)
     segments = []

@@ -17,11 +17,10 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from .bag import typestore
+from .bag import SEAL_EVERY_S, seal_chunk, typestore
 from .types import message_class
 
 log = logging.getLogger("aoa_localizer.recorder")
-_SEAL_EVERY_S = 1.0  # the open MCAP chunk is closed and flushed this often: a crash loses at most this much
 _INFINITE = QosTime(2147483647, 4294967295)  # how rosbag2 writes an infinite duration
 
 
@@ -87,22 +86,16 @@ class BagRecorder:
         self._seal_if_due()
 
     def _seal_if_due(self):
-        """Close the writer's open MCAP chunk and push it to the file about once a second, so a recorder killed
-        (SIGKILL, power) leaves a bag whose complete chunks replay. rosbags closes chunks only at 1 MiB and
-        writes metadata.yaml only at close; its MCAP writer's chunk is sealed through its own close_chunk()."""
+        """Seal the open MCAP chunk (with its CRC) about once a second, so a recorder killed (SIGKILL, power)
+        leaves a bag whose complete chunks replay and whose damage is detected."""
         now = time.monotonic()
-        if now - self._sealed_at < _SEAL_EVERY_S:
-            return
-        self._sealed_at = now
-        storage = getattr(self.writer, "storage", None)
-        chunk = getattr(storage, "chunk", None)
-        if chunk is None or not getattr(chunk, "msgs", None) or not hasattr(storage, "close_chunk"):
-            return  # nothing open, or a rosbags whose writer looks different: chunks close at 1 MiB as before
-        storage.close_chunk()
-        storage.bio.flush()
+        if now - self._sealed_at >= SEAL_EVERY_S:
+            self._sealed_at = now
+            seal_chunk(self.writer)
 
     def close(self):
         for sub in self.subs.values():
             if sub is not None:
                 self.node.destroy_subscription(sub)
+        seal_chunk(self.writer)
         self.writer.close()

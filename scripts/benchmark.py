@@ -33,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import particles_peers  # noqa: E402
 
 from aoa_localizer import LocalizerConfig  # noqa: E402
-from aoa_localizer.evaluation import LARGE_ERROR_M, run, run_batch_ml  # noqa: E402
-from aoa_localizer.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
+from aoa_localizer.engine.evaluation import LARGE_ERROR_M, run, run_batch_ml  # noqa: E402
+from aoa_localizer.engine.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
 
 logging.getLogger("aoa_localizer").setLevel(logging.ERROR)  # per-run first-rejection notes would flood the table
 
@@ -57,15 +57,15 @@ PAPER_TABLE1 = {"sir": (0.266, 0.206, 0.183, 16), "afsa": (0.101, 0.091, 0.352, 
 
 def peer_runs(data, res, truth_engine, n, seed):
     """Run the particles peers on the points our filter used; returns {name: (estimates, step_s)}."""
-    f = res.localizer.filter
-    points = f.model.history.data
-    cfg = res.localizer.cfg
+    loc = res.localizer
+    points = loc.recent_points()
+    cfg = loc.cfg
     if cfg.has_prior:
         mean, cov = np.array([cfg.prior_east, cfg.prior_north]), cfg.prior_sigma_m**2 * np.eye(2)
         # The scenario prior is in the scenario frame; our engine frame may be shifted (datum = first fix).
         mean = mean + (truth_engine - data.emitter_enu)
     else:
-        mean, cov = f.initial.mean(axis=0), 2.0 * np.cov(f.initial.T)
+        mean, cov = loc.start_cloud.mean(axis=0), 2.0 * np.cov(loc.start_cloud.T)
     out = {"particles-bootstrap": particles_peers.run_bootstrap(points, mean, cov, n, cfg.process_noise_m,
                                                                 cfg.outlier_prob, seed),
            "particles-ibis": particles_peers.run_ibis(points, mean, cov, n, cfg.outlier_prob, seed)}
@@ -140,7 +140,7 @@ def rmse_by_point(runs: list[dict], key: str = "errors"):
 
 
 def plot_scenarios(plot_dir: Path, raw: dict):
-    from aoa_localizer.plots import rmse_curves
+    from aoa_localizer.reporting.plots import rmse_curves
 
     plot_dir.mkdir(parents=True, exist_ok=True)
     for scenario, rows in raw.items():

@@ -17,7 +17,7 @@ import time
 import rclpy
 from rclpy.qos import QoSProfile
 
-from aoa_localizer.geodesy import LocalFrame
+from aoa_localizer.engine.geodesy import LocalFrame
 from msgs_adapters import build
 from msgs_adapters.fields import diagnostics_values
 

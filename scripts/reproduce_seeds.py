@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from aoa_localizer.evaluation import run_model
+from aoa_localizer.engine.evaluation import run_model
 from aoa_localizer.models import benchmarks as B
 
 # Per algorithm, how the table runs it (LocalizerConfig changes).
@@ -139,7 +139,7 @@ def plot_cells(plot_dir: Path, done: list[Cell]):
     """One figure per paper table, model and N: RMSE of the first state against k, one line per algorithm."""
     import re
 
-    from aoa_localizer.plots import rmse_curves
+    from aoa_localizer.reporting.plots import rmse_curves
 
     plot_dir.mkdir(parents=True, exist_ok=True)
     groups = {}

@@ -56,3 +56,28 @@ def test_seed_filter_groups_validate_and_round_trip():
         LocalizerConfig().with_changes(**{"espf.sbx_lambda": -1.0})
     with pytest.raises(ConfigError, match="gfapf.scale"):
         LocalizerConfig().with_changes(**{"gfapf.scale": "metres"})
+
+
+def test_the_readme_parameter_tables_are_the_declarations():
+    """One declaration per parameter: the README's tables are written from it; regenerate them with
+    `python -m aoa_localizer.param_docs README.md` after changing a parameter."""
+    from pathlib import Path
+
+    from aoa_localizer.tools.param_docs import BEGIN, END, block
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert readme[readme.index(BEGIN):readme.index(END) + len(END)] == block()
+
+
+def test_every_parameter_is_declared_with_a_meaning_and_checked_by_its_declaration():
+    from aoa_localizer.engine.config import parameter_specs
+
+    specs = parameter_specs()
+    assert len({p.name for p in specs}) == len(specs) == len(LocalizerConfig().to_dict())
+    for p in specs:
+        assert p.spec.doc and p.spec.kind in (int, float, bool, str)
+        if p.spec.kind is str:
+            assert p.default in p.spec.choices
+    # init_min_crossing_deg < 90 used to be checked in Python only, num_particles' cap in ROS only
+    with pytest.raises(ConfigError, match=r"init_min_crossing_deg must be a finite number in \(0, 90\)"):
+        LocalizerConfig(init_min_crossing_deg=90.0)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from aoa_localizer.crlb import crlb_rmse, fisher_information, inside_ellipse, nees
+from aoa_localizer.engine.crlb import crlb_rmse, fisher_information, inside_ellipse, nees
 
 
 def test_two_perpendicular_bearings_by_hand():
@@ -28,7 +28,7 @@ def test_a_collapsed_covariance_scores_infinite_nees():
 
 
 def test_crlb_so_far_grows_into_the_batch_bound():
-    from aoa_localizer.crlb import crlb_so_far
+    from aoa_localizer.engine.crlb import crlb_so_far
 
     sensors = np.array([[0.0, -100.0], [0.0, -150.0], [-200.0, 0.0], [-250.0, 10.0]])
     sigmas = np.full(4, 0.01)

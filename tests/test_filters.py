@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from aoa_localizer.config import LocalizerConfig
+from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.afsa import AfsaFilter, uniform_disc
 from aoa_localizer.filters.likelihood import (
@@ -11,7 +11,7 @@ from aoa_localizer.filters.likelihood import (
     gaussian_loglik,
     mixture_loglik,
 )
-from aoa_localizer.types import ObservationPoint
+from aoa_localizer.engine.types import ObservationPoint
 
 
 def test_gaussian_loglik_by_hand():
@@ -115,8 +115,8 @@ def test_uniform_disc_is_inside_the_unit_disc_and_centred():
 
 
 def test_cached_posterior_of_each_fish_equals_a_fresh_evaluation():
-    from aoa_localizer.evaluation import run
-    from aoa_localizer.scenarios import simulate
+    from aoa_localizer.engine.evaluation import run
+    from aoa_localizer.engine.scenarios import simulate
 
     res = run(simulate("straight", 1), LocalizerConfig(seed=5))
     f = res.localizer.filter

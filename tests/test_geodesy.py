@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from aoa_localizer.geodesy import (
+from aoa_localizer.engine.geodesy import (
     LocalFrame,
     azimuth_to_enu,
     circular_mean,

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.evaluation import run
-from aoa_localizer.input_guard import StreamClock, Verdict
-from aoa_localizer.scenarios import simulate
+from aoa_localizer.engine.evaluation import run
+from aoa_localizer.engine.input_guard import StreamClock, Verdict
+from aoa_localizer.engine.scenarios import simulate
 from msgs_adapters.fields import stamp_seconds
 
 FUTURE = 2_145_916_800.0  # 2038-01-01
@@ -161,7 +161,7 @@ def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
     """Finding 9: passing 10 m from the emitter with 3 m GPS noise, the ellipse used to shrink far below the
     error (the antenna's own position error was ignored). With each NavSatFix's covariance (sigma_m) the 95 %
     ellipse holds the truth in most runs; without it, in few."""
-    from aoa_localizer.scenarios import Scenario
+    from aoa_localizer.engine.scenarios import Scenario
 
     sc = Scenario("close", (1200.0, 800.0), ((0.0, 0.0), (1200.0, 790.0), (2400.0, 0.0)), points=40,
                   readings_per_point=3, quality=(90.0, 90.0), gps_noise_m=3.0, dwell_s=3.0)
@@ -192,3 +192,38 @@ def test_a_known_df_clock_offset_is_taken_off():
     fixed = run(late, LocalizerConfig(seed=1, df_time_offset_s=-2.0)).scores
     assert off["error"] > 10.0 and not off["inside95"]
     assert fixed["error"] < 2.0 and fixed["inside95"]
+
+
+@pytest.mark.parametrize("late_s", [0.0, 2.0])
+def test_stamps_that_a_clock_offset_explains_are_pointed_out(late_s):
+    """Reliability finding 6: a DF clock 2 s off the GPS clock gave 23 m error, status "tracking". The bearings are
+    now checked for a stamp shift that fits the track far better; the suggestion lands within 0.5 s of the truth,
+    and a run on time gets no suggestion."""
+    data = simulate("urban", 0)
+    data.bearings[:, 0] += late_s
+    loc = Localizer(LocalizerConfig(seed=1))
+    play(loc, data)
+    loc.flush()
+    loc.finish()
+    hint = loc.emitter.clock_hint
+    if late_s == 0.0:
+        assert hint is None and loc.clock_hint_sentence() is None
+    else:
+        assert hint is not None and abs(hint.shift_s + late_s) <= 0.5 and hint.gain >= 10
+        assert "try df_time_offset_s = " in loc.clock_hint_sentence()
+        assert any("DF stamps shifted" in line for line in loc.robustness_lines())
+
+
+def test_stamp_gaps_count_a_hole_in_a_regular_stream_and_nothing_else():
+    from aoa_localizer.engine.input_guard import StampGaps
+
+    gaps = StampGaps()
+    for k in range(100):
+        gaps.add(0.1 * k)
+    assert (gaps.gaps, gaps.missing) == (0, 0)
+    for k in range(150, 160):  # stamps 10.0-14.9 s never came: 50 missing at 10 Hz
+        gaps.add(0.1 * k)
+    assert gaps.gaps == 1 and gaps.missing == 50
+    gaps.add(10.0)  # a stamp from the past changes nothing
+    gaps.add(15.95)  # within 5 intervals: no gap
+    assert gaps.gaps == 1

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.geodesy import LocalFrame
+from aoa_localizer.engine.geodesy import LocalFrame
 
 DATUM = (39.1, 117.2, 5.0)
 FRAME = LocalFrame(*DATUM)

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
 
-from aoa_localizer.crlb import ELLIPSE_95
-from aoa_localizer.types import Estimate
+from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_points
+from aoa_localizer.engine.types import Estimate
 from msgs_adapters import build
 from msgs_adapters.bag import typestore
 from msgs_adapters.fields import (
@@ -92,7 +92,7 @@ def test_particles_become_poses(estimate):
 
 def test_markers_hold_the_estimate_a_closed_95_percent_ellipse_and_the_rays(estimate):
     rays = np.array([[0.0, 0.0, 0.5], [100.0, 0.0, 1.0]])
-    msg = build.markers(RCLPY, estimate, rays, ELLIPSE_95)
+    msg = build.markers(RCLPY, estimate, rays, ellipse_points((estimate.east, estimate.north), estimate.cov, ELLIPSE_95))
     for m in flavours(msg, "visualization_msgs/msg/MarkerArray"):
         sphere, ellipse, lines = m.markers
         assert (sphere.pose.position.x, sphere.pose.position.y) == (1200.5, -800.25)

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from aoa_localizer.config import LocalizerConfig
-from aoa_localizer.preprocess import (
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.preprocess import (
     PointBuilder,
     corrected_mean_coefficients,
     make_point,
@@ -13,7 +13,7 @@ from aoa_localizer.preprocess import (
     reading_sigma,
     recursive_corrected_mean,
 )
-from aoa_localizer.types import Reading
+from aoa_localizer.engine.types import Reading
 
 
 def test_quality_weight_eq20_by_hand():

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.evaluation import run
-from aoa_localizer.geodesy import LocalFrame
-from aoa_localizer.scenarios import SCENARIOS, Scenario, simulate
+from aoa_localizer.engine.evaluation import run
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.scenarios import SCENARIOS, Scenario, simulate
 from msgs_adapters.bag import write_bag
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -139,7 +139,7 @@ def test_a_foreign_type_on_an_input_topic_is_counted_and_skipped(tmp_path):
 def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
     """Finding 5: a bag in the `pose` encoding (what the launcher records with bearing_encoding=pose) could not
     be replayed offline at all."""
-    from aoa_localizer.replay import run_bag
+    from aoa_localizer.tools.bag_run import run_bag
 
     bag = _bag_with(tmp_path, "pose", extra_string=False)
     loc = Localizer(LocalizerConfig(seed=1))
@@ -153,7 +153,7 @@ def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
 def test_a_bag_cut_inside_its_only_chunk_keeps_every_complete_message(tmp_path, share):
     """Reliability finding 4: a cut anywhere inside an MCAP chunk used to lose the whole chunk (bags/seed, one
     chunk, cut at 10-90 %: 0 of 39 estimates, "damaged after 0 messages"). Every complete record is used now."""
-    from aoa_localizer.replay import run_bag
+    from aoa_localizer.tools.bag_run import run_bag
 
     bag = tmp_path / "seed"
     bag.mkdir()
@@ -171,9 +171,16 @@ def test_a_bag_cut_inside_its_only_chunk_keeps_every_complete_message(tmp_path, 
 
 
 def test_salvage_keeps_an_intact_file_whole_and_refuses_a_foreign_one():
-    from msgs_adapters.bag import salvage
+    from rosbags.highlevel import AnyReader
 
-    data = (ROOT / "bags/seed/seed.mcap").read_bytes()
-    stream, damage = salvage(data)
-    assert damage is None and stream.startswith(data[:8])
-    assert salvage(b"not an mcap file") == (b"", "no MCAP magic")
+    from msgs_adapters.mcap_salvage import Salvage, read_salvaged
+
+    file = ROOT / "bags/seed/seed.mcap"
+    report = Salvage()
+    salvaged = list(read_salvaged(file.read_bytes(), report))
+    with AnyReader([file]) as reader:
+        stored = [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+    assert not report.damage and report.lost_messages == 0
+    assert sorted((m.topic, m.log_time, m.data) for m in salvaged) == sorted(stored)
+    report = Salvage()
+    assert list(read_salvaged(b"not an mcap file", report)) == [] and report.damage == ["no MCAP magic"]

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aoa_localizer.crlb import ELLIPSE_95
-from aoa_localizer.export import KML_NS, geojson, kml
-from aoa_localizer.geodesy import LocalFrame
-from aoa_localizer.types import Estimate
+from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.reporting.export import KML_NS, geojson, kml
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.types import Estimate
 
 ROOT = Path(__file__).resolve().parent.parent
 FRAME = LocalFrame(39.1, 117.2, 5.0)

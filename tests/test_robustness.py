@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.evaluation import run
-from aoa_localizer.global_search import Points, Robust, find_modes
-from aoa_localizer.localizer import Localizer
-from aoa_localizer.noise import NoiseModel
-from aoa_localizer.safety import HealthMonitor, ModeProposal, independence_sweep
-from aoa_localizer.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
+from aoa_localizer.engine.evaluation import run
+from aoa_localizer.engine.global_search import Points, Robust, find_modes
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.noise import NoiseModel
+from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, independence_sweep
+from aoa_localizer.engine.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
 
 BASE = robustness_cells()["wild0"]
 
@@ -140,7 +140,7 @@ def test_health_monitor_alarms_on_an_implausible_outlier_share():
 
 def test_independence_moves_keep_a_known_posterior():
     """From a start far away, independence MH with the mode proposal lands on N(mu, S): mean and covariance."""
-    from aoa_localizer.global_search import Mode
+    from aoa_localizer.engine.global_search import Mode
 
     mu, cov = np.array([10.0, -5.0]), np.array([[4.0, 1.0], [1.0, 2.0]])
     prec = np.linalg.inv(cov)
@@ -160,7 +160,7 @@ def test_independence_moves_keep_a_known_posterior():
 
 
 def test_closed_form_2x2_inverse_equals_numpy():
-    from aoa_localizer.global_search import inverse_2x2
+    from aoa_localizer.engine.global_search import inverse_2x2
 
     rng = np.random.default_rng(0)
     m = rng.normal(size=(50, 2, 2))

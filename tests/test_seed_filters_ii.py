@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.evaluation import run_model
+from aoa_localizer.engine.evaluation import run_model
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.agapf import adaptive_pc, adaptive_pm
 from aoa_localizer.filters.de import crossover, distinct_indices, evolve, mutate

@@ -3,14 +3,14 @@ import math
 import numpy as np
 import pytest
 
-from aoa_localizer.triangulation import (
+from aoa_localizer.engine.triangulation import (
     good_pairs,
     initial_particles,
     intersect_rays,
     intersect_tan,
     sorted_pairs,
 )
-from aoa_localizer.types import ObservationPoint
+from aoa_localizer.engine.types import ObservationPoint
 
 
 def test_rays_cross_where_hand_geometry_says():

@@ -1,11 +1,11 @@
 """The particle filters, by the `algorithm` name users choose them with."""
-from .afsa import AfsaFilter
-from .agapf import AgaPfFilter
-from .base import ParticleFilter
-from .espf import EspfFilter
-from .gfapf import GfapfFilter
-from .sir import SirFilter
-from .upf import PfDeFilter, UpfDeFilter, UpfFilter
+from aoa_localizer.filters.afsa import AfsaFilter
+from aoa_localizer.filters.agapf import AgaPfFilter
+from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.espf import EspfFilter
+from aoa_localizer.filters.gfapf import GfapfFilter
+from aoa_localizer.filters.sir import SirFilter
+from aoa_localizer.filters.upf import PfDeFilter, UpfDeFilter, UpfFilter
 
 FILTERS = {f.name: f for f in (SirFilter, AfsaFilter, EspfFilter, GfapfFilter, UpfDeFilter, UpfFilter, PfDeFilter,
                                AgaPfFilter)}

@@ -21,8 +21,8 @@ import math
 
 import numpy as np
 
-from ..types import ObservationPoint
-from .base import ParticleFilter
+from aoa_localizer.engine.types import ObservationPoint
+from aoa_localizer.filters.base import ParticleFilter
 
 # Added to the school's covariance before its Cholesky factor, m^2: keeps moves alive in a collapsed school.
 _MIN_SPREAD_M2 = 1e-2

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ParticleFilter, ReplacesResampling
+from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 
 
 def adaptive_pc(f_parent, f_avg: float, f_max: float, pc1: float, pc2: float, a: float):

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import LocalizerConfig
-from ..models import EmitterModel, StateSpaceModel
-from .resampling import SCHEMES
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.models import EmitterModel, StateSpaceModel
+from aoa_localizer.filters.resampling import SCHEMES
 
 
 class ParticleFilter:
@@ -39,7 +39,6 @@ class ParticleFilter:
     def initialise(self, particles: np.ndarray, prior_mean=None, prior_cov=None):
         """Start from given particles (equal weights); the emitter model also takes a Gaussian prior."""
         self.x = np.array(particles, dtype=float).reshape(self.n, self.model.dim)
-        self.initial = self.x.copy()  # the start cloud, kept for peers fed the same start (benchmark)
         self.logw = np.zeros(self.n)
         if prior_mean is not None:
             self.model.set_prior(prior_mean, prior_cov)
@@ -113,7 +112,7 @@ class ParticleFilter:
         """`sweeps` random-walk MH moves scaled by the cloud, then one independence MH move from `proposal`
         (a ModeProposal) if given. Each leaves the posterior invariant, so the weighted cloud stays a sample of
         it; the weights are untouched. Returns the share of accepted moves."""
-        from ..safety import independence_sweep, random_walk_sweep
+        from aoa_localizer.engine.safety import independence_sweep, random_walk_sweep
 
         target = self.log_target(self.x)
         accepted, tried = 0, 0

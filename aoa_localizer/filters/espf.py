@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ParticleFilter
+from aoa_localizer.filters.base import ParticleFilter
 
 
 def sbx_beta(u: np.ndarray, lam: float) -> np.ndarray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ParticleFilter
+from aoa_localizer.filters.base import ParticleFilter
 
 
 def gravitation_step(x: np.ndarray, centre: int, scale: float, attraction: float, attract_min: float,

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from ..geodesy import TWO_PI
+from aoa_localizer.engine.geodesy import TWO_PI
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 

@@ -1,5 +1,5 @@
 """The bootstrap SIR filter: the skeleton as it is (prior proposal, resampling when ESS falls)."""
-from .base import ParticleFilter
+from aoa_localizer.filters.base import ParticleFilter
 
 
 class SirFilter(ParticleFilter):

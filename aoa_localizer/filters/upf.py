@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ParticleFilter, ReplacesResampling
-from .de import evolve
-from .ukf import BatchedUKF, gauss_logpdf
+from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
+from aoa_localizer.filters.de import evolve
+from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
 
 
 class UkfProposalFilter(ParticleFilter):

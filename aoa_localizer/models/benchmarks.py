@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaln
 
-from .base import StateSpaceModel
+from aoa_localizer.models.base import StateSpaceModel
 
 _LOG_2PI = math.log(2 * math.pi)
 

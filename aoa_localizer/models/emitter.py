@@ -5,10 +5,10 @@ import math
 
 import numpy as np
 
-from ..config import LocalizerConfig
-from ..filters.likelihood import BearingLikelihood
-from ..types import ObservationPoint
-from .base import StateSpaceModel
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.filters.likelihood import BearingLikelihood
+from aoa_localizer.engine.types import ObservationPoint
+from aoa_localizer.models.base import StateSpaceModel
 
 
 class PointHistory:

@@ -6,6 +6,7 @@ from enum import Enum
 
 # Fixes kept: enough to bracket any bearing still pending (bearings arrive within gps_max_gap_s).
 _KEEP_FIXES = 512
+_VELOCITY_SPAN = 3  # fix-to-fix segments a velocity is measured over
 
 
 class Where(Enum):
@@ -42,18 +43,32 @@ class GpsTrack:
                 del column[:-_KEEP_FIXES]
         return None
 
-    def locate(self, stamp: float) -> tuple[Where, tuple[float, float, float, float] | None]:
-        """(east, north, north angle, position sigma) at `stamp` if the track brackets it closely enough, else the
-        reason it does not."""
+    def locate(self, stamp: float) -> tuple[Where, tuple[float, ...] | None]:
+        """(east, north, north angle, position sigma, east and north velocity) at `stamp` if the track brackets it
+        closely enough, else the reason it does not. The velocity is that of the segment holding the stamp."""
         if not self.t or stamp < self.t[0]:
             return Where.BEFORE, None
         k = bisect.bisect_left(self.t, stamp)
         if k < len(self.t) and self.t[k] == stamp:
-            return Where.OK, (self.e[k], self.n[k], self.north[k], self.sigma[k])
+            return Where.OK, (self.e[k], self.n[k], self.north[k], self.sigma[k], *self._velocity(k))
         if k == len(self.t):
             return (Where.GAP if stamp - self.t[-1] > self.max_gap_s else Where.WAIT), None
         t0, t1 = self.t[k - 1], self.t[k]
         if t1 - t0 > self.max_gap_s:
             return Where.GAP, None
         f = (stamp - t0) / (t1 - t0)
-        return Where.OK, tuple(c[k - 1] + f * (c[k] - c[k - 1]) for c in (self.e, self.n, self.north, self.sigma))
+        at = tuple(c[k - 1] + f * (c[k] - c[k - 1]) for c in (self.e, self.n, self.north, self.sigma))
+        return Where.OK, (*at, *self._velocity(k))
+
+    def _velocity(self, k: int) -> tuple[float, float]:
+        """East and north velocity (m/s) over the fixes up to `_VELOCITY_SPAN` segments before fix k (after it for
+        the first fixes), within gaps of at most max_gap_s; 0 without such a segment. Several segments, because a
+        one-second difference of noisy fixes is mostly noise."""
+        hi = max(k, min(_VELOCITY_SPAN, len(self.t) - 1))
+        lo = hi
+        while lo > max(0, hi - _VELOCITY_SPAN) and self.t[lo] - self.t[lo - 1] <= self.max_gap_s:
+            lo -= 1
+        if lo == hi:
+            return 0.0, 0.0
+        dt = self.t[hi] - self.t[lo]
+        return (self.e[hi] - self.e[lo]) / dt, (self.n[hi] - self.n[lo]) / dt

@@ -7,7 +7,7 @@ import logging
 
 import yaml
 
-from .config import ALGORITHMS, ConfigError, LocalizerConfig
+from aoa_localizer.engine.config import ALGORITHMS, ConfigError, LocalizerConfig
 
 
 def add_engine_args(parser: argparse.ArgumentParser):

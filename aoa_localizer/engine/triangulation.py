@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from .geodesy import circular_mean, wrap_pi
-from .types import ObservationPoint
+from aoa_localizer.engine.geodesy import circular_mean, wrap_pi
+from aoa_localizer.engine.types import ObservationPoint
 
 # Redraws per particle before the cloud is filled by repeating the good draws.
 _DRAW_FACTOR = 4

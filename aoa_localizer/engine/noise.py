@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geodesy import TWO_PI
+from aoa_localizer.engine.geodesy import TWO_PI
 
 BAND_EDGES = np.arange(40.0, 101.0, 10.0)  # quality bands; below 40 joins the first, NaN has its own
 N_BANDS = BAND_EDGES.size - 1

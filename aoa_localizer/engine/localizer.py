@@ -9,17 +9,18 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter, deque
+from typing import Protocol
 
 import numpy as np
 
-from .config import LocalizerConfig
-from .geodesy import LocalFrame, azimuth_to_enu
-from .gps_track import GpsTrack, Where
-from .input_guard import StreamClock, Verdict, confirms, implausible_fix
-from .noise import sentence as noise_sentence
-from .preprocess import PointBuilder, reading_sigma
-from .track import EmitterTrack
-from .types import Estimate, ObservationPoint, Reading
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.geodesy import LocalFrame, azimuth_to_enu
+from aoa_localizer.engine.gps_track import GpsTrack, Where
+from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
+from aoa_localizer.engine.noise import sentence as noise_sentence
+from aoa_localizer.engine.preprocess import PointBuilder, reading_sigma
+from aoa_localizer.engine.track import EmitterTrack
+from aoa_localizer.engine.types import Estimate, ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
 
@@ -60,13 +61,14 @@ REASONS = {
 }
 
 
-class Trace:
-    """What a report draws: every accepted fix (stamp, east, north) and every reading paired with a position
-    (stamp, east, north, theta, sigma, kept), `kept` False for readings gated out as wild."""
+class Observer(Protocol):
+    """What a program may watch, per input, without reading the engine's internals (reports keep a trace)."""
 
-    def __init__(self):
-        self.fixes: list[tuple] = []
-        self.readings: list[tuple] = []
+    def on_fix(self, stamp: float, east: float, north: float) -> None:
+        """An accepted fix, at its ENU position."""
+
+    def on_point(self, readings: list[Reading], kept: np.ndarray) -> None:
+        """The readings of a closed observation point, and which of them it kept (False: gated out as wild)."""
 
 
 def _positive_definite(cov) -> bool:
@@ -88,10 +90,10 @@ def _as_float(value) -> float:
 class Localizer:
     """Pairs bearings with the interpolated GPS track, builds observation points, starts and runs a filter."""
 
-    def __init__(self, config: LocalizerConfig | None = None, keep_trace: bool = False):
-        """`keep_trace`: also keep every fix (ENU) and every paired reading with its fate, for reports."""
+    def __init__(self, config: LocalizerConfig | None = None, observer: Observer | None = None):
+        """`observer`: told of every accepted fix and every closed point (see Observer), for reports."""
         self.cfg = config or LocalizerConfig()
-        self.trace = Trace() if keep_trace else None
+        self.observer = observer
         self.rng = np.random.default_rng(self.cfg.seed)
         self.frame: LocalFrame | None = None
         if self.cfg.has_datum:
@@ -142,6 +144,18 @@ class Localizer:
         """Observation points buffered while waiting to start."""
         return [p for _, p, _ in self.emitter.window] if self.emitter.filter is None else []
 
+    def recent_points(self, n: int | None = None) -> np.ndarray:
+        """The latest `n` (all: None) observation points the filter uses, oldest first, as rows of antenna east,
+        north (m), bearing theta (ENU rad), its sigma (rad) and the antenna position's sigma (m); (0, 5) before
+        the start."""
+        rows = self.emitter.used_points()
+        return rows if n is None else rows[len(rows) - min(n, len(rows)):]
+
+    @property
+    def start_cloud(self) -> np.ndarray | None:
+        """The particles the filter started from (after the latest start or re-start), or None before it."""
+        return self.emitter.start_cloud
+
     @property
     def bearings_used(self) -> int:
         return self.emitter.bearings_used
@@ -167,6 +181,15 @@ class Localizer:
         summary["point_outlier_prob"] = round(self.emitter.outlier_prob, 4)
         return summary
 
+    def clock_hint_sentence(self) -> str | None:
+        """Words for a DF clock offset the bearings point to (from the last global check), or None."""
+        hint = self.emitter.clock_hint
+        if hint is None:
+            return None
+        return (f"the bearings fit the track far better with the DF stamps shifted by {hint.shift_s:+.2f} s "
+                f"(log-likelihood +{hint.gain:.0f}): a receiver delay or clock offset? try df_time_offset_s = "
+                f"{self.cfg.df_time_offset_s + hint.shift_s:.2f}")
+
     def robustness_lines(self) -> list[str]:
         """Human lines on what the robustness layer saw: the receiver's noise, alternative hypotheses, events."""
         lines = []
@@ -176,6 +199,9 @@ class Localizer:
         if est is not None and len(est.modes) > 1:
             lines.append("alternative hypotheses: " + "; ".join(
                 f"E {e:.1f} N {n:.1f} ({100 * m:.0f} %)" for e, n, m in est.modes))
+        hint = self.clock_hint_sentence()
+        if hint:
+            lines.append(hint)
         events = {k: v for k, v in self.events.items() if k != "alarm_points"}
         if events:
             lines.append("robustness events: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
@@ -238,8 +264,8 @@ class Localizer:
         if reason:
             return self._reject(reason)
         self._recent.append(None)
-        if self.trace is not None:
-            self.trace.fixes.append((stamp, float(east), float(north)))
+        if self.observer is not None:
+            self.observer.on_fix(stamp, float(east), float(north))
         estimate = self._release_pending()
         # A fix well after the open point's first reading closes it: a vehicle that stopped taking
         # readings still gets its estimate, without waiting for the next reading.
@@ -342,13 +368,13 @@ class Localizer:
             if where is not Where.OK:
                 self._reject(where.value)
                 continue
-            east, north, north_angle, gps_sigma = at
+            east, north, north_angle, gps_sigma, v_east, v_north = at
             if math.isnan(quality):
                 self.unknown_quality += 1
             if math.isnan(sigma):
                 sigma = reading_sigma(quality, self.cfg)
             reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality, sigma, east, north,
-                              float(gps_sigma))
+                              float(gps_sigma), float(v_east), float(v_north))
             closed = self.builder.add(reading)
             if closed:
                 estimate = self._use_points(closed) or estimate
@@ -362,9 +388,8 @@ class Localizer:
         estimate = None
         for readings in groups:
             took = self.emitter.add(readings)
-            if self.trace is not None:
-                self.trace.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k))
-                                        for r, k in zip(readings, self.emitter.last_kept)]
+            if self.observer is not None:
+                self.observer.on_point(readings, self.emitter.last_kept)
             if took:
                 mean, cov = self.filter.estimate()
                 if not _positive_definite(cov):

@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-from .config import LocalizerConfig
-from .geodesy import circular_mean, wrap_pi
-from .types import ObservationPoint, Reading
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.geodesy import circular_mean, wrap_pi
+from aoa_localizer.engine.types import ObservationPoint, Reading
 
 
 def quality_weight(quality):

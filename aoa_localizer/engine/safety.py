@@ -18,7 +18,7 @@ import numpy as np
 from scipy.special import gammaln
 from scipy.stats import binom
 
-from .global_search import Mode
+from aoa_localizer.engine.global_search import Mode
 
 _T_DOF = 3.0  # heavy tails: the ratio posterior / proposal stays bounded in the mode's tails
 _WIDEN = 1.5  # the Laplace covariance underestimates a bearing posterior's banana tails
@@ -128,7 +128,7 @@ def independence_sweep(x: np.ndarray, target: np.ndarray, log_target, proposal: 
 def importance_sample(log_target, proposal: ModeProposal, n: int, rng: np.random.Generator, draws_per_particle=8):
     """N particles drawn from q and resampled by pi / q (systematic): a sample of the posterior, modes in
     proportion to their mass. Duplicates are left for the MH sweeps that follow to spread."""
-    from .filters.resampling import systematic
+    from aoa_localizer.filters.resampling import systematic
 
     y = proposal.sample(draws_per_particle * n, rng)
     lw = log_target(y) - proposal.logpdf(y)

@@ -17,6 +17,8 @@ class Reading:
     east: float
     north: float
     gps_sigma: float = 0.0  # horizontal sigma of the antenna position from the fixes (m; 0: not known)
+    v_east: float = 0.0  # the vehicle's velocity at the stamp (m/s), for the DF clock offset check
+    v_north: float = 0.0
 
 
 @dataclass(frozen=True)

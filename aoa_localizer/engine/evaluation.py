@@ -6,11 +6,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import LocalizerConfig
-from .crlb import crlb_rmse, crlb_so_far, inside_ellipse, nees
-from .localizer import Localizer
-from .scenarios import ScenarioData
-from .types import Estimate
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, inside_ellipse, nees
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.scenarios import ScenarioData
+from aoa_localizer.engine.types import Estimate
 
 LARGE_ERROR_M = 15.0  # the AFSA paper's "large error"
 
@@ -116,7 +116,7 @@ def run_model(model, algorithm: str, n: int, steps: int, data_seed: int, filter_
     Data from `data_seed`, the filter from `filter_seed`, so filters compared with the same seeds see the
     same data. `changes` are LocalizerConfig fields (flat `group.name` keys allowed).
     """
-    from .filters import make_filter
+    from aoa_localizer.filters import make_filter
 
     x_true, zs = model.simulate(steps, np.random.default_rng(data_seed), jump)
     cfg = LocalizerConfig(algorithm=algorithm, num_particles=n, seed=filter_seed).with_changes(**changes)

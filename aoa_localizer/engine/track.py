@@ -23,15 +23,16 @@ from typing import Callable
 
 import numpy as np
 
-from .config import LocalizerConfig
-from .crlb import ELLIPSE_95
-from .filters import make_filter
-from .global_search import Mode, Points, Robust, find_modes, inlier_share, log_posterior, refine, residuals
-from .noise import NoiseModel, point_outlier_prob
-from .preprocess import make_point
-from .safety import HealthMonitor, ModeProposal, importance_sample
-from .triangulation import initial_particles
-from .types import ObservationPoint, Reading
+from aoa_localizer.engine.clock_check import ClockHint, best_shift
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.filters import make_filter
+from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, inlier_share, log_posterior, refine, residuals
+from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
+from aoa_localizer.engine.preprocess import make_point
+from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
+from aoa_localizer.engine.triangulation import initial_particles
+from aoa_localizer.engine.types import ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
 
@@ -75,6 +76,8 @@ class EmitterTrack:
         self.next_search = 0
         self.next_start_try = 0
         self.last_search_point = -1
+        self.start_cloud: np.ndarray | None = None  # the particles of the latest start
+        self.clock_hint: ClockHint | None = None  # a DF stamp shift the bearings prefer, from the last global check
 
     # -- points -----------------------------------------------------------------------------------
     def sigmas(self, readings: list[Reading]) -> np.ndarray:
@@ -86,6 +89,12 @@ class EmitterTrack:
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         return make_point(readings, self.cfg, self.sigmas(readings))
+
+    def used_points(self) -> np.ndarray:
+        """(K, 5) rows east, north, theta, sigma, gps sigma of the points the running filter keeps; (0, 5) before."""
+        if self.filter is None:
+            return np.zeros((0, 5))
+        return np.array(self.filter.model.history.data, float).reshape(-1, 5)
 
     def points(self) -> Points:
         return Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for _, p, _ in self.window]))
@@ -157,6 +166,7 @@ class EmitterTrack:
         self.modes, self.proposal = modes, ModeProposal(modes, self._broad_sigma(best.mean))
         particles = importance_sample(self.filter.log_target, self.proposal, cfg.num_particles, self.rng)
         self.filter.initialise(particles, best.mean, sigma**2 * np.eye(2))
+        self.start_cloud = self.filter.x.copy()
         self.filter.rejuvenate(_START_SWEEPS, self.proposal)
         self._started(f"global search: best of {len(modes)} mode(s), {best.inliers} of {len(self.window)} points agree")
         self.points_used += len(self.window)
@@ -213,6 +223,7 @@ class EmitterTrack:
         self.filter = make_filter(self.cfg, self.rng)
         self.filter.model.lik.outlier_prob = self.lik_outlier_prob
         self.filter.initialise(particles, mean, cov)
+        self.start_cloud = self.filter.x.copy()
         waiting, self.window = list(self.window), deque()
         self._started(how)
         result = False
@@ -318,6 +329,7 @@ class EmitterTrack:
         if not modes:
             return
         self.modes = modes
+        self.clock_hint = best_shift(self.points(), self._velocities(), modes[0].mean, self.robust())
         self.proposal = ModeProposal(modes, self._broad_sigma(modes[0].mean))
         best_particle = float(np.max(f.log_target(f.x)))
         if modes[0].log_post > best_particle + self.cfg.restart_log_odds:
@@ -345,6 +357,11 @@ class EmitterTrack:
             p = make_point(group, self.cfg, sigma)[0]
             rows.append([p.east, p.north, p.theta, p.sigma, p.gps_sigma])
         return Points.of(np.array(rows))
+
+    def _velocities(self) -> np.ndarray:
+        """The vehicle's mean velocity (east, north, m/s) over each kept point's readings, (K, 2)."""
+        return np.array([[np.mean([r.v_east for r in group]), np.mean([r.v_north for r in group])]
+                         for group, _, _ in self.window]).reshape(-1, 2)
 
     def _broad_sigma(self, centre: np.ndarray) -> float:
         pts = self.points()

@@ -79,3 +79,27 @@ def confirms(first: tuple[float, float, float], second: tuple[float, float, floa
     a = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
     distance = 2 * _EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(a)))
     return distance <= _CONFIRM_DISTANCE_M + _CONFIRM_SPEED_MPS * abs(t2 - t1)
+
+
+class StampGaps:
+    """Counts gaps in a stream's stamps longer than `factor` times its median interval (the last 50 intervals):
+    messages lost on the way, or a receiver that paused. Needs 10 intervals before it judges."""
+
+    def __init__(self, factor: float = 5.0, window: int = 50):
+        self.factor, self.window = factor, window
+        self.intervals: list[float] = []
+        self.last: float | None = None
+        self.gaps = 0
+        self.missing = 0  # messages the gaps would have held at the median rate
+
+    def add(self, stamp: float):
+        if self.last is not None and stamp > self.last:
+            dt = stamp - self.last
+            if len(self.intervals) >= 10:
+                typical = sorted(self.intervals)[len(self.intervals) // 2]
+                if typical > 0 and dt > self.factor * typical:
+                    self.gaps += 1
+                    self.missing += round(dt / typical) - 1
+            self.intervals = (self.intervals + [dt])[-self.window:]
+        if self.last is None or stamp > self.last:
+            self.last = stamp

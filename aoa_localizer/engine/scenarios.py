@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from pymap3d import vincenty
 
-from .geodesy import LocalFrame, wrap_360
+from aoa_localizer.engine.geodesy import LocalFrame, wrap_360
 
 DATUM = (39.1, 117.2, 5.0)
 PAPER_SIGMA_RAD = math.sqrt(3.801e-4)

@@ -7,9 +7,9 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from .crlb import ellipse_axes, ellipse_points
-from .geodesy import LocalFrame
-from .types import Estimate
+from aoa_localizer.engine.crlb import ellipse_axes, ellipse_points
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.types import Estimate
 
 KML_NS = "http://www.opengis.net/kml/2.2"
 

@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar  # noqa: E402
 
-from .crlb import ellipse_axes, ellipse_points  # noqa: E402
+from aoa_localizer.engine.crlb import ellipse_axes, ellipse_points  # noqa: E402
 
 RAYS_MAX = 400  # used rays drawn (evenly thinned beyond that); every gated-out one is drawn
 

@@ -1,0 +1,185 @@
+"""A localisation report a monitoring engineer can use: map, error plot, KML, GeoJSON and a summary.
+
+    python -m aoa_localizer.report bags/urban --out report/ --params-file bags/urban.params.yaml
+    python -m aoa_localizer.report estimates.jsonl --bag bags/seed --out report/
+
+INPUT is a rosbag2 bag (MCAP or sqlite3) (run through the engine offline, with the options of offline replay) or
+a JSON-lines file of estimates (offline replay's output) with --bag, the bag it came from (for the
+track and the bearings; the estimates are the file's). Writes map.png, emitter.kml, emitter.geojson,
+summary.md, and error.png when the bag carries the truth (sim/truth). Exit codes: 0 written; 1 the bag
+is damaged (the report covers what came before the damage); 2 unreadable input or no estimate.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from aoa_localizer.tools.cli import add_engine_args, config_from_args, setup_logging
+from aoa_localizer.engine.config import ConfigError
+from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.noise import sentence as noise_sentence
+from aoa_localizer.engine.localizer import REASONS, Localizer
+from aoa_localizer.tools.bag_run import run_bag
+from aoa_localizer.engine.types import Estimate
+
+
+class Trace:
+    """What a report draws, kept as the engine runs (a Localizer Observer): every accepted fix (stamp, east, north)
+    and every reading paired with a position (stamp, east, north, theta, sigma, kept), `kept` False for readings
+    gated out as wild."""
+
+    def __init__(self):
+        self.fixes: list[tuple] = []
+        self.readings: list[tuple] = []
+
+    def on_fix(self, stamp: float, east: float, north: float) -> None:
+        self.fixes.append((stamp, east, north))
+
+    def on_point(self, readings, kept) -> None:
+        self.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k)) for r, k in zip(readings, kept)]
+
+
+def estimates_from_jsonl(path: Path, frame_of) -> list[Estimate]:
+    """Estimates of an offline-replay JSON-lines file, placed in our frame through their lat/lon."""
+    out = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            d = json.loads(line)
+            east, north = frame_of.to_enu(d["lat"], d["lon"])
+            out.append(Estimate(stamp=float(d["stamp"]), east=float(east), north=float(north), lat=float(d["lat"]),
+                                lon=float(d["lon"]), cov=np.array(d["cov"], float), bearings_used=int(d["bearings_used"]),
+                                points_used=int(d.get("points_used", 0)), ess=float(d.get("ess", float("nan"))),
+                                algorithm=str(d.get("algorithm", "?"))))
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{path}:{n}: not an estimate line ({exc})") from exc
+    return out
+
+
+def error_series(estimates, readings: np.ndarray, truth) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per estimate: time, error, the CRLB of the readings used up to it (their modelled sigma), 95 % semi-major."""
+    t = np.array([e.stamp for e in estimates])
+    err = np.array([math.hypot(e.east - truth[0], e.north - truth[1]) for e in estimates])
+    major = np.array([ellipse_axes(e.cov)[0] for e in estimates])
+    r = readings[np.argsort(readings[:, 0])]
+    bound = crlb_so_far(truth, r[:, 1:3], r[:, 4], r[:, 0], t) if len(r) else np.full(len(t), np.inf)
+    return t, err, bound, major
+
+
+def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, truth, bound, damage):
+    a, b, azimuth = ellipse_axes(est.cov)
+    used = int(sum(1 for r in trace.readings if r[5]))
+    lines = [f"# Emitter localisation: {Path(inp).name}", "",
+             f"* **Estimate**: {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
+             f"of the datum {loc.frame.lat0:.7f}, {loc.frame.lon0:.7f})",
+             f"* **95 % error ellipse**: semi-axes {a:.1f} m x {b:.1f} m, major axis at {azimuth:.0f} deg from north",
+             f"* **Algorithm**: {est.algorithm}, N = {loc.cfg.num_particles}, seed {loc.cfg.seed}",
+             f"* **Bearings used**: {est.bearings_used} in {est.points_used} observation points "
+             f"(of {len(trace.readings)} paired with a GPS position; {used} kept inside their points)"]
+    if truth is not None:
+        err = np.array([est.east - truth[0], est.north - truth[1]])
+        lines.append(f"* **Final error against the truth**: {math.hypot(*err):.2f} m; Cramer-Rao bound of the bearings "
+                     f"used {bound:.2f} m; the truth is {'inside' if inside_ellipse(err, est.cov) else 'outside'} the 95 % ellipse")
+    if damage:
+        lines.append(f"* **Input damaged**: {damage}; this report covers the data before the damage")
+    if loc.cfg.calibrate_noise:
+        lines.append(f"* **Receiver noise (self-calibrated)**: {noise_sentence(loc.noise_summary())}")
+    if len(est.modes) > 1:
+        lines.append("* **Alternative hypotheses** (posterior modes and their probability): " + "; ".join(
+            f"{lat:.7f}, {lon:.7f} ({100 * m:.0f} %)" for (lat, lon), (_, _, m) in
+            zip((loc.frame.to_geodetic(e, n)[:2] for e, n, _ in est.modes), est.modes)))
+    events = {k: v for k, v in loc.events.items() if k != "alarm_points"}
+    if events:
+        lines.append("* **Robustness events**: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
+    lines += ["", "## Inputs not used", ""]
+    if loc.rejected:
+        lines += ["| reason | count | meaning |", "|---|---|---|"]
+        lines += [f"| `{k}` | {v} | {REASONS[k]} |" for k, v in sorted(loc.rejected.items())]
+    else:
+        lines.append("none")
+    lines += ["", "Files: `map.png`, `emitter.kml`, `emitter.geojson`" + (", `error.png`" if truth is not None else ""), ""]
+    path.write_text("\n".join(lines))
+
+
+def main(argv=None) -> int:
+    from msgs_adapters.bag import BagError
+
+    from . import export, plots
+
+    parser = argparse.ArgumentParser(prog="python -m aoa_localizer.report", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("input", type=Path, help="rosbag2 bag, or a JSON-lines file of estimates with --bag")
+    parser.add_argument("--bag", type=Path, help="with a JSON-lines INPUT: the bag the estimates came from")
+    parser.add_argument("--out", type=Path, required=True, help="directory for the report's files")
+    parser.add_argument("--fix-topic", default="/gps/fix")
+    parser.add_argument("--bearing-topic", default="/df/bearing")
+    add_engine_args(parser)
+    args = parser.parse_args(argv)
+    setup_logging(args.verbose)
+    jsonl = args.input.suffix in (".jsonl", ".json")
+    bag = args.bag if jsonl else args.input
+    if jsonl and bag is None:
+        print("report: a JSON-lines input needs --bag, the bag it came from", file=sys.stderr)
+        return 2
+    if not args.input.exists() or (bag is not None and not bag.exists()):
+        print(f"report: no such input: {args.input if not args.input.exists() else bag}", file=sys.stderr)
+        return 2
+    try:
+        cfg = config_from_args(args)
+    except ConfigError as exc:
+        print(f"report: {exc}", file=sys.stderr)
+        return 2
+    trace = Trace()
+    loc = Localizer(cfg, observer=trace)
+    estimates = []
+    try:
+        run = run_bag(bag, {"fix": args.fix_topic, "bearing": args.bearing_topic}, loc, estimates.append, desc="report")
+    except BagError as exc:
+        print(f"report: {exc}", file=sys.stderr)
+        return 2
+    if run.damage:
+        print(f"report: {run.damage}; reporting what came before", file=sys.stderr)
+    if loc.frame is None:
+        print("report: the bag holds no usable GPS fix", file=sys.stderr)
+        return 2
+    if jsonl:
+        try:
+            estimates = estimates_from_jsonl(args.input, loc.frame)
+        except (OSError, ValueError) as exc:
+            print(f"report: {exc}", file=sys.stderr)
+            return 2
+    if not estimates:
+        print(f"report: no estimate ({loc.status})", file=sys.stderr)
+        return 2
+    est = estimates[-1]
+    truth = None
+    if run.truth is not None and run.datum is not None:
+        lat, lon, _ = LocalFrame(*run.datum).to_geodetic(run.truth[1], run.truth[2], 0.0)
+        truth = tuple(float(v) for v in loc.frame.to_enu(lat, lon))
+    fixes = np.array(trace.fixes).reshape(-1, 3)
+    readings = np.array(trace.readings, dtype=float).reshape(-1, 6)
+    kept = readings[:, 5].astype(bool)
+    args.out.mkdir(parents=True, exist_ok=True)
+    plots.map_figure(args.out / "map.png", loc.frame, fixes, readings[:, :5], kept, est, truth)
+    bound = None
+    if truth is not None:
+        t, err, bounds, major = error_series(estimates, readings[kept][:, :5], truth)
+        plots.error_figure(args.out / "error.png", t, err, bounds, major)
+        bound = crlb_rmse(truth, readings[kept][:, 1:3], readings[kept][:, 4]) if kept.any() else float("inf")
+    track = fixes[:, 1:3]
+    (args.out / "emitter.kml").write_text(export.kml(loc.frame, est, track))
+    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(loc.frame, est, track), indent=1))
+    write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage)
+    print(f"report written to {args.out}: " + ", ".join(sorted(p.name for p in args.out.iterdir())), file=sys.stderr)
+    return 1 if run.damage else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,107 @@
+"""Live replay: a bag's messages published into the ROS graph in log-time order with their recorded timing and QoS."""
+from __future__ import annotations
+
+import sys
+import time
+
+import rclpy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from msgs_adapters.bag import TOPICS, BagError, RawReader
+from msgs_adapters.bag_files import BagFiles, BagFilesError, describe_topics
+from msgs_adapters.types import message_class
+
+
+def live_qos(profiles):
+    """The recorded offered QoS as an rclpy profile (reliable/volatile, depth 100, when none was recorded)."""
+    if not profiles:
+        return QoSProfile(depth=100)
+    q = profiles[0]
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(100, int(q.depth)),
+                      reliability=ReliabilityPolicy(q.reliability.value) if q.reliability.value in (1, 2)
+                      else ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy(q.durability.value) if q.durability.value in (1, 2)
+                      else DurabilityPolicy.VOLATILE)
+
+
+def _remaps(items) -> dict[str, str] | str:
+    """--remap FROM:=TO items as a dict, or the message for a malformed one."""
+    remap = {}
+    for item in items:
+        src, sep, dst = item.partition(":=")
+        if not sep:
+            return f"--remap takes FROM:=TO, got {item!r}"
+        remap[src] = dst
+    return remap
+
+
+def played_topics(args, inventory) -> list:
+    """The topics live replay publishes: --topics, every topic with --all-topics, else the inputs (fix, bearing,
+    and the simulated truth and datum), so that a bag's recorded node outputs never reach a running node's graph."""
+    if args.topics:
+        chosen = set(args.topics)
+    elif args.all_topics:
+        chosen = {t.name for t in inventory}
+    else:
+        chosen = {args.fix_topic, args.bearing_topic, TOPICS["truth"], TOPICS["datum"]}
+    return [t for t in inventory if t.name in chosen]
+
+
+def run_live(args) -> int:
+    remap = _remaps(args.remap)
+    if isinstance(remap, str):
+        print(f"replay: {remap}", file=sys.stderr)
+        return 2
+    try:
+        files = BagFiles(args.bag)
+    except BagFilesError as exc:
+        print(f"replay: {exc}", file=sys.stderr)
+        return 2
+    reader = RawReader(files)
+    inventory = reader.topics()
+    topics = played_topics(args, inventory)
+    if not topics:
+        print(f"replay: nothing to play; {args.bag} has {describe_topics(inventory)}", file=sys.stderr)
+        files.close()
+        return 2
+    rclpy.init()
+    node = rclpy.create_node("aoa_replay")
+    code, sent = 0, 0
+    try:
+        pubs = {}
+        for topic in topics:
+            cls = message_class(topic.msgtype)
+            if cls is None:
+                print(f"replay: skipping {topic.name}: type {topic.msgtype} is not installed", file=sys.stderr)
+                continue
+            pubs[topic.name] = node.create_publisher(cls, remap.get(topic.name, topic.name), live_qos(topic.qos))
+        deadline = time.monotonic() + args.wait
+        while time.monotonic() < deadline and not all(p.get_subscription_count() for p in pubs.values()):
+            rclpy.spin_once(node, timeout_sec=0.05)
+        t_wall0, t_log0 = time.monotonic(), None
+        for msg in reader.messages(set(pubs)):
+            if not rclpy.ok():
+                break
+            t_log0 = msg.log_time if t_log0 is None else t_log0
+            delay = (t_wall0 + (msg.log_time - t_log0) * 1e-9 / args.rate - time.monotonic()) if args.rate > 0 \
+                else 1.0 / args.max_rate
+            if delay > 0:
+                time.sleep(delay)
+            pubs[msg.topic].publish(msg.data)
+            sent += 1
+        time.sleep(0.5)  # let the last messages leave
+        print(f"replayed {sent} messages of {', '.join(sorted(pubs))} from {args.bag}", file=sys.stderr)
+        if reader.damage:
+            print(f"replay: {args.bag}: damaged ({'; '.join(reader.damage)}); every intact message was played",
+                  file=sys.stderr)
+            code = 1
+    except KeyboardInterrupt:
+        code = 0
+    except BagError as exc:
+        print(f"replay: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        files.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code

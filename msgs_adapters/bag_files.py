@@ -1,0 +1,106 @@
+"""A rosbag2 bag's storage files as ros2 bag leaves them: MCAP or sqlite3, split into several files, whole-file or
+per-message zstd compression, with or without metadata.yaml; each file opened on its own so that no message is lost.
+
+rosbags' directory reader drops the messages of a topic whose QoS in metadata.yaml differs from the storage's own
+copy (8 of 21 ros2/rosbag2 test bags read as empty); reading the storage files themselves avoids that.
+"""
+from __future__ import annotations
+
+import logging
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+log = logging.getLogger("aoa_localizer.bag")
+STORAGE_SUFFIXES = (".mcap", ".db3")
+
+
+class BagFilesError(RuntimeError):
+    """The path is not a rosbag2 bag (nothing there, no storage file, an unreadable metadata.yaml)."""
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """One topic of a bag as its storage declares it."""
+
+    name: str
+    msgtype: str
+    count: int
+    qos: tuple = ()  # the offered QoS profiles recorded with it (rosbags Qos), when the storage has them
+
+
+class BagFiles:
+    """The storage files of a bag at `path` (a bag directory, or one .mcap/.db3 file), decompressed into a temporary
+    directory when the bag compresses whole files. Use as a context manager; `files` are in recording order."""
+
+    def __init__(self, path: Path | str):
+        self.path = Path(path)
+        self.message_compression = False  # every payload zstd-compressed on its own
+        self.declared_messages: int | None = None  # metadata.yaml's message_count, when there is one
+        self._tmp: tempfile.TemporaryDirectory | None = None
+        self.files = self._find()
+
+    def _find(self) -> list[Path]:
+        path = self.path
+        if not path.exists():
+            raise BagFilesError(f"{path}: no such bag")
+        if path.is_file():
+            return [self._plain(path)]
+        meta = path / "metadata.yaml"
+        if meta.is_file():
+            try:
+                info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+                names = [Path(p).name for p in info.get("relative_file_paths") or []]
+            except Exception as exc:  # noqa: BLE001 - any malformed metadata: read the storage files themselves
+                log.warning("%s: metadata.yaml unreadable (%s: %s); reading the storage files", meta,
+                            type(exc).__name__, exc)
+                names, info = [], {}
+            self.message_compression = (info.get("compression_mode") or "").upper() == "MESSAGE"
+            self.declared_messages = info.get("message_count")
+            files = [path / n for n in names if (path / n).is_file()]
+            if files:
+                return [self._plain(f) for f in files]
+        files = sorted(f for f in path.iterdir() if f.name.endswith(STORAGE_SUFFIXES)
+                       or f.name.endswith(tuple(s + ".zstd" for s in STORAGE_SUFFIXES)))
+        if not files:
+            raise BagFilesError(f"{path}: not a rosbag2 bag (no .mcap or .db3 file)")
+        return [self._plain(f) for f in files]
+
+    def _plain(self, file: Path) -> Path:
+        """The file itself, or its decompressed copy when ros2 bag compressed it whole (name.mcap.zstd)."""
+        if not file.name.endswith(".zstd"):
+            return file
+        import zstandard
+
+        if self._tmp is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="aoa_bag_")
+        out = Path(self._tmp.name) / file.name[: -len(".zstd")]
+        with open(file, "rb") as src, open(out, "wb") as dst:
+            zstandard.ZstdDecompressor().copy_stream(src, dst)
+        return out
+
+    def payload(self, raw: bytes) -> bytes:
+        """A message's CDR bytes (decompressed when the bag compresses each message)."""
+        if not self.message_compression:
+            return raw
+        import zstandard
+
+        return zstandard.ZstdDecompressor().decompressobj().decompress(bytes(raw))  # frames may omit their size
+
+    def close(self):
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def __enter__(self) -> BagFiles:
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def describe_topics(topics: list[TopicInfo]) -> str:
+    """'name (type, N messages)', one per topic, for messages that say what a bag holds."""
+    return ", ".join(f"{t.name} ({t.msgtype}, {t.count} messages)" for t in topics) or "no topics at all"
