@@ -19,7 +19,7 @@ try:
 except ImportError:  # the `bench` extra is not installed
     particles = None
 
-from aoa_localizer.filters.likelihood import mixture_loglik
+from aoa_localizer.models.likelihood import mixture_loglik
 from aoa_localizer.engine.geodesy import wrap_pi
 
 AVAILABLE = particles is not None

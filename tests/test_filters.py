@@ -5,8 +5,9 @@ import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.filters import make_filter
+from aoa_localizer.models.emitter import EmitterModel
 from aoa_localizer.filters.afsa import AfsaFilter, uniform_disc
-from aoa_localizer.filters.likelihood import (
+from aoa_localizer.models.likelihood import (
     BearingLikelihood,
     gaussian_loglik,
     mixture_loglik,
@@ -38,7 +39,7 @@ def test_likelihood_wraps_the_residual_and_adds_gps_noise_by_range():
 
 def _filter(**kw):
     cfg = LocalizerConfig(seed=1, num_particles=kw.pop("n", 4), **kw)
-    return make_filter(cfg, np.random.default_rng(cfg.seed))
+    return make_filter(cfg, np.random.default_rng(cfg.seed), EmitterModel(cfg))
 
 
 def test_ess_estimate_and_covariance_by_hand():
@@ -98,7 +99,7 @@ def test_mcmc_moves_pull_a_misplaced_school_towards_the_posterior():
 def test_paper_school_swims_towards_the_bearing_line():
     cfg = LocalizerConfig(seed=3, num_particles=200).with_changes(**{"afsa.variant": "paper", "afsa.visual": 5.0,
                                                                      "afsa.step": 2.0})
-    f = make_filter(cfg, np.random.default_rng(3))
+    f = make_filter(cfg, np.random.default_rng(3), EmitterModel(cfg))
     rng = np.random.default_rng(4)
     x = np.column_stack([rng.uniform(900, 1100, 200), rng.uniform(-60, 60, 200)])
     p = ObservationPoint(0.0, 0.0, 0.0, 0.0, math.radians(1.0), 1)  # the line north = 0
@@ -126,3 +127,19 @@ def test_cached_posterior_of_each_fish_equals_a_fresh_evaluation():
         assert np.allclose(f.target, fresh)
     f.move()  # a move always starts from a correct cache and leaves one behind
     assert np.allclose(f.target, f.log_target(f.x))
+
+
+def test_a_filter_refuses_a_model_without_the_capability_it_needs():
+    """The model contract: AFSA needs a static posterior (its school and the MCMC moves evaluate it), the UPF
+    family an unscented form and a transition density; make_filter says which is missing."""
+    from aoa_localizer.filters import ModelMismatch
+    from aoa_localizer.models.benchmarks import BearingsOnlyModel, GrowthModel
+
+    with pytest.raises(ModelMismatch, match="afsa needs a model with StaticPosterior.*GrowthModel has not"):
+        make_filter(LocalizerConfig(algorithm="afsa"), np.random.default_rng(0), GrowthModel())
+    for algorithm in ("upf", "upfde"):
+        with pytest.raises(ModelMismatch, match=f"{algorithm} needs a model with UnscentedForm.*BearingsOnlyModel"):
+            make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), BearingsOnlyModel())
+    for algorithm in ("sir", "espf", "gfapf", "pfde", "agapf", "upf"):
+        assert make_filter(LocalizerConfig(algorithm=algorithm, num_particles=10), np.random.default_rng(0),
+                           GrowthModel()).name == algorithm

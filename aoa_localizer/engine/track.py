@@ -27,6 +27,7 @@ from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.filters import make_filter
+from aoa_localizer.models.emitter import EmitterModel
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, inlier_share, log_posterior, refine, residuals
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.preprocess import make_point
@@ -157,7 +158,7 @@ class EmitterTrack:
         best = modes[0]
         last = self.window[-1][1]
         sigma = max(_PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(best.mean[0] - last.east, best.mean[1] - last.north))
-        self.filter = make_filter(cfg, self.rng)
+        self.filter = make_filter(cfg, self.rng, EmitterModel(cfg))
         self.filter.model.set_prior(best.mean, sigma**2 * np.eye(2))
         self.filter.model.lik.outlier_prob = self.lik_outlier_prob
         for _, p, _ in self.window:
@@ -220,7 +221,7 @@ class EmitterTrack:
         return self._start_then_replay(particles, mean, cfg.prior_sigma_m**2 * np.eye(2), "prior")
 
     def _start_then_replay(self, particles, mean, cov, how: str):
-        self.filter = make_filter(self.cfg, self.rng)
+        self.filter = make_filter(self.cfg, self.rng, EmitterModel(self.cfg))
         self.filter.model.lik.outlier_prob = self.lik_outlier_prob
         self.filter.initialise(particles, mean, cov)
         self.start_cloud = self.filter.x.copy()

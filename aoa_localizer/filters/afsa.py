@@ -23,6 +23,7 @@ import numpy as np
 
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.models.base import StaticPosterior
 
 # Added to the school's covariance before its Cholesky factor, m^2: keeps moves alive in a collapsed school.
 _MIN_SPREAD_M2 = 1e-2
@@ -45,10 +46,11 @@ class AfsaFilter(ParticleFilter):
     """Fish = particle; the objective is the bearing likelihood (eq. 12)."""
 
     name = "afsa"
+    needs = (StaticPosterior,)
 
-    def __init__(self, cfg, rng, model=None):
-        super().__init__(cfg, rng, model)
-        self.paper = cfg.afsa.variant == "paper"
+    def __init__(self, settings, rng, model):
+        super().__init__(settings, rng, model)
+        self.paper = settings.afsa.variant == "paper"
         self.acceptance = float("nan")  # share of accepted moves in the last mcmc move stage
         self.school_rounds = 0  # rounds the paper school swam at the last step
         self.spread = np.eye(2)  # weighted covariance of the school just before the last resampling
@@ -63,7 +65,7 @@ class AfsaFilter(ParticleFilter):
             super().predict()
 
     # -- the paper's school ---------------------------------------------------------------------
-    def initialise(self, particles, prior_mean, prior_cov):
+    def initialise(self, particles, prior_mean=None, prior_cov=None):
         super().initialise(particles, prior_mean, prior_cov)
         self.target, self.target_points = self.log_target(self.x), self.model.history.appended
 

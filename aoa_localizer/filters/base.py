@@ -2,29 +2,55 @@
 estimate and covariance, over any StateSpaceModel (the emitter problem, or a paper's benchmark model).
 
 One `update(z)` is one measurement: propose (by default: predict with the model's transition) -> weight
--> `after_weight` hook -> resample when `should_resample()` -> `after_resample` hook. A filter module
-overrides the hooks, nothing else.
+-> `after_weight` hook -> resample when `should_resample()` -> `after_resample` hook. A filter module overrides
+these steps (propose, after_weight, should_resample, resample, after_resample, predict) and, when it keeps state
+that depends on the whole posterior (AFSA's cached targets), initialise, invalidate and targets_known.
+A filter names the model capabilities it needs in `needs` (models/base.py); `make_filter` checks them.
+The robustness layer's moves (log_target, rejuvenate, reweight, replace_cloud) need a StaticPosterior model.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.models import EmitterModel, StateSpaceModel
+from dataclasses import dataclass, field
+
+from aoa_localizer.engine.config import AfsaConfig, AgapfConfig, DeConfig, EspfConfig, GfapfConfig, LocalizerConfig
 from aoa_localizer.filters.resampling import SCHEMES
+from aoa_localizer.models.base import StateSpaceModel
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """What a filter reads of the configuration: the skeleton's settings and each algorithm's own group (a filter
+    reads only its group), so a benchmark model needs no emitter settings."""
+
+    num_particles: int = 100
+    resampling: str = "systematic"
+    ess_threshold: float = 0.5
+    afsa: AfsaConfig = field(default_factory=AfsaConfig)
+    espf: EspfConfig = field(default_factory=EspfConfig)
+    gfapf: GfapfConfig = field(default_factory=GfapfConfig)
+    de: DeConfig = field(default_factory=DeConfig)
+    agapf: AgapfConfig = field(default_factory=AgapfConfig)
+
+    @classmethod
+    def of(cls, cfg: LocalizerConfig) -> FilterSettings:
+        return cls(cfg.num_particles, cfg.resampling, cfg.ess_threshold, cfg.afsa, cfg.espf, cfg.gfapf, cfg.de,
+                   cfg.agapf)
 
 
 class ParticleFilter:
     """Bootstrap skeleton; subclasses change behaviour only through the hooks."""
 
     name = "base"
+    needs: tuple[type, ...] = ()  # model capabilities (protocols of models/base.py) beyond StateSpaceModel
 
-    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, model: StateSpaceModel | None = None):
-        self.cfg = cfg
+    def __init__(self, settings: FilterSettings, rng: np.random.Generator, model: StateSpaceModel):
+        self.cfg = settings
         self.rng = rng
-        self.model = model if model is not None else EmitterModel(cfg)
-        self.n = cfg.num_particles
-        self.resampler = SCHEMES[cfg.resampling]
+        self.model = model
+        self.n = settings.num_particles
+        self.resampler = SCHEMES[settings.resampling]
         self.x = np.zeros((self.n, self.model.dim))
         self.logw = np.zeros(self.n)
         self.k = 0  # measurements taken

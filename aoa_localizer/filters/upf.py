@@ -16,10 +16,13 @@ import numpy as np
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.de import evolve
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
+from aoa_localizer.models.base import TransitionDensity, UnscentedForm
 
 
 class UkfProposalFilter(ParticleFilter):
     """The per-particle unscented proposal (shared by upf and upfde)."""
+
+    needs = (UnscentedForm, TransitionDensity)
 
     def initialise(self, particles, prior_mean=None, prior_cov=None):
         super().initialise(particles, prior_mean, prior_cov)

@@ -1,5 +1,8 @@
-"""What a filter needs from a model: sample the transition, score a measurement, (optionally) remember it."""
+"""The model contract. Every model gives what the particle-filter skeleton calls (StateSpaceModel); what only some
+filters need is an optional capability, a typed protocol that `make_filter` checks before a filter runs."""
 from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -23,3 +26,36 @@ class StateSpaceModel:
 
     def observe(self, z):
         """Remember z (models whose move steps need the past); nothing by default."""
+
+
+@runtime_checkable
+class StaticPosterior(Protocol):
+    """A static state whose whole posterior over the kept measurements can be evaluated: what MCMC moves, the
+    fish school of AFSA and the robustness layer need. `history` holds the kept measurements."""
+
+    history: Any
+
+    def set_prior(self, mean, cov) -> None: ...
+
+    def log_posterior(self, x: np.ndarray) -> np.ndarray: ...
+
+
+@runtime_checkable
+class TransitionDensity(Protocol):
+    """log p(x_k | x_{k-1}) can be evaluated (a proposal other than the transition needs it in its weight)."""
+
+    def transition_logpdf(self, x: np.ndarray, x_prev: np.ndarray, k: int) -> np.ndarray: ...
+
+
+@runtime_checkable
+class UnscentedForm(Protocol):
+    """The model as a UKF sees it at step k: (f, Q, h, R, which measurement components are angles, z vector)."""
+
+    def ukf(self, k: int, z) -> tuple: ...
+
+
+CAPABILITY_WORDS = {
+    StaticPosterior: "StaticPosterior (history, set_prior, log_posterior: a static state's whole posterior)",
+    TransitionDensity: "TransitionDensity (transition_logpdf)",
+    UnscentedForm: "UnscentedForm (ukf: the model as a UKF sees it)",
+}
