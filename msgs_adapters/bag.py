@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import logging
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Any
 
+from rosbags.highlevel import AnyReader
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -20,14 +22,13 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from . import build
 from .bag_files import BagFiles, BagFilesError, TopicInfo, describe_topics
-from .mcap_salvage import RawMessage, Salvage, read_salvaged
 from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, stamp_seconds
+from .mcap_salvage import RawMessage, Salvage, read_salvaged
 
 log = logging.getLogger("aoa_localizer.bag")
 
@@ -77,7 +78,7 @@ class BagEvent:
 
     kind: str
     log_time_ns: int
-    record: object
+    record: Any
 
 
 def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None):
@@ -91,7 +92,7 @@ def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None):
     if truth_enu is not None:
         messages.append((t0, "truth", build.point_stamped(T, t0, float(truth_enu[0]), float(truth_enu[1]))))
     if datum is not None:
-        messages.append((t0, "datum", build.navsatfix(T, t0, *datum, frame_id="map")))
+        messages.append((t0, "datum", build.navsatfix(T, t0, datum[0], datum[1], datum[2], frame_id="map")))
     messages.sort(key=lambda m: m[0])
     with Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conns = {}
@@ -117,7 +118,7 @@ def seal_chunk(writer: Writer) -> bool:
     CRC 0 ("not computed"), so without this a crash loses a whole chunk and damage inside one goes unnoticed."""
     storage = getattr(writer, "storage", None)
     chunk = getattr(storage, "chunk", None)
-    if chunk is None or not getattr(chunk, "msgs", None) or not hasattr(storage, "close_chunk"):
+    if storage is None or chunk is None or not getattr(chunk, "msgs", None) or not hasattr(storage, "close_chunk"):
         return False
     crc = zlib.crc32(chunk.bio.getvalue())
     start = storage.bio.tell()
@@ -212,7 +213,8 @@ class RawReader:
             except Exception:  # noqa: BLE001 - rosbags cannot open it: count what the record-by-record read finds
                 for msg in self._salvaged(file, Salvage()):
                     seen[(msg.topic, msg.msgtype)] = seen.get((msg.topic, msg.msgtype), 0) + 1
-        return [TopicInfo(name, msgtype, n, qos.get((name, msgtype), ())) for (name, msgtype), n in sorted(seen.items())]
+        return [TopicInfo(name, msgtype, n, qos.get((name, msgtype), ()))
+                for (name, msgtype), n in sorted(seen.items())]
 
     def messages(self, wanted: set[str]) -> Iterator[RawMessage]:
         for file in self.files.files:
@@ -243,8 +245,11 @@ class RawReader:
             self.damage.append(f"{file.name}: {'; '.join(report.damage)}")
             self.lost += report.lost_messages
         else:
-            log.warning("%s: rosbags could not read it (%s); read record by record", file,
-                        str(failure).splitlines()[0] if str(failure) else type(failure).__name__)
+            log.warning(
+                "%s: rosbags could not read it (%s); read record by record",
+                file,
+                str(failure).splitlines()[0] if str(failure) else type(failure).__name__,
+            )
 
     def _salvaged(self, file: Path, report: Salvage) -> Iterator[RawMessage]:
         for msg in read_salvaged(file.read_bytes(), report):

@@ -8,7 +8,6 @@ from types import SimpleNamespace
 
 import numpy as np
 
-
 from .fields import seconds_to_stamp
 
 
@@ -35,12 +34,14 @@ def rclpy_types() -> SimpleNamespace:
         PointStamped,
         Pose,
         PoseArray,
+        PoseStamped,
         PoseWithCovariance,
         PoseWithCovarianceStamped,
         Quaternion,
         Vector3,
         Vector3Stamped,
     )
+    from nav_msgs.msg import Path
     from sensor_msgs.msg import NavSatFix, NavSatStatus
     from std_msgs.msg import ColorRGBA, Header
     from visualization_msgs.msg import Marker, MarkerArray
@@ -48,7 +49,7 @@ def rclpy_types() -> SimpleNamespace:
     return SimpleNamespace(**{c.__name__: c for c in (
         Time, Header, NavSatFix, NavSatStatus, Vector3Stamped, Vector3, PointStamped, Point, Pose, PoseArray,
         PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, ColorRGBA, Marker, MarkerArray,
-        DiagnosticArray, DiagnosticStatus, KeyValue)})
+        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped)})
 
 
 def header(T, stamp: float, frame_id: str):
@@ -78,9 +79,10 @@ def pose_bearing(T, stamp: float, yaw_rad: float, variance_rad2: float, frame_id
     cov = np.zeros(36)
     cov[35] = variance_rad2
     q = T.Quaternion(x=0.0, y=0.0, z=math.sin(yaw_rad / 2), w=math.cos(yaw_rad / 2))
-    return T.PoseWithCovarianceStamped(header=header(T, stamp, frame_id),
-                                       pose=T.PoseWithCovariance(pose=T.Pose(position=T.Point(x=0.0, y=0.0, z=0.0), orientation=q),
-                                                                 covariance=cov))
+    return T.PoseWithCovarianceStamped(
+        header=header(T, stamp, frame_id),
+        pose=T.PoseWithCovariance(pose=T.Pose(position=T.Point(x=0.0, y=0.0, z=0.0), orientation=q), covariance=cov),
+    )
 
 
 def point_stamped(T, stamp: float, x: float, y: float, z: float = 0.0, frame_id: str = "map"):
@@ -93,22 +95,40 @@ def emitter_pose(T, est, frame_id: str = "map"):
     cov = np.zeros(36)
     cov[[0, 1, 6, 7]] = np.asarray(est.cov, float).reshape(4)
     pose = T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0))
-    return T.PoseWithCovarianceStamped(header=header(T, est.stamp, frame_id),
-                                       pose=T.PoseWithCovariance(pose=pose, covariance=cov))
+    return T.PoseWithCovarianceStamped(
+        header=header(T, est.stamp, frame_id), pose=T.PoseWithCovariance(pose=pose, covariance=cov)
+    )
 
 
-def emitter_fix(T, est, alt: float):
+def emitter_fix(T, est, alt: float, frame_id: str = "emitter"):
     """emitter/fix: lat/lon with the ENU covariance (m^2), COVARIANCE_TYPE_APPROXIMATED."""
     cov = np.zeros(9)
     cov[[0, 1, 3, 4]] = np.asarray(est.cov, float).reshape(4)
-    return navsatfix(T, est.stamp, est.lat, est.lon, alt, status=0, frame_id="map", covariance=cov,
+    return navsatfix(T, est.stamp, est.lat, est.lon, alt, status=0, frame_id=frame_id, covariance=cov,
                      covariance_type=1)
+
+
+def datum_fix(T, stamp: float, lat: float, lon: float, alt: float, frame_id: str = "map"):
+    """emitter/datum: the WGS84 position of the map frame's origin (frame_id the map frame), no covariance."""
+    return navsatfix(T, stamp, lat, lon, alt, status=0, frame_id=frame_id)
+
+
+def vehicle_path(T, stamp: float, track, frame_id: str = "map"):
+    """vehicle/path: the accepted GPS fixes, rows (stamp, east, north) in the map frame, oldest first."""
+    poses = [
+        T.PoseStamped(header=header(T, t, frame_id),
+                      pose=T.Pose(position=T.Point(x=float(e), y=float(n), z=0.0), orientation=T.Quaternion(w=1.0)))
+        for t, e, n in track
+    ]
+    return T.Path(header=header(T, stamp, frame_id), poses=poses)
 
 
 def particle_array(T, est, frame_id: str = "map"):
     """emitter/particles: one pose per particle."""
-    poses = [T.Pose(position=T.Point(x=float(x), y=float(y), z=0.0), orientation=T.Quaternion(w=1.0))
-             for x, y in est.particles]
+    poses = [
+        T.Pose(position=T.Point(x=float(x), y=float(y), z=0.0), orientation=T.Quaternion(w=1.0))
+        for x, y in est.particles
+    ]
     return T.PoseArray(header=header(T, est.stamp, frame_id), poses=poses)
 
 
@@ -117,24 +137,56 @@ def markers(T, est, rays, ring, frame_id: str = "map"):
     points), the bearing rays (line list; rays: (M, 3) antenna east, north and ENU bearing of the latest points)."""
     h = header(T, est.stamp, frame_id)
     colour = lambda r, g, b: T.ColorRGBA(r=r, g=g, b=b, a=1.0)  # noqa: E731
-    sphere = T.Marker(header=h, ns="estimate", id=0, type=2, action=0, scale=T.Vector3(x=4.0, y=4.0, z=4.0),
-                      color=colour(1.0, 0.1, 0.1),
-                      pose=T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0)))
+    sphere = T.Marker(
+        header=h,
+        ns="estimate",
+        id=0,
+        type=2,
+        action=0,
+        scale=T.Vector3(x=4.0, y=4.0, z=4.0),
+        color=colour(1.0, 0.1, 0.1),
+        pose=T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0)),
+    )
     ring = [T.Point(x=float(x), y=float(y), z=0.0) for x, y in ring]
-    ellipse = T.Marker(header=h, ns="ellipse95", id=1, type=4, action=0, scale=T.Vector3(x=1.0),
-                       color=colour(1.0, 0.8, 0.0), pose=T.Pose(orientation=T.Quaternion(w=1.0)), points=ring)
+    ellipse = T.Marker(
+        header=h,
+        ns="ellipse95",
+        id=1,
+        type=4,
+        action=0,
+        scale=T.Vector3(x=1.0),
+        color=colour(1.0, 0.8, 0.0),
+        pose=T.Pose(orientation=T.Quaternion(w=1.0)),
+        points=ring,
+    )
     segments = []
     for e, n, theta in rays:
         length = 1.2 * math.hypot(est.east - e, est.north - n) + 50.0
-        segments += [T.Point(x=float(e), y=float(n), z=0.0),
-                     T.Point(x=float(e + length * math.cos(theta)), y=float(n + length * math.sin(theta)), z=0.0)]
-    ray_marker = T.Marker(header=h, ns="bearings", id=2, type=5, action=0, scale=T.Vector3(x=0.5),
-                          color=colour(0.2, 0.6, 1.0), pose=T.Pose(orientation=T.Quaternion(w=1.0)), points=segments)
+        segments += [
+            T.Point(x=float(e), y=float(n), z=0.0),
+            T.Point(x=float(e + length * math.cos(theta)), y=float(n + length * math.sin(theta)), z=0.0),
+        ]
+    ray_marker = T.Marker(
+        header=h,
+        ns="bearings",
+        id=2,
+        type=5,
+        action=0,
+        scale=T.Vector3(x=0.5),
+        color=colour(0.2, 0.6, 1.0),
+        pose=T.Pose(orientation=T.Quaternion(w=1.0)),
+        points=segments,
+    )
     return T.MarkerArray(markers=[sphere, ellipse, ray_marker])
 
 
-def diagnostic_array(T, stamp: float, name: str, level: int, message: str, values: dict):
+def diagnostic_array(T, stamp: float, name: str, level: int, message: str, values: dict, hardware_id: str = ""):
     """/diagnostics with one status; values become KeyValue strings."""
-    status = T.DiagnosticStatus(level=bytes([level]), name=name, message=message, hardware_id="aoa_localizer",
-                                values=[T.KeyValue(key=str(k), value=str(v)) for k, v in values.items()])
+    status = T.DiagnosticStatus(
+        level=bytes([level]),
+        name=name,
+        message=message,
+        hardware_id=hardware_id,
+        values=[T.KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
+    )
     return T.DiagnosticArray(header=header(T, stamp, ""), status=[status])

@@ -20,7 +20,7 @@ class FixRecord(NamedTuple):
 
 
 class DfRecord(NamedTuple):
-    """A DF record (Vector3Stamped encoding of INTERFACE.md) as Localizer.add_bearing takes it."""
+    """A DF record (Vector3Stamped encoding of docs/interface.md) as Localizer.add_bearing takes it."""
 
     stamp: float
     azimuth_deg: float

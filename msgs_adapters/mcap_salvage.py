@@ -6,8 +6,8 @@ A cut chunk gives up each complete record inside it; a chunk whose CRC does not 
 from __future__ import annotations
 
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Iterator
 
 MAGIC = b"\x89MCAP0\r\n"
 _SCHEMA, _CHANNEL, _MESSAGE, _CHUNK, _FOOTER, _DATA_END = 0x03, 0x04, 0x05, 0x06, 0x02, 0x0F
@@ -71,76 +71,84 @@ def read_salvaged(data: bytes, report: Salvage) -> Iterator[RawMessage]:
     if not data.startswith(MAGIC):
         report.damage.append("no MCAP magic")
         return
-    schemas: dict[int, str] = {}
-    channels: dict[int, tuple[str, int]] = {}
+    yield from _Salvager(report).top_level(data)
 
-    def records(buf: bytes, where: str) -> Iterator[RawMessage]:
-        for op, body in _records(buf):
-            if op is None:
-                report.damage.append(f"{body}{where}")
+
+class _Salvager:
+    """Walks an MCAP file's records, keeping schemas and channels as they come."""
+
+    def __init__(self, report: Salvage):
+        self.report = report
+        self.schemas: dict[int, str] = {}
+        self.channels: dict[int, tuple[str, int]] = {}
+
+    def top_level(self, data: bytes) -> Iterator[RawMessage]:
+        """The file's records after the magic, by hand, so each chunk knows its byte offset for the report."""
+        pos = len(MAGIC)
+        while pos < len(data):
+            if pos + 9 > len(data):
+                self.report.damage.append(f"cut at byte {pos}")
                 return
-            assert isinstance(body, bytes)
-            if op == _SCHEMA:
-                schemas[_u16(body, 0)] = _string(body, 2)[0]
-            elif op == _CHANNEL:
-                topic, _ = _string(body, 4)
-                channels[_u16(body, 0)] = (topic, _u16(body, 2))
-            elif op == _MESSAGE:
-                chan = channels.get(_u16(body, 0))
-                if chan is None:
-                    report.damage.append(f"a message on an undeclared channel{where}")
-                    report.lost_messages += 1
-                    continue
-                yield RawMessage(chan[0], schemas.get(chan[1], ""), _u64(body, 6), body[22:])
-            elif op == _CHUNK:
-                yield from chunk(body, where)
-            elif op in (_FOOTER, _DATA_END):
+            op, length = data[pos], _u64(data, pos + 1)
+            body = data[pos + 9:pos + 9 + length]
+            if op == 0:
+                self.report.damage.append(f"an invalid record (opcode 0) at byte {pos}")
+                return
+            if len(body) < length:
+                yield from self.cut(op, body, pos)
+                return
+            if op in (_FOOTER, _DATA_END):
                 return  # the summary after the data section repeats what the chunks declared
+            if op == _CHUNK:
+                yield from self.chunk(body, pos)
+            else:
+                yield from self.records(data[pos:pos + 9 + length], "")
+            pos += 9 + length
 
-    def chunk(body: bytes, where: str) -> Iterator[RawMessage]:
+    def cut(self, op: int, body: bytes, pos: int) -> Iterator[RawMessage]:
+        """A record the file ends inside: an uncompressed chunk still gives up its complete records."""
+        if op == _CHUNK and len(body) >= 36:
+            self.report.damage.append(f"cut in the chunk at byte {pos}")
+            compression, at = _string(body, 28)
+            if not compression:
+                yield from self.records(body[at + 8:], f" inside the chunk at byte {pos}")
+        else:
+            self.report.damage.append(f"cut at byte {pos}")
+
+    def chunk(self, body: bytes, offset: int) -> Iterator[RawMessage]:
+        """A whole chunk: decompressed, checked against its CRC (skipped and counted on a mismatch), read."""
         crc = _u32(body, 24)
         compression, at = _string(body, 28)
-        size = _u64(body, at)
-        inner = body[at + 8:at + 8 + size]
+        inner = body[at + 8:at + 8 + _u64(body, at)]
         if compression:
             if compression != "zstd":
-                report.damage.append(f"a {compression} chunk{where}: not read")
+                self.report.damage.append(f"a {compression} chunk at byte {offset}: not read")
                 return
             import zstandard
 
             inner = zstandard.ZstdDecompressor().decompressobj().decompress(inner)
         if crc and zlib.crc32(inner) != crc:
             lost = sum(1 for op, _ in _records(inner) if op == _MESSAGE)
-            report.damage.append(f"the chunk at byte {offset} failed its CRC check; its {lost} messages not used")
-            report.lost_messages += lost
+            self.report.damage.append(f"the chunk at byte {offset} failed its CRC check; its {lost} messages not used")
+            self.report.lost_messages += lost
             return
-        yield from records(inner, f" inside the chunk at byte {offset}")
+        yield from self.records(inner, f" inside the chunk at byte {offset}")
 
-    # Walk the top level by hand, so a chunk knows its byte offset for the report.
-    pos = len(MAGIC)
-    while pos < len(data):
-        offset = pos
-        if pos + 9 > len(data):
-            report.damage.append(f"cut at byte {pos}")
-            return
-        op, length = data[pos], _u64(data, pos + 1)
-        body = data[pos + 9:pos + 9 + length]
-        if op == 0:
-            report.damage.append(f"an invalid record (opcode 0) at byte {pos}")
-            return
-        if len(body) < length:
-            if op == _CHUNK and len(body) >= 36:
-                report.damage.append(f"cut in the chunk at byte {pos}")
-                compression, at = _string(body, 28)
-                if not compression:
-                    yield from records(body[at + 8:], f" inside the chunk at byte {pos}")
-            else:
-                report.damage.append(f"cut at byte {pos}")
-            return
-        if op in (_FOOTER, _DATA_END):
-            return
-        if op == _CHUNK:
-            yield from chunk(body, "")
-        else:
-            yield from records(data[pos:pos + 9 + length], "")
-        pos += 9 + length
+    def records(self, buf: bytes, where: str) -> Iterator[RawMessage]:
+        for op, body in _records(buf):
+            if op is None or isinstance(body, str):
+                self.report.damage.append(f"{body!s}{where}")
+                return
+            if op == _SCHEMA:
+                self.schemas[_u16(body, 0)] = _string(body, 2)[0]
+            elif op == _CHANNEL:
+                self.channels[_u16(body, 0)] = (_string(body, 4)[0], _u16(body, 2))
+            elif op == _MESSAGE:
+                chan = self.channels.get(_u16(body, 0))
+                if chan is None:
+                    self.report.damage.append(f"a message on an undeclared channel{where}")
+                    self.report.lost_messages += 1
+                    continue
+                yield RawMessage(chan[0], self.schemas.get(chan[1], ""), _u64(body, 6), body[22:])
+            elif op in (_FOOTER, _DATA_END):
+                return

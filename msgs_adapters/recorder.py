@@ -56,7 +56,9 @@ class BagRecorder:
         self.ts = typestore()
         self.writer = Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        self.subs, self.conns, self.count = {}, {}, 0
+        self.subs: dict = {}  # topic: subscription (None: not recordable)
+        self.conns: dict = {}  # topic: rosbags connection
+        self.count = 0
         self._sealed_at = time.monotonic()
 
     def poll(self):

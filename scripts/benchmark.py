@@ -133,7 +133,7 @@ def rmse_by_point(runs: list[dict], key: str = "errors"):
     """(point index, RMS over the runs that have an estimate at that point) for one filter."""
     by_point = {}
     for r in runs:
-        for p, e in zip(r.get("points", []), r.get(key, [])):
+        for p, e in zip(r.get("points", []), r.get(key, []), strict=False):
             by_point.setdefault(p, []).append(e)
     pts = sorted(p for p, v in by_point.items() if len(v) >= max(1, len(runs) // 2))
     return np.array(pts), np.array([np.sqrt(np.mean(np.square(by_point[p]))) for p in pts])
@@ -157,7 +157,8 @@ def print_tables(results):
             ("bias_x_pct", "biasX %", "{:+.3f}"), ("bias_y_pct", "biasY %", "{:+.3f}"),
             ("large_errors_per_run", ">15m/run", "{:.1f}"), ("nees_mean", "NEES", "{:.2f}"),
             ("coverage95_pct", "cov95 %", "{:.0f}"), ("step_median_ms", "med ms", "{:.3f}"),
-            ("step_p95_ms", "p95 ms", "{:.3f}"), ("step_mean_ms", "mean ms", "{:.3f}"), ("filter_total_ms", "run ms", "{:.1f}"), ("failed", "fail", "{}")]
+            ("step_p95_ms", "p95 ms", "{:.3f}"), ("step_mean_ms", "mean ms", "{:.3f}"),
+            ("filter_total_ms", "run ms", "{:.1f}"), ("failed", "fail", "{}")]
     for scenario, by_filter in results.items():
         print(f"\n## {scenario}")
         print("| filter | " + " | ".join(c[1] for c in cols) + " |")
@@ -165,22 +166,35 @@ def print_tables(results):
         for fname, m in by_filter.items():
             cells = [fmt.format(m[k]) if k in m else "-" for k, _, fmt in cols]
             print(f"| {fname} | " + " | ".join(cells) + " |")
-    ratios = [(sc, m["afsa"]["step_mean_ms"] / m["particles-ibis"]["step_mean_ms"],
-               m["afsa"]["step_median_ms"] / m["particles-ibis"]["step_median_ms"])
-              for sc, m in results.items() if "afsa" in m and "particles-ibis" in m and "step_mean_ms" in m["afsa"]]
+    ratios = [
+        (
+            sc,
+            m["afsa"]["step_mean_ms"] / m["particles-ibis"]["step_mean_ms"],
+            m["afsa"]["step_median_ms"] / m["particles-ibis"]["step_median_ms"],
+        )
+        for sc, m in results.items()
+        if "afsa" in m and "particles-ibis" in m and "step_mean_ms" in m["afsa"]
+    ]
     if ratios:
-        print("\nAFSA-PF time / particles IBIS time, same runs: " + ", ".join(
-            f"{sc} {mean:.2f} (mean step), {med:.2f} (median step)" for sc, mean, med in ratios))
+        print(
+            "\nAFSA-PF time / particles IBIS time, same runs: "
+            + ", ".join(f"{sc} {mean:.2f} (mean step), {med:.2f} (median step)" for sc, mean, med in ratios)
+        )
     if "seed" in results:
         print("\n## AFSA paper Table 1 (Matlab, i5-2450M) next to ours on `seed`")
-        print("| filter | paper relX % | ours | paper relY % | ours | paper s / 60 steps | ours (filter) | paper >15 m of 60 | ours |")
+        print(
+            "| filter | paper relX % | ours | paper relY % | ours | paper s / 60 steps | ours (filter) "
+            "| paper >15 m of 60 | ours |"
+        )
         print("|---|---|---|---|---|---|---|---|---|")
         for fname, (px, py, pt, pl) in PAPER_TABLE1.items():
             m = results["seed"].get(fname)
             if m and "rmse_m" in m:
                 ours_t = m["filter_total_ms"] / 1e3 * 60 / m["steps_per_run"]
-                print(f"| {fname} | {px} | {m['rel_x_pct']:.3f} | {py} | {m['rel_y_pct']:.3f} | {pt} | {ours_t:.4f} | "
-                      f"{pl} | {m['large_errors_per_run']:.1f} |")
+                print(
+                    f"| {fname} | {px} | {m['rel_x_pct']:.3f} | {py} | {m['rel_y_pct']:.3f} | {pt} | {ours_t:.4f} | "
+                    f"{pl} | {m['large_errors_per_run']:.1f} |"
+                )
 
 
 ROBUST_FILTERS = ("afsa", "sir", "espf", "gfapf", "upfde", "upf", "pfde", "agapf", "batch-ml")
@@ -205,17 +219,22 @@ def robust_task(task):
 
 def robust_aggregate(rows: list[dict]) -> dict:
     ok = [r for r in rows if r["converged"]]
-    out = {"runs": len(rows), "no_estimate": len(rows) - len(ok),
-           "time_ms": float(1e3 * np.mean([r["wall_s"] for r in rows]))}
+    out = {
+        "runs": len(rows),
+        "no_estimate": len(rows) - len(ok),
+        "time_ms": float(1e3 * np.mean([r["wall_s"] for r in rows])),
+    }
     if ok:
         err = np.array([r["error"] for r in ok])
         crlb = np.array([r["crlb"] for r in ok])
-        out.update(rmse_over_crlb=float(np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(crlb**2))),
-                   median_over_crlb=float(np.median(err / crlb)),
-                   gross=int(np.sum(err > GROSS_FACTOR * crlb)),
-                   nees_mean=float(np.mean([min(r["nees"], 1e6) for r in ok])),
-                   nees_median=float(np.median([r["nees"] for r in ok])),
-                   coverage95_pct=float(100 * np.mean([r["inside95"] for r in ok])))
+        out.update(
+            rmse_over_crlb=float(np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(crlb**2))),
+            median_over_crlb=float(np.median(err / crlb)),
+            gross=int(np.sum(err > GROSS_FACTOR * crlb)),
+            nees_mean=float(np.mean([min(r["nees"], 1e6) for r in ok])),
+            nees_median=float(np.median([r["nees"] for r in ok])),
+            coverage95_pct=float(100 * np.mean([r["inside95"] for r in ok])),
+        )
     return out
 
 
@@ -238,10 +257,17 @@ def bench_robustness(runs: int, filters, jobs: int) -> dict:
 
 
 def print_robustness(results: dict):
-    cols = [("rmse_over_crlb", "RMSE/CRLB", "{:.2f}"), ("median_over_crlb", "median/CRLB", "{:.2f}"),
-            ("gross", "gross", "{}"), ("no_estimate", "no est.", "{}"), ("nees_mean", "NEES mean", "{:.2f}"),
-            ("nees_median", "NEES med.", "{:.2f}"), ("coverage95_pct", "cov95 %", "{:.0f}"),
-            ("time_ms", "ms/run", "{:.0f}"), ("runs", "runs", "{}")]
+    cols = [
+        ("rmse_over_crlb", "RMSE/CRLB", "{:.2f}"),
+        ("median_over_crlb", "median/CRLB", "{:.2f}"),
+        ("gross", "gross", "{}"),
+        ("no_estimate", "no est.", "{}"),
+        ("nees_mean", "NEES mean", "{:.2f}"),
+        ("nees_median", "NEES med.", "{:.2f}"),
+        ("coverage95_pct", "cov95 %", "{:.0f}"),
+        ("time_ms", "ms/run", "{:.0f}"),
+        ("runs", "runs", "{}"),
+    ]
     filters = list(next(iter(results.values())))
     for fname in filters:
         print(f"\n## robustness: {fname}")
@@ -256,41 +282,74 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per scenario (default 100)")
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
-    parser.add_argument("--filters", nargs="+", default=list(FILTERS), choices=list(FILTERS),
-                        help="filters to run (the robustness section also always runs the batch-ml reference)")
+    parser.add_argument(
+        "--filters",
+        nargs="+",
+        default=list(FILTERS),
+        choices=list(FILTERS),
+        help="filters to run (the robustness section also always runs the batch-ml reference)",
+    )
     parser.add_argument("--particles", type=int, default=100, help="N for every filter (default 100)")
     parser.add_argument("--no-peers", action="store_true", help="skip the particles package's filters")
     parser.add_argument("--json", metavar="OUT", help="write all figures as JSON")
     parser.add_argument("--plot", metavar="DIR", help="write RMSE-against-step plots with the CRLB, one per scenario")
-    parser.add_argument("--section", choices=("public", "robustness", "all"), default="all",
-                        help="public scenarios, robustness cells, or both (default)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                        help="parallel processes for the robustness section (default: the cores)")
+    parser.add_argument(
+        "--section",
+        choices=("public", "robustness", "all"),
+        default="all",
+        help="public scenarios, robustness cells, or both (default)",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="parallel processes for the robustness section (default: the cores)",
+    )
     args = parser.parse_args(argv)
     if args.section == "robustness":
         return robustness_main(args)
     with_peers = particles_peers.AVAILABLE and not args.no_peers
     if not particles_peers.AVAILABLE and not args.no_peers:
-        print("note: the `particles` package is not installed (pip install -e '.[bench]'): no peer rows", file=sys.stderr)
+        print(
+            "note: the `particles` package is not installed (pip install -e '.[bench]'): no peer rows", file=sys.stderr
+        )
     t0 = time.time()
     results, raw = {}, {}
-    with tqdm(total=args.runs * len(args.scenarios) * len(args.filters), unit="run", file=sys.stderr) as bar:
+    # numpy's RuntimeWarnings of diverging filters would break into the progress bar: counted, told after it.
+    with warnings.catch_warnings(record=True) as caught, tqdm(
+        total=args.runs * len(args.scenarios) * len(args.filters), unit="run", file=sys.stderr
+    ) as bar:
+        warnings.simplefilter("always", RuntimeWarning)
         for name in args.scenarios:
             bar.set_description(name)
             results[name], raw[name] = bench_scenario(name, args.runs, args.particles, args.filters, with_peers, bar)
+    if caught:
+        kinds = sorted({str(w.message) for w in caught})
+        print(f"note: {len(caught)} numpy RuntimeWarnings during the runs (diverging filters): {'; '.join(kinds[:5])}",
+              file=sys.stderr)
     print_tables(results)
     if args.plot:
         plot_scenarios(Path(args.plot), raw)
-    meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
-            "processor": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-            "python": platform.python_version(), "numpy": np.__version__, "runs": args.runs,
-            "particles": args.particles, "wall_s": round(time.time() - t0, 1)}
-    print(f"\n{meta['runs']} runs per scenario, N = {args.particles}, {meta['wall_s']} s, {meta['machine']}, "
-          f"{meta['cores']} cores, {meta['date']}")
+    meta = {
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "machine": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "runs": args.runs,
+        "particles": args.particles,
+        "wall_s": round(time.time() - t0, 1),
+    }
+    print(
+        f"\n{meta['runs']} runs per scenario, N = {args.particles}, {meta['wall_s']} s, {meta['machine']}, "
+        f"{meta['cores']} cores, {meta['date']}"
+    )
     robust = {}
     if args.section == "all":
-        robust = bench_robustness(args.runs, [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"],
-                                  args.jobs)
+        robust = bench_robustness(
+            args.runs, [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"], args.jobs
+        )
         print_robustness(robust)
     if args.json:
         Path(args.json).write_text(json.dumps({"meta": meta, "results": results, "robustness": robust}, indent=1))
@@ -301,9 +360,16 @@ def robustness_main(args):
     filters = [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"]
     robust = bench_robustness(args.runs, filters, args.jobs)
     print_robustness(robust)
-    meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
-            "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
-            "runs": args.runs, "jobs": args.jobs, "wall_s": round(time.time() - t0, 1)}
+    meta = {
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "machine": platform.platform(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "runs": args.runs,
+        "jobs": args.jobs,
+        "wall_s": round(time.time() - t0, 1),
+    }
     print(f"\n{args.runs} runs per cell, {meta['wall_s']} s, {meta['machine']}, {meta['cores']} cores, {meta['date']}")
     if args.json:
         Path(args.json).write_text(json.dumps({"meta": meta, "robustness": robust}, indent=1))

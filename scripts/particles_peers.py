@@ -19,8 +19,8 @@ try:
 except ImportError:  # the `bench` extra is not installed
     particles = None
 
-from aoa_localizer.models.likelihood import mixture_loglik
 from aoa_localizer.engine.geodesy import wrap_pi
+from aoa_localizer.models.likelihood import mixture_loglik
 
 AVAILABLE = particles is not None
 

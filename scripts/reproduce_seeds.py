@@ -76,36 +76,123 @@ def cells(runs_override: int | None) -> list[Cell]:
                             {"rmse": None}, changes={"espf.sbx_lambda": lam}))
     for rv, values in ((0.1, {"pf": 2.772, "gfapf": 0.509}), (0.001, {"pf": 2.182, "gfapf": 0.122})):
         for algo in ("pf", "gfapf"):
-            out.append(Cell("gfapf", "Table 2", f"Model 1 (Gamma), sigma_v^2 = {rv:g}", lambda rv=rv: B.gfapf_model1(rv),
-                            algo, 50, 100, r(50), {"rmse": values[algo], "time_s": None}))
+            out.append(
+                Cell(
+                    "gfapf",
+                    "Table 2",
+                    f"Model 1 (Gamma), sigma_v^2 = {rv:g}",
+                    lambda rv=rv: B.gfapf_model1(rv),
+                    algo,
+                    50,
+                    100,
+                    r(50),
+                    {"rmse": values[algo], "time_s": None},
+                )
+            )
     for algo, value in (("pf", None), ("gfapf", 0.2031)):
-        out.append(Cell("gfapf", "Table 3", "UNGM", B.gfapf_ungm, algo, 50, 100, r(50), {"rmse": value, "time_s": None}))
+        out.append(
+            Cell("gfapf", "Table 3", "UNGM", B.gfapf_ungm, algo, 50, 100, r(50), {"rmse": value, "time_s": None})
+        )
     for algo, value in (("pf", 1.8828), ("gfapf", 0.5825)):
-        out.append(Cell("gfapf", "Table 4", "UNGM, state jump of 10 at k = 25", B.gfapf_ungm, algo, 50, 100, r(50),
-                        {"rmse": value, "time_s": None}, jump=(25, 10.0)))
-    upfde = {"pf": (0.9485, 0.0324, 0.0348), "pfde": (0.8054, 0.0320, 0.3088), "upf": (0.4893, 0.0100, 0.3742),
-             "upfde": (0.2580, 0.0084, 0.6372)}
+        out.append(
+            Cell(
+                "gfapf",
+                "Table 4",
+                "UNGM, state jump of 10 at k = 25",
+                B.gfapf_ungm,
+                algo,
+                50,
+                100,
+                r(50),
+                {"rmse": value, "time_s": None},
+                jump=(25, 10.0),
+            )
+        )
+    upfde = {
+        "pf": (0.9485, 0.0324, 0.0348),
+        "pfde": (0.8054, 0.0320, 0.3088),
+        "upf": (0.4893, 0.0100, 0.3742),
+        "upfde": (0.2580, 0.0084, 0.6372),
+    }
     for algo, (mean, var, secs) in upfde.items():
-        out.append(Cell("upfde", "Tables 1-2", "Gamma model, switch at t = 30", B.upfde_model, algo, 10, 50, r(500),
-                        {"rmse": mean, "rmse_var": var, "time_s": secs}, per_run=True))
-    out.append(Cell("upfde", "Tables 1-2", "Gamma model, switch at t = 30", B.upfde_model, "pf", 200, 50, r(500),
-                    {"rmse": 0.4398, "rmse_var": None, "time_s": 0.6284}, per_run=True))
+        out.append(
+            Cell(
+                "upfde",
+                "Tables 1-2",
+                "Gamma model, switch at t = 30",
+                B.upfde_model,
+                algo,
+                10,
+                50,
+                r(500),
+                {"rmse": mean, "rmse_var": var, "time_s": secs},
+                per_run=True,
+            )
+        )
+    out.append(
+        Cell(
+            "upfde",
+            "Tables 1-2",
+            "Gamma model, switch at t = 30",
+            B.upfde_model,
+            "pf",
+            200,
+            50,
+            r(500),
+            {"rmse": 0.4398, "rmse_var": None, "time_s": 0.6284},
+            per_run=True,
+        )
+    )
     aga = {False: {100: 1.01, 300: 0.82, 500: 0.71}, True: {100: 4.02, 300: 3.90, 500: 3.46}}
     for jumped, values in aga.items():
         for n, value in values.items():
             for algo in ("pf", "agapf"):
-                out.append(Cell("agapf", "Table 3" if jumped else "Table 2",
-                                "1-D model" + (", state jump of 10 at k = 50" if jumped else ""), B.agapf_ungm, algo, n,
-                                100, r(20), {"rmse": value if algo == "agapf" else None, "rmse_max": None},
-                                jump=(50, 10.0) if jumped else None, per_run=True))
+                out.append(
+                    Cell(
+                        "agapf",
+                        "Table 3" if jumped else "Table 2",
+                        "1-D model" + (", state jump of 10 at k = 50" if jumped else ""),
+                        B.agapf_ungm,
+                        algo,
+                        n,
+                        100,
+                        r(20),
+                        {"rmse": value if algo == "agapf" else None, "rmse_max": None},
+                        jump=(50, 10.0) if jumped else None,
+                        per_run=True,
+                    )
+                )
     truck = {"pf": (0.8126, 0.7696, 1.0642, 22.1793, 26.6928), "agapf": (0.6412, 0.6172, 0.7015, 2.2361, 2.1793)}
     for algo, values in truck.items():
-        out.append(Cell("agapf", "Table 4", "truck-trailer, jump of 20 m at k = 50", B.TruckTrailerModel, algo, 300,
-                        100, r(20), {f"rmse_x{i}": v for i, v in enumerate(values)},
-                        jump=(50, np.array([0.0, 0.0, 20.0, 20.0])), transform=B.TruckTrailerModel.five))
+        out.append(
+            Cell(
+                "agapf",
+                "Table 4",
+                "truck-trailer, jump of 20 m at k = 50",
+                B.TruckTrailerModel,
+                algo,
+                300,
+                100,
+                r(20),
+                {f"rmse_x{i}": v for i, v in enumerate(values)},
+                jump=(50, np.array([0.0, 0.0, 20.0, 20.0])),
+                transform=B.TruckTrailerModel.five,
+            )
+        )
     for algo in ("pf", "agapf"):
-        out.append(Cell("agapf", "bearings-only tracking (ours)", "Gordon 1993 model, 24 steps", B.BearingsOnlyModel,
-                        algo, 300, 24, r(20), {"rmse_x": None, "rmse_y": None}))
+        out.append(
+            Cell(
+                "agapf",
+                "bearings-only tracking (ours)",
+                "Gordon 1993 model, 24 steps",
+                B.BearingsOnlyModel,
+                algo,
+                300,
+                24,
+                r(20),
+                {"rmse_x": None, "rmse_y": None},
+            )
+        )
     return out
 
 
@@ -114,8 +201,9 @@ def run_cell(c: Cell, bar) -> list[dict]:
     model = c.make()
     sq, seconds = [], []
     for run in range(c.runs):
-        truth, est, t = run_model(model, algorithm, c.n, c.steps, run, 1000 + run, jump=c.jump,
-                                  **{**changes, **c.changes})
+        truth, est, t = run_model(
+            model, algorithm, c.n, c.steps, run, 1000 + run, jump=c.jump, **{**changes, **c.changes}
+        )
         sq.append((truth - est) ** 2)
         seconds.append(t)
         bar.update()
@@ -130,9 +218,20 @@ def run_cell(c: Cell, bar) -> list[dict]:
     if model.dim == 4 and c.transform is None:
         ours.update(rmse_x=float(rmse_k[:, 0].mean()), rmse_y=float(rmse_k[:, 2].mean()))
     ours.update({f"rmse_x{i}": float(rmse_k[:, i].mean()) for i in range(rmse_k.shape[1])} if c.transform else {})
-    return [{"paper": c.paper, "table": c.table, "model": c.model, "algorithm": c.algorithm, "N": c.n,
-             "metric": metric, "ours": ours[metric], "paper_value": paper_value, "runs": c.runs}
-            for metric, paper_value in c.paper_values.items()]
+    return [
+        {
+            "paper": c.paper,
+            "table": c.table,
+            "model": c.model,
+            "algorithm": c.algorithm,
+            "N": c.n,
+            "metric": metric,
+            "ours": ours[metric],
+            "paper_value": paper_value,
+            "runs": c.runs,
+        }
+        for metric, paper_value in c.paper_values.items()
+    ]
 
 
 def plot_cells(plot_dir: Path, done: list[Cell]):
@@ -149,9 +248,14 @@ def plot_cells(plot_dir: Path, done: list[Cell]):
         groups.setdefault((c.paper, c.table, c.model, c.n), []).append(c)
     for (paper, table, model, n), cs in groups.items():
         slug = re.sub(r"[^a-z0-9]+", "_", f"{paper} {table} {model} n{n}".lower()).strip("_")
-        rmse_curves(plot_dir / f"{slug}.png", f"{paper} {table}: {model}, N = {n}, {cs[0].runs} runs",
-                    {c.algorithm: (np.arange(1, len(c.curve) + 1), c.curve) for c in cs},
-                    xlabel="k", ylabel="RMSE of x (first state)", log=False)
+        rmse_curves(
+            plot_dir / f"{slug}.png",
+            f"{paper} {table}: {model}, N = {n}, {cs[0].runs} runs",
+            {c.algorithm: (np.arange(1, len(c.curve) + 1), c.curve) for c in cs},
+            xlabel="k",
+            ylabel="RMSE of x (first state)",
+            log=False,
+        )
 
 
 def print_rows(rows):
@@ -159,15 +263,18 @@ def print_rows(rows):
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         pv = "-" if r["paper_value"] is None else f"{r['paper_value']:g}"
-        print(f"| {r['paper']} | {r['table']} | {r['model']} | {r['algorithm']} | {r['N']} | {r['metric']} | "
-              f"{r['ours']:.4g} | {pv} |")
+        print(
+            f"| {r['paper']} | {r['table']} | {r['model']} | {r['algorithm']} | {r['N']} | {r['metric']} | "
+            f"{r['ours']:.4g} | {pv} |"
+        )
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, help="Monte Carlo runs per cell (default: each paper's own)")
-    parser.add_argument("--papers", nargs="+", default=["espf", "gfapf", "upfde", "agapf"],
-                        choices=["espf", "gfapf", "upfde", "agapf"])
+    parser.add_argument(
+        "--papers", nargs="+", default=["espf", "gfapf", "upfde", "agapf"], choices=["espf", "gfapf", "upfde", "agapf"]
+    )
     parser.add_argument("--json", metavar="OUT", help="write the rows as JSON")
     parser.add_argument("--plot", metavar="DIR", help="write RMSE-against-k plots, one per table, model and N")
     args = parser.parse_args(argv)
@@ -181,9 +288,14 @@ def main(argv=None):
     print_rows(rows)
     if args.plot:
         plot_cells(Path(args.plot), todo)
-    meta = {"date": datetime.datetime.now().isoformat(timespec="seconds"), "machine": platform.platform(),
-            "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
-            "wall_s": round(time.time() - t0, 1)}
+    meta = {
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "machine": platform.platform(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "wall_s": round(time.time() - t0, 1),
+    }
     print(f"\n{meta['wall_s']} s, {meta['machine']}, {meta['cores']} cores, {meta['date']}")
     if args.json:
         Path(args.json).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))

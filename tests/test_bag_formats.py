@@ -12,8 +12,8 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.tools.bag_run import run_bag
 from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.tools.bag_run import run_bag
 from msgs_adapters import build
 from msgs_adapters.bag import TOPICS, BagError, BagTopicsError, _qos, read_bag, typestore, write_bag
 
@@ -91,6 +91,7 @@ def test_every_message_of_a_ros2_bag_layout_is_read(tmp_path, data, variant):
     assert got == want
 
 
+@pytest.mark.slow
 def test_a_bag_without_the_needed_topics_says_what_it_has_and_what_it_needs(tmp_path):
     """Reliability finding: 11 valid ros2 bags without the default topics were "damaged after 0 messages
     (KeyError)", exit 2. They are now described."""
@@ -121,6 +122,7 @@ def _chunks(data: bytes) -> list[tuple[int, int]]:
     return out
 
 
+@pytest.mark.slow
 def test_damage_inside_a_chunk_is_caught_by_its_crc_and_the_other_chunks_are_used(tmp_path, data):
     """Reliability finding 4: 4 KiB of zeros mid-file went unnoticed (exit 0, 100 of 300 bearings silently
     missing; no chunk CRCs were written). Bags are now written in chunks of about a second with CRCs; a chunk that

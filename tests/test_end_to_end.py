@@ -7,6 +7,7 @@ from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
 def test_afsa_finds_the_emitter_in_every_public_scenario(name):
     for r in range(3):
@@ -16,6 +17,7 @@ def test_afsa_finds_the_emitter_in_every_public_scenario(name):
         assert s["error"] < 3 * s["crlb"] + 1.0, (r, s["error"], s["crlb"])
 
 
+@pytest.mark.slow
 def test_published_ellipse_is_honest_over_seeded_runs():
     """Mean NEES near 2 (not over-confident): the check the papers never made."""
     values = [run(simulate("seed", r), LocalizerConfig(seed=10000 + r)).scores["nees"] for r in range(15)]
@@ -23,10 +25,13 @@ def test_published_ellipse_is_honest_over_seeded_runs():
 
 
 def _straight_rmse(**changes) -> float:
-    errors = [run(simulate("straight", r), LocalizerConfig(seed=10000 + r, **changes)).scores["error"] for r in range(3)]
+    errors = [
+        run(simulate("straight", r), LocalizerConfig(seed=10000 + r, **changes)).scores["error"] for r in range(3)
+    ]
     return float(np.sqrt(np.mean(np.square(errors))))
 
 
+@pytest.mark.slow
 def test_afsa_beats_the_bootstrap_filter_where_it_collapses():
     """The filters alone (no safety layer, as the papers have them): AFSA's moves keep what SIR loses."""
     afsa = _straight_rmse(global_safety=False)
@@ -34,6 +39,7 @@ def test_afsa_beats_the_bootstrap_filter_where_it_collapses():
     assert afsa < 0.5 * sir
 
 
+@pytest.mark.slow
 def test_the_safety_layer_rescues_the_bootstrap_filter_too():
     """The safety layer sits in the skeleton, so SIR gets its moves: it no longer collapses on `straight`."""
     assert _straight_rmse(algorithm="sir") < 0.5 * _straight_rmse(algorithm="sir", global_safety=False)

@@ -4,15 +4,15 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters import make_filter
-from aoa_localizer.models.emitter import EmitterModel
 from aoa_localizer.filters.afsa import AfsaFilter, uniform_disc
+from aoa_localizer.models.emitter import EmitterModel
 from aoa_localizer.models.likelihood import (
     BearingLikelihood,
     gaussian_loglik,
     mixture_loglik,
 )
-from aoa_localizer.engine.types import ObservationPoint
 
 
 def test_gaussian_loglik_by_hand():
@@ -31,7 +31,9 @@ def test_mixture_never_falls_below_the_outlier_floor():
 def test_likelihood_wraps_the_residual_and_adds_gps_noise_by_range():
     lik = BearingLikelihood("gaussian", 0.0)
     # Particle due west (bearing pi); measurement -pi + 0.01: the residual is 0.01, not 2 pi - 0.01.
-    assert lik.log(np.array([[-100.0, 0.0]]), 0.0, 0.0, -math.pi + 0.01, 0.01)[0] == pytest.approx(gaussian_loglik(0.01, 0.01))
+    assert lik.log(np.array([[-100.0, 0.0]]), 0.0, 0.0, -math.pi + 0.01, 0.01)[0] == pytest.approx(
+        gaussian_loglik(0.01, 0.01)
+    )
     with_gps = BearingLikelihood("gaussian", 0.0, gps_sigma_m=3.0)
     s_eff = math.sqrt(0.01**2 + (3.0 / 100.0) ** 2)
     assert with_gps.log(np.array([[100.0, 0.0]]), 0.0, 0.0, 0.0, 0.01)[0] == pytest.approx(gaussian_loglik(0.0, s_eff))
@@ -97,8 +99,9 @@ def test_mcmc_moves_pull_a_misplaced_school_towards_the_posterior():
 
 
 def test_paper_school_swims_towards_the_bearing_line():
-    cfg = LocalizerConfig(seed=3, num_particles=200).with_changes(**{"afsa.variant": "paper", "afsa.visual": 5.0,
-                                                                     "afsa.step": 2.0})
+    cfg = LocalizerConfig(seed=3, num_particles=200).with_changes(
+        **{"afsa.variant": "paper", "afsa.visual": 5.0, "afsa.step": 2.0}
+    )
     f = make_filter(cfg, np.random.default_rng(3), EmitterModel(cfg))
     rng = np.random.default_rng(4)
     x = np.column_stack([rng.uniform(900, 1100, 200), rng.uniform(-60, 60, 200)])
@@ -141,5 +144,9 @@ def test_a_filter_refuses_a_model_without_the_capability_it_needs():
         with pytest.raises(ModelMismatch, match=f"{algorithm} needs a model with UnscentedForm.*BearingsOnlyModel"):
             make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), BearingsOnlyModel())
     for algorithm in ("sir", "espf", "gfapf", "pfde", "agapf", "upf"):
-        assert make_filter(LocalizerConfig(algorithm=algorithm, num_particles=10), np.random.default_rng(0),
-                           GrowthModel()).name == algorithm
+        assert (
+            make_filter(
+                LocalizerConfig(algorithm=algorithm, num_particles=10), np.random.default_rng(0), GrowthModel()
+            ).name
+            == algorithm
+        )

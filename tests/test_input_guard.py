@@ -72,6 +72,7 @@ def test_one_record_and_one_fix_from_2038_do_not_stop_a_whole_scenario():
     assert len(estimates) > 30 and final_error(loc, data) < 10.0
 
 
+@pytest.mark.slow
 def test_a_clock_that_steps_back_and_stays_back_is_followed():
     """Finding 2: a DF clock stepping back 10 s used to lose every later bearing (495 of them). Now the step is
     recognised after 3 readings and the stream goes on (bearings 10 s off their GPS pair with the wrong
@@ -125,13 +126,14 @@ def test_bearings_waiting_for_a_fix_age_out_when_the_gps_stops():
 def test_most_inputs_refused_is_said_in_the_status():
     loc = Localizer(LocalizerConfig(datum_lat=39.1, datum_lon=117.2))
     loc.add_fix(0.0, 39.1, 117.2, 5.0)
-    for k in range(30):
+    for _k in range(30):
         loc.add_bearing(10.0, float("nan"), 90.0)
     assert "most inputs refused: bad_azimuth" in loc.status
 
 
 @pytest.mark.parametrize("changes", [{"num_particles": 2}, {"num_particles": 10}, {"algorithm": "upf"},
                                      {"algorithm": "upfde", "num_particles": 10}, {"process_noise_m": 0.0}])
+@pytest.mark.slow
 def test_every_published_covariance_is_positive_definite(changes):
     """Finding 9: valid non-default settings gave 276 non-positive-definite covariances in 1,652 estimates."""
     res = run(simulate("seed", 1), LocalizerConfig(seed=2, **changes))
@@ -141,6 +143,7 @@ def test_every_published_covariance_is_positive_definite(changes):
     assert res.estimates or res.localizer.rejected["covariance_degenerate"] > 0
 
 
+@pytest.mark.slow
 def test_fuzzed_first_fixes_and_stamps_never_raise():
     """A bounded fuzz of the first-fix and stamp paths: wild values in every field, then a good scenario."""
     rng = np.random.default_rng(7)
@@ -157,6 +160,7 @@ def test_fuzzed_first_fixes_and_stamps_never_raise():
         assert loc.estimate is not None and final_error(loc, data) < 15.0, loc.status
 
 
+@pytest.mark.slow
 def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
     """Finding 9: passing 10 m from the emitter with 3 m GPS noise, the ellipse used to shrink far below the
     error (the antenna's own position error was ignored). With each NavSatFix's covariance (sigma_m) the 95 %
@@ -182,6 +186,7 @@ def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
     assert inside[True] >= 6 and inside[False] <= 3, inside
 
 
+@pytest.mark.slow
 def test_a_known_df_clock_offset_is_taken_off():
     """Finding 6: DF stamps 2 s late on `urban` gave 23 m error with a 2.2 m ellipse (22.6 m here, the truth
     outside it). With df_time_offset_s the run is back at the baseline (t + 2 - 2 is not always t in floating
@@ -194,6 +199,7 @@ def test_a_known_df_clock_offset_is_taken_off():
     assert fixed["error"] < 2.0 and fixed["inside95"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("late_s", [0.0, 2.0])
 def test_stamps_that_a_clock_offset_explains_are_pointed_out(late_s):
     """Reliability finding 6: a DF clock 2 s off the GPS clock gave 23 m error, status "tracking". The bearings are

@@ -92,7 +92,9 @@ def test_particles_become_poses(estimate):
 
 def test_markers_hold_the_estimate_a_closed_95_percent_ellipse_and_the_rays(estimate):
     rays = np.array([[0.0, 0.0, 0.5], [100.0, 0.0, 1.0]])
-    msg = build.markers(RCLPY, estimate, rays, ellipse_points((estimate.east, estimate.north), estimate.cov, ELLIPSE_95))
+    msg = build.markers(
+        RCLPY, estimate, rays, ellipse_points((estimate.east, estimate.north), estimate.cov, ELLIPSE_95)
+    )
     for m in flavours(msg, "visualization_msgs/msg/MarkerArray"):
         sphere, ellipse, lines = m.markers
         assert (sphere.pose.position.x, sphere.pose.position.y) == (1200.5, -800.25)
@@ -107,7 +109,9 @@ def test_markers_hold_the_estimate_a_closed_95_percent_ellipse_and_the_rays(esti
 
 
 def test_diagnostics_round_trip():
-    msg = build.diagnostic_array(RCLPY, 5.0, "aoa_localizer: localizer", 1, "waiting", {"bearings_used": 12, "ess": 3.5})
+    msg = build.diagnostic_array(
+        RCLPY, 5.0, "aoa_localizer: localizer", 1, "waiting", {"bearings_used": 12, "ess": 3.5}
+    )
     for m in flavours(msg, "diagnostic_msgs/msg/DiagnosticArray"):
         d = diagnostics_values(m)["aoa_localizer: localizer"]
         assert d == {"bearings_used": "12", "ess": "3.5", "level": "1", "message": "waiting"}

@@ -1,6 +1,7 @@
 """Offline replay as a user runs it: `python -m aoa_localizer.replay BAG --offline --output FILE`."""
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scenarios import SCENARIOS, Scenario, simulate
+from aoa_localizer.tools.replay import main as replay_main
 from msgs_adapters.bag import write_bag
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -24,9 +26,13 @@ def replay(*args, cwd=ROOT):
 
 
 def lines(path):
-    return [json.loads(line) for line in Path(path).read_text().splitlines()]
+    """The estimates of an offline-replay file (after its configuration line)."""
+    rows = [json.loads(line) for line in Path(path).read_text().splitlines()]
+    assert "configuration" in rows[0]
+    return rows[1:]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bag, extra", [("seed", []), ("urban", ["--params-file", ROOT / "bags/urban.params.yaml"])])
 def test_sample_bags_localise(tmp_path, bag, extra):
     out = tmp_path / "est.jsonl"
@@ -37,9 +43,14 @@ def test_sample_bags_localise(tmp_path, bag, extra):
     sc = SCENARIOS[bag]
     e, n = LocalFrame(*sc.datum).to_enu(est[-1]["lat"], est[-1]["lon"])
     assert math.hypot(e - sc.emitter[0], n - sc.emitter[1]) < 10.0
-    assert "error against the bag's truth" in res.stderr
+    # One frame in the closing lines (the issue: E/N in the engine's frame beside an error in the truth's)
+    printed = re.search(r"\(E ([-\d.]+) m, N ([-\d.]+) m from the bag's datum", res.stderr)
+    assert printed and (float(printed[1]), float(printed[2])) == pytest.approx((e, n), abs=0.06)
+    error = float(re.search(r"error against the bag's truth .*: ([\d.]+) m", res.stderr)[1])
+    assert error == pytest.approx(math.hypot(e - sc.emitter[0], n - sc.emitter[1]), abs=0.006)
 
 
+@pytest.mark.slow
 def test_offline_replay_gives_the_engines_own_answer(tmp_path):
     data = simulate("homing", 3)
     write_bag(tmp_path / "bag", data.fixes, data.bearings, data.emitter_enu, data.scenario.datum)
@@ -52,6 +63,7 @@ def test_offline_replay_gives_the_engines_own_answer(tmp_path):
     assert np.allclose(replayed[-1]["cov"], direct[-1].cov, rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_truncated_bag_keeps_the_estimates_made_before_the_damage(tmp_path):
     long_drive = Scenario("long", (1200, 800), ((0, 0), (1000, 400), (1500, 600), (1600, 1400), (1500, 600),
                                                 (1000, 400), (0, 0), (1000, 400), (1600, 1400)),
@@ -69,23 +81,24 @@ def test_truncated_bag_keeps_the_estimates_made_before_the_damage(tmp_path):
 
 
 @pytest.mark.parametrize("make", ["garbage", "missing", "empty_dir"])
-def test_unreadable_input_exits_non_zero_with_a_message(tmp_path, make):
+def test_unreadable_input_exits_non_zero_with_a_message(tmp_path, make, cli):
     path = tmp_path / "bag"
     if make == "garbage":
         path.mkdir()
         (path / "bag.mcap").write_bytes(b"\x00not an mcap file" * 100)
     elif make == "empty_dir":
         path.mkdir()
-    res = replay(path, "--offline", "--output", tmp_path / "e.jsonl")
+    res = cli(replay_main, path, "--offline", "--output", tmp_path / "e.jsonl")
     assert res.returncode == 2
     assert "replay:" in res.stderr
 
 
-def test_invalid_parameter_is_refused(tmp_path):
-    res = replay(ROOT / "bags/seed", "--offline", "--output", tmp_path / "e.jsonl", "-p", "quality_min=400")
+def test_invalid_parameter_is_refused(tmp_path, cli):
+    res = cli(replay_main, ROOT / "bags/seed", "--offline", "--output", tmp_path / "e.jsonl", "-p", "quality_min=400")
     assert res.returncode == 2 and "quality_min" in res.stderr
 
 
+@pytest.mark.slow
 def test_main_job_prints_the_estimate_and_its_error():
     res = subprocess.run([sys.executable, "-m", "aoa_localizer.simulate", "--scenario", "seed"], cwd=ROOT,
                          capture_output=True, text=True, timeout=120)
@@ -126,6 +139,7 @@ def _bag_with(tmp_path, bearing_type: str, extra_string: bool):
     return path
 
 
+@pytest.mark.slow
 def test_a_foreign_type_on_an_input_topic_is_counted_and_skipped(tmp_path):
     """Finding 5: one std_msgs/String on /df/bearing used to end the replay as "damage" with 0 estimates."""
     bag = _bag_with(tmp_path, "df_record", extra_string=True)
@@ -149,6 +163,7 @@ def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
     assert np.hypot(loc.estimate.east - 1200.0, loc.estimate.north - 800.0) < 10.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("share", [0.1, 0.5, 0.9])
 def test_a_bag_cut_inside_its_only_chunk_keeps_every_complete_message(tmp_path, share):
     """Reliability finding 4: a cut anywhere inside an MCAP chunk used to lose the whole chunk (bags/seed, one

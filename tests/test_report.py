@@ -1,6 +1,7 @@
 """The localisation report: files written, KML and GeoJSON as GIS tools read them, the ellipse's area."""
 import json
 import math
+import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -10,9 +11,10 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.crlb import ELLIPSE_95
-from aoa_localizer.reporting.export import KML_NS, geojson, kml
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.types import Estimate
+from aoa_localizer.reporting.export import KML_NS, geojson, kml
+from aoa_localizer.reporting.report import main as report_main
 
 ROOT = Path(__file__).resolve().parent.parent
 FRAME = LocalFrame(39.1, 117.2, 5.0)
@@ -33,7 +35,7 @@ def inside(point, ring) -> bool:
     """Ray casting in (lon, lat)."""
     x, y = point
     hit = False
-    for (x1, y1), (x2, y2) in zip(ring[:-1], ring[1:]):
+    for (x1, y1), (x2, y2) in zip(ring[:-1], ring[1:], strict=False):
         if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
             hit = not hit
     return hit
@@ -80,6 +82,7 @@ def report(*args):
                           capture_output=True, text=True, timeout=240)
 
 
+@pytest.mark.slow
 def test_report_on_a_sample_bag_writes_every_file(tmp_path):
     res = report(ROOT / "bags/seed", "--out", tmp_path / "r", "--seed", 1)
     assert res.returncode == 0, res.stderr
@@ -90,10 +93,15 @@ def test_report_on_a_sample_bag_writes_every_file(tmp_path):
     assert "Final error against the truth" in summary and "Inputs not used" in summary
 
 
+@pytest.mark.slow
 def test_report_from_estimates_and_their_bag(tmp_path):
     out = tmp_path / "e.jsonl"
-    rep = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", ROOT / "bags/seed", "--offline", "--output", out,
-                          "--seed", "2"], cwd=ROOT, capture_output=True, text=True)
+    rep = subprocess.run(
+        [sys.executable, "-m", "aoa_localizer.replay", ROOT / "bags/seed", "--offline", "--output", out, "--seed", "2"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
     assert rep.returncode == 0, rep.stderr
     res = report(out, "--bag", ROOT / "bags/seed", "--out", tmp_path / "r")
     assert res.returncode == 0, res.stderr
@@ -104,7 +112,7 @@ def test_report_from_estimates_and_their_bag(tmp_path):
 
 
 @pytest.mark.parametrize("case", ["garbage", "missing", "jsonl_without_bag", "bad_jsonl"])
-def test_broken_input_exits_non_zero_with_a_message(tmp_path, case):
+def test_broken_input_exits_non_zero_with_a_message(tmp_path, case, cli):
     if case == "garbage":
         (tmp_path / "bag").mkdir()
         (tmp_path / "bag/x.mcap").write_bytes(b"not a bag" * 50)
@@ -115,7 +123,49 @@ def test_broken_input_exits_non_zero_with_a_message(tmp_path, case):
         (tmp_path / "e.jsonl").write_text("{}\n")
         args = [tmp_path / "e.jsonl"]
     else:
-        (tmp_path / "e.jsonl").write_text("{\"stamp\": 1}\n")
+        (tmp_path / "e.jsonl").write_text('{"stamp": 1}\n')
         args = [tmp_path / "e.jsonl", "--bag", ROOT / "bags/seed"]
-    res = report(*args, "--out", tmp_path / "r")
+    res = cli(report_main, *args, "--out", tmp_path / "r")
     assert res.returncode == 2 and "report:" in res.stderr
+
+
+@pytest.mark.slow
+def test_estimates_carry_their_configuration_and_the_report_redraws_with_it(tmp_path, cli):
+    """ROS-package issue: `report urban.jsonl --bag bags/urban` without the params file drew 963 rays as wild
+    instead of 356 and the wrong bound. The file's header line carries the configuration; the report uses it."""
+    from aoa_localizer.tools.replay import main as replay_main
+
+    params = ROOT / "bags/urban.params.yaml"
+    made = cli(replay_main, ROOT / "bags/urban", "--offline", "--output", tmp_path / "u.jsonl", "--params-file",
+               params, "--seed", 4)
+    assert made.returncode == 0, made.stderr
+    header = json.loads((tmp_path / "u.jsonl").read_text().splitlines()[0])["configuration"]
+    assert header["sigma_model"] == "quality" and header["seed"] == 4
+    from_file = cli(report_main, tmp_path / "u.jsonl", "--bag", ROOT / "bags/urban", "--out", tmp_path / "a")
+    direct = cli(report_main, ROOT / "bags/urban", "--params-file", params, "--seed", 4, "--out", tmp_path / "b")
+    assert from_file.returncode == direct.returncode == 0, from_file.stderr + direct.stderr
+    a, b = ((tmp_path / d / "summary.md").read_text() for d in "ab")
+    wild = [re.search(r"`point_outlier` \| (\d+)", text)[1] for text in (a, b)]
+    bound = [re.search(r"Cramer-Rao bound of the bearings used ([\d.]+) m", text)[1] for text in (a, b)]
+    assert wild[0] == wild[1] and int(wild[0]) < 500 and bound[0] == bound[1]
+    assert "seed 4" in a
+
+    (tmp_path / "old.jsonl").write_text("\n".join((tmp_path / "u.jsonl").read_text().splitlines()[1:]))
+    old = cli(report_main, tmp_path / "old.jsonl", "--bag", ROOT / "bags/urban", "--out", tmp_path / "c")
+    assert old.returncode == 0 and "has no configuration line" in old.stderr
+    assert "seed unset (a random run)" in (tmp_path / "c/summary.md").read_text()
+
+
+def test_rmse_curves_give_every_series_its_own_style_and_clip_a_diverged_one(tmp_path):
+    """ROS-package issue: the --plot chart reused colours across 12 series and one diverged filter stretched the
+    axis to 1e7."""
+    from aoa_localizer.reporting.plots import CLIP_FACTOR, rmse_curves
+
+    x = np.arange(60)
+    curves = {f"f{i}": (x, 5.0 + i + 100.0 / (1 + x)) for i in range(11)}
+    curves["diverged"] = (x, np.where(x > 30, 1e7, 8.0))
+    drawn = rmse_curves(tmp_path / "c.png", "t", curves, bound=(x, 2.0 + 50.0 / (1 + x)))
+    assert len(set(drawn["styles"].values())) == 12
+    assert drawn["clip"] == pytest.approx(CLIP_FACTOR * 52.0)
+    assert "diverged (diverged: clipped at 5.2e+04)" in drawn["styles"] and "f3" in drawn["styles"]
+    assert (tmp_path / "c.png").stat().st_size > 10_000

@@ -31,6 +31,7 @@ def truth_in_engine(loc, data):
     return np.array(loc.frame.to_enu(*data.emitter_lat_lon))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("safety", [True, False])
 def test_a_cloud_locked_1_km_off_under_the_outlier_floor(safety):
     """A confident cloud 1 km off: every new point sits at the outlier floor there. With the safety layer it
@@ -52,6 +53,7 @@ def test_a_cloud_locked_1_km_off_under_the_outlier_floor(safety):
         assert min(errors[:20]) > 900, errors  # the freeze: no particle explains the points, nothing moves
 
 
+@pytest.mark.slow
 def test_self_calibrated_sigma_of_a_3_degree_receiver():
     """Quality unknown, real noise 3 deg, configured 1.117 deg: the calibrated sigma lands within 10 % of 3 deg
     and the published ellipse holds the truth."""
@@ -77,6 +79,7 @@ def test_calibration_learns_how_sigma_falls_with_quality():
     assert noise.reading_outlier_prob == pytest.approx(0.2, abs=0.04)
 
 
+@pytest.mark.slow
 def test_two_modes_are_reported_with_their_masses():
     """A straight road through the datum, one reading per stop. Even stops see the emitter, odd stops its
     mirror image across the datum's meridian, with the mirrored noise of the mirrored stop: the data are
@@ -100,6 +103,7 @@ def test_two_modes_are_reported_with_their_masses():
     assert np.hypot(*(places - [[-300.0, 800.0], [300.0, 800.0]]).T).max() < 25, places
 
 
+@pytest.mark.slow
 def test_an_emitter_moved_400_m_is_noticed_and_re_found():
     sc = Scenario("moved", (1200, 800), SEED_TRACK, points=120, readings_per_point=3, quality=(70.0, 100.0),
                   sigma_q_deg=(1.0, 3.0), dwell_s=8.0, moved_to=(1400.0, 1150.0), moved_at_s=700.0)

@@ -102,6 +102,7 @@ def _rmse(model, algorithm, n, steps, runs, **changes):
     return float(np.mean(per_run))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algorithm", ["upfde", "upf", "pfde"])
 def test_the_unscented_and_de_filters_beat_the_bootstrap_filter_on_their_papers_model(algorithm):
     model = B.upfde_model()

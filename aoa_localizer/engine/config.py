@@ -8,6 +8,7 @@ YAML file and a Python notebook describe a run the same way.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 from typing import Any
@@ -51,8 +52,12 @@ class Spec:
         if self.kind is int:
             return isinstance(value, Integral) and not isinstance(value, bool)
         if self.kind is float:
-            return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
-        return isinstance(value, str) and value in self.choices
+            return _finite_number(value)
+        if self.kind is list:
+            return isinstance(value, Sequence) and not isinstance(value, str) and all(map(_finite_number, value))
+        if not isinstance(value, str):
+            return False
+        return value in self.choices if self.choices else bool(value) and not any(c.isspace() for c in value)
 
     def _in_range(self, value) -> bool:
         if self.low is not None and (value <= self.low if self.low_open else value < self.low):
@@ -62,9 +67,11 @@ class Spec:
     def describe(self) -> str:
         """What a valid value is, in words: 'one of a, b', 'an integer >= 2', 'a finite number in (0, 1)'."""
         if self.kind is str:
-            return f"one of {', '.join(self.choices)}"
+            return f"one of {', '.join(self.choices)}" if self.choices else "a name without spaces"
         if self.kind is bool:
             return "true or false"
+        if self.kind is list:
+            return "a list of finite numbers"
         what = "an integer" if self.kind is int else "a finite number"
         if self.low is not None and self.high is not None:
             span = f"{'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}"
@@ -74,6 +81,10 @@ class Spec:
         elif self.high is not None:
             what += f" {'<' if self.high_open else '<='} {self.high:g}"
         return what + (" or unset" if self.optional else "")
+
+
+def _finite_number(value) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def param(default, doc: str, kind: type | None = None, **constraints):
@@ -129,10 +140,12 @@ class GfapfConfig:
 
 @dataclass(frozen=True)
 class DeConfig:
-    """Differential evolution of UPF-DE and PF-DE: V = F1 X_r1 + F2 (X_r2 - X_r3), binomial crossover Cr, G generations."""
+    """Differential evolution of UPF-DE and PF-DE: V = F1 X_r1 + F2 (X_r2 - X_r3), binomial crossover Cr, G
+    generations."""
 
-    f1: float = param(1.0, "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)",
-                      low=0.0, low_open=True)
+    f1: float = param(
+        1.0, "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)", low=0.0, low_open=True
+    )
     f2: float = param(0.9, "UPF-DE/PF-DE: scale F2 of the difference vector", low=0.0, low_open=True)
     cr: float = param(0.6, "UPF-DE/PF-DE: binomial crossover rate", low=0.0, high=1.0)
     generations: int = param(20, "UPF-DE/PF-DE: DE generations G per measurement", low=0)
@@ -153,93 +166,184 @@ class AgapfConfig:
 class LocalizerConfig:
     """All engine parameters. Defaults are the AFSA paper's where it gives one (see docs/design.md)."""
 
-    algorithm: str = choice("afsa", ALGORITHMS, "`afsa` (AFSA-PF), `sir` (bootstrap), `espf` (evolution sampling), "
-                            "`gfapf` (gravitation field), `upfde` (UKF proposal + differential evolution), `upf` "
-                            "(unscented PF), `pfde` (PF + differential evolution), `agapf` (adaptive genetic); "
-                            "docs/benchmarks.md says how each does on the emitter")
-    num_particles: int = param(100, "number of particles N (at 100,000 about 2.7 s per update on a 2-core machine; "
-                               "live, /diagnostics warns when the callbacks no longer fit the input rate)",
-                               low=2, high=MAX_PARTICLES)
+    algorithm: str = choice(
+        "afsa",
+        ALGORITHMS,
+        "`afsa` (AFSA-PF), `sir` (bootstrap), `espf` (evolution sampling), "
+        "`gfapf` (gravitation field), `upfde` (UKF proposal + differential evolution), `upf` "
+        "(unscented PF), `pfde` (PF + differential evolution), `agapf` (adaptive genetic); "
+        "docs/benchmarks.md says how each does on the emitter",
+    )
+    num_particles: int = param(
+        100,
+        "number of particles N (at 100,000 about 2.7 s per update on a 2-core machine; "
+        "live, /diagnostics warns when the callbacks no longer fit the input rate)",
+        low=2,
+        high=MAX_PARTICLES,
+    )
     seed: int | None = param(None, "filter seed; unset: random. The same seed reproduces a run", kind=int, low=0)
     # Bearing noise model: one sigma for every reading, or a sigma that grows linearly as quality falls.
-    bearing_sigma_deg: float = param(PAPER_BEARING_SIGMA_DEG, "reading sigma (deg; the paper's 3.801e-4 rad^2) for "
-                                     "`sigma_model: constant`", low=0.0, low_open=True)
-    sigma_model: str = choice("constant", ("constant", "quality"), "`constant`, or `quality`: sigma linear from "
-                              "`sigma_q40_deg` at Q = 40 to `sigma_q100_deg` at Q = 100")
-    sigma_q100_deg: float = param(1.0, "reading sigma at quality 100 (deg), `sigma_model: quality`",
-                                  low=0.0, low_open=True)
-    sigma_q40_deg: float = param(8.0, "reading sigma at quality 40 (deg), `sigma_model: quality`",
-                                 low=0.0, low_open=True)
-    likelihood: str = choice("mixture", ("mixture", "gaussian"), "`mixture`: Gaussian + uniform outliers with "
-                             "`outlier_prob`; `gaussian`: the paper's")
-    outlier_prob: float = param(0.05, "share of wild bearings the mixture likelihood allows for (the starting "
-                                "guess when `calibrate_noise`)", low=0.0, high=1.0, high_open=True)
-    process_noise_m: float = param(1.0, "random walk per step (m, paper eq. 17) for `sir` and `afsa.variant: "
-                                   "paper`", low=0.0)
+    bearing_sigma_deg: float = param(
+        PAPER_BEARING_SIGMA_DEG,
+        "reading sigma (deg; the paper's 3.801e-4 rad^2) for `sigma_model: constant`",
+        low=0.0,
+        low_open=True,
+    )
+    sigma_model: str = choice(
+        "constant",
+        ("constant", "quality"),
+        "`constant`, or `quality`: sigma linear from `sigma_q40_deg` at Q = 40 to `sigma_q100_deg` at Q = 100",
+    )
+    sigma_q100_deg: float = param(
+        1.0, "reading sigma at quality 100 (deg), `sigma_model: quality`", low=0.0, low_open=True
+    )
+    sigma_q40_deg: float = param(
+        8.0, "reading sigma at quality 40 (deg), `sigma_model: quality`", low=0.0, low_open=True
+    )
+    likelihood: str = choice(
+        "mixture",
+        ("mixture", "gaussian"),
+        "`mixture`: Gaussian + uniform outliers with `outlier_prob`; `gaussian`: the paper's",
+    )
+    outlier_prob: float = param(
+        0.05,
+        "share of wild bearings the mixture likelihood allows for (the starting guess when `calibrate_noise`)",
+        low=0.0,
+        high=1.0,
+        high_open=True,
+    )
+    process_noise_m: float = param(
+        1.0, "random walk per step (m, paper eq. 17) for `sir` and `afsa.variant: paper`", low=0.0
+    )
     # Bearing pre-processing (paper sec. 3.2) and what one observation point is.
     quality_min: float = param(40.0, "readings with a lower DF quality are dropped", low=0.0, high=100.0)
-    point_weighting: str = choice("inverse_variance", ("paper", "inverse_variance", "equal"),
-                                  "combination of a point's readings: `inverse_variance` (1/sigma^2, the best with "
-                                  "calibrated sigmas), `paper` (eqs. 19-21) or `equal`")
+    point_weighting: str = choice(
+        "inverse_variance",
+        ("paper", "inverse_variance", "equal"),
+        "combination of a point's readings: `inverse_variance` (1/sigma^2, the best with "
+        "calibrated sigmas), `paper` (eqs. 19-21) or `equal`",
+    )
     obs_max_duration_s: float = param(2.0, "longest span of one observation point (s)", low=0.0, low_open=True)
     obs_max_distance_m: float = param(10.0, "longest distance covered by one observation point (m)", low=0.0)
     obs_max_readings: int = param(50, "most readings in one observation point", low=1, high=100_000)
-    df_correlation: float = param(0.0, "correlation of the readings at one point (1: ten readings count as one)",
-                                  low=0.0, high=1.0)
-    point_gate_sigma: float = param(4.0, "wild-reading gate inside a point, in sigmas from its median (0: off)",
-                                    low=0.0)
+    df_correlation: float = param(
+        0.0, "correlation of the readings at one point (1: ten readings count as one)", low=0.0, high=1.0
+    )
+    point_gate_sigma: float = param(
+        4.0, "wild-reading gate inside a point, in sigmas from its median (0: off)", low=0.0
+    )
     # Start: global search of the robust posterior (or the paper's triangulation), unless a prior is given.
-    init_method: str = choice("global", ("global", "triangulation"), "`global`: start from the best mode of a "
-                              "global search of the robust posterior; `triangulation`: the paper's crossing pairs")
+    init_method: str = choice(
+        "global",
+        ("global", "triangulation"),
+        "`global`: start from the best mode of a "
+        "global search of the robust posterior; `triangulation`: the paper's crossing pairs",
+    )
     init_bearings: int = param(10, "observation points before a start is tried", low=2, high=100_000)
-    init_min_crossing_deg: float = param(10.0, "steepest crossing (deg) among the bearings the start mode explains",
-                                         low=0.0, high=90.0, low_open=True, high_open=True)
-    init_min_support: float = param(0.6, "`triangulation` only: share of points that must agree with a crossing",
-                                    low=0.0, high=1.0)
+    init_min_crossing_deg: float = param(
+        10.0,
+        "steepest crossing (deg) among the bearings the start mode explains",
+        low=0.0,
+        high=90.0,
+        low_open=True,
+        high_open=True,
+    )
+    init_min_support: float = param(
+        0.6, "`triangulation` only: share of points that must agree with a crossing", low=0.0, high=1.0
+    )
     init_max_points: int = param(500, "points kept while waiting for geometry (at least `init_bearings`)", low=2)
-    prior_east: float | None = param(None, "Gaussian prior mean east (m, map); set with `prior_north` and "
-                                     "`prior_sigma_m`, it replaces the start search", kind=float)
+    prior_east: float | None = param(
+        None,
+        "Gaussian prior mean east (m, map); set with `prior_north` and `prior_sigma_m`, it replaces the start search",
+        kind=float,
+    )
     prior_north: float | None = param(None, "Gaussian prior mean north (m, map)", kind=float)
     prior_sigma_m: float | None = param(None, "Gaussian prior sigma (m)", kind=float, low=0.0, low_open=True)
     # Frames and GPS pairing.
-    datum_lat: float | None = param(None, "latitude of the map origin (deg); unset: the first valid fix, once the "
-                                    "next fix confirms it", kind=float, low=-90.0, high=90.0)
-    datum_lon: float | None = param(None, "longitude of the map origin (deg), set with `datum_lat`", kind=float,
-                                    low=-180.0, high=180.0)
+    datum_lat: float | None = param(
+        None,
+        "latitude of the map origin (deg); unset: the first valid fix, once the next fix confirms it",
+        kind=float,
+        low=-90.0,
+        high=90.0,
+    )
+    datum_lon: float | None = param(
+        None, "longitude of the map origin (deg), set with `datum_lat`", kind=float, low=-180.0, high=180.0
+    )
     datum_alt: float | None = param(None, "altitude of the map origin (m); unset: the first valid fix's", kind=float)
-    gps_max_gap_s: float = param(2.0, "longest fix gap a bearing may be interpolated across (s)",
-                                 low=0.0, low_open=True)
-    max_stamp_jump_s: float = param(300.0, "a stamp this far ahead of its stream is refused, not adopted; a clock "
-                                    "step is followed after 3 agreeing stamps (s)", low=0.0, low_open=True)
-    df_time_offset_s: float = param(0.0, "added to every DF stamp to put it on the GPS clock (a receiver that "
-                                    "stamps 0.5 s late: -0.5); /diagnostics suggests one when the bearings show it")
-    gps_sigma_m: float = param(0.0, "GPS position noise (m), added to each bearing's variance by range; 0: each "
-                               "fix's own position_covariance (when its type is not unknown)", low=0.0)
-    bearing_encoding: str = choice("df_record", ("df_record", "pose"), "`df_record` (Vector3Stamped: azimuth deg, "
-                                   "quality) or `pose` (PoseWithCovarianceStamped yaw; `Localizer.add_bearing_enu` "
-                                   "in Python)", read_only=True)
+    gps_max_gap_s: float = param(
+        2.0, "longest fix gap a bearing may be interpolated across (s)", low=0.0, low_open=True
+    )
+    max_stamp_jump_s: float = param(
+        300.0,
+        "a stamp this far ahead of its stream is refused, not adopted; a clock "
+        "step is followed after 3 agreeing stamps (s)",
+        low=0.0,
+        low_open=True,
+    )
+    df_time_offset_s: float = param(
+        0.0,
+        "added to every DF stamp to put it on the GPS clock (a receiver that "
+        "stamps 0.5 s late: -0.5); /diagnostics suggests one when the bearings show it",
+    )
+    gps_sigma_m: float = param(
+        0.0,
+        "GPS position noise (m), added to each bearing's variance by range; 0: each "
+        "fix's own position_covariance (when its type is not unknown)",
+        low=0.0,
+    )
+    bearing_encoding: str = choice(
+        "df_record",
+        ("df_record", "pose"),
+        "`df_record` (Vector3Stamped: azimuth deg, "
+        "quality) or `pose` (PoseWithCovarianceStamped yaw; `Localizer.add_bearing_enu` "
+        "in Python)",
+        read_only=True,
+    )
     # Particle-filter skeleton.
-    resampling: str = choice("systematic", ("systematic", "stratified", "residual", "multinomial"),
-                             "resampling scheme")
-    ess_threshold: float = param(0.5, "resample when the effective sample size falls below this share of N",
-                                 low=0.0, high=1.0)
+    resampling: str = choice("systematic", ("systematic", "stratified", "residual", "multinomial"), "resampling scheme")
+    ess_threshold: float = param(
+        0.5, "resample when the effective sample size falls below this share of N", low=0.0, high=1.0
+    )
     history_points: int = param(300, "observation points the MCMC moves' posterior keeps", low=1, high=100_000)
     # Robustness (docs/design.md "Never confidently wrong"): noise self-calibration, global-mode safety,
     # emitter-moved test.
-    calibrate_noise: bool = param(True, "learn the receiver's sigma per quality band and the outlier rate from the "
-                                  "data (the configured model is the starting guess)")
-    global_safety: bool = param(True, "health test, global searches, independence MH moves, re-starts and the "
-                                "emitter-moved test (false: the filters alone)")
-    health_window: int = param(10, "recent points whose outlier share is tested against the outlier rate",
-                               low=3, high=1000)
-    health_p_value: float = param(1e-3, "binomial tail below which the recent outlier share raises the alarm",
-                                  low=0.0, high=1.0, low_open=True, high_open=True)
-    restart_log_odds: float = param(10.0, "re-start from a global mode whose log posterior beats the cloud's best "
-                                    "particle by this many nats", low=0.0, low_open=True)
-    moved_min_points: int = param(8, "disagreeing recent points needed before the emitter-moved test",
-                                  low=3, high=100_000)
-    moved_log_odds: float = param(20.0, "log likelihood ratio (nats) both old and recent points must show to "
-                                  "declare the emitter moved", low=0.0, low_open=True)
+    calibrate_noise: bool = param(
+        True,
+        "learn the receiver's sigma per quality band and the outlier rate from the "
+        "data (the configured model is the starting guess)",
+    )
+    global_safety: bool = param(
+        True,
+        "health test, global searches, independence MH moves, re-starts and the "
+        "emitter-moved test (false: the filters alone)",
+    )
+    health_window: int = param(
+        10, "recent points whose outlier share is tested against the outlier rate", low=3, high=1000
+    )
+    health_p_value: float = param(
+        1e-3,
+        "binomial tail below which the recent outlier share raises the alarm",
+        low=0.0,
+        high=1.0,
+        low_open=True,
+        high_open=True,
+    )
+    restart_log_odds: float = param(
+        10.0,
+        "re-start from a global mode whose log posterior beats the cloud's best particle by this many nats",
+        low=0.0,
+        low_open=True,
+    )
+    moved_min_points: int = param(
+        8, "disagreeing recent points needed before the emitter-moved test", low=3, high=100_000
+    )
+    moved_log_odds: float = param(
+        20.0,
+        "log likelihood ratio (nats) both old and recent points must show to declare the emitter moved",
+        low=0.0,
+        low_open=True,
+    )
     afsa: AfsaConfig = field(default_factory=AfsaConfig)
     espf: EspfConfig = field(default_factory=EspfConfig)
     gfapf: GfapfConfig = field(default_factory=GfapfConfig)
@@ -257,7 +361,7 @@ class LocalizerConfig:
     def has_datum(self) -> bool:
         return self.datum_lat is not None
 
-    def with_changes(self, **changes) -> "LocalizerConfig":
+    def with_changes(self, **changes) -> LocalizerConfig:
         """A copy with some fields changed (flat `afsa.x` keys allowed), validated again."""
         return LocalizerConfig.from_dict({**self.to_dict(), **changes})
 
@@ -269,20 +373,20 @@ class LocalizerConfig:
         return d
 
     @classmethod
-    def from_dict(cls, values: dict) -> "LocalizerConfig":
+    def from_dict(cls, values: dict) -> LocalizerConfig:
         """Build from a flat or nested dict; unknown keys are refused with their names."""
         values = dict(values)
         groups, unknown = {}, []
         for group, group_cls in GROUPS.items():
             given = dict(values.pop(group, None) or {})
             for key in [k for k in values if k.startswith(f"{group}.")]:
-                given[key[len(group) + 1:]] = values.pop(key)
+                given[key[len(group) + 1 :]] = values.pop(key)
             known = {f.name for f in fields(group_cls)}
             unknown += [f"{group}.{k}" for k in sorted(set(given) - known)]
             groups[group] = {k: v for k, v in given.items() if k in known}
         unknown = sorted(set(values) - {f.name for f in fields(cls)}) + unknown
         if unknown:
-            raise ConfigError(f"unknown parameter(s): {', '.join(unknown)}")
+            raise ConfigError(unknown_names(unknown, [p.name for p in parameter_specs()]))
         built = {group: replace(GROUPS[group](), **given) for group, given in groups.items()}
         return cls(**values, **built)
 
@@ -302,13 +406,30 @@ def _validate(cfg: LocalizerConfig):
                 g.metadata["spec"].check(f"{f.name}.{g.name}", getattr(group, g.name))
         else:
             f.metadata["spec"].check(f.name, getattr(cfg, f.name))
-    _check(cfg.init_max_points >= cfg.init_bearings,
-           f"init_max_points must be >= init_bearings ({cfg.init_bearings}), got {cfg.init_max_points!r}")
+    _check(
+        cfg.init_max_points >= cfg.init_bearings,
+        f"init_max_points must be >= init_bearings ({cfg.init_bearings}), got {cfg.init_max_points!r}",
+    )
     prior = (cfg.prior_east, cfg.prior_north, cfg.prior_sigma_m)
-    _check(all(p is None for p in prior) or all(p is not None for p in prior),
-           "prior_east, prior_north and prior_sigma_m are set together (all finite) or not at all")
-    _check((cfg.datum_lat is None) == (cfg.datum_lon is None),
-           "datum_lat and datum_lon are set together (finite) or not at all")
+    _check(
+        all(p is None for p in prior) or all(p is not None for p in prior),
+        "prior_east, prior_north and prior_sigma_m are set together (all finite) or not at all",
+    )
+    _check(
+        (cfg.datum_lat is None) == (cfg.datum_lon is None),
+        "datum_lat and datum_lon are set together (finite) or not at all",
+    )
+
+
+def unknown_names(names, known) -> str:
+    """'num_particle: unknown; did you mean num_particles?' for each name, the nearest known one suggested."""
+    import difflib
+
+    parts = []
+    for name in names:
+        near = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+        parts.append(f"{name}: unknown parameter" + (f"; did you mean {near[0]}?" if near else ""))
+    return "; ".join(parts)
 
 
 GROUPS = {"afsa": AfsaConfig, "espf": EspfConfig, "gfapf": GfapfConfig, "de": DeConfig, "agapf": AgapfConfig}

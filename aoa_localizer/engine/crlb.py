@@ -1,4 +1,4 @@
-"""Cramer-Rao lower bound of a static emitter seen through bearings (BENCHMARKS.md), and consistency scores."""
+"""Cramer-Rao lower bound of a static emitter seen through bearings (docs/benchmarks.md), and consistency scores."""
 from __future__ import annotations
 
 import numpy as np

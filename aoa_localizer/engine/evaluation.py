@@ -32,7 +32,9 @@ def scenario_config(data: ScenarioData, base: LocalizerConfig) -> LocalizerConfi
 def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
     """A scenario's fixes and bearings into `loc` in stamp order; on_result(what each call returned)."""
     for kind, row in data.events():
-        on_result(loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2]))
+        on_result(
+            loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2])
+        )
 
 
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
@@ -68,10 +70,18 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
     bound = crlb_rmse(truth, data.sensor_enu[~data.wild], data.sigma[~data.wild])
     if mode is None:
         return {"converged": False, "crlb": bound, "wall_s": wall}
-    lat, lon, _ = loc.frame.to_geodetic(mode.mean[0], mode.mean[1])
+    lat, lon, _ = loc.datum_frame().to_geodetic(mode.mean[0], mode.mean[1])
     err = np.array(data.frame.to_enu(lat, lon)) - truth
-    return {"converged": True, "error": float(np.hypot(*err)), "err_east": float(err[0]), "err_north": float(err[1]),
-            "crlb": bound, "nees": nees(err, mode.cov), "inside95": inside_ellipse(err, mode.cov), "wall_s": wall}
+    return {
+        "converged": True,
+        "error": float(np.hypot(*err)),
+        "err_east": float(err[0]),
+        "err_north": float(err[1]),
+        "crlb": bound,
+        "nees": nees(err, mode.cov),
+        "inside95": inside_ellipse(err, mode.cov),
+        "wall_s": wall,
+    }
 
 
 def score(data: ScenarioData, result: RunResult) -> dict:
@@ -104,13 +114,26 @@ def score(data: ScenarioData, result: RunResult) -> dict:
         "steps": len(result.estimates),
         "errors": errors.tolist(),
         "points": [e.points_used for e in result.estimates],
-        "crlb_steps": crlb_so_far(truth, data.sensor_enu[inlier], data.sigma[inlier], data.bearings[inlier, 0],
-                                  [e.stamp for e in result.estimates]).tolist(),
+        "crlb_steps": crlb_so_far(
+            truth,
+            data.sensor_enu[inlier],
+            data.sigma[inlier],
+            data.bearings[inlier, 0],
+            [e.stamp for e in result.estimates],
+        ).tolist(),
     }
 
 
-def run_model(model, algorithm: str, n: int, steps: int, data_seed: int, filter_seed: int,
-              jump: tuple[int, float] | None = None, **changes) -> tuple[np.ndarray, np.ndarray, float]:
+def run_model(
+    model,
+    algorithm: str,
+    n: int,
+    steps: int,
+    data_seed: int,
+    filter_seed: int,
+    jump: tuple[int, float] | None = None,
+    **changes,
+) -> tuple[np.ndarray, np.ndarray, float]:
     """One run of a filter on a benchmark model: (true states x_1..x_T, estimates, filter seconds).
 
     Data from `data_seed`, the filter from `filter_seed`, so filters compared with the same seeds see the

@@ -11,7 +11,7 @@ modes, the safety layer proposes from them, and the benchmark uses the best one 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -42,14 +42,14 @@ class Points:
     north: np.ndarray
     theta: np.ndarray
     sigma: np.ndarray
-    gps: np.ndarray | float = 0.0
+    gps: np.ndarray = field(default_factory=lambda: np.zeros(()))  # a scalar broadcasts to every point
 
     def __post_init__(self):
         self.cos, self.sin = np.cos(self.theta), np.sin(self.theta)
         self.gps = np.broadcast_to(np.asarray(self.gps, float), self.east.shape)
 
     @classmethod
-    def of(cls, rows: np.ndarray) -> "Points":
+    def of(cls, rows: np.ndarray) -> Points:
         """From a (K, 5) array of east, north, theta, sigma, gps sigma (the emitter model's history)."""
         rows = np.asarray(rows, float).reshape(-1, 5)
         return cls(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4])
@@ -57,10 +57,10 @@ class Points:
     def __len__(self) -> int:
         return self.east.size
 
-    def take(self, idx) -> "Points":
+    def take(self, idx) -> Points:
         return Points(self.east[idx], self.north[idx], self.theta[idx], self.sigma[idx], self.gps[idx])
 
-    def gps_var(self, rob: "Robust") -> np.ndarray:
+    def gps_var(self, rob: Robust) -> np.ndarray:
         """Variance of each antenna position (m^2): configured and per point."""
         return rob.gps_sigma_m**2 + self.gps**2
 
@@ -265,7 +265,7 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
     a_idx, r_idx = np.unravel_index(top, score.shape)
     means, covs, gamma = refine(cells[a_idx, r_idx], radius[r_idx], pts, rob)
     lp = log_posterior(means, pts, rob)
-    modes = []
+    modes: list[Mode] = []
     for m in np.argsort(-lp):
         if not (np.isfinite(lp[m]) and np.all(np.isfinite(means[m])) and np.all(np.isfinite(covs[m]))):
             continue
@@ -277,8 +277,16 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
         inlier = gamma[m] > 0.5
         if inlier.sum() < 2:  # a flat far-away "mode" that explains no bearing
             continue
-        modes.append(Mode(means[m].copy(), covs[m].copy(), float(lp[m]), float(lp[m] + 0.5 * (logdet + 2 * math.log(TWO_PI))),
-                          int(inlier.sum()), steepest_crossing_deg(means[m], pts, inlier)))
+        modes.append(
+            Mode(
+                means[m].copy(),
+                covs[m].copy(),
+                float(lp[m]),
+                float(lp[m] + 0.5 * (logdet + 2 * math.log(TWO_PI))),
+                int(inlier.sum()),
+                steepest_crossing_deg(means[m], pts, inlier),
+            )
+        )
     modes.sort(key=lambda md: -(md.log_post if by_density else md.log_mass))
     return modes
 

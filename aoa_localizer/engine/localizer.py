@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter, deque
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -90,13 +91,17 @@ def _as_float(value) -> float:
 class Localizer:
     """Pairs bearings with the interpolated GPS track, builds observation points, starts and runs a filter."""
 
-    def __init__(self, config: LocalizerConfig | None = None, observer: Observer | None = None):
-        """`observer`: told of every accepted fix and every closed point (see Observer), for reports."""
+    def __init__(self, config: LocalizerConfig | None = None, observer: Observer | None = None,
+                 on_estimate: Callable[[Estimate], None] | None = None):
+        """`observer`: told of every accepted fix and every closed point (see Observer), for reports.
+        `on_estimate`: called with every new estimate, whichever input made it (a fix often closes the point
+        that makes it); `estimate` always holds the latest one (None before the first)."""
         self.cfg = config or LocalizerConfig()
         self.observer = observer
+        self.on_estimate = on_estimate
         self.rng = np.random.default_rng(self.cfg.seed)
         self.frame: LocalFrame | None = None
-        if self.cfg.has_datum:
+        if self.cfg.datum_lat is not None and self.cfg.datum_lon is not None:
             self.frame = LocalFrame(self.cfg.datum_lat, self.cfg.datum_lon, self.cfg.datum_alt or 0.0)
         self.rejected: Counter = Counter()
         self.input_events: Counter = Counter()  # fix_clock_jump, df_clock_jump
@@ -215,14 +220,18 @@ class Localizer:
         # gps_sigma_m, when set, overrides the fixes' own covariances (it enters the likelihood as a constant)
         sigma_m = sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 and not self.cfg.gps_sigma_m else 0.0
         if not math.isfinite(stamp):
-            return self._reject("fix_bad_stamp")
+            self._reject("fix_bad_stamp")
+            return None
         if status < 0:
-            return self._reject("fix_no_fix")
+            self._reject("fix_no_fix")
+            return None
         if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
-            return self._reject("fix_bad_position")
+            self._reject("fix_bad_position")
+            return None
         why = implausible_fix(lat, lon, alt)
         if why:
-            return self._reject(why)
+            self._reject(why)
+            return None
         verdict = self._admit(self.fix_clock, "fix", "fix_clock_jump", stamp)
         if verdict is None:
             return None
@@ -246,7 +255,8 @@ class Localizer:
         CLOCK_JUMP (counted under `jump_event`, logged); the caller moves to the new timeline."""
         verdict = clock.admit(stamp)
         if verdict in _CLOCK_REASONS:
-            return self._reject(f"{kind}_{_CLOCK_REASONS[verdict]}")
+            self._reject(f"{kind}_{_CLOCK_REASONS[verdict]}")
+            return None
         if verdict is Verdict.CLOCK_JUMP:
             self.input_events[jump_event] += 1
             log.warning("%s: the clock jumped to %.3f; going on on the new timeline", jump_event, stamp)
@@ -259,10 +269,12 @@ class Localizer:
         log.info("datum set from the first valid fix, confirmed by the next: %.7f, %.7f, %.1f m", lat, lon, datum_alt)
 
     def _store_fix(self, stamp, lat, lon, alt, sigma_m=0.0) -> Estimate | None:
-        east, north = self.frame.to_enu(lat, lon)
-        reason = self.track.add(stamp, float(east), float(north), float(self.frame.north_angle(lat, lon)), sigma_m)
+        frame = self.datum_frame()
+        east, north = frame.to_enu(lat, lon)
+        reason = self.track.add(stamp, float(east), float(north), float(frame.north_angle(lat, lon)), sigma_m)
         if reason:
-            return self._reject(reason)
+            self._reject(reason)
+            return None
         self._recent.append(None)
         if self.observer is not None:
             self.observer.on_fix(stamp, float(east), float(north))
@@ -290,13 +302,17 @@ class Localizer:
         stamp, azimuth, quality = map(_as_float, (stamp, azimuth_deg, quality))
         stamp += self.cfg.df_time_offset_s  # on the GPS clock
         if not math.isfinite(stamp):
-            return self._reject("bad_stamp")
+            self._reject("bad_stamp")
+            return None
         if not math.isfinite(azimuth):
-            return self._reject("bad_azimuth")
+            self._reject("bad_azimuth")
+            return None
         if not math.isnan(quality) and not 0 <= quality <= 100:
-            return self._reject("bad_quality")
+            self._reject("bad_quality")
+            return None
         if quality < self.cfg.quality_min:  # False for NaN: unknown quality passes, counted below
-            return self._reject("low_quality")
+            self._reject("low_quality")
+            return None
         verdict = self._admit(self.df_clock, "bearing", "df_clock_jump", stamp)
         if verdict is None:
             return None
@@ -306,7 +322,8 @@ class Localizer:
                 self._reject("clock_jump")
         first = self.track.t[0] if len(self.track) else (self._datum_candidate or (math.inf,))[0]
         if stamp < first:
-            return self._reject("before_first_fix")
+            self._reject("before_first_fix")
+            return None
         self._recent.append(None)
         self.pending.append((stamp, azimuth % 360.0, quality, sigma))
         return self._release_pending()
@@ -327,10 +344,17 @@ class Localizer:
             return None
         mean, cov = self.filter.estimate()
         if not _positive_definite(cov):
-            return self._reject("covariance_degenerate")
-        self.estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
-        self.estimate.end_of_data = True
-        return self.estimate
+            self._reject("covariance_degenerate")
+            return None
+        estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
+        estimate.end_of_data = True
+        self._new_estimate(estimate)
+        return estimate
+
+    def _new_estimate(self, estimate: Estimate):
+        self.estimate = estimate
+        if self.on_estimate is not None:
+            self.on_estimate(estimate)
 
     def reset(self, drop_datum: bool = False):
         """Drop the track, the points and the filter; keep the counters (the node's ~/reset). The datum is kept,
@@ -395,13 +419,27 @@ class Localizer:
                 if not _positive_definite(cov):
                     self._reject("covariance_degenerate")
                     continue
-                self.estimate = estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
+                estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
+                self._new_estimate(estimate)
         return estimate
 
+    def adopt_datum(self, frame: LocalFrame | None):
+        """Keep the map frame of an earlier Localizer (a datum it took from a fix) so that a restart with new
+        settings does not move the map; a configured datum (datum_lat, datum_lon) wins and is kept."""
+        if frame is not None and not self.cfg.has_datum and self.frame is None and not len(self.track):
+            self.frame = frame
+
+    def datum_frame(self) -> LocalFrame:
+        """The map frame at the datum (ENU metres); raises RuntimeError before the datum is set."""
+        if self.frame is None:
+            raise RuntimeError("no datum yet: no fix has been confirmed")
+        return self.frame
+
     def _make_estimate(self, stamp: float, mean, cov) -> Estimate:
-        lat, lon, _ = self.frame.to_geodetic(mean[0], mean[1])
+        lat, lon, _ = self.datum_frame().to_geodetic(mean[0], mean[1])
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
                         cov=cov, bearings_used=self.bearings_used, points_used=self.points_used,
                         ess=self.filter.ess(), algorithm=self.cfg.algorithm,
                         particles=self.filter.x.copy(), weights=self.filter.weights,
-                        modes=self.emitter.mode_masses(), noise=self.noise_summary() if self.cfg.calibrate_noise else None)
+                        modes=self.emitter.mode_masses(),
+                        noise=self.noise_summary() if self.cfg.calibrate_noise else None)

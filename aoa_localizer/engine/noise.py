@@ -12,7 +12,6 @@ while the config says constant, and one that reports no quality at all. EM start
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
@@ -65,7 +64,7 @@ class NoiseModel:
         self.fits += 1
         return ll
 
-    def copy(self) -> "NoiseModel":
+    def copy(self) -> NoiseModel:
         other = NoiseModel(self.reading_outlier_prob)
         other.k, other.readings, other.fits = self.k.copy(), self.readings.copy(), self.fits
         return other

@@ -66,7 +66,7 @@ def point_coefficients(quality: np.ndarray, sigma: np.ndarray, weighting: str) -
 def recursive_corrected_mean(gammas, weights) -> float:
     """The paper's recursion (eqs. 19-21) literally, on unwrapped angles: the reference for tests."""
     mean = cmean = 0.0
-    for n, (g, w) in enumerate(zip(gammas, weights), start=1):
+    for n, (g, w) in enumerate(zip(gammas, weights, strict=False), start=1):
         mean = ((n - 1) * mean + g) / n
         corrected = g - (g - mean) * w
         cmean = ((n - 1) * cmean + corrected) / n
@@ -87,9 +87,9 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig,
     """Corrected bearing of one observation point and the mask of the readings it kept (the rest: wild).
 
     `point_weighting` "paper" is eqs. 19-21; "inverse_variance" is the best linear combination when
-    the sigma model is calibrated (sigma_model "quality"). Angles are averaged on the tangent at their circular mean, positions and stamps with the same
-    coefficients (the bearing is nearly linear in position over a few metres, so the corrected
-    bearing belongs to the equally-weighted position). Variance: a^T C a with C the readings'
+    the sigma model is calibrated (sigma_model "quality"). Angles are averaged on the tangent at their circular
+    mean, positions and stamps with the same coefficients (the bearing is nearly linear in position over a few
+    metres, so the corrected bearing belongs to the equally-weighted position). Variance: a^T C a with C the readings'
     covariance under `df_correlation`. `sigma`: the readings' sigmas when not their own (self-calibrated noise);
     the gate uses the larger of the two.
     """
@@ -99,7 +99,7 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig,
     # The gate is never stricter than the configured sigma: the readings of a moving vehicle's point also
     # differ by its motion, which a small calibrated sigma would call wild.
     keep = ~point_outliers(theta, np.maximum(sigma, own), cfg.point_gate_sigma)
-    kept = [r for r, k in zip(readings, keep) if k]
+    kept = [r for r, k in zip(readings, keep, strict=False) if k]
     theta, sigma = theta[keep], sigma[keep]
     quality = np.array([r.quality for r in kept])
     a = point_coefficients(quality, sigma, cfg.point_weighting)
@@ -136,13 +136,16 @@ class PointBuilder:
             too_late = r.stamp - first.stamp > self.cfg.obs_max_duration_s
             too_far = math.hypot(r.east - first.east, r.north - first.north) > self.cfg.obs_max_distance_m
             if too_late or too_far:
-                closed.append(self.flush())
+                closed.append(self._take())
         self.readings.append(r)
         if len(self.readings) >= self.cfg.obs_max_readings:
-            closed.append(self.flush())
+            closed.append(self._take())
         return closed
 
-    def flush(self) -> list[Reading] | None:
-        """Close the open point (end of data, reset) and return its readings."""
+    def _take(self) -> list[Reading]:
         readings, self.readings = self.readings, []
-        return readings or None
+        return readings
+
+    def flush(self) -> list[Reading] | None:
+        """Close the open point (end of data, reset) and return its readings (None when none is open)."""
+        return self._take() or None

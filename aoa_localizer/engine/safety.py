@@ -102,12 +102,13 @@ class ModeProposal:
 
     def logpdf(self, x: np.ndarray) -> np.ndarray:
         parts = np.stack([math.log(w) + _t_logpdf(x, m, c, ld)
-                          for w, m, c, ld in zip(self.weights, self.means, self.chols, self.logdets)])
+                          for w, m, c, ld in zip(self.weights, self.means, self.chols, self.logdets, strict=False)])
         return np.logaddexp.reduce(parts, axis=0)
 
 
 def random_walk_sweep(x: np.ndarray, target: np.ndarray, log_target, cov: np.ndarray, rng: np.random.Generator):
-    """One Gaussian random-walk MH move per particle, scaled by the cloud's covariance; returns (x, target, accepted)."""
+    """One Gaussian random-walk MH move per particle, scaled by the cloud's covariance; returns (x, target,
+    accepted)."""
     chol = np.linalg.cholesky(cov + 1e-4 * np.eye(2))
     prop = x + _RW_SCALE * rng.standard_normal(x.shape) @ chol.T
     prop_target = log_target(prop)
@@ -115,8 +116,7 @@ def random_walk_sweep(x: np.ndarray, target: np.ndarray, log_target, cov: np.nda
     return np.where(take[:, None], prop, x), np.where(take, prop_target, target), int(take.sum())
 
 
-def independence_sweep(x: np.ndarray, target: np.ndarray, log_target, proposal: ModeProposal,
-                       rng: np.random.Generator):
+def independence_sweep(x: np.ndarray, target: np.ndarray, log_target, proposal: ModeProposal, rng: np.random.Generator):
     """One independence MH move per particle from `proposal`: accept with pi(y) q(x) / (pi(x) q(y))."""
     prop = proposal.sample(x.shape[0], rng)
     prop_target = log_target(prop)

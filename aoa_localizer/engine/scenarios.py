@@ -1,4 +1,4 @@
-"""The public benchmark scenarios of BENCHMARKS.md, simulated as a vehicle would record them.
+"""The public benchmark scenarios (docs/benchmarks.md, "Scenarios"), simulated as a vehicle would record them.
 
 Output is what crosses the public interface: GPS fixes (stamp, lat, lon, alt) on the GPS clock and
 DF records (stamp, azimuth from true north, quality) on the receiver's clock, plus the truth the

@@ -19,21 +19,32 @@ import logging
 import math
 import time
 from collections import Counter, deque
-from typing import Callable
+from collections.abc import Callable
+from typing import cast
 
 import numpy as np
 
 from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
-from aoa_localizer.filters import make_filter
-from aoa_localizer.models.emitter import EmitterModel
-from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, inlier_share, log_posterior, refine, residuals
+from aoa_localizer.engine.global_search import (
+    Mode,
+    Points,
+    Robust,
+    find_modes,
+    inlier_share,
+    log_posterior,
+    refine,
+    residuals,
+)
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.preprocess import make_point
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
 from aoa_localizer.engine.triangulation import initial_particles
 from aoa_localizer.engine.types import ObservationPoint, Reading
+from aoa_localizer.filters import make_filter
+from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.models.emitter import EmitterModel
 
 log = logging.getLogger("aoa_localizer")
 
@@ -63,7 +74,7 @@ class EmitterTrack:
         # (readings, point, readings gated out) per point: the points waiting for a start, then the filter's
         # history
         self.window: deque[tuple[list[Reading], ObservationPoint, int]] = deque()
-        self.filter = None
+        self.filter: ParticleFilter | None = None
         self.health = HealthMonitor(cfg.health_window, cfg.health_p_value)
         self.modes: list[Mode] = []
         self.proposal: ModeProposal | None = None
@@ -91,22 +102,34 @@ class EmitterTrack:
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         return make_point(readings, self.cfg, self.sigmas(readings))
 
+    @property
+    def running(self) -> ParticleFilter:
+        """The filter, where the code runs only once it started."""
+        if self.filter is None:
+            raise RuntimeError("no filter running")  # an engine bug, never bad input
+        return self.filter
+
+    @property
+    def model(self) -> EmitterModel:
+        """The running filter's emitter model (the track always builds one)."""
+        return cast(EmitterModel, self.running.model)
+
     def used_points(self) -> np.ndarray:
         """(K, 5) rows east, north, theta, sigma, gps sigma of the points the running filter keeps; (0, 5) before."""
         if self.filter is None:
             return np.zeros((0, 5))
-        return np.array(self.filter.model.history.data, float).reshape(-1, 5)
+        return np.array(self.model.history.data, float).reshape(-1, 5)
 
     def points(self) -> Points:
         return Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for _, p, _ in self.window]))
 
     def robust(self, prior: bool = True) -> Robust:
-        model = self.filter.model if self.filter is not None else None
-        if prior and model is not None and model.prior_prec.any():
-            return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, model.prior_mean, model.prior_prec)
-        if prior and self.cfg.has_prior:
-            return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, np.array([self.cfg.prior_east, self.cfg.prior_north]),
-                          np.eye(2) / self.cfg.prior_sigma_m**2)
+        if prior and self.filter is not None and self.model.prior_prec.any():
+            return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, self.model.prior_mean, self.model.prior_prec)
+        cfg = self.cfg
+        if prior and cfg.prior_east is not None and cfg.prior_north is not None and cfg.prior_sigma_m is not None:
+            return Robust(self.lik_outlier_prob, cfg.gps_sigma_m, np.array([cfg.prior_east, cfg.prior_north]),
+                          np.eye(2) / cfg.prior_sigma_m**2)
         return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m)
 
     @property
@@ -157,18 +180,20 @@ class EmitterTrack:
             return False
         best = modes[0]
         last = self.window[-1][1]
-        sigma = max(_PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(best.mean[0] - last.east, best.mean[1] - last.north))
+        sigma = max(
+            _PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(best.mean[0] - last.east, best.mean[1] - last.north)
+        )
         self.filter = make_filter(cfg, self.rng, EmitterModel(cfg))
-        self.filter.model.set_prior(best.mean, sigma**2 * np.eye(2))
-        self.filter.model.lik.outlier_prob = self.lik_outlier_prob
+        self.model.set_prior(best.mean, sigma**2 * np.eye(2))
+        self.model.lik.outlier_prob = self.lik_outlier_prob
         for _, p, _ in self.window:
-            self.filter.model.observe(p)
-        self.filter.k = len(self.window)
+            self.model.observe(p)
+        self.running.k = len(self.window)
         self.modes, self.proposal = modes, ModeProposal(modes, self._broad_sigma(best.mean))
-        particles = importance_sample(self.filter.log_target, self.proposal, cfg.num_particles, self.rng)
-        self.filter.initialise(particles, best.mean, sigma**2 * np.eye(2))
-        self.start_cloud = self.filter.x.copy()
-        self.filter.rejuvenate(_START_SWEEPS, self.proposal)
+        particles = importance_sample(self.running.log_target, self.proposal, cfg.num_particles, self.rng)
+        self.running.initialise(particles, best.mean, sigma**2 * np.eye(2))
+        self.start_cloud = self.running.x.copy()
+        self.running.rejuvenate(_START_SWEEPS, self.proposal)
         self._started(f"global search: best of {len(modes)} mode(s), {best.inliers} of {len(self.window)} points agree")
         self.points_used += len(self.window)
         self.bearings_used += sum(len(r) - g for r, _, g in self.window)
@@ -188,8 +213,10 @@ class EmitterTrack:
         if best.inliers < _MIN_INLIERS:
             return [], f"the best place explains only {best.inliers} points (needs {_MIN_INLIERS})"
         if best.crossing_deg < self.cfg.init_min_crossing_deg:
-            return [], (f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < "
-                        f"{self.cfg.init_min_crossing_deg:g} deg")
+            return [], (
+                f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < "
+                f"{self.cfg.init_min_crossing_deg:g} deg"
+            )
         size, reach = self._ellipse_and_range(best)
         if size > _MAX_ELLIPSE_RANGE_SHARE * reach:
             return [], (f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m from the track")
@@ -205,13 +232,16 @@ class EmitterTrack:
         """The paper's start (sec. 3.3): crossings of sorted pairs; then every buffered point updates the filter."""
         cfg = self.cfg
         pts = [p for _, p, _ in self.window]
-        particles, why = initial_particles(pts, cfg.num_particles, cfg.init_min_crossing_deg, cfg.init_min_support,
-                                           self.rng)
+        particles, why = initial_particles(
+            pts, cfg.num_particles, cfg.init_min_crossing_deg, cfg.init_min_support, self.rng
+        )
         if particles is None:
             self.status = f"waiting for geometry: {why}"
             return False
         mean = particles.mean(axis=0)
-        sigma = max(_PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(mean[0] - pts[-1].east, mean[1] - pts[-1].north))
+        sigma = max(
+            _PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(mean[0] - pts[-1].east, mean[1] - pts[-1].north)
+        )
         return self._start_then_replay(particles, mean, sigma**2 * np.eye(2), "triangulation")
 
     def _start_from_prior(self):
@@ -222,9 +252,9 @@ class EmitterTrack:
 
     def _start_then_replay(self, particles, mean, cov, how: str):
         self.filter = make_filter(self.cfg, self.rng, EmitterModel(self.cfg))
-        self.filter.model.lik.outlier_prob = self.lik_outlier_prob
-        self.filter.initialise(particles, mean, cov)
-        self.start_cloud = self.filter.x.copy()
+        self.model.lik.outlier_prob = self.lik_outlier_prob
+        self.running.initialise(particles, mean, cov)
+        self.start_cloud = self.running.x.copy()
         waiting, self.window = list(self.window), deque()
         self._started(how)
         result = False
@@ -239,20 +269,20 @@ class EmitterTrack:
         log.info("filter %s started after %d observation points (%s)", self.cfg.algorithm, self.points_seen, how)
 
     def _update(self, readings, point, gated) -> bool:
-        f = self.filter
-        before = f.model.history.appended
+        f = self.running
+        before = self.model.history.appended
         logw_before = f.logw.copy()
         try:
             ok = f.update(point)
-            if ok and f.model.history.appended > before:
+            if ok and self.model.history.appended > before:
                 self.window.append((readings, point, gated))
-                while len(self.window) > len(f.model.history):
+                while len(self.window) > len(self.model.history):
                     self.window.popleft()
             if ok and self._finite():
                 self._supervise(logw_before)
             if self.filter is None:  # the emitter moved and the re-start waits for more points
                 return False
-            f = self.filter
+            f = self.running
         except (ArithmeticError, ValueError, np.linalg.LinAlgError):
             log.exception("filter update failed; point skipped")
             self._reject("internal_error", 1)
@@ -272,13 +302,13 @@ class EmitterTrack:
         return True
 
     def _finite(self) -> bool:
-        mean, cov = self.filter.estimate()
-        return bool(np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)))
+        mean, cov = self.running.estimate()
+        return bool(np.all(np.isfinite(self.running.x)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)))
 
     # -- the safety layer ---------------------------------------------------------------------------
     def _supervise(self, logw_before: np.ndarray):
         """Health of the newest point, scheduled and alarm-driven global searches, moves while in alarm."""
-        f, n = self.filter, len(self.window)
+        f, n = self.running, len(self.window)
         if not self.cfg.global_safety:
             if self.cfg.calibrate_noise and n >= self.next_search:
                 self.next_search = min(int(math.ceil(n * _SEARCH_GROWTH)), n + _SEARCH_EVERY_MAX)
@@ -286,14 +316,18 @@ class EmitterTrack:
                 self._calibrate([self._refined(best)], False)
             return
         w = np.exp(logw_before - logw_before.max())
-        floor = math.log(max(f.model.lik.outlier_prob, 1e-300) / (2 * math.pi)) if f.model.lik.outlier_prob else -np.inf
+        eps = self.model.lik.outlier_prob
+        floor = math.log(max(eps, 1e-300) / (2 * math.pi)) if eps else -np.inf
         outlier_resp = float(w @ np.exp(np.minimum(floor - f.last_ll, 0.0)) / w.sum())
         was = self.health.alarm_since is not None
         alarm = self.health.push(outlier_resp > 0.5, self.points_seen, self.outlier_prob)
         if alarm and not was:
             self.events["alarm"] += 1
-            log.warning("the cloud no longer explains the newest points (%d of the last %d look wild); searching",
-                        sum(self.health.flags), len(self.health.flags))
+            log.warning(
+                "the cloud no longer explains the newest points (%d of the last %d look wild); searching",
+                sum(self.health.flags),
+                len(self.health.flags),
+            )
         if alarm:
             self.events["alarm_points"] += 1
             self.status = f"checking: {sum(self.health.flags)} of the last {len(self.health.flags)} points disagree"
@@ -319,7 +353,7 @@ class EmitterTrack:
         return self.filter is not None
 
     def _global_check(self, alarm: bool):
-        f = self.filter
+        f = self.running
         self.last_search_point = self.points_seen
         if self.cfg.calibrate_noise:  # the joint fit is safe at any place: it compares several
             best = f.x[np.argmax(f.log_target(f.x))]
@@ -335,8 +369,12 @@ class EmitterTrack:
         best_particle = float(np.max(f.log_target(f.x)))
         if modes[0].log_post > best_particle + self.cfg.restart_log_odds:
             self.events["global_restart"] += 1
-            log.warning("re-start: a mode at E %.1f N %.1f explains the points far better (log odds %.1f) than the cloud",
-                        modes[0].mean[0], modes[0].mean[1], modes[0].log_post - best_particle)
+            log.warning(
+                "re-start: a mode at E %.1f N %.1f explains the points far better (log odds %.1f) than the cloud",
+                modes[0].mean[0],
+                modes[0].mean[1],
+                modes[0].log_post - best_particle,
+            )
             f.replace_cloud(importance_sample(f.log_target, self.proposal, f.n, self.rng))
             f.rejuvenate(_START_SWEEPS, self.proposal)
             self.health.clear()
@@ -361,8 +399,9 @@ class EmitterTrack:
 
     def _velocities(self) -> np.ndarray:
         """The vehicle's mean velocity (east, north, m/s) over each kept point's readings, (K, 2)."""
-        return np.array([[np.mean([r.v_east for r in group]), np.mean([r.v_north for r in group])]
-                         for group, _, _ in self.window]).reshape(-1, 2)
+        return np.array(
+            [[np.mean([r.v_east for r in group]), np.mean([r.v_north for r in group])] for group, _, _ in self.window]
+        ).reshape(-1, 2)
 
     def _broad_sigma(self, centre: np.ndarray) -> float:
         pts = self.points()
@@ -379,8 +418,12 @@ class EmitterTrack:
             return False
         quality = np.array([r.quality for r in readings])
         base = np.array([r.sigma for r in readings])
-        at_readings = Points(np.array([r.east for r in readings]), np.array([r.north for r in readings]),
-                             np.array([r.theta for r in readings]), base)
+        at_readings = Points(
+            np.array([r.east for r in readings]),
+            np.array([r.north for r in readings]),
+            np.array([r.theta for r in readings]),
+            base,
+        )
         pts = self._rebuilt_points(None)
         eps = self.cfg.outlier_prob if self.cfg.likelihood == "mixture" else 0.0
         narrow = find_modes(pts, Robust(eps, self.cfg.gps_sigma_m), by_density=by_density)
@@ -395,10 +438,13 @@ class EmitterTrack:
                 x = self._refined(x, trial)
             if best is None or ll > best[0]:
                 best = (ll, trial, x)
+        if best is None:
+            return False
         _, self.noise, at = best
-        f = self.filter
+        f = self.filter  # None while waiting to start: only the points are rebuilt
         old = f.log_target(f.x) if f is not None else None
-        rebuilt, delta = deque(), 0
+        rebuilt: deque = deque()
+        delta = 0
         for group, _, gated in self.window:
             point, kept = self.make(group)
             now = int((~kept).sum())
@@ -411,9 +457,9 @@ class EmitterTrack:
         self.outlier_prob = point_outlier_prob(residuals(at, pts), pts.sigma, self.outlier_prob)
         self.events["recalibrated"] += 1
         if f is not None:
-            f.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
-            f.model.lik.outlier_prob = self.lik_outlier_prob
-            f.reweight(f.log_target(f.x) - old)
+            self.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
+            self.model.lik.outlier_prob = self.lik_outlier_prob
+            f.reweight(f.log_target(f.x) - old)  # old is set whenever f is
             if f.ess() < self.cfg.ess_threshold * f.n:
                 f.resample()
                 f.rejuvenate(_ALARM_SWEEPS, self.proposal)
@@ -437,7 +483,7 @@ class EmitterTrack:
         if not modes or modes[0].crossing_deg < self.cfg.init_min_crossing_deg or modes[0].inliers < _MIN_INLIERS:
             return False
         x_new = modes[0].mean
-        x_old = self.filter.estimate()[0]
+        x_old = self.running.estimate()[0]
         # A moved emitter leaves (almost) no recent point agreeing with the old place; a second, stationary
         # source (a reflection) keeps about its share of them: that is a second mode, not a move.
         still = inlier_share(x_old, recent, rob)
@@ -451,9 +497,15 @@ class EmitterTrack:
         dropped = [self.window.popleft() for _ in range(k - m)]
         self._reject("emitter_moved", sum(len(r) - g for r, _, g in dropped))
         self.events["emitter_moved"] += 1
-        log.warning("the emitter moved: the last %d points agree on E %.1f N %.1f, which the older %d contradict "
-                    "(log odds %.1f); re-starting from the recent points", m, x_new[0], x_new[1], k - m,
-                    min(lr_recent, lr_old))
+        log.warning(
+            "the emitter moved: the last %d points agree on E %.1f N %.1f, which the older %d contradict "
+            "(log odds %.1f); re-starting from the recent points",
+            m,
+            x_new[0],
+            x_new[1],
+            k - m,
+            min(lr_recent, lr_old),
+        )
         self.filter = None
         self.modes, self.proposal = [], None
         self.points_used = 0
@@ -475,7 +527,7 @@ class EmitterTrack:
     # -- what the estimate reports -----------------------------------------------------------------------
     def mode_masses(self) -> list[tuple[float, float, float]]:
         """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first."""
-        f = self.filter
+        f = self.running
         w = f.weights
         if len(self.modes) < 2:
             mean = w @ f.x

@@ -4,9 +4,10 @@ Records are sorted by bearing and paired a fixed interval apart (neighbours are 
 Pairs that cross at less than `init_min_crossing_deg`, or whose rays meet behind either antenna,
 are refused, and so are pairs whose crossing point is not supported by at least `min_support` of
 all the records (bearing within 3 sigma of it): one wild bearing crossing the others steeply would
-otherwise seed the whole cloud far from the emitter. Each particle is the crossing of one good pair with both bearings redrawn from their
-noise, so the cloud has the spread the two bearings really allow.
+otherwise seed the whole cloud far from the emitter. Each particle is the crossing of one good pair with
+both bearings redrawn from their noise, so the cloud has the spread the two bearings really allow.
 """
+
 from __future__ import annotations
 
 import math
@@ -63,8 +64,9 @@ def support(candidates: np.ndarray, pos: np.ndarray, theta: np.ndarray, sigma: n
     return np.mean(np.abs(wrap_pi(theta[None, :] - seen)) <= _SUPPORT_SIGMAS * sigma[None, :], axis=1)
 
 
-def good_pairs(points: list[ObservationPoint], min_crossing_deg: float,
-               min_support: float) -> tuple[np.ndarray, np.ndarray, str]:
+def good_pairs(
+    points: list[ObservationPoint], min_crossing_deg: float, min_support: float
+) -> tuple[np.ndarray, np.ndarray, str]:
     """The sorted pairs whose rays cross steeply, in front of both antennas, at a point most records support."""
     if len(points) < 2:
         return np.array([], int), np.array([], int), "fewer than two observation points"
@@ -92,8 +94,9 @@ def good_pairs(points: list[ObservationPoint], min_crossing_deg: float,
     return i[ok], j[ok], why
 
 
-def initial_particles(points: list[ObservationPoint], n: int, min_crossing_deg: float, min_support: float,
-                      rng: np.random.Generator) -> tuple[np.ndarray | None, str]:
+def initial_particles(
+    points: list[ObservationPoint], n: int, min_crossing_deg: float, min_support: float, rng: np.random.Generator
+) -> tuple[np.ndarray | None, str]:
     """N initial particles from crossing pairs with redrawn bearing noise, or (None, reason) if the geometry is poor."""
     i, j, why = good_pairs(points, min_crossing_deg, min_support)
     if i.size == 0:

@@ -48,15 +48,15 @@ class Estimate:
     points_used: int
     ess: float
     algorithm: str
-    particles: np.ndarray = field(repr=False, default=None)  # (N, 2) east/north
-    weights: np.ndarray = field(repr=False, default=None)  # (N,), normalised
+    particles: np.ndarray | None = field(repr=False, default=None)  # (N, 2) east/north
+    weights: np.ndarray | None = field(repr=False, default=None)  # (N,), normalised
     # Alternative hypotheses: (east, north, mass) of each posterior mode holding >= 1 % of the cloud
     modes: list = field(default_factory=list)
     noise: dict | None = None  # the self-calibrated noise (Localizer.noise_summary), when calibration is on
     end_of_data: bool = False  # made by Localizer.finish(), the offline end-of-data global check
 
     def to_json_dict(self) -> dict:
-        """The JSON-lines record of INTERFACE.md (offline replay output)."""
+        """The JSON-lines record of docs/interface.md (offline replay output)."""
         return {
             "stamp": self.stamp,
             "lat": self.lat,

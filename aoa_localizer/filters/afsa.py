@@ -12,9 +12,11 @@
   range is measured in standard deviations of the school (so it means the same at 5 km and at 5 m);
   `max_iterations` is the number of sweeps. The emitter is modelled static, as the paper says it is:
   the random walk u of eq. 17 would make the filter forget old bearings, and the moves already keep
-  the school diverse, so `process_noise_m` applies to the paper variant and SIR only. Swarming towards the neighbours' centre is not reversible
-  and is left to the paper variant. See docs/design.md for the measurements behind the choice.
+  the school diverse, so `process_noise_m` applies to the paper variant and SIR only. Swarming towards the
+  neighbours' centre is not reversible and is left to the paper variant. See docs/design.md for the
+  measurements behind the choice.
 """
+
 from __future__ import annotations
 
 import math
@@ -67,18 +69,19 @@ class AfsaFilter(ParticleFilter):
     # -- the paper's school ---------------------------------------------------------------------
     def initialise(self, particles, prior_mean=None, prior_cov=None):
         super().initialise(particles, prior_mean, prior_cov)
-        self.target, self.target_points = self.log_target(self.x), self.model.history.appended
+        self.target, self.target_points = self.log_target(self.x), self.posterior_model.history.appended
 
     def invalidate(self):
         self.target_points = -1
 
     def targets_known(self, target: np.ndarray):
-        self.target, self.target_points = target, self.model.history.appended
+        self.target, self.target_points = target, self.posterior_model.history.appended
 
     def after_weight(self, p: ObservationPoint):
         if not self.paper:
             # The fish did not move since the last point: their posterior gains this point's likelihood.
-            fresh = self.target_points == self.model.history.appended - 1 and self.model.history.dropped == 0
+            history = self.posterior_model.history
+            fresh = self.target_points == history.appended - 1 and history.dropped == 0
             if fresh:
                 self.target = self.target + self.last_ll
                 self.target_points += 1
@@ -113,8 +116,9 @@ class AfsaFilter(ParticleFilter):
             found = better.any(axis=1)
             first = looks[np.arange(n), better.argmax(axis=1)]
             random_dir = unit(uniform_disc(rng, (n,)))
-            direction = np.where(swarm[:, None], unit(centre - x),
-                                 np.where(found[:, None], unit(first - x), random_dir))
+            direction = np.where(
+                swarm[:, None], unit(centre - x), np.where(found[:, None], unit(first - x), random_dir)
+            )
             x = x + (rng.random(n) * a.step)[:, None] * direction
             y_new = self.loglik(x, p)
             change = float(np.mean(np.abs(y_new - y)))
@@ -140,9 +144,9 @@ class AfsaFilter(ParticleFilter):
         """Prey looks accepted by Metropolis-Hastings on the posterior, `max_iterations` sweeps."""
         a, rng, n = self.cfg.afsa, self.rng, self.n
         chol = np.linalg.cholesky(self.spread + _MIN_SPREAD_M2 * np.eye(2))
-        if self.target_points != self.model.history.appended or self.model.history.dropped:
+        if self.target_points != self.posterior_model.history.appended or self.posterior_model.history.dropped:
             self.target = self.log_target(self.x)
-        self.target_points = self.model.history.appended
+        self.target_points = self.posterior_model.history.appended
         target = self.target
         accepted = 0
         for _ in range(a.max_iterations):

@@ -10,13 +10,14 @@ The robustness layer's moves (log_target, rejuvenate, reweight, replace_cloud) n
 """
 from __future__ import annotations
 
-import numpy as np
-
 from dataclasses import dataclass, field
+from typing import cast
+
+import numpy as np
 
 from aoa_localizer.engine.config import AfsaConfig, AgapfConfig, DeConfig, EspfConfig, GfapfConfig, LocalizerConfig
 from aoa_localizer.filters.resampling import SCHEMES
-from aoa_localizer.models.base import StateSpaceModel
+from aoa_localizer.models.base import StateSpaceModel, StaticPosterior
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ class ParticleFilter:
         self.x = np.array(particles, dtype=float).reshape(self.n, self.model.dim)
         self.logw = np.zeros(self.n)
         if prior_mean is not None:
-            self.model.set_prior(prior_mean, prior_cov)
+            self.posterior_model.set_prior(prior_mean, prior_cov)
 
     # -- the skeleton ---------------------------------------------------------------------------
     def predict(self):
@@ -129,10 +130,16 @@ class ParticleFilter:
             self.after_resample(z)
         return True
 
+    @property
+    def posterior_model(self) -> StaticPosterior:
+        """The model as a StaticPosterior: filters that need one say so in `needs`; a prior and the safety moves
+        need one too (the emitter model is)."""
+        return cast(StaticPosterior, self.model)
+
     # -- moves on the posterior over all kept points (models with a `log_posterior`: the emitter) -----------
     def log_target(self, x: np.ndarray) -> np.ndarray:
         """The posterior the safety moves keep invariant: the model's, over its kept points."""
-        return self.model.log_posterior(x)
+        return self.posterior_model.log_posterior(x)
 
     def rejuvenate(self, sweeps: int, proposal=None):
         """`sweeps` random-walk MH moves scaled by the cloud, then one independence MH move from `proposal`

@@ -67,4 +67,8 @@ def gauss_logpdf(x: np.ndarray, m: np.ndarray, P: np.ndarray) -> np.ndarray:
     d = x.shape[1]
     L = np.linalg.cholesky(P + _JITTER * np.eye(d))
     sol = np.linalg.solve(L, (x - m)[..., None])[..., 0]
-    return -0.5 * np.sum(sol**2, axis=1) - np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1) - 0.5 * d * np.log(2 * np.pi)
+    return (
+        -0.5 * np.sum(sol**2, axis=1)
+        - np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
+        - 0.5 * d * np.log(2 * np.pi)
+    )

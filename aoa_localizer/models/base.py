@@ -54,7 +54,7 @@ class UnscentedForm(Protocol):
     def ukf(self, k: int, z) -> tuple: ...
 
 
-CAPABILITY_WORDS = {
+CAPABILITY_WORDS: dict[type, str] = {
     StaticPosterior: "StaticPosterior (history, set_prior, log_posterior: a static state's whole posterior)",
     TransitionDensity: "TransitionDensity (transition_logpdf)",
     UnscentedForm: "UnscentedForm (ukf: the model as a UKF sees it)",

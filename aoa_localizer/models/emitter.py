@@ -6,9 +6,9 @@ import math
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.models.likelihood import BearingLikelihood
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.models.base import StateSpaceModel
+from aoa_localizer.models.likelihood import BearingLikelihood
 
 
 class PointHistory:

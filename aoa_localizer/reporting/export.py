@@ -16,7 +16,7 @@ KML_NS = "http://www.opengis.net/kml/2.2"
 
 def properties(est: Estimate) -> dict:
     a, b, azimuth = ellipse_axes(est.cov)
-    return {"time": datetime.datetime.fromtimestamp(est.stamp, datetime.timezone.utc).isoformat(),
+    return {"time": datetime.datetime.fromtimestamp(est.stamp, datetime.UTC).isoformat(),
             "stamp": est.stamp, "algorithm": est.algorithm, "bearings_used": est.bearings_used,
             "points_used": est.points_used, "ellipse95_semi_major_m": round(a, 2),
             "ellipse95_semi_minor_m": round(b, 2), "ellipse95_major_azimuth_deg": round(azimuth, 1)}
@@ -24,7 +24,7 @@ def properties(est: Estimate) -> dict:
 
 def _lonlat(frame: LocalFrame, enu: np.ndarray) -> list[list[float]]:
     lat, lon, _ = frame.to_geodetic(enu[:, 0], enu[:, 1], np.zeros(len(enu)))
-    return [[float(x), float(y)] for x, y in zip(np.atleast_1d(lon), np.atleast_1d(lat))]
+    return [[float(x), float(y)] for x, y in zip(np.atleast_1d(lon), np.atleast_1d(lat), strict=False)]
 
 
 def ellipse_ring(frame: LocalFrame, est: Estimate) -> list[list[float]]:
@@ -44,8 +44,13 @@ def geojson(frame: LocalFrame, est: Estimate, track_enu: np.ndarray) -> dict:
          "properties": {"name": "95 % error ellipse", **props}},
     ]
     if len(track_enu) >= 2:
-        features.append({"type": "Feature", "geometry": {"type": "LineString", "coordinates": _lonlat(frame, track_enu)},
-                         "properties": {"name": "vehicle track"}})
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "LineString", "coordinates": _lonlat(frame, track_enu)},
+                "properties": {"name": "vehicle track"},
+            }
+        )
     return {"type": "FeatureCollection", "features": features}
 
 

@@ -15,6 +15,7 @@ from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar  # noqa: E4
 from aoa_localizer.engine.crlb import ellipse_axes, ellipse_points  # noqa: E402
 
 RAYS_MAX = 400  # used rays drawn (evenly thinned beyond that); every gated-out one is drawn
+CLIP_FACTOR = 1000.0  # rmse_curves: a series above this many times the reference is clipped
 
 
 def nice_length(span: float) -> float:
@@ -40,20 +41,13 @@ def _rays(readings: np.ndarray, target, keep_all: bool, t_range, colour) -> Line
 def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.ndarray, est,
                truth=None, title_extra: str = ""):
     """map.png: track, bearing rays (used: blue, fading with age; gated out as wild: red dashed), particles,
-    estimate with its 95 % ellipse, truth if known; metres at the datum, scale bar, an inset around the estimate."""
-    fig, ax = plt.subplots(figsize=(9, 8), dpi=110)
+    estimate with its 95 % ellipse, truth if known; metres at the datum, scale bar. The zoom on the estimate and
+    the legend sit in their own panels beside the map, so neither hides any of the track."""
+    fig = plt.figure(figsize=(12, 8), dpi=110)
+    grid = fig.add_gridspec(2, 2, width_ratios=(3, 1.15), height_ratios=(1, 1.1))
+    ax = fig.add_subplot(grid[:, 0])
     target = (est.east, est.north)
-    t_range = (readings[:, 0].min(), readings[:, 0].max()) if len(readings) else (0.0, 1.0)
-    used, wild = readings[kept], readings[~kept]
-    if len(used) > RAYS_MAX:
-        used = used[np.linspace(0, len(used) - 1, RAYS_MAX).astype(int)]
-    if len(used):
-        ax.add_collection(_rays(used, target, False, t_range, (0.12, 0.35, 0.85)))
-    if len(wild):
-        ax.add_collection(_rays(wild, target, True, t_range, (0.85, 0.1, 0.1)))
-    if len(fixes):
-        ax.plot(fixes[:, 1], fixes[:, 2], color="0.25", lw=1.6, label="vehicle track")
-        ax.plot(fixes[0, 1], fixes[0, 2], "o", color="0.25", ms=5)
+    _draw_inputs(ax, fixes, readings, kept, target)
     ring = ellipse_points(target, est.cov)
     if est.particles is not None:
         ax.scatter(est.particles[:, 0], est.particles[:, 1], s=4, color="0.45", alpha=0.6, label="particles", zorder=3)
@@ -67,7 +61,8 @@ def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.nd
     if truth is not None:
         ax.plot(*truth, "*", color="green", ms=14, label="truth", zorder=6)
     ax.plot([], [], color=(0.12, 0.35, 0.85), lw=1, label="bearings used (older: fainter)")
-    ax.plot([], [], color=(0.85, 0.1, 0.1), lw=1, ls="--", label="bearings gated out as wild")
+    if not kept.all():
+        ax.plot([], [], color=(0.85, 0.1, 0.1), lw=1, ls="--", label="bearings gated out as wild")
     pts = [fixes[:, 1:3]] if len(fixes) else []
     pts.append(np.array([target]))
     if truth is not None:
@@ -82,16 +77,45 @@ def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.nd
     ax.set_ylabel("north (m)")
     span = ax.get_xlim()[1] - ax.get_xlim()[0]
     bar = nice_length(span)
-    ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower left", pad=0.6, frameon=False, size_vertical=0))
+    ax.add_artist(
+        AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower left", pad=0.6, frameon=False, size_vertical=0)
+    )
     a, b, _ = ellipse_axes(est.cov)
-    ax.set_title(f"Emitter at {est.lat:.6f}, {est.lon:.6f} ({est.algorithm}; 95 % ellipse {a:.1f} x {b:.1f} m)\n"
-                 f"map frame: ENU metres at datum {frame.lat0:.6f}, {frame.lon0:.6f}{title_extra}", fontsize=10)
-    ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
-    # Inset around the estimate: the ellipse is metres wide on a map kilometres wide.
+    ax.set_title(
+        f"Emitter at {est.lat:.6f}, {est.lon:.6f} ({est.algorithm}; 95 % ellipse {a:.1f} x {b:.1f} m)\n"
+        f"map frame: ENU metres at datum {frame.lat0:.6f}, {frame.lon0:.6f}{title_extra}",
+        fontsize=10,
+    )
+    _zoom(fig.add_subplot(grid[0, 1]), est, ring, truth, a)
+    legend_panel = fig.add_subplot(grid[1, 1])
+    legend_panel.axis("off")
+    legend_panel.legend(*ax.get_legend_handles_labels(), loc="upper left", fontsize=8, frameon=False)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _draw_inputs(ax, fixes: np.ndarray, readings: np.ndarray, kept: np.ndarray, target):
+    """The vehicle track and the bearing rays (at most RAYS_MAX of the used ones; the wild ones dashed)."""
+    t_range = (readings[:, 0].min(), readings[:, 0].max()) if len(readings) else (0.0, 1.0)
+    used, wild = readings[kept], readings[~kept]
+    if len(used) > RAYS_MAX:
+        used = used[np.linspace(0, len(used) - 1, RAYS_MAX).astype(int)]
+    if len(used):
+        ax.add_collection(_rays(used, target, False, t_range, (0.12, 0.35, 0.85)))
+    if len(wild):
+        ax.add_collection(_rays(wild, target, True, t_range, (0.85, 0.1, 0.1)))
+    if len(fixes):
+        ax.plot(fixes[:, 1], fixes[:, 2], color="0.25", lw=1.6, label="vehicle track")
+        ax.plot(fixes[0, 1], fixes[0, 2], "o", color="0.25", ms=5)
+
+
+def _zoom(ins, est, ring: np.ndarray, truth, a: float):
+    """A zoom on the estimate: the ellipse is metres wide on a map kilometres wide."""
+    target = (est.east, est.north)
     half = max(4 * a, 10.0)
     if truth is not None:
         half = max(half, 1.3 * math.hypot(truth[0] - target[0], truth[1] - target[1]))
-    ins = ax.inset_axes([0.64, 0.03, 0.34, 0.34])
     rel = lambda xy: (np.asarray(xy)[..., 0] - target[0], np.asarray(xy)[..., 1] - target[1])  # noqa: E731
     if est.particles is not None:
         ins.scatter(*rel(est.particles), s=5, color="0.45", alpha=0.6)
@@ -103,11 +127,8 @@ def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.nd
     ins.set_ylim(-half, half)
     ins.set_aspect("equal")
     ins.locator_params(nbins=5)
-    ins.tick_params(labelsize=6)
-    ins.set_title("metres from the estimate", fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    ins.tick_params(labelsize=7)
+    ins.set_title("zoom: metres from the estimate", fontsize=9)
 
 
 def error_figure(path, t, error, bound, major):
@@ -127,20 +148,38 @@ def error_figure(path, t, error, bound, major):
     plt.close(fig)
 
 
-def rmse_curves(path, title: str, curves: dict, bound=None, xlabel="observation point", ylabel="RMSE (m)", log=True):
-    """RMSE against step, one line per filter, and the bound if given: the benchmarks' --plot."""
-    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
-    for name, (x, y) in curves.items():
-        ax.plot(x, y, lw=1.3, label=name)
+def rmse_curves(path, title: str, curves: dict, bound=None, xlabel="observation point", ylabel="RMSE (m)",
+                log=True) -> dict:
+    """RMSE against step, one line per filter, and the bound if given: the benchmarks' --plot. Every series has
+    its own colour and dash (tab20 by four dashes); a diverged series is clipped at CLIP_FACTOR x the bound (or
+    the median series) and marked, so it cannot squash the others. Returns each label's (colour, dash) and the
+    clip level, for the tests."""
+    fig, ax = plt.subplots(figsize=(9, 5), dpi=100)
+    colours, dashes = [plt.get_cmap("tab20")(k) for k in range(20)], ("-", "--", "-.", ":")
+    finite = [np.asarray(y, float)[np.isfinite(y)] for _, y in curves.values()]
+    reference = np.max(bound[1]) if bound is not None else np.median([np.median(y) for y in finite if len(y)])
+    top = CLIP_FACTOR * float(reference)
+    drawn = {}
+    for i, (name, (x, y)) in enumerate(curves.items()):
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        over = ~np.isfinite(y) | (y > top)
+        label = name if not over.any() else f"{name} (diverged: clipped at {top:.3g})"
+        style = (colours[i % len(colours)], dashes[(i // 2) % len(dashes)])
+        ax.plot(x, np.where(over, top, y), color=style[0], ls=style[1], lw=1.3, label=label)
+        if over.any():
+            ax.plot(x[over], np.full(over.sum(), top), "^", color=style[0], ms=4)
+        drawn[label] = style
     if bound is not None:
         ax.plot(bound[0], bound[1], color="black", ls="--", lw=1.2, label="CRLB")
     if log:
         ax.set_yscale("log")
+    ax.set_ylim(top=1.5 * top)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, ncol=2)
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+    return {"styles": drawn, "clip": top}

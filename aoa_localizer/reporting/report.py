@@ -19,14 +19,16 @@ from pathlib import Path
 
 import numpy as np
 
-from aoa_localizer.tools.cli import add_engine_args, config_from_args, setup_logging
-from aoa_localizer.engine.config import ConfigError
+from aoa_localizer.engine.config import ConfigError, LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.localizer import REASONS, Localizer
-from aoa_localizer.tools.bag_run import run_bag
+from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.types import Estimate
+from aoa_localizer.reporting import export, plots
+from aoa_localizer.tools.bag_run import run_bag
+from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, add_topic_args, config_from_args, setup_logging
+from msgs_adapters.bag import BagError
 
 
 class Trace:
@@ -42,7 +44,19 @@ class Trace:
         self.fixes.append((stamp, east, north))
 
     def on_point(self, readings, kept) -> None:
-        self.readings += [(r.stamp, r.east, r.north, r.theta, r.sigma, bool(k)) for r, k in zip(readings, kept)]
+        self.readings += [
+            (r.stamp, r.east, r.north, r.theta, r.sigma, bool(k)) for r, k in zip(readings, kept, strict=False)
+        ]
+
+
+def configuration_of(path: Path) -> dict | None:
+    """The configuration on an offline-replay file's header line (None: a file without one)."""
+    try:
+        with open(path) as fh:
+            first = json.loads(fh.readline() or "{}")
+    except (OSError, ValueError) as exc:
+        raise ReportError(f"{path}: not a JSON-lines file of estimates ({exc})") from exc
+    return first.get("configuration") if isinstance(first, dict) else None
 
 
 def estimates_from_jsonl(path: Path, frame_of) -> list[Estimate]:
@@ -53,11 +67,23 @@ def estimates_from_jsonl(path: Path, frame_of) -> list[Estimate]:
             continue
         try:
             d = json.loads(line)
+            if "configuration" in d:
+                continue  # the header line
             east, north = frame_of.to_enu(d["lat"], d["lon"])
-            out.append(Estimate(stamp=float(d["stamp"]), east=float(east), north=float(north), lat=float(d["lat"]),
-                                lon=float(d["lon"]), cov=np.array(d["cov"], float), bearings_used=int(d["bearings_used"]),
-                                points_used=int(d.get("points_used", 0)), ess=float(d.get("ess", float("nan"))),
-                                algorithm=str(d.get("algorithm", "?"))))
+            out.append(
+                Estimate(
+                    stamp=float(d["stamp"]),
+                    east=float(east),
+                    north=float(north),
+                    lat=float(d["lat"]),
+                    lon=float(d["lon"]),
+                    cov=np.array(d["cov"], float),
+                    bearings_used=int(d["bearings_used"]),
+                    points_used=int(d.get("points_used", 0)),
+                    ess=float(d.get("ess", float("nan"))),
+                    algorithm=str(d.get("algorithm", "?")),
+                )
+            )
         except (ValueError, KeyError, TypeError) as exc:
             raise ValueError(f"{path}:{n}: not an estimate line ({exc})") from exc
     return out
@@ -76,25 +102,38 @@ def error_series(estimates, readings: np.ndarray, truth) -> tuple[np.ndarray, np
 def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, truth, bound, damage):
     a, b, azimuth = ellipse_axes(est.cov)
     used = int(sum(1 for r in trace.readings if r[5]))
-    lines = [f"# Emitter localisation: {Path(inp).name}", "",
-             f"* **Estimate**: {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
-             f"of the datum {loc.frame.lat0:.7f}, {loc.frame.lon0:.7f})",
-             f"* **95 % error ellipse**: semi-axes {a:.1f} m x {b:.1f} m, major axis at {azimuth:.0f} deg from north",
-             f"* **Algorithm**: {est.algorithm}, N = {loc.cfg.num_particles}, seed {loc.cfg.seed}",
-             f"* **Bearings used**: {est.bearings_used} in {est.points_used} observation points "
-             f"(of {len(trace.readings)} paired with a GPS position; {used} kept inside their points)"]
+    lines = [
+        f"# Emitter localisation: {Path(inp).name}",
+        "",
+        f"* **Estimate**: {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
+        f"of the datum {loc.datum_frame().lat0:.7f}, {loc.datum_frame().lon0:.7f})",
+        f"* **95 % error ellipse**: semi-axes {a:.1f} m x {b:.1f} m, major axis at {azimuth:.0f} deg from north",
+        f"* **Algorithm**: {est.algorithm}, N = {loc.cfg.num_particles}, "
+        + ("seed unset (a random run)" if loc.cfg.seed is None else f"seed {loc.cfg.seed}"),
+        f"* **Bearings used**: {est.bearings_used} in {est.points_used} observation points "
+        f"(of {len(trace.readings)} paired with a GPS position; {used} kept inside their points)",
+    ]
     if truth is not None:
         err = np.array([est.east - truth[0], est.north - truth[1]])
-        lines.append(f"* **Final error against the truth**: {math.hypot(*err):.2f} m; Cramer-Rao bound of the bearings "
-                     f"used {bound:.2f} m; the truth is {'inside' if inside_ellipse(err, est.cov) else 'outside'} the 95 % ellipse")
+        lines.append(
+            f"* **Final error against the truth**: {math.hypot(*err):.2f} m; Cramer-Rao bound of the bearings "
+            f"used {bound:.2f} m; the truth is {'inside' if inside_ellipse(err, est.cov) else 'outside'} "
+            "the 95 % ellipse"
+        )
     if damage:
         lines.append(f"* **Input damaged**: {damage}; this report covers the data before the damage")
     if loc.cfg.calibrate_noise:
         lines.append(f"* **Receiver noise (self-calibrated)**: {noise_sentence(loc.noise_summary())}")
     if len(est.modes) > 1:
-        lines.append("* **Alternative hypotheses** (posterior modes and their probability): " + "; ".join(
-            f"{lat:.7f}, {lon:.7f} ({100 * m:.0f} %)" for (lat, lon), (_, _, m) in
-            zip((loc.frame.to_geodetic(e, n)[:2] for e, n, _ in est.modes), est.modes)))
+        lines.append(
+            "* **Alternative hypotheses** (posterior modes and their probability): "
+            + "; ".join(
+                f"{lat:.7f}, {lon:.7f} ({100 * m:.0f} %)"
+                for (lat, lon), (_, _, m) in zip(
+                    (loc.datum_frame().to_geodetic(e, n)[:2] for e, n, _ in est.modes), est.modes, strict=False
+                )
+            )
+        )
     events = {k: v for k, v in loc.events.items() if k != "alarm_points"}
     if events:
         lines.append("* **Robustness events**: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
@@ -104,81 +143,110 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
         lines += [f"| `{k}` | {v} | {REASONS[k]} |" for k, v in sorted(loc.rejected.items())]
     else:
         lines.append("none")
-    lines += ["", "Files: `map.png`, `emitter.kml`, `emitter.geojson`" + (", `error.png`" if truth is not None else ""), ""]
+    lines += [
+        "",
+        "Files: `map.png`, `emitter.kml`, `emitter.geojson`" + (", `error.png`" if truth is not None else ""),
+        "",
+    ]
     path.write_text("\n".join(lines))
 
 
-def main(argv=None) -> int:
-    from msgs_adapters.bag import BagError
+class ReportError(Exception):
+    """Why the report cannot be written (exit 2)."""
 
-    from . import export, plots
 
+def parse_args(argv) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.report", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("input", type=Path, help="rosbag2 bag, or a JSON-lines file of estimates with --bag")
     parser.add_argument("--bag", type=Path, help="with a JSON-lines INPUT: the bag the estimates came from")
     parser.add_argument("--out", type=Path, required=True, help="directory for the report's files")
-    parser.add_argument("--fix-topic", default="/gps/fix")
-    parser.add_argument("--bearing-topic", default="/df/bearing")
+    add_topic_args(parser)
     add_engine_args(parser)
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
     setup_logging(args.verbose)
+    try:
+        return make_report(args)
+    except ReportError as exc:
+        print(f"report: {exc}", file=sys.stderr)
+        return 2
+
+
+def _made_with(path: Path) -> LocalizerConfig:
+    """The configuration a JSON-lines file's estimates were made with, the base under the report's own options;
+    the defaults, with a warning, for a file without the header line."""
+    values = configuration_of(path)
+    if values is None:
+        print(f"report: {path} has no configuration line (written before it was added): the gate and the bound "
+              "are drawn with the defaults plus the given options", file=sys.stderr)
+        return LocalizerConfig()
+    try:
+        return LocalizerConfig.from_dict(values)
+    except ConfigError as exc:
+        raise ReportError(f"{path}: its configuration line is not valid here: {exc}") from exc
+
+
+def make_report(args) -> int:
+    """Run the bag through the engine (or place the given estimates), write the files; 1 when the bag is damaged."""
     jsonl = args.input.suffix in (".jsonl", ".json")
     bag = args.bag if jsonl else args.input
     if jsonl and bag is None:
-        print("report: a JSON-lines input needs --bag, the bag it came from", file=sys.stderr)
-        return 2
-    if not args.input.exists() or (bag is not None and not bag.exists()):
-        print(f"report: no such input: {args.input if not args.input.exists() else bag}", file=sys.stderr)
-        return 2
+        raise ReportError("a JSON-lines input needs --bag, the bag it came from")
+    for path in (args.input, bag):
+        if not path.exists():
+            raise ReportError(f"no such input: {path}")
     try:
-        cfg = config_from_args(args)
+        cfg = config_from_args(args, _made_with(args.input) if jsonl else None)
     except ConfigError as exc:
-        print(f"report: {exc}", file=sys.stderr)
-        return 2
+        raise ReportError(str(exc)) from exc
     trace = Trace()
     loc = Localizer(cfg, observer=trace)
-    estimates = []
+    estimates: list[Estimate] = []
     try:
         run = run_bag(bag, {"fix": args.fix_topic, "bearing": args.bearing_topic}, loc, estimates.append, desc="report")
     except BagError as exc:
-        print(f"report: {exc}", file=sys.stderr)
-        return 2
+        raise ReportError(str(exc)) from exc
     if run.damage:
         print(f"report: {run.damage}; reporting what came before", file=sys.stderr)
     if loc.frame is None:
-        print("report: the bag holds no usable GPS fix", file=sys.stderr)
-        return 2
+        raise ReportError("the bag holds no usable GPS fix")
     if jsonl:
         try:
             estimates = estimates_from_jsonl(args.input, loc.frame)
         except (OSError, ValueError) as exc:
-            print(f"report: {exc}", file=sys.stderr)
-            return 2
+            raise ReportError(str(exc)) from exc
     if not estimates:
-        print(f"report: no estimate ({loc.status})", file=sys.stderr)
-        return 2
-    est = estimates[-1]
+        raise ReportError(f"no estimate ({loc.status})")
+    write_files(args, loc, trace, estimates, run)
+    print(f"report written to {args.out}: " + ", ".join(sorted(p.name for p in args.out.iterdir())), file=sys.stderr)
+    return 1 if run.damage else 0
+
+
+def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], run):
+    """map.png, error.png (with the truth), emitter.kml, emitter.geojson and summary.md in args.out."""
+    frame, est = loc.datum_frame(), estimates[-1]
     truth = None
     if run.truth is not None and run.datum is not None:
         lat, lon, _ = LocalFrame(*run.datum).to_geodetic(run.truth[1], run.truth[2], 0.0)
-        truth = tuple(float(v) for v in loc.frame.to_enu(lat, lon))
+        truth = tuple(float(v) for v in frame.to_enu(lat, lon))
     fixes = np.array(trace.fixes).reshape(-1, 3)
     readings = np.array(trace.readings, dtype=float).reshape(-1, 6)
     kept = readings[:, 5].astype(bool)
     args.out.mkdir(parents=True, exist_ok=True)
-    plots.map_figure(args.out / "map.png", loc.frame, fixes, readings[:, :5], kept, est, truth)
+    plots.map_figure(args.out / "map.png", frame, fixes, readings[:, :5], kept, est, truth)
     bound = None
     if truth is not None:
         t, err, bounds, major = error_series(estimates, readings[kept][:, :5], truth)
         plots.error_figure(args.out / "error.png", t, err, bounds, major)
         bound = crlb_rmse(truth, readings[kept][:, 1:3], readings[kept][:, 4]) if kept.any() else float("inf")
     track = fixes[:, 1:3]
-    (args.out / "emitter.kml").write_text(export.kml(loc.frame, est, track))
-    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(loc.frame, est, track), indent=1))
+    (args.out / "emitter.kml").write_text(export.kml(frame, est, track))
+    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, est, track), indent=1))
     write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage)
-    print(f"report written to {args.out}: " + ", ".join(sorted(p.name for p in args.out.iterdir())), file=sys.stderr)
-    return 1 if run.damage else 0
 
 
 if __name__ == "__main__":

@@ -1,1 +1,2 @@
-"""The ROS 2 shell: the localizer node, the simulated vehicle, the launcher, live replay; the only package that imports rclpy."""
+"""The ROS 2 shell: the localizer node, the simulated vehicle, the launcher, live replay; the only package that
+imports rclpy."""

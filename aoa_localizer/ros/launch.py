@@ -25,10 +25,16 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
+from aoa_localizer.engine.config import ConfigError, parameter_specs, unknown_names
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 from aoa_localizer.engine.crlb import nees as crlb_nees
+from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scenarios import SCENARIOS
+from aoa_localizer.ros.node_params import NODE_PARAMS
+from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
+from aoa_localizer.tools.cli import HelpFormatter, seed_value
 
 _PR_SET_PDEATHSIG = 1  # prctl option: a signal for this process when its parent dies
 
@@ -63,12 +69,13 @@ def ros_value(v) -> str:
     return str(v)
 
 
-def parse_params(items) -> dict:
+def parse_params(items, option: str = "-p") -> dict:
+    """NAME=VALUE items as a dict; ValueError naming the option for one without '='."""
     out = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep:
-            raise SystemExit(f"launch: -p takes NAME=VALUE, got {item!r}")
+            raise ValueError(f"{option} takes NAME=VALUE, got {item!r}")
         out[name.strip()] = value.strip()
     return out
 
@@ -133,20 +140,25 @@ def build_commands(args, node_params: dict) -> tuple[list[str], list[str]]:
                   "-p", f"wait_for_subscribers:={2 if args.record else 1}"]
         if args.duration:
             source += ["-p", f"duration_s:={float(args.duration)}"]
-        for k, v in parse_params(args.vehicle_param).items():
+        for k, v in parse_params(args.vehicle_param, "--vehicle-param").items():
             source += ["-p", f"{k}:={v}"]
     return node, source
 
 
 def node_parameters(args) -> dict:
     """The scenario's frame and filter settings (so the node's map is the truth's), then the user's -p."""
-    params = {}
-    if not args.bag:
+    params: dict = {}
+    if args.scenario:
         sc = SCENARIOS[args.scenario]
-        params.update(datum_lat=sc.datum[0], datum_lon=sc.datum[1], datum_alt=sc.datum[2])
+        if not args.bag:
+            params.update(datum_lat=sc.datum[0], datum_lon=sc.datum[1], datum_alt=sc.datum[2])
         params.update(sc.filter_overrides)
     if args.seed is not None:
         params["seed"] = args.seed
+    # The node must read what the vehicle publishes: its bearing encoding goes to the node too.
+    encoding = parse_params(args.vehicle_param, "--vehicle-param").get("bearing_encoding")
+    if encoding:
+        params["bearing_encoding"] = encoding
     params.update(parse_params(args.param))
     return params
 
@@ -164,10 +176,17 @@ class Monitor:
         self.rclpy = rclpy
         self.node = rclpy.create_node("aoa_launch")
         T = rclpy_types()
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pose = self.truth = self.diag = None
-        self.node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: setattr(self, "pose", m), latched)
+        self.node.create_subscription(
+            T.PoseWithCovarianceStamped, "emitter/pose", lambda m: setattr(self, "pose", m), latched
+        )
         self.node.create_subscription(T.PointStamped, "sim/truth", lambda m: setattr(self, "truth", m), latched)
+        self.sim_datum = self.node_datum = None  # the truth's map origin, and the node's (they differ with --bag)
+        self.node.create_subscription(T.NavSatFix, "sim/datum", lambda m: setattr(self, "sim_datum", m), latched)
+        self.node.create_subscription(T.NavSatFix, "emitter/datum", lambda m: setattr(self, "node_datum", m),
+                                      latched)
         self.node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: setattr(self, "fix", m), 10)
         self.node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: setattr(self, "diag", m), 10)
         self.fix = None
@@ -187,7 +206,7 @@ class Monitor:
     def state(self) -> dict:
         from msgs_adapters.fields import diagnostics_values, estimate_from_pose
 
-        out = {}
+        out: dict = {}
         if self.diag is not None:
             out["diag"] = diagnostics_values(self.diag).get("aoa_localizer: localizer", {})
         if self.pose is not None:
@@ -195,9 +214,21 @@ class Monitor:
             out.update(stamp=stamp, east=east, north=north, cov=cov)
         if self.fix is not None:
             out.update(lat=self.fix.latitude, lon=self.fix.longitude)
-        if self.truth is not None:
-            out["truth"] = (self.truth.point.x, self.truth.point.y)
+        truth = self.truth_in_node_frame()
+        if truth is not None:
+            out["truth"] = truth
         return out
+
+    def truth_in_node_frame(self) -> tuple[float, float] | None:
+        """sim/truth (east, north in the simulation's map at sim/datum) in the node's map at emitter/datum, so
+        the error is measured in one frame; None until the truth and both datums are known."""
+        if self.truth is None or self.sim_datum is None or self.node_datum is None:
+            return None
+        sim = LocalFrame(self.sim_datum.latitude, self.sim_datum.longitude, self.sim_datum.altitude)
+        lat, lon, _ = sim.to_geodetic(self.truth.point.x, self.truth.point.y)
+        node = LocalFrame(self.node_datum.latitude, self.node_datum.longitude, self.node_datum.altitude)
+        east, north = node.to_enu(lat, lon, self.node_datum.altitude)
+        return float(east), float(north)
 
     def close(self):
         if self.recorder:
@@ -213,8 +244,14 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
         return False, f"no estimate was published ({status})", {}
     cov = np.array(state["cov"])
     major, minor, _ = ellipse_axes(cov)
-    figures = {"east": state["east"], "north": state["north"], "ellipse95_m": [major, minor],
-               "lat": state.get("lat"), "lon": state.get("lon"), "cov": state["cov"]}
+    figures = {
+        "east": state["east"],
+        "north": state["north"],
+        "ellipse95_m": [major, minor],
+        "lat": state.get("lat"),
+        "lon": state.get("lon"),
+        "cov": state["cov"],
+    }
     if major > max_ellipse:
         return False, f"95 % ellipse {major:.1f} m is wider than --max-ellipse {max_ellipse:g} m", figures
     if "truth" in state:
@@ -222,102 +259,189 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
         figures["error_m"] = float(np.hypot(*err))
         figures["nees"] = nees = crlb_nees(err, cov)
         if nees > CONVERGE_SCALE**2 * ELLIPSE_95:
-            return False, f"the truth is {figures['error_m']:.1f} m off, outside {CONVERGE_SCALE:g}x the 95 % ellipse", figures
+            return (
+                False,
+                f"the truth is {figures['error_m']:.1f} m off, outside {CONVERGE_SCALE:g}x the 95 % ellipse",
+                figures,
+            )
     return True, "converged", figures
 
 
-def main(argv=None) -> int:
+def parse_args(argv) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.launch", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenario", choices=sorted(SCENARIOS), default="seed")
-    parser.add_argument("--speedup", type=float, default=10.0, help="simulated seconds per wall second (default 10)")
-    parser.add_argument("--duration", type=float, help="simulated seconds to play (default: the whole scenario)")
-    parser.add_argument("--data-seed", type=int, default=0, help="seed of the simulated data")
+                                     formatter_class=HelpFormatter)
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS),
+                        help="public scenario to simulate (docs/benchmarks.md, Scenarios; unset: seed); with --bag, "
+                        "the scenario whose receiver settings the node gets (unset: the node's defaults)")
+    parser.add_argument("--speedup", type=float, default=10.0, help="simulated seconds per wall second")
+    parser.add_argument("--duration", type=float, help="simulated seconds to play (unset: the whole scenario)")
+    parser.add_argument("--data-seed", type=seed_value, default=0, help="seed of the simulated data")
     parser.add_argument("--bag", type=Path, help="replay this bag into the node instead of the simulated vehicle")
     parser.add_argument("--rate", type=float, default=10.0, help="with --bag: replay rate (0: as fast as allowed)")
     parser.add_argument("--record", type=Path, help="record every topic into this rosbag2 MCAP bag directory")
-    parser.add_argument("--seed", type=int, help="the node's filter seed")
+    parser.add_argument("--seed", type=seed_value, help="the node's filter seed (unset: random)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE", help="node parameter")
     parser.add_argument("--params-file", type=Path, help="node parameters file (ROS 2 YAML)")
     parser.add_argument("--vehicle-param", action="append", default=[], metavar="NAME=VALUE",
                         help="sim_vehicle parameter, e.g. gps_dropout_prob=0.1")
-    parser.add_argument("--domain-id", type=int, help="ROS_DOMAIN_ID (default: random in 1-101, the range ROS recommends)")
+    parser.add_argument("--domain-id", type=int,
+                        help="ROS_DOMAIN_ID (unset: random in 1-101, the range ROS recommends)")
     parser.add_argument("--timeout", type=float, default=600.0, help="wall seconds before giving up")
     parser.add_argument("--max-ellipse", type=float, default=50.0, help="widest 95 %% ellipse (m) called converged")
     parser.add_argument("--result", type=Path, help="write the final estimate and verdict as JSON")
     args = parser.parse_args(argv)
-    if args.record and args.record.exists():
-        print(f"launch: {args.record} exists; choose a new directory", file=sys.stderr)
-        return 2
-    if args.bag and not args.bag.exists():
-        print(f"launch: no bag at {args.bag}", file=sys.stderr)
-        return 2
+    if args.scenario is None and not args.bag:
+        args.scenario = "seed"
+    return args
 
-    domain = args.domain_id if args.domain_id is not None else random.Random(os.getpid() ^ time.time_ns()).randint(1, 101)
+
+def _vehicle_value_problem(name: str, text: str) -> str | None:
+    """Why --vehicle-param NAME=TEXT is refused (None: it is fine), read as ROS reads `-p NAME:=TEXT` (YAML)."""
+    try:
+        value = yaml.safe_load(text)
+        VEHICLE_SPECS[name].spec.check(name, value)
+    except (yaml.YAMLError, ConfigError) as exc:
+        return f"--vehicle-param {exc}"
+    return None
+
+
+def refusal(args) -> str | None:
+    """Why the options cannot run, before anything starts (None: they can)."""
+    if args.record and args.record.exists():
+        return f"{args.record} exists; choose a new directory"
+    if args.bag and not args.bag.exists():
+        return f"no bag at {args.bag}"
+    if args.params_file and not args.params_file.is_file():
+        return f"no params file at {args.params_file}"
+    try:
+        node_names, vehicle_names = parse_params(args.param), parse_params(args.vehicle_param, "--vehicle-param")
+    except ValueError as exc:
+        return str(exc)
+    known = [p.name for p in parameter_specs() + NODE_PARAMS]
+    unknown = [n for n in node_names if n not in known]
+    if unknown:
+        return f"-p {unknown_names(unknown, known)}"
+    unknown = [n for n in vehicle_names if n not in VEHICLE_SPECS]
+    if unknown:
+        return f"--vehicle-param {unknown_names(unknown, list(VEHICLE_SPECS))}"
+    for name, text in vehicle_names.items():
+        problem = _vehicle_value_problem(name, text)
+        if problem:
+            return problem
+    encoding = vehicle_names.get("bearing_encoding")
+    if encoding and node_names.get("bearing_encoding", encoding) != encoding:
+        return (f"the vehicle publishes bearing_encoding {encoding} but -p gives the node "
+                f"{node_names['bearing_encoding']}: the node would receive nothing")
+    if args.bag and (args.vehicle_param or args.duration or args.data_seed):
+        return "--vehicle-param, --duration and --data-seed are for the simulated vehicle, not --bag"
+    return None
+
+
+def enter_domain(args) -> int:
+    """The run's own ROS domain (never 0 unless asked), set for this process and its children."""
+    domain = args.domain_id if args.domain_id is not None else \
+        random.Random(os.getpid() ^ time.time_ns()).randint(1, 101)
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    node_cmd, source_cmd = build_commands(args, node_parameters(args))
-    logdir = Path(tempfile.mkdtemp(prefix="aoa_launch_"))
-    source_name = "replay" if args.bag else "sim_vehicle"
-    print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {source_name}: "
-          f"{args.bag if args.bag else f'scenario {args.scenario} at {args.speedup:g}x'}", flush=True)
+    return domain
 
-    stop = _StopOnce()
-    old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
-    children, monitor, code = [], None, 2
-    try:
-        monitor = Monitor(args.record)
-        node = Child("aoa_localizer", node_cmd, env, logdir)
-        children.append(node)
+
+class Run:
+    """One launch: the node, the data source (vehicle or bag replay), the monitor; `close()` stops them all."""
+
+    def __init__(self, args, logdir: Path):
+        self.args, self.logdir = args, logdir
+        self.env = dict(os.environ, PYTHONUNBUFFERED="1")
+        self.source_name = "replay" if args.bag else "sim_vehicle"
+        self.children: list[Child] = []
+        self.monitor: Monitor | None = None
+
+    def start(self, name: str, cmd: list[str]) -> Child:
+        child = Child(name, cmd, self.env, self.logdir)
+        self.children.append(child)
+        return child
+
+    def execute(self) -> int:
+        """Start the node, then the source; watch until the source ends; print and return the verdict's code."""
+        args = self.args
+        node_cmd, source_cmd = build_commands(args, node_parameters(args))
+        self.monitor = monitor = Monitor(args.record)
+        node = self.start("aoa_localizer", node_cmd)
         monitor.spin(1.5)  # let the node come up and the monitor discover it
         if not node.running():
-            print(f"launch: the localizer exited at start (code {node.proc.returncode}):\n{node.tail()}", file=sys.stderr)
+            print(f"launch: the localizer exited at start (code {node.proc.returncode}):\n{node.tail()}",
+                  file=sys.stderr)
             return 2
-        source = Child(source_name, source_cmd, env, logdir)
-        children.append(source)
-        t0, next_print = time.monotonic(), 0.0
-        while source.running():
-            monitor.spin(0.2)
-            if not node.running():
-                print(f"launch: the localizer died (code {node.proc.returncode}):\n{node.tail()}", file=sys.stderr)
-                return 2
-            elapsed = time.monotonic() - t0
-            if elapsed > args.timeout:
-                print(f"launch: timeout after {args.timeout:g} s", file=sys.stderr)
-                return 2
-            if elapsed >= next_print:
-                print(progress_line(monitor.state(), elapsed), flush=True)
-                next_print += 2.0
-        if source.proc.returncode != 0:
-            print(f"launch: {source_name} failed (code {source.proc.returncode}):\n{source.tail()}", file=sys.stderr)
+        source = self.start(self.source_name, source_cmd)
+        failure = self.watch(node, source)
+        if failure:
+            print(f"launch: {failure}", file=sys.stderr)
             return 2
         monitor.spin(1.5)  # the last observation point closes on the last fixes
         ok, why, figures = verdict(monitor.state(), args.max_ellipse)
         print_result(ok, why, figures)
         if args.result:
             args.result.write_text(json.dumps({"converged": ok, "reason": why, **figures}, indent=1))
-        code = 0 if ok else 1
+        return 0 if ok else 1
+
+    def watch(self, node: Child, source: Child) -> str | None:
+        """Spin the monitor and print progress every 2 s while the source runs; what went wrong, if anything."""
+        assert self.monitor is not None
+        t0, next_print = time.monotonic(), 0.0
+        while source.running():
+            self.monitor.spin(0.2)
+            if not node.running():
+                return f"the localizer died (code {node.proc.returncode}):\n{node.tail()}"
+            elapsed = time.monotonic() - t0
+            if elapsed > self.args.timeout:
+                return f"timeout after {self.args.timeout:g} s"
+            if elapsed >= next_print:
+                print(progress_line(self.monitor.state(), elapsed), flush=True)
+                next_print += 2.0
+        if source.proc.returncode != 0:
+            return f"{self.source_name} failed (code {source.proc.returncode}):\n{source.tail()}"
+        return None
+
+    def close(self):
+        for child in reversed(self.children):
+            child.stop()
+        if self.monitor is not None:
+            if self.monitor.recorder:
+                print(f"recorded {self.monitor.recorder.count} messages into {self.args.record}")
+            self.monitor.close()
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    problem = refusal(args)
+    if problem:
+        print(f"launch: {problem}", file=sys.stderr)
+        return 2
+    domain = enter_domain(args)
+    logdir = Path(tempfile.mkdtemp(prefix="aoa_launch_"))
+    run = Run(args, logdir)
+    source = args.bag if args.bag else f"scenario {args.scenario} at {args.speedup:g}x"
+    print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {run.source_name}: {source}", flush=True)
+    stop = _StopOnce()
+    old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        return run.execute()
     except Stop as exc:
         print(f"launch: stopped by {exc}", file=sys.stderr)
-        code = 2
+        return 2
     finally:
         stop.stopping = True  # a Ctrl-C during the cleanup must not cut it short with a traceback
-        for child in reversed(children):
-            child.stop()
-        if monitor is not None:
-            if monitor.recorder:
-                print(f"recorded {monitor.recorder.count} messages into {args.record}")
-            monitor.close()
+        run.close()
         for s, handler in old.items():
             signal.signal(s, handler)
-    return code
 
 
 def progress_line(state: dict, elapsed: float) -> str:
     d = state.get("diag", {})
-    line = f"[{elapsed:5.1f} s] {d.get('status', 'waiting for the localizer')}; " \
-           f"bearings received {d.get('bearings_received', 0)}, used {d.get('bearings_used', 0)}"
+    line = (
+        f"[{elapsed:5.1f} s] {d.get('status', 'waiting for the localizer')}; "
+        f"bearings received {d.get('bearings_received', 0)}, used {d.get('bearings_used', 0)}"
+    )
     if "east" in state:
         line += f"; estimate E {state['east']:.1f} N {state['north']:.1f}"
         if "truth" in state:
@@ -328,8 +452,10 @@ def progress_line(state: dict, elapsed: float) -> str:
 def print_result(ok: bool, why: str, f: dict):
     if f:
         where = f"lat {f['lat']:.7f} lon {f['lon']:.7f}, " if f.get("lat") is not None else ""
-        print(f"estimate: {where}E {f['east']:.1f} m N {f['north']:.1f} m, "
-              f"95% ellipse {f['ellipse95_m'][0]:.1f} m x {f['ellipse95_m'][1]:.1f} m")
+        print(
+            f"estimate: {where}E {f['east']:.1f} m N {f['north']:.1f} m, "
+            f"95% ellipse {f['ellipse95_m'][0]:.1f} m x {f['ellipse95_m'][1]:.1f} m"
+        )
         if "error_m" in f:
             print(f"error against the simulated truth: {f['error_m']:.2f} m")
     print(f"result: {why}")

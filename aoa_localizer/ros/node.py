@@ -4,20 +4,20 @@
 
 Inputs `gps/fix`, `df/bearing` (sensor-data QoS: reliable and best-effort publishers both connect);
 outputs `emitter/pose` (latched), `emitter/fix`, `emitter/particles`, `emitter/markers`, `/diagnostics`
-at 1 Hz; services `~/reset` and `~/reset_datum`. Every LocalizerConfig field is a parameter (fish-school ones as `afsa.*`);
-a changed parameter restarts the track with the new settings, an invalid one is refused with its reason.
+at 1 Hz; services `~/reset` and `~/reset_datum`. Every LocalizerConfig field is a parameter (a filter's own
+settings as `<filter>.*`); a changed parameter restarts the track with the new settings, an invalid one is
+refused with its reason.
 """
+
 from __future__ import annotations
 
+import logging
 import sys
 import time
-from dataclasses import fields
+from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
     SetParametersResult,
 )
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -25,6 +25,16 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
+from aoa_localizer.engine.config import ConfigError, LocalizerConfig, parameter_specs
+from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
+from aoa_localizer.engine.input_guard import StampGaps
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.noise import sentence as noise_sentence
+from aoa_localizer.ros.declare import declare, refuse_unknown
+from aoa_localizer.ros.node_health import NodeHealth
+from aoa_localizer.ros.node_params import NODE_PARAMS
+from aoa_localizer.ros.ros_main import run_node
+from aoa_localizer.ros.vehicle_path import VehiclePath
 from msgs_adapters import build
 from msgs_adapters.fields import (
     bearing_from_pose,
@@ -32,42 +42,39 @@ from msgs_adapters.fields import (
     fix_from_navsatfix,
 )
 
-from aoa_localizer.engine.config import ConfigError, LocalizerConfig, ParameterSpec, parameter_specs
-from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
-from aoa_localizer.engine.input_guard import StampGaps
-from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.ros.node_params import NODE_PARAMS
-from aoa_localizer.engine.noise import sentence as noise_sentence
-from aoa_localizer.ros.ros_main import run_node
-
 NODE_NAME = "aoa_localizer"
 PAIRED = (("datum_lat", "datum_lon"), ("prior_east", "prior_north", "prior_sigma_m"))  # set together
 _MAX_LOAD = 0.8  # share of wall time in input callbacks above which /diagnostics warns
-DIAG_NAME = "aoa_localizer: localizer"
+DATUM_PARAMS = frozenset({"datum_lat", "datum_lon", "datum_alt"})  # the only parameters that move the map frame
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
 
 _NODE_SPECS = {p.name: p for p in NODE_PARAMS}
 
 
-def _descriptor(p: ParameterSpec) -> ParameterDescriptor:
-    """The ROS descriptor of a declared parameter: its meaning, read_only when fixed at start, its range when
-    closed on both sides (ROS ranges cannot be open; the engine's check refuses the rest with the reason)."""
-    spec = p.spec
-    d = ParameterDescriptor(description=spec.doc.replace("`", ""), read_only=spec.read_only)
-    if p.default is None:
-        d.dynamic_typing = True  # unset until given; then any number
-    closed = not (spec.low_open or spec.high_open) and spec.low is not None and spec.high is not None
-    if closed and spec.kind is int:
-        d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
-    elif closed and spec.kind is float:
-        d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
-    if spec.choices:
-        d.additional_constraints = f"one of {', '.join(spec.choices)}"
-    return d
-
-
 ENGINE_PARAMS = frozenset(p.name for p in parameter_specs())
+
+
+class RosLogHandler(logging.Handler):
+    """Python logging records (the engine's: datum set, filter started, re-starts) forwarded to a ROS logger, so
+    they reach the console and /rosout like the node's own lines."""
+
+    def __init__(self, ros_logger):
+        super().__init__()
+        self.ros_logger = ros_logger
+
+    def emit(self, record: logging.LogRecord):
+        # One call line per severity: rclpy keys its log settings on the calling line and raises "Logger severity
+        # cannot be changed between calls" when one line logs at two severities (it crashed the node's callback).
+        level, ros, text = record.levelno, self.ros_logger, f"{record.name}: {record.getMessage()}"
+        if level >= logging.ERROR:
+            ros.error(text)
+        elif level >= logging.WARNING:
+            ros.warning(text)
+        elif level >= logging.INFO:
+            ros.info(text)
+        else:
+            ros.debug(text)
 
 
 class LocalizerNode(Node):
@@ -75,15 +82,31 @@ class LocalizerNode(Node):
 
     def __init__(self):
         super().__init__(NODE_NAME)
-        for p in parameter_specs() + NODE_PARAMS:
-            self.declare_parameter(p.name, p.default, _descriptor(p))
-        for p in NODE_PARAMS:  # a node-only value is checked like an engine one: refused at start with the reason
-            p.spec.check(p.name, self.get_parameter(p.name).value)
-        self.cfg = self._config_from({})  # raises ConfigError: the caller refuses to start
-        self.loc = Localizer(self.cfg)
+        self.log_bridge = RosLogHandler(self.get_logger())
+        engine_log = logging.getLogger("aoa_localizer")
+        self._engine_log_was = (engine_log.level, engine_log.propagate)
+        engine_log.addHandler(self.log_bridge)
+        engine_log.setLevel(logging.INFO)
+        engine_log.propagate = False  # the ROS logger prints it; no second copy through the root handler
+        declare(self, parameter_specs(), check=False)  # the engine's values are checked together, by its config
+        declare(self, NODE_PARAMS)  # raises ConfigError: the caller refuses to start
+        refuse_unknown(self)
+        self.cfg = self._config_from({})  # raises ConfigError too
+        self.map_frame = self.get_parameter("map_frame").value
+        self.emitter_frame = self.get_parameter("emitter_frame").value
+        self.diag_name = f"{self.get_fully_qualified_name().lstrip('/')}: localizer"  # like diagnostic_updater
+        self.datum_sent: Any = None  # the LocalFrame last published on emitter/datum
+        self.health = NodeHealth(self._now(), self.get_parameter("stale_after_s").value)
+        self.path = VehiclePath(self.get_parameter("path_length").value, lambda: self.health.valid_fix(self._now()))
+        self.loc = Localizer(self.cfg, observer=self.path)
         self.T = build.rclpy_types()
-        self.counts = {"fixes_received": 0, "bearings_received": 0, "adapter_errors": 0, "fixes_lost": 0,
-                       "bearings_lost": 0}
+        self.counts = {
+            "fixes_received": 0,
+            "bearings_received": 0,
+            "adapter_errors": 0,
+            "fixes_lost": 0,
+            "bearings_lost": 0,
+        }
         self.lost_reported = 0  # fixes_lost + bearings_lost at the last diagnostics
         self.df_gaps = StampGaps()
         self.callback_s: list[float] = []
@@ -91,25 +114,47 @@ class LocalizerNode(Node):
         self.callback_max_s = 0.0
 
         depth = self.get_parameter("input_queue_depth").value
-        sensor = QoSProfile(depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST,
-                            durability=DurabilityPolicy.VOLATILE)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.fix_sub = self.create_subscription(self.T.NavSatFix, "gps/fix", self.on_fix, sensor,
-                                                event_callbacks=self._lost_counter("fixes_lost"))
-        bearing_type = self.T.Vector3Stamped if self.cfg.bearing_encoding == "df_record" else self.T.PoseWithCovarianceStamped
-        self.bearing_sub = self.create_subscription(bearing_type, "df/bearing", self.on_bearing, sensor,
-                                                    event_callbacks=self._lost_counter("bearings_lost"))
+        reliable = self.get_parameter("input_reliability").value == "reliable"
+        sensor = QoSProfile(
+            depth=depth,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            history=HistoryPolicy.KEEP_LAST,
+            durability=DurabilityPolicy.VOLATILE,
+        )
+        latched = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
+        self.fix_sub = self.create_subscription(
+            self.T.NavSatFix, "gps/fix", self.on_fix, sensor, event_callbacks=self._lost_counter("fixes_lost")
+        )
+        bearing_type = (
+            self.T.Vector3Stamped if self.cfg.bearing_encoding == "df_record" else self.T.PoseWithCovarianceStamped
+        )
+        self.bearing_sub = self.create_subscription(
+            bearing_type, "df/bearing", self.on_bearing, sensor, event_callbacks=self._lost_counter("bearings_lost")
+        )
         self.pub_pose = self.create_publisher(self.T.PoseWithCovarianceStamped, "emitter/pose", latched)
         self.pub_fix = self.create_publisher(self.T.NavSatFix, "emitter/fix", 10)
         self.pub_particles = self.create_publisher(self.T.PoseArray, "emitter/particles", 10)
         self.pub_markers = self.create_publisher(self.T.MarkerArray, "emitter/markers", 10)
+        self.pub_datum = self.create_publisher(self.T.NavSatFix, "emitter/datum", latched)
+        self.pub_path = self.create_publisher(self.T.Path, "vehicle/path", 1)
         self.pub_diag = self.create_publisher(self.T.DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.create_service(Trigger, "~/reset_datum", self.on_reset_datum)
-        self.create_timer(self.get_parameter("diagnostics_period_s").value, self.publish_diagnostics)
+        self.create_timer(self.get_parameter("diagnostics_period_s").value, self.on_period)
         self.add_on_set_parameters_callback(self.on_set_parameters)
-        self.get_logger().info(f"started: algorithm {self.cfg.algorithm}, N = {self.cfg.num_particles}, "
-                               f"bearing encoding {self.cfg.bearing_encoding}")
+        self._publish_datum()  # a configured datum is known at once
+        self.get_logger().info(
+            f"started: algorithm {self.cfg.algorithm}, N = {self.cfg.num_particles}, "
+            f"bearing encoding {self.cfg.bearing_encoding}"
+        )
+
+    def destroy_node(self):
+        engine_log = logging.getLogger("aoa_localizer")
+        engine_log.removeHandler(self.log_bridge)
+        engine_log.level, engine_log.propagate = self._engine_log_was
+        return super().destroy_node()
 
     # -- parameters ---------------------------------------------------------------------------------
     def _config_from(self, changes: dict) -> LocalizerConfig:
@@ -124,6 +169,11 @@ class LocalizerNode(Node):
                     _NODE_SPECS[p.name].spec.check(p.name, p.value)
                 except ConfigError as exc:
                     return SetParametersResult(successful=False, reason=str(exc))
+        for p in params:
+            if p.name == "path_length":
+                self.path.resize(p.value)
+            elif p.name == "stale_after_s":
+                self.health.stale_after_s = p.value
         changes = {p.name: p.value for p in params if p.name in ENGINE_PARAMS}
         if not changes:
             return SetParametersResult(successful=True)
@@ -136,11 +186,18 @@ class LocalizerNode(Node):
             # The standard set_parameters service sets a request's parameters one at a time: the first of a
             # pair is accepted and held; the track keeps its settings until the pair is complete.
             self.pending_params = {**self.pending_params, **changes}
-            self.get_logger().info(f"{', '.join(sorted(changes))} held until {', '.join(waiting)} "
-                                   "are set too (they belong together)")
+            self.get_logger().info(
+                f"{', '.join(sorted(changes))} held until {', '.join(waiting)} are set too (they belong together)"
+            )
             return SetParametersResult(successful=True)
         self.pending_params = {}
-        self.cfg, self.loc = cfg, Localizer(cfg)
+        old = self.loc
+        self.cfg, self.loc = cfg, Localizer(cfg, observer=self.path)
+        if changes.keys() & DATUM_PARAMS:
+            self.path.clear()  # drawn in the old map frame
+        else:
+            self.loc.adopt_datum(old.frame)  # only datum_* move the map frame
+        self._publish_datum()
         self.get_logger().info(f"parameters changed ({', '.join(sorted(changes))}): track restarted")
         return SetParametersResult(successful=True)
 
@@ -158,8 +215,10 @@ class LocalizerNode(Node):
     # -- inputs -------------------------------------------------------------------------------------
     def _lost_counter(self, key: str) -> SubscriptionEventCallbacks:
         """The middleware's message-lost events of a subscription, counted under `key`."""
+
         def on_lost(status):
             self.counts[key] += int(status.total_count_change)
+
         return SubscriptionEventCallbacks(message_lost=on_lost)
 
     def on_fix(self, msg):
@@ -171,11 +230,13 @@ class LocalizerNode(Node):
             self.counts["adapter_errors"] += 1
             return
         self._publish(self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m))
+        self._publish_datum()
         self._timed(t0)
 
     def on_bearing(self, msg):
         t0 = time.perf_counter()
         self.counts["bearings_received"] += 1
+        self.health.reading(self._now())
         try:
             if self.cfg.bearing_encoding == "df_record":
                 r = df_from_vector3stamped(msg)
@@ -201,99 +262,143 @@ class LocalizerNode(Node):
         if est is None:
             return
         T = self.T
-        self.pub_pose.publish(build.emitter_pose(T, est))
-        self.pub_fix.publish(build.emitter_fix(T, est, self.loc.frame.alt0))
-        self.pub_particles.publish(build.particle_array(T, est))
+        frame = self.map_frame
+        self.pub_pose.publish(build.emitter_pose(T, est, frame))
+        self.pub_fix.publish(build.emitter_fix(T, est, self.loc.datum_frame().alt0, self.emitter_frame))
+        self.pub_particles.publish(build.particle_array(T, est, frame))
         rays = self.loc.recent_points(self.get_parameter("marker_rays").value)[:, :3]
         ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
-        self.pub_markers.publish(build.markers(T, est, rays, ring))
+        self.pub_markers.publish(build.markers(T, est, rays, ring, frame))
+
+    def _publish_datum(self):
+        """emitter/datum (latched) whenever the map frame's origin is new: set from a fix, or configured."""
+        datum = self.loc.frame
+        if datum is not None and datum != self.datum_sent:
+            self.pub_datum.publish(build.datum_fix(self.T, self._now(), datum.lat0, datum.lon0, datum.alt0,
+                                                   self.map_frame))
+            self.datum_sent = datum
+
+    def _publish_path(self):
+        """vehicle/path when a fix was added since the last one (a full path each time: Path has no deltas)."""
+        poses = self.path.new_path()
+        if poses:
+            self.pub_path.publish(build.vehicle_path(self.T, poses[-1][0], poses, self.map_frame))
+
+    def _now(self) -> float:
+        """The node's clock (ROS time: /clock under use_sim_time), seconds."""
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def diagnostics(self) -> tuple[int, str, dict]:
-        """(level, message, values) of the localizer's state, as published on /diagnostics."""
+        """(level, message, values) of the localizer's state, as published on /diagnostics: WARN before the first
+        estimate, while a global check runs, and while any warning holds (its words join the message)."""
         loc = self.loc
-        values = dict(self.counts)
+        values = self._state_values()
+        values.update(self._robustness_values())
+        if self.pending_params:
+            values["parameters_held"] = ", ".join(sorted(self.pending_params)) + " (waiting for the rest of the group)"
+        values.update(df_stamp_gaps=self.df_gaps.gaps, df_missing_by_stamp=self.df_gaps.missing)
+        now = self._now()
+        self.health.count_restarts(now, loc.events + loc.rejected)
+        warnings = self._warnings() + self.health.stale(now)
+        error = self.health.restart_error()
+        if error:
+            warnings.append(("restarting", *error))
+        values.update({key: value for key, value, _ in warnings})
+        checking = loc.emitter.health.alarm_since is not None  # the cloud no longer explains the newest points
+        level = 2 if error else 1 if loc.estimate is None or checking or warnings else 0
+        return level, "; ".join([loc.status] + [words for _, _, words in warnings]), values
+
+    def _state_values(self) -> dict[str, Any]:
+        """Counts, rejections by reason, callback load and the estimate."""
+        loc = self.loc
+        values: dict[str, Any] = dict(self.counts)
         values.update(status=loc.status, algorithm=self.cfg.algorithm, bearings_used=loc.bearings_used,
                       points_used=loc.points_used, unknown_quality=loc.unknown_quality,
                       bearings_rejected=sum(v for k, v in loc.rejected.items() if not k.startswith("fix_")),
                       fixes_rejected=sum(v for k, v in loc.rejected.items() if k.startswith("fix_")))
         values.update({f"rejected.{k}": v for k, v in sorted(loc.rejected.items())})
-        load = sum(self.callback_s) / self.get_parameter("diagnostics_period_s").value
         if self.callback_s:
             values.update(callback_mean_ms=f"{1e3 * sum(self.callback_s) / len(self.callback_s):.3f}",
                           callback_max_ms=f"{1e3 * self.callback_max_s:.3f}",
-                          callbacks_in_period=len(self.callback_s), load_pct=f"{100 * load:.0f}")
+                          callbacks_in_period=len(self.callback_s), load_pct=f"{100 * self._load():.0f}")
         est = loc.estimate
         if est is not None:
-            values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * loc.last_update_s:.3f}",
-                          east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}", lon=f"{est.lon:.7f}",
+            values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * loc.last_update_s:.3f}", east=f"{est.east:.2f}",
+                          north=f"{est.north:.2f}", lat=f"{est.lat:.7f}", lon=f"{est.lon:.7f}",
                           ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
-        values.update(self._robustness_values())
-        if self.pending_params:
-            values["parameters_held"] = ", ".join(sorted(self.pending_params)) + " (waiting for the rest of the group)"
+        return values
+
+    def _load(self) -> float:
+        """Share of the last diagnostics period spent in input callbacks."""
+        return sum(self.callback_s) / self.get_parameter("diagnostics_period_s").value
+
+    def _warnings(self) -> list[tuple[str, str, str]]:
+        """(key, value, words for the status message) of each warning that holds now."""
+        out = []
         wrong = self._wrong_publishers()
         if wrong:
-            values["wrong_encoding"] = "; ".join(wrong)
-        level = 0 if est is not None else 1
-        if loc.emitter.health.alarm_since is not None:
-            level = max(level, 1)  # the cloud no longer explains the newest points: a global check is under way
+            out.append(("wrong_encoding", "; ".join(wrong), wrong[0]))
+        load = self._load()
         if load > _MAX_LOAD:
-            level = max(level, 1)
-            values["overload"] = (f"input callbacks took {100 * load:.0f} % of the last period: the node cannot keep "
-                                  f"up (inputs queue, and past input_queue_depth are lost); fewer particles help")
-        values.update(df_stamp_gaps=self.df_gaps.gaps, df_missing_by_stamp=self.df_gaps.missing)
-        clock = loc.clock_hint_sentence()
-        if clock:
-            level = max(level, 1)
-            values["clock_offset"] = clock
+            out.append(("overload", f"input callbacks took {100 * load:.0f} % of the last period: the node cannot "
+                        "keep up (inputs queue, and past input_queue_depth are lost); fewer particles help",
+                        "the node cannot keep up with its inputs"))
         lost = self.counts["fixes_lost"] + self.counts["bearings_lost"]
         if lost > self.lost_reported:
-            level = max(level, 1)
-            values["messages_lost"] = (f"{lost - self.lost_reported} input messages lost by the middleware in the last "
-                                       "period (network, or input_queue_depth too small for the load)")
+            out.append(("messages_lost", f"{lost - self.lost_reported} input messages lost by the middleware in the "
+                        "last period (network, or input_queue_depth too small for the load)",
+                        "input messages are being lost"))
         self.lost_reported = lost
-        if wrong:
-            level = max(level, 1)
-        message = loc.status if not wrong else f"{loc.status}; {wrong[0]}"
-        if "overload" in values:
-            message += "; the node cannot keep up with its inputs"
-        if "messages_lost" in values:
-            message += "; input messages are being lost"
+        clock = self.loc.clock_hint_sentence()
         if clock:
-            message += "; the DF stamps look offset from the GPS clock"
-        return level, message, values
+            out.append(("clock_offset", clock, "the DF stamps look offset from the GPS clock"))
+        return out
 
     def _robustness_values(self) -> dict:
         """Self-calibrated noise, modes, the health test and the robustness events, as diagnostic values."""
-        loc, values = self.loc, {}
+        loc = self.loc
+        values: dict[str, Any] = {}
         if self.cfg.calibrate_noise:
             noise = loc.noise_summary()
             values["noise"] = noise_sentence(noise)
             values.update({f"noise.sigma_deg.q{k}": v for k, v in noise["sigma_deg"].items()})
-            values.update({"noise.reading_outlier_prob": noise["reading_outlier_prob"],
-                           "noise.point_outlier_prob": noise["point_outlier_prob"]})
+            values.update(
+                {
+                    "noise.reading_outlier_prob": noise["reading_outlier_prob"],
+                    "noise.point_outlier_prob": noise["point_outlier_prob"],
+                }
+            )
         values["health.recent_outlier_share"] = f"{loc.emitter.health.share:.2f}"
         est = loc.estimate
         if est is not None:
             values["modes"] = len(est.modes)
-            values.update({f"mode.{i + 1}": f"E {e:.1f} N {n:.1f} mass {m:.3f}" for i, (e, n, m) in enumerate(est.modes)})
+            values.update(
+                {f"mode.{i + 1}": f"E {e:.1f} N {n:.1f} mass {m:.3f}" for i, (e, n, m) in enumerate(est.modes)}
+            )
         values.update({f"events.{k}": v for k, v in sorted(loc.events.items())})
         return values
 
     def _wrong_publishers(self) -> list[str]:
         """Publishers on our input topics with another message type (DDS never delivers them)."""
         out = []
-        expected = ((self.fix_sub.topic_name, FIX_TYPE), (self.bearing_sub.topic_name, INPUT_TYPES[self.cfg.bearing_encoding]))
+        expected = (
+            (self.fix_sub.topic_name, FIX_TYPE),
+            (self.bearing_sub.topic_name, INPUT_TYPES[self.cfg.bearing_encoding]),
+        )
         for topic, want in expected:
             for info in self.get_publishers_info_by_topic(topic):
                 if info.topic_type != want:
                     out.append(f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}")
         return out
 
-    def publish_diagnostics(self):
+    def on_period(self):
+        """Every diagnostics_period_s: /diagnostics, and vehicle/path if it grew."""
         level, message, values = self.diagnostics()
-        now = self.get_clock().now().nanoseconds * 1e-9
-        self.pub_diag.publish(build.diagnostic_array(self.T, now, DIAG_NAME, level, message, values))
+        hardware_id = self.get_parameter("hardware_id").value
+        self.pub_diag.publish(build.diagnostic_array(self.T, self._now(), self.diag_name, level, message, values,
+                                                     hardware_id))
         self.callback_s, self.callback_max_s = [], 0.0
+        self._publish_path()
 
     def on_reset(self, request, response):
         self.loc.reset()
@@ -309,14 +414,31 @@ class LocalizerNode(Node):
             response.message = "the datum is configured (datum_lat, datum_lon): change those parameters to move it"
             return response
         self.loc.reset(drop_datum=True)
+        self.path.clear()  # drawn in the dropped map frame
         response.success = True
         response.message = "track and datum dropped; the next confirmed fix sets the datum"
         self.get_logger().info(response.message)
         return response
 
 
+def usage() -> str:
+    """--help: how to start the node and every parameter with its default and valid values."""
+    lines = [
+        "usage: ros2 run aoa_localizer aoa_localizer [-h] [--ros-args -p NAME:=VALUE --params-file FILE -r FROM:=TO]",
+        "   or: python -m aoa_localizer.node [-h] [--ros-args ...]",
+        "",
+        __doc__.strip(),
+        "",
+        "parameters (-p name:=value, or --params-file; docs: README 'Parameters'):",
+    ]
+    for p in parameter_specs() + NODE_PARAMS:
+        default = "unset" if p.default is None else p.default
+        lines.append(f"  {p.name} = {default}  ({p.spec.describe()}){'  [read-only]' if p.spec.read_only else ''}")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
-    return run_node(NODE_NAME, LocalizerNode, rclpy.spin, (ConfigError,), argv)
+    return run_node(NODE_NAME, LocalizerNode, rclpy.spin, (ConfigError,), argv, usage())
 
 
 if __name__ == "__main__":

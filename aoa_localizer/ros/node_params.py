@@ -5,8 +5,23 @@ from aoa_localizer.engine.config import ParameterSpec, Spec
 NODE_PARAMS = [
     ParameterSpec("input_queue_depth", 200, Spec("subscription queue depth for gps/fix and df/bearing", int,
                                                  low=1, high=100_000, read_only=True)),
+    ParameterSpec("input_reliability", "best_effort", Spec(
+        "QoS reliability of the gps/fix and df/bearing subscriptions: `best_effort` (sensor data: reliable and "
+        "best-effort publishers both connect, a message can be lost under load) or `reliable` (nothing lost, but "
+        "only reliable publishers connect)", str, choices=("best_effort", "reliable"), read_only=True)),
+    ParameterSpec("map_frame", "map", Spec("frame_id of emitter/pose, emitter/particles, emitter/markers and "
+                                           "vehicle/path: ENU metres at the datum (emitter/datum)", str,
+                                           read_only=True)),
+    ParameterSpec("emitter_frame", "emitter", Spec("frame_id of emitter/fix (the emitter's own position)", str,
+                                                   read_only=True)),
+    ParameterSpec("path_length", 1000, Spec("GPS fixes kept in vehicle/path (0: the path is not published)", int,
+                                            low=0, high=1_000_000)),
     ParameterSpec("marker_rays", 20, Spec("bearing rays drawn in emitter/markers (the latest observation points)",
                                           int, low=0, high=10_000)),
-    ParameterSpec("diagnostics_period_s", 1.0, Spec("period of /diagnostics (s)", float, low=0.01, high=3600.0,
-                                                    read_only=True)),
+    ParameterSpec("diagnostics_period_s", 1.0, Spec("period of /diagnostics and vehicle/path (s)", float, low=0.01,
+                                                    high=3600.0, read_only=True)),
+    ParameterSpec("stale_after_s", 5.0, Spec("/diagnostics warns when no DF reading or no valid GPS fix arrived for "
+                                             "this long (s)", float, low=0.0, low_open=True, high=86_400.0)),
+    ParameterSpec("hardware_id", "df_receiver", Spec("hardware_id of the /diagnostics status (the DF receiver's name "
+                                                     "or serial)", str)),
 ]

@@ -5,7 +5,9 @@ import sys
 import time
 
 import rclpy
+from builtin_interfaces.msg import Time
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 
 from msgs_adapters.bag import TOPICS, BagError, RawReader
 from msgs_adapters.bag_files import BagFiles, BagFilesError, describe_topics
@@ -47,50 +49,79 @@ def played_topics(args, inventory) -> list:
     return [t for t in inventory if t.name in chosen]
 
 
-def run_live(args) -> int:
-    remap = _remaps(args.remap)
-    if isinstance(remap, str):
-        print(f"replay: {remap}", file=sys.stderr)
-        return 2
-    try:
-        files = BagFiles(args.bag)
-    except BagFilesError as exc:
-        print(f"replay: {exc}", file=sys.stderr)
-        return 2
-    reader = RawReader(files)
-    inventory = reader.topics()
-    topics = played_topics(args, inventory)
-    if not topics:
-        print(f"replay: nothing to play; {args.bag} has {describe_topics(inventory)}", file=sys.stderr)
-        files.close()
-        return 2
-    rclpy.init()
-    node = rclpy.create_node("aoa_replay")
-    code, sent = 0, 0
-    try:
-        pubs = {}
+class LivePlayer:
+    """Publishers for the chosen topics (recorded QoS, remapped names) and, with `clock`, /clock at the bag's log
+    time, so nodes with use_sim_time follow the bag."""
+
+    def __init__(self, node, topics, remap: dict[str, str], clock: bool):
+        self.node = node
+        self.pubs = {}
         for topic in topics:
             cls = message_class(topic.msgtype)
             if cls is None:
                 print(f"replay: skipping {topic.name}: type {topic.msgtype} is not installed", file=sys.stderr)
                 continue
-            pubs[topic.name] = node.create_publisher(cls, remap.get(topic.name, topic.name), live_qos(topic.qos))
-        deadline = time.monotonic() + args.wait
-        while time.monotonic() < deadline and not all(p.get_subscription_count() for p in pubs.values()):
-            rclpy.spin_once(node, timeout_sec=0.05)
+            self.pubs[topic.name] = node.create_publisher(cls, remap.get(topic.name, topic.name), live_qos(topic.qos))
+        self.clock = node.create_publisher(Clock, "/clock", 10) if clock else None
+        self.sent = 0
+
+    def wait_for_subscribers(self, seconds: float):
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline and not all(p.get_subscription_count() for p in self.pubs.values()):
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+
+    def play(self, messages, rate: float, max_rate: float):
+        """Publish in log-time order with the recorded timing divided by `rate` (0: `max_rate` messages/s)."""
         t_wall0, t_log0 = time.monotonic(), None
-        for msg in reader.messages(set(pubs)):
+        for msg in messages:
             if not rclpy.ok():
                 break
             t_log0 = msg.log_time if t_log0 is None else t_log0
-            delay = (t_wall0 + (msg.log_time - t_log0) * 1e-9 / args.rate - time.monotonic()) if args.rate > 0 \
-                else 1.0 / args.max_rate
+            delay = (t_wall0 + (msg.log_time - t_log0) * 1e-9 / rate - time.monotonic()) if rate > 0 \
+                else 1.0 / max_rate
             if delay > 0:
                 time.sleep(delay)
-            pubs[msg.topic].publish(msg.data)
-            sent += 1
+            if self.clock is not None:
+                self.clock.publish(Clock(clock=Time(sec=msg.log_time // 1_000_000_000,
+                                                    nanosec=msg.log_time % 1_000_000_000)))
+            self.pubs[msg.topic].publish(msg.data)
+            self.sent += 1
         time.sleep(0.5)  # let the last messages leave
-        print(f"replayed {sent} messages of {', '.join(sorted(pubs))} from {args.bag}", file=sys.stderr)
+
+
+def open_bag(args) -> tuple[BagFiles, RawReader, list] | str:
+    """The bag's files, reader and the topics to play, or why there is nothing to play."""
+    try:
+        files = BagFiles(args.bag)
+    except BagFilesError as exc:
+        return str(exc)
+    reader = RawReader(files)
+    inventory = reader.topics()
+    topics = played_topics(args, inventory)
+    if not topics:
+        files.close()
+        return f"nothing to play; {args.bag} has {describe_topics(inventory)}"
+    return files, reader, topics
+
+
+def run_live(args) -> int:
+    remap = _remaps(args.remap)
+    if isinstance(remap, str):
+        print(f"replay: {remap}", file=sys.stderr)
+        return 2
+    opened = open_bag(args)
+    if isinstance(opened, str):
+        print(f"replay: {opened}", file=sys.stderr)
+        return 2
+    files, reader, topics = opened
+    rclpy.init()
+    node = rclpy.create_node("aoa_replay")
+    player = LivePlayer(node, topics, remap, args.clock)
+    code = 0
+    try:
+        player.wait_for_subscribers(args.wait)
+        player.play(reader.messages(set(player.pubs)), args.rate, args.max_rate)
+        print(f"replayed {player.sent} messages of {', '.join(sorted(player.pubs))} from {args.bag}", file=sys.stderr)
         if reader.damage:
             print(f"replay: {args.bag}: damaged ({'; '.join(reader.damage)}); every intact message was played",
                   file=sys.stderr)

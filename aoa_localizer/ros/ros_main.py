@@ -8,8 +8,19 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 
-def run_node(name: str, make, run, refusals: tuple, argv=None) -> int:
-    """make() builds the node (raising one of `refusals` to refuse); run(node) works until done."""
+def wants_help(argv) -> bool:
+    """-h or --help before any --ros-args: print usage, start nothing (not even on a ROS domain)."""
+    args = list(sys.argv if argv is None else argv)
+    own = args[:args.index("--ros-args")] if "--ros-args" in args else args
+    return "-h" in own or "--help" in own
+
+
+def run_node(name: str, make, run, refusals: tuple, argv=None, usage: str = "") -> int:
+    """make() builds the node (raising one of `refusals` to refuse); run(node) works until done. With -h or
+    --help, `usage` is printed and nothing starts."""
+    if wants_help(argv):
+        print(usage)
+        return 0
     rclpy.init(args=argv)
     try:
         node = make()

@@ -2,7 +2,7 @@
 
     python -m aoa_localizer.sim_vehicle --ros-args -p scenario:=urban -p speedup:=10.0
 
-Parameters pick a public scenario (BENCHMARKS.md) and override any part of it: track, speed,
+Parameters pick a public scenario (docs/benchmarks.md) and override any part of it: track, speed,
 emitter, datum, GPS rate/noise/drop-outs, DF rate, bearing noise, quality range, wild-bearing share,
 the data seed. Messages are paced in real time divided by `speedup` (0: as fast as `max_rate_hz`
 allows); header stamps follow the simulated clock, starting at the wall time of the start. The
@@ -15,55 +15,95 @@ import dataclasses
 import math
 import sys
 import time
+from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from aoa_localizer.engine.config import ConfigError, ParameterSpec, Spec
+from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.ros.declare import declare, refuse_unknown
+from aoa_localizer.ros.ros_main import run_node
 from msgs_adapters import build
 
-from aoa_localizer.ros.ros_main import run_node
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+
+def _number(doc: str, kind: type = float, **bounds) -> Spec:
+    return Spec(doc, kind, optional=True, **bounds)
+
 
 # Scenario fields a parameter may override (unset: the scenario's own value).
-OVERRIDES = {
-    "emitter_east": "emitter east (m, map)", "emitter_north": "emitter north (m, map)",
-    "track": "track polyline as a flat list e0, n0, e1, n1, ... (m, map)",
-    "speed": "vehicle speed (m/s)", "points": "observation points (stop-and-go); 0: drive without stopping",
-    "readings_per_point": "DF readings per observation point", "quality_low": "lowest DF quality",
-    "quality_high": "highest DF quality", "sigma_deg": "bearing noise (deg), constant",
-    "wild_share": "share of wild (multipath) bearings", "gps_rate_hz": "GPS rate (Hz)",
-    "gps_noise_m": "GPS noise per axis (m)", "gps_dropout_prob": "share of GPS fixes lost",
-    "df_rate_hz": "DF rate (Hz)", "datum_lat": "datum latitude (deg)", "datum_lon": "datum longitude (deg)",
-    "datum_alt": "datum altitude (m)",
-}
+OVERRIDES = [
+    ParameterSpec("emitter_east", None, _number("emitter east (m, map)")),
+    ParameterSpec("emitter_north", None, _number("emitter north (m, map)")),
+    ParameterSpec("track", None, Spec("track polyline as a flat list e0, n0, e1, n1, ... (m, map)", list,
+                                      optional=True)),
+    ParameterSpec("speed", None, _number("vehicle speed (m/s)", low=0.0, low_open=True, high=100.0)),
+    ParameterSpec("points", None, _number("observation points (stop-and-go); 0: drive without stopping", int,
+                                          low=0, high=100_000)),
+    ParameterSpec("readings_per_point", None, _number("DF readings per observation point", int, low=1,
+                                                      high=10_000)),
+    ParameterSpec("quality_low", None, _number("lowest DF quality", low=0.0, high=100.0)),
+    ParameterSpec("quality_high", None, _number("highest DF quality", low=0.0, high=100.0)),
+    ParameterSpec("sigma_deg", None, _number("bearing noise (deg), constant", low=0.0, high=180.0)),
+    ParameterSpec("wild_share", None, _number("share of wild (multipath) bearings", low=0.0, high=1.0)),
+    ParameterSpec("gps_rate_hz", None, _number("GPS rate (Hz)", low=0.0, low_open=True, high=1000.0)),
+    ParameterSpec("gps_noise_m", None, _number("GPS noise per axis (m)", low=0.0, high=10_000.0)),
+    ParameterSpec("gps_dropout_prob", None, _number("share of GPS fixes lost", low=0.0, high=1.0, high_open=True)),
+    ParameterSpec("df_rate_hz", None, _number("DF rate (Hz)", low=0.0, low_open=True, high=10_000.0)),
+    ParameterSpec("datum_lat", None, _number("datum latitude (deg)", low=-89.0, high=89.0)),
+    ParameterSpec("datum_lon", None, _number("datum longitude (deg)", low=-180.0, high=180.0)),
+    ParameterSpec("datum_alt", None, _number("datum altitude (m)", low=-1000.0, high=10_000.0)),
+]
+
+# The vehicle's own settings besides the scenario overrides.
+SETTINGS = [
+    ParameterSpec("scenario", "seed", Spec("public scenario", str, choices=tuple(SCENARIOS))),
+    ParameterSpec("data_seed", 0, Spec("seed of the simulated data", int, low=0)),
+    ParameterSpec("speedup", 1.0, Spec("simulated seconds per wall second; 0: as fast as max_rate_hz", float,
+                                       low=0.0)),
+    ParameterSpec("max_rate_hz", 400.0, Spec("message rate cap when speedup is 0", float, low=0.0, low_open=True)),
+    ParameterSpec("duration_s", 0.0, Spec("stop after this much simulated time (0: the whole scenario)", float,
+                                          low=0.0)),
+    ParameterSpec("bearing_encoding", "df_record", Spec("df_record (Vector3Stamped) or pose "
+                                                        "(PoseWithCovarianceStamped)", str,
+                                                        choices=("df_record", "pose"))),
+    ParameterSpec("wait_for_subscribers", 1, Spec("play once gps/fix and df/bearing each have this many "
+                                                  "subscribers", int, low=0)),
+    ParameterSpec("start_timeout_s", 10.0, Spec("play anyway after waiting this long for subscribers (s)", float,
+                                                low=0.0)),
+    ParameterSpec("start_delay_s", 0.5, Spec("pause after the subscribers are there (s), for matching to settle",
+                                             float, low=0.0)),
+]
+VEHICLE_SPECS = {p.name: p for p in SETTINGS + OVERRIDES}
 
 
 def scenario_from(name: str, o: dict):
     """The named scenario with the set overrides applied."""
     sc = SCENARIOS[name]
-    changes = {}
+    changes: dict[str, Any] = {}
+
+    def given(key: str, default: float) -> float:
+        return float(o[key]) if o.get(key) is not None else default
+
     if o.get("emitter_east") is not None or o.get("emitter_north") is not None:
-        changes["emitter"] = (float(o.get("emitter_east") if o.get("emitter_east") is not None else sc.emitter[0]),
-                              float(o.get("emitter_north") if o.get("emitter_north") is not None else sc.emitter[1]))
+        changes["emitter"] = (given("emitter_east", sc.emitter[0]), given("emitter_north", sc.emitter[1]))
     if o.get("track") is not None:
         flat = [float(v) for v in o["track"]]
         if len(flat) < 4 or len(flat) % 2:
             raise ValueError("track needs an even number of values (e, n pairs), at least two points")
-        changes["track"] = tuple(zip(flat[::2], flat[1::2]))
+        changes["track"] = tuple(zip(flat[::2], flat[1::2], strict=False))
     for key in ("speed", "points", "readings_per_point", "wild_share", "gps_rate_hz", "gps_noise_m",
                 "gps_dropout_prob", "df_rate_hz"):
         if o.get(key) is not None:
             changes[key] = o[key]
     if o.get("quality_low") is not None or o.get("quality_high") is not None:
-        changes["quality"] = tuple(float(o[k]) if o.get(k) is not None else q
-                                   for k, q in zip(("quality_low", "quality_high"), sc.quality))
+        changes["quality"] = (given("quality_low", sc.quality[0]), given("quality_high", sc.quality[1]))
     if o.get("sigma_deg") is not None:
         changes.update(sigma_rad=math.radians(o["sigma_deg"]), sigma_q_deg=None)
     if any(o.get(k) is not None for k in ("datum_lat", "datum_lon", "datum_alt")):
-        changes["datum"] = tuple(float(o[k]) if o.get(k) is not None else d
-                                 for k, d in zip(("datum_lat", "datum_lon", "datum_alt"), sc.datum))
+        changes["datum"] = (given("datum_lat", sc.datum[0]), given("datum_lon", sc.datum[1]),
+                            given("datum_alt", sc.datum[2]))
     return dataclasses.replace(sc, **changes)
 
 
@@ -72,47 +112,51 @@ class SimVehicle(Node):
 
     def __init__(self):
         super().__init__("sim_vehicle")
-        p = lambda name, default, text: self.declare_parameter(  # noqa: E731
-            name, default, ParameterDescriptor(description=text, dynamic_typing=default is None)).value
-        self.scenario_name = p("scenario", "seed", f"public scenario: {', '.join(SCENARIOS)}")
-        self.data_seed = p("data_seed", 0, "seed of the simulated data")
-        self.speedup = p("speedup", 1.0, "simulated seconds per wall second; 0: as fast as max_rate_hz")
-        self.max_rate_hz = p("max_rate_hz", 400.0, "message rate cap when speedup is 0")
-        self.duration_s = p("duration_s", 0.0, "stop after this much simulated time (0: the whole scenario)")
-        self.encoding = p("bearing_encoding", "df_record", "df_record (Vector3Stamped) or pose (PoseWithCovarianceStamped)")
-        self.wait_for = p("wait_for_subscribers", 1, "play once gps/fix and df/bearing each have this many subscribers")
-        self.start_timeout_s = p("start_timeout_s", 10.0, "play anyway after waiting this long for subscribers (s)")
-        self.start_delay_s = p("start_delay_s", 0.5, "pause after the subscribers are there (s), for matching to settle")
-        overrides = {k: p(k, None, text) for k, text in OVERRIDES.items()}
-        if self.scenario_name not in SCENARIOS:
-            raise ValueError(f"scenario must be one of {', '.join(SCENARIOS)}, got {self.scenario_name!r}")
-        if self.encoding not in ("df_record", "pose"):
-            raise ValueError(f"bearing_encoding must be df_record or pose, got {self.encoding!r}")
+        s = declare(self, SETTINGS)  # raises ConfigError: refused at start with the reason
+        overrides = declare(self, OVERRIDES)
+        refuse_unknown(self)
+        self.scenario_name, self.data_seed, self.speedup = s["scenario"], s["data_seed"], s["speedup"]
+        self.max_rate_hz, self.duration_s, self.encoding = s["max_rate_hz"], s["duration_s"], s["bearing_encoding"]
+        self.wait_for, self.start_timeout_s = s["wait_for_subscribers"], s["start_timeout_s"]
+        self.start_delay_s = s["start_delay_s"]
         self.data = simulate(scenario_from(self.scenario_name, overrides), self.data_seed)
         self.T = build.rclpy_types()
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
         self.pub_fix = self.create_publisher(self.T.NavSatFix, "gps/fix", 100)
         bearing_type = self.T.Vector3Stamped if self.encoding == "df_record" else self.T.PoseWithCovarianceStamped
         self.pub_bearing = self.create_publisher(bearing_type, "df/bearing", 100)
         self.pub_truth = self.create_publisher(self.T.PointStamped, "sim/truth", latched)
         self.pub_datum = self.create_publisher(self.T.NavSatFix, "sim/datum", latched)
 
+    def serve(self, seconds: float):
+        """Wait `seconds` while serving the node's callbacks (parameter services, discovery), not sleeping."""
+        end = time.monotonic() + seconds
+        while rclpy.ok() and (left := end - time.monotonic()) > 0:
+            rclpy.spin_once(self, timeout_sec=left)
+
     def play(self):
         """Publish the run; returns when it is played (or the duration is reached)."""
         d, T = self.data, self.T
         deadline = time.monotonic() + self.start_timeout_s
-        while time.monotonic() < deadline and rclpy.ok() and min(
-                self.pub_fix.get_subscription_count(), self.pub_bearing.get_subscription_count()) < self.wait_for:
-            time.sleep(0.05)
-        time.sleep(self.start_delay_s)
+        while (
+            time.monotonic() < deadline
+            and rclpy.ok()
+            and min(self.pub_fix.get_subscription_count(), self.pub_bearing.get_subscription_count()) < self.wait_for
+        ):
+            self.serve(0.05)
+        self.serve(self.start_delay_s)
         base = time.time()
         self.pub_datum.publish(build.navsatfix(T, base, *d.scenario.datum, frame_id="map"))
         self.pub_truth.publish(build.point_stamped(T, base, *d.emitter_enu))
-        sigma_of = dict(zip(d.bearings[:, 0].tolist(), d.sigma.tolist()))
+        sigma_of = dict(zip(d.bearings[:, 0].tolist(), d.sigma.tolist(), strict=False))
         events = d.events()
         end = events[-1][1][0] if not self.duration_s else min(events[-1][1][0], self.duration_s)
-        self.get_logger().info(f"playing {self.scenario_name}: {len(d.fixes)} fixes, {len(d.bearings)} DF readings, "
-                               f"{end:.0f} s simulated at speed-up {self.speedup:g}")
+        self.get_logger().info(
+            f"playing {self.scenario_name}: {len(d.fixes)} fixes, {len(d.bearings)} DF readings, "
+            f"{end:.0f} s simulated at speed-up {self.speedup:g}"
+        )
         t_wall0, next_log = time.monotonic(), 0.0
         for kind, row in events:
             t = row[0]
@@ -123,7 +167,7 @@ class SimVehicle(Node):
             else:
                 delay = 1.0 / self.max_rate_hz
             if delay > 0:
-                time.sleep(delay)
+                self.serve(delay)
             if kind == "fix":
                 self.pub_fix.publish(build.navsatfix(T, base + t, row[1], row[2], row[3]))
             elif self.encoding == "df_record":
@@ -134,12 +178,27 @@ class SimVehicle(Node):
             if t >= next_log:
                 self.get_logger().info(f"t = {t:.0f} s")
                 next_log += 30.0
-        time.sleep(0.5)  # let the last messages leave
+        self.serve(0.5)  # let the last messages leave
         self.get_logger().info("scenario played")
 
 
+def usage() -> str:
+    """--help: how to start the vehicle and its parameters."""
+    lines = [
+        "usage: ros2 run aoa_localizer sim_vehicle [-h] [--ros-args -p NAME:=VALUE]",
+        "   or: python -m aoa_localizer.sim_vehicle [-h] [--ros-args ...]",
+        "",
+        __doc__.strip(),
+        "",
+        "parameters (-p name:=value):",
+    ]
+    lines += [f"  {p.name} = {p.default}  {p.spec.doc} ({p.spec.describe()})" for p in SETTINGS]
+    lines += [f"  {p.name} (unset: the scenario's)  {p.spec.doc} ({p.spec.describe()})" for p in OVERRIDES]
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
-    return run_node("sim_vehicle", SimVehicle, SimVehicle.play, (ValueError, TypeError), argv)
+    return run_node("sim_vehicle", SimVehicle, SimVehicle.play, (ConfigError, ValueError), argv, usage())
 
 
 if __name__ == "__main__":

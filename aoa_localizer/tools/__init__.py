@@ -1,1 +1,2 @@
-"""ROS-free programs and their helpers: offline replay, simulation runs, command-line options, the README parameter tables."""
+"""ROS-free programs and their helpers: offline replay, simulation runs, command-line options, the README parameter
+tables."""

@@ -34,11 +34,18 @@ def summary(loc: Localizer, truth, datum) -> list[str]:
         lines.append(f"no estimate: {loc.status}")
     else:
         a, b, _ = ellipse_axes(est.cov)
-        lines.append(f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} (E {est.east:.1f} m, N {est.north:.1f} m), "
-                     f"95% ellipse {a:.1f} x {b:.1f} m, {est.bearings_used} bearings in {est.points_used} points")
+        # East/north in one frame only: the truth's (sim/datum) when the bag has it, else the engine's datum.
         if truth is not None and datum is not None:
             e, n = LocalFrame(*datum).to_enu(est.lat, est.lon)
-            lines.append(f"error against the bag's truth: {math.hypot(e - truth[1], n - truth[2]):.2f} m")
+            where = f"E {e:.1f} m, N {n:.1f} m from the bag's datum {datum[0]:.7f}, {datum[1]:.7f}"
+        else:
+            origin = loc.datum_frame()
+            where = f"E {est.east:.1f} m, N {est.north:.1f} m from the datum {origin.lat0:.7f}, {origin.lon0:.7f}"
+        lines.append(f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} ({where}), 95% ellipse {a:.1f} x {b:.1f} m, "
+                     f"{est.bearings_used} bearings in {est.points_used} points")
+        if truth is not None and datum is not None:
+            lines.append(f"error against the bag's truth (E {truth[1]:.1f} m, N {truth[2]:.1f} m, same frame): "
+                         f"{math.hypot(e - truth[1], n - truth[2]):.2f} m")
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(loc.rejected.items())) or "none"
     lines.append(f"inputs not used: {rejected}")
     return lines + loc.robustness_lines()

@@ -10,14 +10,53 @@ import yaml
 from aoa_localizer.engine.config import ALGORITHMS, ConfigError, LocalizerConfig
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """The programs' --help: the description as written, and every option's default that is a value (an option
+    left unset says in its help what unset means)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        unset = default is None or default is False or default == [] or default == argparse.SUPPRESS
+        if unset or "%(default)" in text or not action.option_strings:
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def seed_value(text: str) -> int:
+    """argparse type of a seed: an integer >= 0 (numpy refuses negative seeds)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {value}")
+    return value
+
+
+def add_topic_args(parser: argparse.ArgumentParser):
+    parser.add_argument("--fix-topic", default="/gps/fix", help="the bag's GPS topic (sensor_msgs/msg/NavSatFix)")
+    parser.add_argument("--bearing-topic", default="/df/bearing",
+                        help="the bag's DF topic (a Vector3Stamped DF record, or a PoseWithCovarianceStamped bearing)")
+
+
 def add_engine_args(parser: argparse.ArgumentParser):
-    parser.add_argument("--algorithm", choices=ALGORITHMS, help="filter (default: afsa)")
-    parser.add_argument("--particles", type=int, help="number of particles (default: 100)")
-    parser.add_argument("--seed", type=int, help="filter seed: the same seed reproduces a run")
-    parser.add_argument("--params-file", metavar="YAML",
-                        help="parameters as a ROS 2 params file (aoa_localizer: ros__parameters: ...) or a flat mapping")
-    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE",
-                        help="any LocalizerConfig parameter, e.g. -p afsa.variant=paper -p quality_min=50")
+    parser.add_argument("--algorithm", choices=ALGORITHMS, help="filter (unset: afsa, or the params file's)")
+    parser.add_argument("--particles", type=int, help="number of particles (unset: 100, or the params file's)")
+    parser.add_argument("--seed", type=seed_value, help="filter seed: the same seed reproduces a run")
+    parser.add_argument(
+        "--params-file",
+        metavar="YAML",
+        help="parameters as a ROS 2 params file (aoa_localizer: ros__parameters: ...) or a flat mapping",
+    )
+    parser.add_argument(
+        "-p",
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="any LocalizerConfig parameter, e.g. -p afsa.variant=paper -p quality_min=50",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log the engine's decisions")
 
 
@@ -44,18 +83,21 @@ def load_params_file(path: str) -> dict:
 
 
 def config_from_args(args, base: LocalizerConfig | None = None) -> LocalizerConfig:
-    """The config the options describe (file, then -p, then the short options); raises ConfigError."""
+    """The config the options describe (file, then -p, then the short options); raises ConfigError. Every
+    value given is checked, also one a later option overrides (a wrong -p is never silently dropped)."""
     changes = load_params_file(args.params_file) if args.params_file else {}
     for item in args.param:
         name, sep, text = item.partition("=")
         if not sep:
             raise ConfigError(f"-p takes NAME=VALUE, got {item!r}")
         changes[name.strip()] = _value(text.strip())
-    for name, value in (("algorithm", args.algorithm), ("num_particles", args.particles), ("seed", args.seed)):
-        if value is not None:
-            changes[name] = value
-    return (base or LocalizerConfig()).with_changes(**changes)
+    cfg = (base or LocalizerConfig()).with_changes(**changes)
+    short = {name: value for name, value in (("algorithm", args.algorithm), ("num_particles", args.particles),
+                                             ("seed", args.seed)) if value is not None}
+    return cfg.with_changes(**short) if short else cfg
 
 
 def setup_logging(verbose: bool):
-    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+    )

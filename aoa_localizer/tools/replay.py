@@ -20,7 +20,7 @@ from pathlib import Path
 from aoa_localizer.engine.config import ConfigError, LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.tools.bag_run import run_bag, summary
-from aoa_localizer.tools.cli import add_engine_args, config_from_args, setup_logging
+from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, add_topic_args, config_from_args, setup_logging
 from msgs_adapters.bag import BagError
 
 
@@ -33,6 +33,9 @@ def run_offline(args) -> int:
     loc = Localizer(cfg)
     written = 0
     out = open(args.output, "w") if args.output != "-" else sys.stdout
+    # The header line: the configuration the estimates were made with (the report redraws the gate and the
+    # bound with it), and the bag.
+    out.write(json.dumps({"configuration": cfg.to_dict(), "bag": str(args.bag)}) + "\n")
 
     def write(est):
         nonlocal written
@@ -63,20 +66,23 @@ def run_offline(args) -> int:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.replay", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                                     formatter_class=HelpFormatter)
     parser.add_argument("bag", help="rosbag2 bag: a directory (MCAP or sqlite3, split, compressed; metadata.yaml "
                         "optional) or one .mcap/.db3 file")
     parser.add_argument("--offline", action="store_true", help="run the engine on the bag without ROS")
     parser.add_argument("--rate", type=float, default=1.0, help="live: playback rate (0: as fast as --max-rate)")
     parser.add_argument("--max-rate", type=float, default=400.0, help="live, --rate 0: messages per second")
     parser.add_argument("--remap", action="append", default=[], metavar="FROM:=TO", help="live: rename a topic")
-    parser.add_argument("--topics", nargs="+", help="live: play these topics (default: the fix and bearing topics and "
+    parser.add_argument("--topics", nargs="+", help="live: play these topics (unset: the fix and bearing topics and "
                         "/sim/truth, /sim/datum; never the bag's recorded node outputs)")
     parser.add_argument("--all-topics", action="store_true", help="live: play every topic of the bag")
-    parser.add_argument("--wait", type=float, default=3.0, help="live: seconds to wait for every topic to have a subscriber")
-    parser.add_argument("--output", default="-", help="JSON-lines file for the estimates (default: stdout)")
-    parser.add_argument("--fix-topic", default="/gps/fix")
-    parser.add_argument("--bearing-topic", default="/df/bearing")
+    parser.add_argument("--clock", action="store_true", help="live: publish /clock at the bag's log time (for "
+                        "nodes with use_sim_time:=true)")
+    parser.add_argument(
+        "--wait", type=float, default=3.0, help="live: seconds to wait for every topic to have a subscriber"
+    )
+    parser.add_argument("--output", default="-", help="offline: JSON-lines file for the estimates (-: stdout)")
+    add_topic_args(parser)
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)

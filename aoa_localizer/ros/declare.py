@@ -1,0 +1,48 @@
+"""Declared parameters (`ParameterSpec`) as ROS parameters: descriptors with the declaration's meaning, range and
+read_only, and the values checked against it, for every node of the package."""
+from __future__ import annotations
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+
+from aoa_localizer.engine.config import ConfigError, ParameterSpec, unknown_names
+
+
+def descriptor(p: ParameterSpec) -> ParameterDescriptor:
+    """The ROS descriptor of a declared parameter: its meaning, read_only when fixed at start, its range when
+    closed on both sides (ROS ranges cannot be open; the declaration's check refuses the rest with the reason)."""
+    spec = p.spec
+    d = ParameterDescriptor(description=spec.doc.replace("`", ""), read_only=spec.read_only)
+    if p.default is None:
+        d.dynamic_typing = True  # unset until given; then any number
+    closed = not (spec.low_open or spec.high_open)
+    if closed and spec.low is not None and spec.high is not None:
+        if spec.kind is int:
+            d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
+        elif spec.kind is float:
+            d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high),
+                                                         step=0.0)]
+    if spec.choices:
+        d.additional_constraints = f"one of {', '.join(spec.choices)}"
+    return d
+
+
+def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
+    """Declare every spec on `node` and return the values; raises ConfigError (the caller refuses to start) for a
+    value outside its declaration when `check`."""
+    for p in specs:
+        node.declare_parameter(p.name, p.default, descriptor(p))
+    values = {p.name: node.get_parameter(p.name).value for p in specs}
+    if check:
+        for p in specs:
+            p.spec.check(p.name, values[p.name])
+    return values
+
+
+def refuse_unknown(node: Node):
+    """After every declaration: ConfigError for an override (-p, --params-file) of a name not declared, with the
+    nearest known name. rclpy silently ignores those and has no public accessor for them."""
+    declared = set(node._parameters)
+    unknown = sorted(set(getattr(node, "_parameter_overrides", {})) - declared)
+    if unknown:
+        raise ConfigError(unknown_names(unknown, sorted(declared)))

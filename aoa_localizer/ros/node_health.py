@@ -1,0 +1,57 @@
+"""What the node's /diagnostics says beyond the engine's status, without rclpy: inputs gone stale (WARN) and a
+filter that keeps restarting (ERROR), in the node's clock (ROS time, so sim time works)."""
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+
+RESTARTS_FOR_ERROR = 3  # restarts within RESTART_WINDOW_S that turn /diagnostics to ERROR
+RESTART_WINDOW_S = 60.0
+RESTART_KINDS = ("global_restart", "emitter_moved", "filter_diverged")  # events and rejections that restart
+
+
+class NodeHealth:
+    """Arrival times of DF readings and valid fixes, and the times the filter restarted."""
+
+    def __init__(self, now: float, stale_after_s: float):
+        self.stale_after_s = stale_after_s
+        self.started = now
+        self.last_reading: float | None = None
+        self.last_valid_fix: float | None = None
+        self.restarts: deque[float] = deque()
+        self.restart_total = 0
+
+    def reading(self, now: float):
+        self.last_reading = now
+
+    def valid_fix(self, now: float):
+        self.last_valid_fix = now
+
+    def count_restarts(self, now: float, counts: Mapping[str, int]):
+        """`counts`: the engine's running totals by kind; the ones new since the last call are stamped `now`."""
+        total = sum(counts.get(k, 0) for k in RESTART_KINDS)
+        if total < self.restart_total:  # a new Localizer (parameters changed): its totals start again
+            self.restart_total = 0
+        self.restarts.extend([now] * (total - self.restart_total))
+        self.restart_total = total
+        while self.restarts and self.restarts[0] < now - RESTART_WINDOW_S:
+            self.restarts.popleft()
+
+    def stale(self, now: float) -> list[tuple[str, str, str]]:
+        """(key, value, words) for each input silent longer than stale_after_s (since the start if never seen)."""
+        out = []
+        for key, last, what in (("df_stale", self.last_reading, "DF reading"),
+                                ("gps_stale", self.last_valid_fix, "valid GPS fix")):
+            silent = now - (self.started if last is None else last)
+            if silent > self.stale_after_s:
+                since = "since the start" if last is None else f"for {silent:.1f} s"
+                out.append((key, f"no {what} {since} (stale_after_s {self.stale_after_s:g})",
+                            f"no {what} {since}"))
+        return out
+
+    def restart_error(self) -> tuple[str, str] | None:
+        """(value, words) when the filter restarted RESTARTS_FOR_ERROR times within RESTART_WINDOW_S."""
+        if len(self.restarts) < RESTARTS_FOR_ERROR:
+            return None
+        words = f"the filter restarted {len(self.restarts)} times in the last {RESTART_WINDOW_S:g} s"
+        return words + " (bearings inconsistent with one fixed emitter, or a wrong configuration)", words

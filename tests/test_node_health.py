@@ -1,0 +1,64 @@
+"""The node's own diagnostics and path, without ROS: stale inputs, a filter that keeps restarting, the path."""
+from collections import Counter
+
+import pytest
+
+from aoa_localizer.engine.config import ConfigError
+from aoa_localizer.ros.node_health import RESTART_WINDOW_S, RESTARTS_FOR_ERROR, NodeHealth
+from aoa_localizer.ros.node_params import NODE_PARAMS
+from aoa_localizer.ros.vehicle_path import VehiclePath
+
+
+def test_inputs_silent_past_stale_after_are_named_with_how_long():
+    health = NodeHealth(now=100.0, stale_after_s=5.0)
+    assert health.stale(104.0) == []
+    assert {key for key, _, _ in health.stale(106.0)} == {"df_stale", "gps_stale"}  # never seen since the start
+    health.reading(106.0)
+    health.valid_fix(107.0)
+    assert health.stale(110.0) == []
+    stale = health.stale(111.5)
+    assert [key for key, _, _ in stale] == ["df_stale"] and "for 5.5 s" in stale[0][1]
+    assert {key for key, _, _ in health.stale(112.5)} == {"df_stale", "gps_stale"}
+
+
+def test_repeated_restarts_within_the_window_are_an_error_and_age_out():
+    health = NodeHealth(now=0.0, stale_after_s=5.0)
+    health.count_restarts(1.0, Counter(global_restart=1, alarm=7))  # an alarm alone restarts nothing
+    health.count_restarts(2.0, Counter(global_restart=1, filter_diverged=1))
+    assert health.restart_error() is None
+    health.count_restarts(3.0, Counter(global_restart=1, filter_diverged=1, emitter_moved=1))
+    value, words = health.restart_error()
+    assert f"restarted {RESTARTS_FOR_ERROR} times" in words and words in value
+    health.count_restarts(1.5 + RESTART_WINDOW_S, Counter(global_restart=1, filter_diverged=1, emitter_moved=1))
+    assert health.restart_error() is None  # the first restart (t = 1) left the window
+    health.count_restarts(62.0, Counter(filter_diverged=2))  # a new Localizer: its totals start again at 0
+    assert len(health.restarts) == 4  # t = 2, 3 and the two new ones
+    assert health.restart_error() is not None
+
+
+def test_the_path_keeps_the_latest_fixes_and_reports_only_news():
+    fixes = []
+    path = VehiclePath(3, on_valid_fix=lambda: fixes.append(1))
+    assert path.new_path() is None
+    for k in range(5):
+        path.on_fix(float(k), 10.0 * k, 0.0)
+    assert path.new_path() == [(2.0, 20.0, 0.0), (3.0, 30.0, 0.0), (4.0, 40.0, 0.0)] and len(fixes) == 5
+    assert path.new_path() is None  # nothing new since
+    path.resize(1)
+    path.on_fix(5.0, 50.0, 0.0)
+    assert path.new_path() == [(5.0, 50.0, 0.0)]
+    path.resize(0)
+    path.on_fix(6.0, 60.0, 0.0)
+    assert path.new_path() is None  # path_length 0: not published
+
+
+@pytest.mark.parametrize(
+    "name, bad",
+    [("map_frame", ""), ("map_frame", "my map"), ("input_reliability", "sometimes"), ("stale_after_s", 0.0),
+     ("path_length", -1), ("hardware_id", 3)],
+)
+def test_node_parameters_refuse_values_outside_their_declaration(name, bad):
+    spec = {p.name: p for p in NODE_PARAMS}[name]
+    spec.spec.check(name, spec.default)
+    with pytest.raises(ConfigError, match=name):
+        spec.spec.check(name, bad)

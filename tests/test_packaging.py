@@ -1,0 +1,84 @@
+"""The ROS package's metadata: package.xml, the launch file and the programs' --help (the colcon build itself
+runs in .ci/colcon_check)."""
+import ast
+import re
+import tomllib
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+import rclpy
+
+from aoa_localizer.engine.scenarios import SCENARIOS
+from aoa_localizer.ros import node, sim_vehicle
+
+ROOT = Path(__file__).resolve().parents[1]
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+
+
+def test_package_xml_is_an_ament_python_package_of_this_version_with_every_message_package_it_uses():
+    root = ET.parse(ROOT / "package.xml").getroot()
+    assert root.get("format") == "3" and root.findtext("name") == "aoa_localizer"
+    assert root.findtext("export/build_type") == "ament_python"
+    assert root.findtext("version") == PYPROJECT["project"]["version"]
+    depends = {e.text for e in root.findall("exec_depend")}
+    sources = "\n".join(p.read_text() for d in ("aoa_localizer", "msgs_adapters") for p in (ROOT / d).rglob("*.py"))
+    used = set(re.findall(r"\b([a-z_]+_msgs|std_srvs|rcl_interfaces|builtin_interfaces)\b", sources))
+    assert used and used <= depends, used - depends
+    assert (ROOT / "resource" / "aoa_localizer").is_file()  # the ament index marker setup.py installs
+
+
+def test_the_launch_file_parses_and_starts_the_installed_programs_with_its_arguments():
+    tree = ast.parse((ROOT / "launch" / "localize_sim.launch.py").read_text())
+    functions = {f.name for f in tree.body if isinstance(f, ast.FunctionDef)}
+    assert "generate_launch_description" in functions
+    calls = [c for c in ast.walk(tree) if isinstance(c, ast.Call)]
+    keywords = [{k.arg: k.value for k in c.keywords} for c in calls]
+    executables = {k["executable"].value for k in keywords if "executable" in k}
+    assert executables == {"aoa_localizer", "sim_vehicle"} <= set(PYPROJECT["project"]["scripts"])
+    arguments = {
+        c.args[0].value: {k.arg: k.value.value for k in c.keywords if isinstance(k.value, ast.Constant)}
+        for c in calls
+        if getattr(c.func, "id", "") == "DeclareLaunchArgument"
+    }
+    assert set(arguments) == {"scenario", "speedup", "params_file"}
+    assert arguments["scenario"]["default_value"] in SCENARIOS
+
+
+@pytest.mark.parametrize(
+    "program, listed",
+    [
+        (node.main, ["num_particles", "diagnostics_period_s", "[read-only]"]),
+        (sim_vehicle.main, ["scenario", "speedup", "gps_dropout_prob"]),
+    ],
+)
+@pytest.mark.parametrize("flag", ["--help", "-h"])
+def test_help_prints_usage_and_parameters_and_starts_nothing(cli, program, listed, flag):
+    res = cli(program, "prog", flag)
+    assert res.returncode == 0 and res.stdout.startswith("usage: ros2 run aoa_localizer")
+    for word in listed:
+        assert word in res.stdout
+    assert not rclpy.ok()  # no ROS context was created: nothing joined a domain
+
+
+def test_every_programs_help_shows_its_defaults_and_describes_its_options(cli):
+    """ROS-package issue: --rate, --timeout, --max-ellipse, --max-rate, --wait had no default in their help, and
+    --scenario, --fix-topic, --bearing-topic no description."""
+    from aoa_localizer.reporting.report import main as report_main
+    from aoa_localizer.ros.launch import main as launch_main
+    from aoa_localizer.tools.replay import main as replay_main
+    from aoa_localizer.tools.simulate import main as simulate_main
+
+    expected = {
+        launch_main: ["--rate RATE", "(default: 10.0)", "(default: 600.0)", "(default: 50.0)", "public scenario",
+                      "seed of the simulated data (default: 0)"],
+        replay_main: ["(default: 400.0)", "(default: 3.0)", "the bag's GPS topic", "the bag's DF topic"],
+        report_main: ["the bag's GPS topic (sensor_msgs/msg/NavSatFix) (default: /gps/fix)"],
+        simulate_main: ["public scenario", "(default: seed)"],
+    }
+    for main, words in expected.items():
+        res = cli(main, "--help")
+        text = " ".join(res.stdout.split())  # argparse wraps lines
+        assert res.returncode == 0 and "(default: None)" not in text
+        for word in words:
+            assert word in text, (main.__module__, word)
