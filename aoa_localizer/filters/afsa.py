@@ -97,7 +97,7 @@ class AfsaFilter(ParticleFilter):
     def swim(self, x: np.ndarray, p: ObservationPoint) -> np.ndarray:
         """Swarm and prey behaviours (eqs. 8-9, 13-15) for all fish and all tries at once."""
         a = self.cfg.afsa
-        rng, n = self.rng, x.shape[0]
+        rng, n = self.rng, int(x.shape[0])
         y = self.loglik(x, p)
         log_crowd = math.log(a.crowd)
         self.school_rounds = 0
@@ -109,15 +109,15 @@ class AfsaFilter(ParticleFilter):
             nf = near.sum(axis=1)
             centre = (near @ x) / np.maximum(nf, 1)[:, None]
             yc = self.loglik(centre, p)
-            swarm = (nf > 0) & (yc - np.log(np.maximum(nf, 1)) > log_crowd + y)
+            swarm = np.asarray((nf > 0) & (yc - np.log(np.maximum(nf, 1)) > log_crowd + y))
             # Prey: try_number looks within the visual range; the first better one wins.
             looks = x[:, None, :] + a.visual * uniform_disc(rng, (n, a.try_number))
-            better = self.loglik(looks, p) > y[:, None]
-            found = better.any(axis=1)
+            better = np.asarray(self.loglik(looks, p) > y[:, None])
+            found = np.any(better, axis=1, keepdims=True)
             first = looks[np.arange(n), better.argmax(axis=1)]
             random_dir = unit(uniform_disc(rng, (n,)))
             direction = np.where(
-                swarm[:, None], unit(centre - x), np.where(found[:, None], unit(first - x), random_dir)
+                swarm[:, None], unit(centre - x), np.where(found, unit(first - x), random_dir)
             )
             x = x + (rng.random(n) * a.step)[:, None] * direction
             y_new = self.loglik(x, p)

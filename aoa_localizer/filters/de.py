@@ -33,7 +33,7 @@ def evolve(x: np.ndarray, fitness: np.ndarray, score, cfg, rng: np.random.Genera
         return x, fitness
     for _ in range(cfg.generations):
         trial = crossover(x, mutate(x, distinct_indices(n, rng), cfg.f1, cfg.f2), cfg.cr,
-                          rng.random((n, d)), rng.integers(0, d, n))
+                          rng.random((n, d)), np.asarray(rng.integers(0, d, size=n)))
         f = score(trial)
         better = f > fitness
         x = np.where(better[:, None], trial, x)

@@ -1,6 +1,7 @@
 """Live replay: a bag's messages published into the ROS graph in log-time order with their recorded timing and QoS."""
 from __future__ import annotations
 
+import signal
 import sys
 import time
 
@@ -64,29 +65,40 @@ class LivePlayer:
             self.pubs[topic.name] = node.create_publisher(cls, remap.get(topic.name, topic.name), live_qos(topic.qos))
         self.clock = node.create_publisher(Clock, "/clock", 10) if clock else None
         self.sent = 0
+        self.stopped_by: str | None = None  # the signal that asked to stop (the context stays valid meanwhile)
+
+    def stop(self, signum, _frame):
+        self.stopped_by = signal.Signals(signum).name
+
+    def _wait(self, seconds: float):
+        """Sleep in short steps so a stop request is seen at once."""
+        end = time.monotonic() + seconds
+        while self.stopped_by is None and (left := end - time.monotonic()) > 0:
+            time.sleep(min(left, 0.05))
 
     def wait_for_subscribers(self, seconds: float):
         deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline and not all(p.get_subscription_count() for p in self.pubs.values()):
+        while (time.monotonic() < deadline and self.stopped_by is None
+               and not all(p.get_subscription_count() for p in self.pubs.values())):
             rclpy.spin_once(self.node, timeout_sec=0.05)
 
     def play(self, messages, rate: float, max_rate: float):
         """Publish in log-time order with the recorded timing divided by `rate` (0: `max_rate` messages/s)."""
         t_wall0, t_log0 = time.monotonic(), None
         for msg in messages:
-            if not rclpy.ok():
-                break
             t_log0 = msg.log_time if t_log0 is None else t_log0
             delay = (t_wall0 + (msg.log_time - t_log0) * 1e-9 / rate - time.monotonic()) if rate > 0 \
                 else 1.0 / max_rate
             if delay > 0:
-                time.sleep(delay)
+                self._wait(delay)
+            if self.stopped_by is not None:
+                return
             if self.clock is not None:
                 self.clock.publish(Clock(clock=Time(sec=msg.log_time // 1_000_000_000,
                                                     nanosec=msg.log_time % 1_000_000_000)))
             self.pubs[msg.topic].publish(msg.data)
             self.sent += 1
-        time.sleep(0.5)  # let the last messages leave
+        self._wait(0.5)  # let the last messages leave
 
 
 def open_bag(args) -> tuple[BagFiles, RawReader, list] | str:
@@ -114,24 +126,28 @@ def run_live(args) -> int:
         print(f"replay: {opened}", file=sys.stderr)
         return 2
     files, reader, topics = opened
-    rclpy.init()
+    # Our own SIGINT/SIGTERM handling: rclpy's would invalidate the context under a publish (an RCLError traceback)
+    rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node("aoa_replay")
     player = LivePlayer(node, topics, remap, args.clock)
+    old = {s: signal.signal(s, player.stop) for s in (signal.SIGINT, signal.SIGTERM)}
     code = 0
     try:
         player.wait_for_subscribers(args.wait)
         player.play(reader.messages(set(player.pubs)), args.rate, args.max_rate)
-        print(f"replayed {player.sent} messages of {', '.join(sorted(player.pubs))} from {args.bag}", file=sys.stderr)
+        stopped = f" (stopped by {player.stopped_by})" if player.stopped_by else ""
+        print(f"replayed {player.sent} messages of {', '.join(sorted(player.pubs))} from {args.bag}{stopped}",
+              file=sys.stderr)
         if reader.damage:
             print(f"replay: {args.bag}: damaged ({'; '.join(reader.damage)}); every intact message was played",
                   file=sys.stderr)
             code = 1
-    except KeyboardInterrupt:
-        code = 0
     except BagError as exc:
         print(f"replay: {exc}", file=sys.stderr)
         code = 1
     finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
         files.close()
         node.destroy_node()
         rclpy.try_shutdown()
