@@ -49,6 +49,14 @@ FILTERS = {
     "upf": {"algorithm": "upf"},
     "pfde": {"algorithm": "pfde"},
     "agapf": {"algorithm": "agapf"},
+    # the papers' filters as printed (the default of each is its mcmc variant)
+    "sir-paper": {"algorithm": "sir", "sir.variant": "paper"},
+    "espf-paper": {"algorithm": "espf", "espf.variant": "paper"},
+    "gfapf-paper": {"algorithm": "gfapf", "gfapf.variant": "paper"},
+    "upfde-paper": {"algorithm": "upfde", "de.variant": "paper"},
+    "upf-paper": {"algorithm": "upf", "upf.variant": "paper"},
+    "pfde-paper": {"algorithm": "pfde", "de.variant": "paper"},
+    "agapf-paper": {"algorithm": "agapf", "agapf.variant": "paper"},
 }
 PEERS = ("particles-bootstrap", "particles-ibis")
 # AFSA paper, Table 1 (relative error x / y in %, seconds for 60 steps, "large errors" of 60 estimates).

@@ -5,8 +5,8 @@ import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.types import ObservationPoint
-from aoa_localizer.filters import make_filter
-from aoa_localizer.filters.afsa import AfsaFilter, uniform_disc
+from aoa_localizer.filters import FILTERS, make_filter
+from aoa_localizer.filters.afsa import AfsaMoves, uniform_disc
 from aoa_localizer.models.emitter import EmitterModel
 from aoa_localizer.models.likelihood import (
     BearingLikelihood,
@@ -76,13 +76,13 @@ def test_a_point_no_particle_can_explain_is_skipped_and_nothing_changes():
 def test_mcmc_moves_keep_the_target_distribution():
     """With no bearings the posterior is the Gaussian prior: the fish moves must leave it invariant."""
     f = _filter(n=4000)
-    assert isinstance(f, AfsaFilter) and not f.paper
+    assert isinstance(f, AfsaMoves)
     mean, cov = np.array([100.0, -50.0]), np.array([[400.0, 150.0], [150.0, 100.0]])
     rng = np.random.default_rng(2)
     f.initialise(rng.multivariate_normal(mean, cov, 4000), mean, cov)
     f.spread = cov
     for _ in range(5):
-        f.move()
+        f.move(None)
     assert 0.2 < f.acceptance < 0.95
     assert f.x.mean(axis=0) == pytest.approx(mean, abs=1.5)
     assert np.cov(f.x.T) == pytest.approx(cov, rel=0.12, abs=10)
@@ -94,7 +94,7 @@ def test_mcmc_moves_pull_a_misplaced_school_towards_the_posterior():
     f.initialise(np.full((500, 2), 30.0) + np.random.default_rng(0).normal(size=(500, 2)), mean, cov)
     f.spread = cov
     for _ in range(20):
-        f.move()
+        f.move(None)
     assert np.linalg.norm(f.x.mean(axis=0)) < 6.0
 
 
@@ -118,35 +118,22 @@ def test_uniform_disc_is_inside_the_unit_disc_and_centred():
     assert np.mean(r < 0.5) == pytest.approx(0.25, abs=0.02)  # uniform in area
 
 
-def test_cached_posterior_of_each_fish_equals_a_fresh_evaluation():
-    from aoa_localizer.engine.evaluation import run
-    from aoa_localizer.engine.scenarios import simulate
-
-    res = run(simulate("straight", 1), LocalizerConfig(seed=5))
-    f = res.localizer.filter
-    assert f.model.history.appended == 60 and f.target_points >= 0
-    fresh = f.log_target(f.x)
-    if f.target_points == f.model.history.appended:
-        assert np.allclose(f.target, fresh)
-    f.move()  # a move always starts from a correct cache and leaves one behind
-    assert np.allclose(f.target, f.log_target(f.x))
-
-
 def test_a_filter_refuses_a_model_without_the_capability_it_needs():
     """The model contract: AFSA needs a static posterior (its school and the MCMC moves evaluate it), the UPF
     family an unscented form and a transition density; make_filter says which is missing."""
     from aoa_localizer.filters import ModelMismatch
     from aoa_localizer.models.benchmarks import BearingsOnlyModel, GrowthModel
 
-    with pytest.raises(ModelMismatch, match="afsa needs a model with StaticPosterior.*GrowthModel has not"):
-        make_filter(LocalizerConfig(algorithm="afsa"), np.random.default_rng(0), GrowthModel())
+    paper = {f"{FILTERS[a][0]}.variant": "paper" for a in FILTERS}
+    with pytest.raises(ModelMismatch, match=r"afsa \(afsa.variant paper\) needs a model with StaticPosterior"):
+        make_filter(LocalizerConfig(algorithm="afsa").with_changes(**paper), np.random.default_rng(0), GrowthModel())
     for algorithm in ("upf", "upfde"):
-        with pytest.raises(ModelMismatch, match=f"{algorithm} needs a model with UnscentedForm.*BearingsOnlyModel"):
-            make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), BearingsOnlyModel())
+        with pytest.raises(ModelMismatch, match=f"{algorithm} .*needs a model with UnscentedForm.*BearingsOnlyModel"):
+            make_filter(LocalizerConfig(algorithm=algorithm).with_changes(**paper), np.random.default_rng(0),
+                        BearingsOnlyModel())
     for algorithm in ("sir", "espf", "gfapf", "pfde", "agapf", "upf"):
-        assert (
-            make_filter(
-                LocalizerConfig(algorithm=algorithm, num_particles=10), np.random.default_rng(0), GrowthModel()
-            ).name
-            == algorithm
-        )
+        cfg = LocalizerConfig(algorithm=algorithm, num_particles=10).with_changes(**paper)
+        assert make_filter(cfg, np.random.default_rng(0), GrowthModel()).name == algorithm
+        # the default (mcmc) variant needs the static posterior, and says the paper variant may run
+        with pytest.raises(ModelMismatch, match="variant: paper, may run on it"):
+            make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), GrowthModel())

@@ -58,7 +58,8 @@ def test_gravitation_scales_with_the_problem_in_spread_units():
 @pytest.mark.parametrize("algorithm", ["espf", "gfapf"])
 def test_weights_stay_normalised_and_a_seed_reproduces_a_run(algorithm):
     model = B.espf_model2()
-    cfg = LocalizerConfig.from_dict({"algorithm": algorithm, "num_particles": 64, "seed": 3, "gfapf.scale": "absolute"})
+    cfg = LocalizerConfig.from_dict({"algorithm": algorithm, "num_particles": 64, "seed": 3, "gfapf.scale": "absolute",
+                                     "espf.variant": "paper", "gfapf.variant": "paper"})
     f = make_filter(cfg, np.random.default_rng(3), model)
     f.initialise(model.initial(64, np.random.default_rng(4)))
     _, zs = model.simulate(20, np.random.default_rng(5))

@@ -74,18 +74,28 @@ def test_greedy_selection_never_lowers_fitness():
 
 def test_adaptive_probabilities_at_their_ends_and_at_the_average():
     g = LocalizerConfig().agapf
-    assert adaptive_pc(0.1, 0.2, 0.5, g.pc1, g.pc2, g.a) == pytest.approx(g.pc1)
-    assert adaptive_pc(0.2, 0.2, 0.5, g.pc1, g.pc2, g.a) == pytest.approx((g.pc1 + g.pc2) / 2)
-    assert adaptive_pc(0.5, 0.2, 0.5, g.pc1, g.pc2, g.a) == pytest.approx(g.pc2, abs=1e-6)
-    assert adaptive_pm(0.1, 0.2, 0.5, g.pm1, g.pm2, g.a) == pytest.approx(g.pm1)
-    assert adaptive_pm(0.2, 0.2, 0.5, g.pm1, g.pm2, g.a) == pytest.approx((g.pm1 + g.pm2) / 2)
-    assert adaptive_pm(0.5, 0.2, 0.5, g.pm1, g.pm2, g.a) == pytest.approx(g.pm2, abs=1e-6)  # the fittest mutate least
+    # As printed (a jump to the mid value at the average):
+    assert adaptive_pc(0.1, 0.2, 0.5, g.pc1, g.pc2, g.a, "printed") == pytest.approx(g.pc1)
+    assert adaptive_pc(0.2, 0.2, 0.5, g.pc1, g.pc2, g.a, "printed") == pytest.approx((g.pc1 + g.pc2) / 2)
+    assert adaptive_pc(0.5, 0.2, 0.5, g.pc1, g.pc2, g.a, "printed") == pytest.approx(g.pc2, abs=1e-6)
+    assert adaptive_pm(0.2, 0.2, 0.5, g.pm1, g.pm2, g.a, "printed") == pytest.approx((g.pm1 + g.pm2) / 2)
+    # Kuang et al.'s sigmoid with its "- 1" (the default): continuous at the average, pc2/pm2 at the best.
+    # At f_avg: p1 - (p1 - p2) / (1 + e^A) = 0.95 - 0.45 / (1 + e^9.9034) = 0.949978...
+    assert g.curve == "kuang"
+    assert adaptive_pc(0.2, 0.2, 0.5, g.pc1, g.pc2, g.a) == pytest.approx(0.95 - 0.45 / (1 + math.exp(9.9034)))
+    assert adaptive_pc(0.1999, 0.2, 0.5, g.pc1, g.pc2, g.a) == pytest.approx(g.pc1)
+    assert adaptive_pc(0.5, 0.2, 0.5, g.pc1, g.pc2, g.a) == pytest.approx(0.5 + 0.45 / (1 + math.exp(9.9034)))
+    assert adaptive_pc(0.35, 0.2, 0.5, g.pc1, g.pc2, g.a) == pytest.approx((g.pc1 + g.pc2) / 2)  # mid-way
+    assert adaptive_pm(0.5, 0.2, 0.5, g.pm1, g.pm2, g.a) == pytest.approx(g.pm2, abs=1e-5)  # the fittest mutate least
+    assert adaptive_pm(0.2, 0.2, 0.5, g.pm1, g.pm2, g.a) == pytest.approx(g.pm1, abs=1e-5)
 
 
 @pytest.mark.parametrize("algorithm", ["upfde", "upf", "pfde", "agapf"])
 def test_weights_finite_and_normalised_and_runs_reproducible(algorithm):
     model = B.upfde_model()
-    f = make_filter(LocalizerConfig(algorithm=algorithm, num_particles=10, seed=1), np.random.default_rng(1), model)
+    cfg = LocalizerConfig(algorithm=algorithm, num_particles=10, seed=1).with_changes(
+        **{"upf.variant": "paper", "de.variant": "paper", "agapf.variant": "paper"})
+    f = make_filter(cfg, np.random.default_rng(1), model)
     f.initialise(model.initial(10, np.random.default_rng(2)))
     _, zs = model.simulate(40, np.random.default_rng(3))
     for z in zs:

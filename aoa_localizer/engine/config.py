@@ -103,13 +103,16 @@ def choice(default: str, choices: tuple[str, ...], doc: str, **constraints):
 class AfsaConfig:
     """Fish-school settings (AFSA paper sec. 2.2 and 5). `variant` picks the paper's greedy school or ours."""
 
-    variant: str = choice("mcmc", ("mcmc", "paper"), "`mcmc` (consistent, default) or `paper`: the school as "
-                          "printed (docs/design.md says why it is not the default)")
+    variant: str = choice("mcmc", ("mcmc", "paper"), "`mcmc` (default: the school as moves that keep the "
+                          "posterior: prey as multiple-try Metropolis, swarm as a drift proposal) or `paper`: the "
+                          "school as printed (docs/design.md)")
     visual: float = param(1.0, "visual range: metres (paper) or standard deviations of the school (mcmc)",
                           low=0.0, low_open=True)
-    step: float = param(0.3, "fish step (m), paper variant", low=0.0, low_open=True)
+    step: float = param(0.3, "fish step: metres (paper), or the share of the way to the swarm's centre (mcmc)",
+                        low=0.0, low_open=True)
     crowd: float = param(0.618, "crowd factor delta, paper variant", low=0.0, low_open=True)
-    try_number: int = param(50, "prey tries per fish and round, paper variant", low=1)
+    try_number: int = param(50, "prey tries per fish and round (paper); mcmc uses at most `mcmc_tries`", low=1)
+    mcmc_tries: int = param(5, "prey looks of the multiple-try move per fish and sweep (mcmc)", low=2, high=1000)
     max_iterations: int = param(5, "school rounds (paper) or MCMC sweeps (mcmc)", low=1)
     tolerance: float = param(1e-3, "stop the paper school when the mean log-objective change is smaller",
                              low=0.0, low_open=True)
@@ -119,8 +122,12 @@ class AfsaConfig:
 class EspfConfig:
     """ESPF settings: the SBX distribution index lambda (any non-negative real in the paper; docs/seed_tables.md)."""
 
+    variant: str = choice("mcmc", ("mcmc", "paper"), "ESPF: `mcmc` (default: the paper's operator as a move that "
+                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
     sbx_lambda: float = param(2.0, "ESPF: distribution index of the simulated binary crossover (larger: children "
                               "nearer their parents)", low=0.0)
+    selection: str = choice("draw", ("draw", "top"), "ESPF paper variant: `draw` N of the 2N pool by weight "
+                            "(default), or `top`: the N largest weights (ties broken by position)")
 
 
 @dataclass(frozen=True)
@@ -129,6 +136,8 @@ class GfapfConfig:
     attraction and the range of the repulsion. `scale`: `absolute` reads the two distances in state units (the
     paper's 1-D models); `spread` in standard deviations of the cloud (the emitter problem, any scale)."""
 
+    variant: str = choice("mcmc", ("mcmc", "paper"), "GFA-PF: `mcmc` (default: the paper's operator as a move that "
+                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
     attraction: float = param(0.0618, "GFA-PF: attraction weight M towards the central dust", low=0.0)
     rotation_max: float = param(0.3, "GFA-PF: largest rotation factor f of the repulsion", low=0.0)
     iterations: int = param(8, "GFA-PF: gravitation iterations D per measurement", low=0)
@@ -143,6 +152,10 @@ class DeConfig:
     """Differential evolution of UPF-DE and PF-DE: V = F1 X_r1 + F2 (X_r2 - X_r3), binomial crossover Cr, G
     generations."""
 
+    variant: str = choice("mcmc", ("mcmc", "paper"), "UPF-DE/PF-DE: `mcmc` (default: the paper's operator as a move "
+                          "that keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    fitness: str = choice("posterior", ("posterior", "ratio"), "UPF-DE/PF-DE paper variant: a trial's fitness, "
+                          "`posterior` (L p: the path posterior, default) or `ratio` (L p / q, unbounded)")
     f1: float = param(
         1.0, "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)", low=0.0, low_open=True
     )
@@ -152,9 +165,31 @@ class DeConfig:
 
 
 @dataclass(frozen=True)
+class SirConfig:
+    """The bootstrap filter on the emitter: `mcmc` resample-move (Gaussian random-walk MH) or `paper` (the plain
+    bootstrap with the random-walk process noise: the papers' PF baseline)."""
+
+    variant: str = choice("mcmc", ("mcmc", "paper"), "SIR: `mcmc` (default: the paper's operator as a move that "
+                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+
+
+@dataclass(frozen=True)
+class UpfConfig:
+    """The unscented PF on the emitter: `mcmc` (the UKF's Gaussian as an independence MH proposal) or `paper`."""
+
+    variant: str = choice("mcmc", ("mcmc", "paper"), "UPF: `mcmc` (default: the paper's operator as a move that "
+                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+
+
+@dataclass(frozen=True)
 class AgapfConfig:
     """AGA-PF's adaptive crossover and mutation probabilities (eqs. 18-19)."""
 
+    variant: str = choice("mcmc", ("mcmc", "paper"), "AGA-PF: `mcmc` (default: the paper's operator as a move that "
+                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    curve: str = choice("kuang", ("kuang", "printed"), "AGA-PF: the adaptive curves of eqs. 18-19, `kuang` (with "
+                        "the - 1 of Kuang et al.'s sigmoid: pc1 at the average fitness, pc2 at the best) or "
+                        "`printed`")
     pc1: float = param(0.95, "AGA-PF: crossover probability below the average fitness", low=0.0, high=1.0)
     pc2: float = param(0.5, "AGA-PF: crossover probability floor for the fittest", low=0.0, high=1.0)
     pm1: float = param(0.07, "AGA-PF: mutation probability below the average fitness", low=0.0, high=1.0)
@@ -305,6 +340,8 @@ class LocalizerConfig:
     ess_threshold: float = param(
         0.5, "resample when the effective sample size falls below this share of N", low=0.0, high=1.0
     )
+    move_sweeps: int = param(3, "sweeps of a filter's moves after each resampling (the mcmc variants; AFSA: "
+                             "`afsa.max_iterations`)", low=1, high=1000)
     history_points: int = param(300, "observation points the MCMC moves' posterior keeps", low=1, high=100_000)
     # Robustness (docs/design.md "Never confidently wrong"): noise self-calibration, global-mode safety,
     # emitter-moved test.
@@ -344,8 +381,10 @@ class LocalizerConfig:
         low=0.0,
         low_open=True,
     )
+    sir: SirConfig = field(default_factory=SirConfig)
     afsa: AfsaConfig = field(default_factory=AfsaConfig)
     espf: EspfConfig = field(default_factory=EspfConfig)
+    upf: UpfConfig = field(default_factory=UpfConfig)
     gfapf: GfapfConfig = field(default_factory=GfapfConfig)
     de: DeConfig = field(default_factory=DeConfig)
     agapf: AgapfConfig = field(default_factory=AgapfConfig)
@@ -432,7 +471,8 @@ def unknown_names(names, known) -> str:
     return "; ".join(parts)
 
 
-GROUPS = {"afsa": AfsaConfig, "espf": EspfConfig, "gfapf": GfapfConfig, "de": DeConfig, "agapf": AgapfConfig}
+GROUPS = {"sir": SirConfig, "afsa": AfsaConfig, "espf": EspfConfig, "gfapf": GfapfConfig, "upf": UpfConfig,
+          "de": DeConfig, "agapf": AgapfConfig}
 
 
 @dataclass(frozen=True)

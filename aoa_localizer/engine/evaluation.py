@@ -137,12 +137,14 @@ def run_model(
     """One run of a filter on a benchmark model: (true states x_1..x_T, estimates, filter seconds).
 
     Data from `data_seed`, the filter from `filter_seed`, so filters compared with the same seeds see the
-    same data. `changes` are LocalizerConfig fields (flat `group.name` keys allowed).
+    same data. The filter runs in its `paper` variant (the papers' models are where the printed filters
+    belong) unless `changes` say otherwise; `changes` are LocalizerConfig fields (flat `group.name` keys).
     """
-    from aoa_localizer.filters import make_filter
+    from aoa_localizer.filters import FILTERS, make_filter
 
     x_true, zs = model.simulate(steps, np.random.default_rng(data_seed), jump)
-    cfg = LocalizerConfig(algorithm=algorithm, num_particles=n, seed=filter_seed).with_changes(**changes)
+    paper = {f"{FILTERS[algorithm][0]}.variant": "paper"}
+    cfg = LocalizerConfig(algorithm=algorithm, num_particles=n, seed=filter_seed).with_changes(**paper, **changes)
     rng = np.random.default_rng(filter_seed)
     f = make_filter(cfg, rng, model)
     f.initialise(model.initial(n, rng))

@@ -4,17 +4,18 @@
   newest bearing's likelihood (swarm towards the neighbours' centre when it is better and not
   crowded, else prey: up to `try_number` random looks within the visual range, step towards the
   first better one, or a random step). Then re-weight, resample every step. `visual`, `step` in metres.
-* `mcmc` (default): the paper's school pulls every fish towards the newest bearing line and the
-  weights never learn of it, so the cloud shrinks below the real error (over-confident ellipses).
-  Here the school moves only after resampling, and each fish's prey look is accepted by the
-  Metropolis-Hastings ratio on the whole posterior (all kept bearings and the prior), not by the
-  greedy comparison on the newest bearing: the cloud stays a sample of the posterior. The visual
-  range is measured in standard deviations of the school (so it means the same at 5 km and at 5 m);
-  `max_iterations` is the number of sweeps. The emitter is modelled static, as the paper says it is:
-  the random walk u of eq. 17 would make the filter forget old bearings, and the moves already keep
-  the school diverse, so `process_noise_m` applies to the paper variant and SIR only. Swarming towards the
-  neighbours' centre is not reversible and is left to the paper variant. See docs/design.md for the
-  measurements behind the choice.
+  The paper takes the swarm's neighbourhood among "the other predicted measurements within the visual
+  range", in bearing space; we take it in metres (the same set on one bearing's scale, not across points).
+* `mcmc` (default): the same school as moves that keep the posterior of all kept points (the paper's school
+  pulls every fish towards the newest bearing and the weights never learn of it: over-confident ellipses).
+  After each resampling, `max_iterations` sweeps of: the prey as a multiple-try Metropolis move (`mcmc_tries`
+  looks within the visual range, one picked in proportion to the posterior, accepted by the MTM ratio), and
+  the swarm as a drift proposal towards the centre of the fish of the other half within the visual range
+  (a `step` share of the way, the fish itself excluded; at most 200 of them looked at) with its Hastings ratio
+  (moves.py). The visual range is
+  in standard deviations of the school, so it means the same at 5 km and at 5 m. The emitter is static, as the
+  paper says: no random walk (it would make the filter forget old bearings). The crowd factor has no role in a
+  move that keeps the posterior, so only the paper variant uses it.
 """
 
 from __future__ import annotations
@@ -24,11 +25,13 @@ import math
 import numpy as np
 
 from aoa_localizer.engine.types import ObservationPoint
+from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models.base import StaticPosterior
 
-# Added to the school's covariance before its Cholesky factor, m^2: keeps moves alive in a collapsed school.
-_MIN_SPREAD_M2 = 1e-2
+SWARM_NOISE = 0.5  # the swarm proposal's spread around its drift, in visual ranges
+SWARM_PEERS = 200  # fish of the other half a swarm looks at, at most (a random subset: O(N) not O(N^2))
 
 
 def uniform_disc(rng: np.random.Generator, shape) -> np.ndarray:
@@ -45,54 +48,23 @@ def unit(v: np.ndarray) -> np.ndarray:
 
 
 class AfsaFilter(ParticleFilter):
-    """Fish = particle; the objective is the bearing likelihood (eq. 12)."""
+    """`afsa.variant: paper`: fish = particle; the objective is the bearing likelihood (eq. 12)."""
 
     name = "afsa"
     needs = (StaticPosterior,)
 
     def __init__(self, settings, rng, model):
         super().__init__(settings, rng, model)
-        self.paper = settings.afsa.variant == "paper"
-        self.acceptance = float("nan")  # share of accepted moves in the last mcmc move stage
-        self.school_rounds = 0  # rounds the paper school swam at the last step
-        self.spread = np.eye(2)  # weighted covariance of the school just before the last resampling
-        # Log posterior of each fish over the kept history, kept up to date between moves (mcmc only);
-        # valid while it counts the same points as the history window.
-        self.target = np.zeros(self.n)
-        self.target_points = -1
-
-    def predict(self):
-        """Paper: the random walk of eq. 17. mcmc: the emitter is static (paper sec. 3.1); the moves keep diversity."""
-        if self.paper:
-            super().predict()
-
-    # -- the paper's school ---------------------------------------------------------------------
-    def initialise(self, particles, prior_mean=None, prior_cov=None):
-        super().initialise(particles, prior_mean, prior_cov)
-        self.target, self.target_points = self.log_target(self.x), self.posterior_model.history.appended
-
-    def invalidate(self):
-        self.target_points = -1
-
-    def targets_known(self, target: np.ndarray):
-        self.target, self.target_points = target, self.posterior_model.history.appended
+        self.school_rounds = 0  # rounds the school swam at the last step
 
     def after_weight(self, p: ObservationPoint):
-        if not self.paper:
-            # The fish did not move since the last point: their posterior gains this point's likelihood.
-            history = self.posterior_model.history
-            fresh = self.target_points == history.appended - 1 and history.dropped == 0
-            if fresh:
-                self.target = self.target + self.last_ll
-                self.target_points += 1
-        if self.paper:
-            self.x = self.swim(self.x, p)
-            ll = self.loglik(self.x, p)
-            new = self.prev_logw + ll
-            self.logw = new - new.max()
+        self.x = self.swim(self.x, p)
+        ll = self.loglik(self.x, p)
+        new = self.prev_logw + ll
+        self.logw = new - new.max()
 
     def should_resample(self) -> bool:
-        return True if self.paper else super().should_resample()
+        return True
 
     def swim(self, x: np.ndarray, p: ObservationPoint) -> np.ndarray:
         """Swarm and prey behaviours (eqs. 8-9, 13-15) for all fish and all tries at once."""
@@ -127,34 +99,31 @@ class AfsaFilter(ParticleFilter):
                 break
         return x
 
-    # -- the consistent school ------------------------------------------------------------------
-    def after_resample(self, p: ObservationPoint):
-        if not self.paper:
-            self.move()
 
-    def resample(self) -> np.ndarray:
-        # The weighted cloud before resampling is the better picture of the posterior's spread:
-        # after it a degenerate school may sit on a handful of points.
-        self.spread = self.estimate()[1]
-        idx = super().resample()
-        self.target = self.target[idx]
-        return idx
+class AfsaMoves(ResampleMove):
+    """`afsa.variant: mcmc`: the fish school as moves on the posterior (prey: multiple-try Metropolis; swarm:
+    a drift towards the other half's neighbours' centre, with its Hastings ratio)."""
 
-    def move(self):
-        """Prey looks accepted by Metropolis-Hastings on the posterior, `max_iterations` sweeps."""
+    name = "afsa"
+
+    def __init__(self, settings, rng, model):
+        super().__init__(settings, rng, model)
+        self.sweeps = settings.afsa.max_iterations
+
+    def sweep(self, target, z):
         a, rng, n = self.cfg.afsa, self.rng, self.n
-        chol = np.linalg.cholesky(self.spread + _MIN_SPREAD_M2 * np.eye(2))
-        if self.target_points != self.posterior_model.history.appended or self.posterior_model.history.dropped:
-            self.target = self.log_target(self.x)
-        self.target_points = self.posterior_model.history.appended
-        target = self.target
-        accepted = 0
-        for _ in range(a.max_iterations):
-            look = self.x + a.visual * uniform_disc(rng, (n,)) @ chol.T
-            look_target = self.log_target(look)
-            take = np.log(rng.random(n)) < look_target - target
-            self.x = np.where(take[:, None], look, self.x)
-            target = np.where(take, look_target, target)
-            accepted += int(take.sum())
-        self.target = target
-        self.acceptance = accepted / (n * a.max_iterations)
+        look = self.chol(a.visual)
+        x, target, prey = moves.multiple_try(self.x, target, self.log_target, rng, min(a.mcmc_tries, a.try_number),
+                                             look)
+        inverse = np.linalg.inv(look)  # distances in visual ranges
+
+        def towards_centre(xs, others, _others_target):
+            others = others[:SWARM_PEERS]  # the halves are random, so this is a random subset, fixed for the move
+            u, v = xs @ inverse.T, others @ inverse.T
+            near = np.sum((u[:, None, :] - v[None, :, :]) ** 2, axis=-1) < 1.0
+            count = near.sum(axis=1)
+            centre = np.where(count[:, None] > 0, (near @ others) / np.maximum(count, 1)[:, None], xs)
+            return xs + a.step * (centre - xs)
+
+        x, target, swarm = moves.drift(x, target, self.log_target, rng, towards_centre, SWARM_NOISE * look)
+        return x, target, prey + swarm, 2 * n

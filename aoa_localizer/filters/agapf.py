@@ -1,26 +1,51 @@
 """AGA-PF: the non-degenerate particle filter with an adaptive genetic algorithm (Wu Hao, Sun Xiaoyan 2016).
 
-Each step: propagate, weight w = L(z|x), fitness = normalised weight (eq. 17); roulette selection by
-fitness; arithmetic crossover of pairs with the adaptive probability pc of eq. 18 (f' the fitter parent);
-Gaussian mutation with the adaptive probability pm of eq. 19 (f the individual's own fitness); no other
-resampling. The offspring are weighted by their likelihood for the estimate; the next step starts
-from equal weights.
+`agapf.variant: paper`. Each step: propagate, weight w = L(z|x), fitness = normalised weight (eq. 17);
+roulette selection by fitness; arithmetic crossover of pairs with the adaptive probability pc of eq. 18
+(f' the fitter parent); Gaussian mutation with the adaptive probability pm of eq. 19 (f the individual's own
+fitness); no other resampling. The selection already used the newest likelihood, so the offspring carry equal
+weights (round 1 weighted them by the likelihood again: the newest measurement counted twice, every ellipse
+over-confident).
 
-Readings: eq. 19 as printed (pm2 + (pm1 - pm2)/(1 + exp(-A ...))) rises towards pm1 for the fittest,
-against the text's stated intent (good individuals mutate less); we implement the intent, the same
-curve mirrored: pm2 + (pm1 - pm2)/(1 + exp(+A ...)), which falls to pm2 at f_max. The real-valued
-operators are ours: crossover children a x1 + (1-a) x2 and (1-a) x1 + a x2 with a ~ U(0, 1);
-mutation adds N(0, s^2) with s the population's standard deviation per dimension.
+The adaptive curves: A = 9.9034 is the constant of Kuang et al.'s adaptive sigmoid,
+pc = pc1 - (pc1 - pc2) / (1 + exp(-A (2 (f' - f_avg) / (f_max - f_avg) - 1))); the "- 1" was lost in
+eqs. 18-19 as printed. `agapf.curve: kuang` (default) restores it: continuous at f_avg (pc1), pc2 at f_max,
+and the same form for pm (pm1 at the average, pm2 for the fittest: good individuals mutate less, as the text
+says). `printed`: the equations as printed (pc jumps at f_avg; pm mirrored to fall, as the text intends).
+The real-valued operators are ours: crossover children a x1 + (1-a) x2 and (1-a) x1 + a x2 with
+a ~ U(0, 1); mutation adds N(0, s^2) with s the population's standard deviation per dimension.
+
+`agapf.variant: mcmc` (default, the emitter): selection is the resampling (every point); the arithmetic
+crossover, made reversible by adding its inverse (the half-difference scaled by s = 2a - 1 or by 1/s), and the
+mutation are MH moves on the posterior, tried with the adaptive probabilities (fitness from the posterior,
+f_avg and f_max fixed per sweep) and carrying them in the ratio; equal weights after the moves.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
+from aoa_localizer.filters.resample_move import ResampleMove
+
+RW_SCALE = 2.38 / 2**0.5  # the mutation's random walk, in standard deviations of the cloud
 
 
-def adaptive_pc(f_parent, f_avg: float, f_max: float, pc1: float, pc2: float, a: float):
-    """Eq. 18: pc1 below the average fitness; above it falls from (pc1+pc2)/2 towards pc2 at f_max."""
+def kuang(f, f_avg: float, f_max: float, p1: float, p2: float, a: float):
+    """Kuang et al.'s adaptive sigmoid: p1 below the average fitness; above it p1 - (p1 - p2) /
+    (1 + exp(-A (2 (f - f_avg) / (f_max - f_avg) - 1))), continuous at f_avg, p2 at f_max (to 1e-4 at A 9.9)."""
+    f = np.asarray(f, float)
+    span = max(f_max - f_avg, 1e-300)
+    with np.errstate(over="ignore"):
+        above = p1 - (p1 - p2) / (1 + np.exp(-a * (2 * (f - f_avg) / span - 1)))
+    return np.where(f >= f_avg, above, p1)
+
+
+def adaptive_pc(f_parent, f_avg: float, f_max: float, pc1: float, pc2: float, a: float, curve: str = "kuang"):
+    """Eq. 18: pc1 below the average fitness; above it falls towards pc2 at f_max (`printed`: from
+    (pc1+pc2)/2, a jump at f_avg)."""
+    if curve == "kuang":
+        return kuang(f_parent, f_avg, f_max, pc1, pc2, a)
     f = np.asarray(f_parent, float)
     span = max(f_max - f_avg, 1e-300)
     with np.errstate(over="ignore"):
@@ -28,13 +53,24 @@ def adaptive_pc(f_parent, f_avg: float, f_max: float, pc1: float, pc2: float, a:
     return np.where(f >= f_avg, above, pc1)
 
 
-def adaptive_pm(f, f_avg: float, f_max: float, pm1: float, pm2: float, a: float):
-    """Eq. 19 as intended: pm1 below the average; above it falls from (pm1+pm2)/2 towards pm2 at f_max."""
+def adaptive_pm(f, f_avg: float, f_max: float, pm1: float, pm2: float, a: float, curve: str = "kuang"):
+    """Eq. 19: pm1 below the average; above it falls towards pm2 at f_max (`printed`: eq. 19 mirrored to fall as
+    the text intends, from (pm1+pm2)/2)."""
+    if curve == "kuang":
+        return kuang(f, f_avg, f_max, pm1, pm2, a)
     f = np.asarray(f, float)
     span = max(f_max - f_avg, 1e-300)
     with np.errstate(over="ignore"):
         above = pm2 + (pm1 - pm2) / (1 + np.exp(a * 2 * (f - f_avg) / span))
     return np.where(f >= f_avg, above, pm1)
+
+
+def arithmetic_scale(rng: np.random.Generator, m: int) -> np.ndarray:
+    """s = 2a - 1 (a ~ U(0, 1)) or its inverse 1/s, half and half: the arithmetic crossover made reversible
+    (its law has p(1/s) = s^2 p(s), as moves.pair_scale needs)."""
+    s = rng.uniform(-1.0, 1.0, m)
+    s = np.where(s == 0.0, 1e-12, s)
+    return np.where(rng.random(m) < 0.5, s, 1.0 / s)
 
 
 class AgaPfFilter(ReplacesResampling, ParticleFilter):
@@ -48,15 +84,47 @@ class AgaPfFilter(ReplacesResampling, ParticleFilter):
         x, pf = self.x[parents], fit[parents]
         order = rng.permutation(n)
         i, j = order[: n // 2], order[n // 2: 2 * (n // 2)]
-        cross = rng.random(i.size) < adaptive_pc(np.maximum(pf[i], pf[j]), f_avg, f_max, g.pc1, g.pc2, g.a)
+        cross = rng.random(i.size) < adaptive_pc(np.maximum(pf[i], pf[j]), f_avg, f_max, g.pc1, g.pc2, g.a, g.curve)
         a = rng.random(i.size)[:, None]
         xi, xj = x[i], x[j]
         x[i] = np.where(cross[:, None], a * xi + (1 - a) * xj, xi)
         x[j] = np.where(cross[:, None], (1 - a) * xi + a * xj, xj)
-        mutate = rng.random(n) < adaptive_pm(pf, f_avg, f_max, g.pm1, g.pm2, g.a)
+        mutate = rng.random(n) < adaptive_pm(pf, f_avg, f_max, g.pm1, g.pm2, g.a, g.curve)
         spread = np.std(self.x, axis=0)
         x = np.where(mutate[:, None], x + spread * rng.standard_normal(x.shape), x)
-        ll = self.loglik(x, z)
-        if np.isfinite(ll.max()):
-            self.x, self.last_ll = x, ll
-            self.logw = ll - ll.max()
+        # Selection used the newest likelihood already: equal weights (weighting by it again counted it twice).
+        self.x, self.last_ll = x, self.loglik(x, z)
+        self.logw = np.zeros(n)
+
+
+class AgaPfMoves(ResampleMove):
+    """`agapf.variant: mcmc`: selection as resampling at every point, then crossover and mutation as MH moves
+    tried with the adaptive probabilities."""
+
+    name = "agapf"
+
+    def should_resample(self) -> bool:
+        return True  # selection, every point
+
+    def sweep(self, target, z):
+        g, rng = self.cfg.agapf, self.rng
+        fit = np.exp(target - target.max())
+        total = fit.sum()
+        f_avg, f_max = float(fit.mean() / total), float(fit.max() / total)
+        top = float(target.max())
+
+        def fitness(t):
+            return np.exp(t - top) / total
+
+        def log_pc(t_a, t_b):
+            return np.log(adaptive_pc(np.maximum(fitness(t_a), fitness(t_b)), f_avg, f_max, g.pc1, g.pc2, g.a,
+                                      g.curve))
+
+        def log_pm(t):
+            return np.log(adaptive_pm(fitness(t), f_avg, f_max, g.pm1, g.pm2, g.a, g.curve))
+
+        x, target, crossed = moves.pair_scale(self.x, target, self.log_target, rng,
+                                              lambda m: arithmetic_scale(rng, m), log_attempt=log_pc)
+        x, target, mutated = moves.random_walk(x, target, self.log_target, rng, self.chol(RW_SCALE),
+                                               log_attempt=log_pm)
+        return x, target, crossed + mutated, 2 * self.n

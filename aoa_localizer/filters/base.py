@@ -15,7 +15,16 @@ from typing import cast
 
 import numpy as np
 
-from aoa_localizer.engine.config import AfsaConfig, AgapfConfig, DeConfig, EspfConfig, GfapfConfig, LocalizerConfig
+from aoa_localizer.engine.config import (
+    AfsaConfig,
+    AgapfConfig,
+    DeConfig,
+    EspfConfig,
+    GfapfConfig,
+    LocalizerConfig,
+    SirConfig,
+    UpfConfig,
+)
 from aoa_localizer.filters.resampling import SCHEMES
 from aoa_localizer.models.base import StateSpaceModel, StaticPosterior
 
@@ -28,16 +37,19 @@ class FilterSettings:
     num_particles: int = 100
     resampling: str = "systematic"
     ess_threshold: float = 0.5
+    move_sweeps: int = 3
+    sir: SirConfig = field(default_factory=SirConfig)
     afsa: AfsaConfig = field(default_factory=AfsaConfig)
     espf: EspfConfig = field(default_factory=EspfConfig)
     gfapf: GfapfConfig = field(default_factory=GfapfConfig)
+    upf: UpfConfig = field(default_factory=UpfConfig)
     de: DeConfig = field(default_factory=DeConfig)
     agapf: AgapfConfig = field(default_factory=AgapfConfig)
 
     @classmethod
     def of(cls, cfg: LocalizerConfig) -> FilterSettings:
-        return cls(cfg.num_particles, cfg.resampling, cfg.ess_threshold, cfg.afsa, cfg.espf, cfg.gfapf, cfg.de,
-                   cfg.agapf)
+        return cls(cfg.num_particles, cfg.resampling, cfg.ess_threshold, cfg.move_sweeps, cfg.sir, cfg.afsa, cfg.espf,
+                   cfg.gfapf, cfg.upf, cfg.de, cfg.agapf)
 
 
 class ParticleFilter:

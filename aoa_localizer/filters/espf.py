@@ -1,19 +1,28 @@
 """ESPF: the particle filter based on evolution sampling (Hu, Pan et al. 2009, sec. 3).
 
-After the ordinary resampling: take each resampled particle's parent at k-1 ("MCMC pre-sampling"),
-pair the parents at random and cross them with simulated binary crossover (eqs. 10-11), propagate the
-children through the state model (eq. 12) and weight them by their normalised likelihood (eq. 13).
-The N resampled particles, with the weight resampling left them (1/N: "the weights recorded after
-resampling"), and the N children with their normalised likelihoods form a pool of 2N; the N with the
-largest weights go on, with equal weights. So a child replaces a resampled particle when its likelihood
-is above the children's average. (Reading the recorded weights as the pre-resampling ones instead lets
-the copies of one heavy particle fill the whole selection; measured in docs/seed_tables.md.)
+`espf.variant: paper`. After the ordinary resampling: take each resampled particle's parent at k-1 ("MCMC
+pre-sampling"), pair the parents at random and cross them with simulated binary crossover (eqs. 10-11),
+propagate the children through the state model (eq. 12) and weight them by their normalised likelihood
+(eq. 13). The N resampled particles, with the weight resampling left them (1/N: "the weights recorded after
+resampling"), and the N children with their normalised likelihoods form a pool of 2N from which N go on,
+with equal weights. `espf.selection: draw` (default) draws the N from the pool in proportion to the weights
+(systematic); `top` keeps the N largest. The paper says "select N"; `top` with every resampled particle at
+1/N breaks the ties by position, and as the resampled block sits in ancestor order that culled the tail of
+the block at every step (about 97 of 200 on Model 3): the bug behind 25-30 % of ESPF's error there.
+
+`espf.variant: mcmc` (default, the emitter): resample-move with SBX as a pair move accepted with
+beta^d pi(c1) pi(c2) / (pi(x_i) pi(x_j)) (moves.pair_scale) plus a small random-walk MH step (SBX keeps each
+pair's midpoint, so alone it cannot spread duplicates).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.resample_move import ResampleMove
+
+RW_SCALE = 0.5  # the small random-walk step after the pair move, in standard deviations of the cloud
 
 
 def sbx_beta(u: np.ndarray, lam: float) -> np.ndarray:
@@ -22,6 +31,12 @@ def sbx_beta(u: np.ndarray, lam: float) -> np.ndarray:
     e = 1.0 / (lam + 1.0)
     with np.errstate(divide="ignore"):
         return np.where(u <= 0.5, (2.0 * u) ** e, (1.0 / (2.0 * (1.0 - u))) ** e)
+
+
+def sbx_scale(rng: np.random.Generator, m: int, lam: float) -> np.ndarray:
+    """m draws of the SBX spread factor beta (u ~ U(0, 1)); its law has p(1/beta) = beta^2 p(beta), which makes
+    the pair move of filters/moves.py reversible."""
+    return sbx_beta(rng.random(m), lam)
 
 
 def sbx_children(xi: np.ndarray, xj: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -33,6 +48,13 @@ def sbx_children(xi: np.ndarray, xj: np.ndarray, beta: np.ndarray) -> tuple[np.n
 def top_n(weights: np.ndarray, n: int) -> np.ndarray:
     """Indices of the n largest weights (ties broken by position, so the choice is reproducible)."""
     return np.argsort(-weights, kind="stable")[:n]
+
+
+def draw_n(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n indices drawn in proportion to the weights, systematically (one uniform, n evenly spaced points on the
+    cumulative weights): equal weights get equal shares, whatever their position."""
+    u = (rng.random() + np.arange(n)) / n
+    return np.minimum(np.searchsorted(np.cumsum(weights / weights.sum()), u), len(weights) - 1)
 
 
 class EspfFilter(ParticleFilter):
@@ -55,6 +77,19 @@ class EspfFilter(ParticleFilter):
         cand_w = np.exp(ll - ll.max()) if np.isfinite(ll.max()) else np.zeros(n)
         cand_w = cand_w / cand_w.sum() if cand_w.sum() > 0 else cand_w
         pool = np.concatenate([self.x, children])
-        keep = top_n(np.concatenate([np.full(n, 1.0 / n), cand_w]), n)
+        pool_w = np.concatenate([np.full(n, 1.0 / n), cand_w])
+        keep = top_n(pool_w, n) if self.cfg.espf.selection == "top" else draw_n(pool_w, n, rng)
         self.x = pool[keep]
         self.logw = np.zeros(n)
+
+
+class EspfMoves(ResampleMove):
+    """`espf.variant: mcmc`: SBX pair moves and a small random walk, both MH on the posterior."""
+
+    name = "espf"
+
+    def sweep(self, target, z):
+        lam, rng = self.cfg.espf.sbx_lambda, self.rng
+        x, target, crossed = moves.pair_scale(self.x, target, self.log_target, rng, lambda m: sbx_scale(rng, m, lam))
+        x, target, walked = moves.random_walk(x, target, self.log_target, rng, self.chol(RW_SCALE))
+        return x, target, crossed + walked, 2 * self.n

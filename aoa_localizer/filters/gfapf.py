@@ -11,13 +11,23 @@ the repulsion points away from the centre (the text calls it a repulsion; as pri
 with the attraction's sign); f, "the probability of rotation", is drawn U(0, rotation_max) per dust and
 iteration. Scaling: with `scale: spread` the thresholds are in standard deviations s of the cloud and
 the repulsion is s f cbrt(|dis|/s), so the whole move scales with the problem (a test checks it); with
-`absolute`, s = 1: the paper's 1-D models.
+`absolute`, s = 1: the paper's 1-D models. This is `gfapf.variant: paper`: the re-weight after the move lacks
+the move's density (the paper's own flaw), which collapses the cloud on the emitter.
+
+`gfapf.variant: mcmc` (default, the emitter): resample-move; attraction and repulsion towards the central
+dust (the best particle of the other half, fixed for the half's move; f drawn once per sweep) are the mean of
+a Gaussian proposal (half a standard deviation of the cloud), accepted with the Hastings ratio computed
+through the reverse move's mean (moves.drift); `iterations` sweeps.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.resample_move import ResampleMove
+
+NOISE_SCALE = 0.5  # the proposal's spread around the gravitation move, in standard deviations of the cloud
 
 
 def gravitation_step(x: np.ndarray, centre: int, scale: float, attraction: float, attract_min: float,
@@ -55,3 +65,26 @@ class GfapfFilter(ParticleFilter):
         if np.isfinite(new.max()):
             self.x, self.last_ll = x, ll
             self.logw = new - new.max()
+
+
+class GfapfMoves(ResampleMove):
+    """`gfapf.variant: mcmc`: the gravitation step as the mean of an MH proposal on the posterior."""
+
+    name = "gfapf"
+
+    def __init__(self, settings, rng, model):
+        super().__init__(settings, rng, model)
+        self.sweeps = settings.gfapf.iterations or 1
+
+    def sweep(self, target, z):
+        g = self.cfg.gfapf
+        scale = 1.0 if g.scale == "absolute" else float(np.sqrt(max(np.trace(self.spread) / self.model.dim, 1e-12)))
+        f = g.rotation_max * self.rng.random()
+
+        def pulled(xs, others, others_target):
+            centre = others[int(np.argmax(others_target))]
+            pool = np.vstack([centre[None, :], xs])  # the centre dust first, then the moving dusts
+            return gravitation_step(pool, 0, scale, g.attraction, g.attract_min, g.repel_max, np.full(len(pool), f))[1:]
+
+        x, target, accepted = moves.drift(self.x, target, self.log_target, self.rng, pulled, self.chol(NOISE_SCALE))
+        return x, target, accepted, self.n

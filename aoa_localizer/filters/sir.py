@@ -1,8 +1,24 @@
-"""The bootstrap SIR filter: the skeleton as it is (prior proposal, resampling when ESS falls)."""
+"""The bootstrap SIR filter: the skeleton as it is (prior proposal, resampling when ESS falls), and its emitter
+variant, resample-move with Gaussian random-walk Metropolis moves (the IBIS sampler's kernel)."""
+from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.resample_move import ResampleMove
+
+RW_SCALE = 2.38 / 2**0.5  # the optimal random-walk scale in 2-D (Roberts, Gelman, Gilks 1997)
 
 
 class SirFilter(ParticleFilter):
-    """Sampling-importance-resampling with the state model as proposal; the baseline every filter must beat."""
+    """`sir.variant: paper`: sampling-importance-resampling with the state model (its random walk) as proposal;
+    the papers' PF baseline."""
 
     name = "sir"
+
+
+class SirMoves(ResampleMove):
+    """`sir.variant: mcmc`: resample-move with random-walk MH moves scaled by the cloud."""
+
+    name = "sir"
+
+    def sweep(self, target, z):
+        x, target, accepted = moves.random_walk(self.x, target, self.log_target, self.rng, self.chol(RW_SCALE))
+        return x, target, accepted, self.n

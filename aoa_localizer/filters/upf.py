@@ -7,16 +7,30 @@
   fitness instead of resampling; a trial replacing particle i is scored with particle i's own
   x_prev and proposal. The evolved particles are the next prior; the next step starts from equal weights.
 * `pfde`: the transition as proposal (fitness = likelihood), then the same evolution.
-The estimate is the mean weighted by the final fitness.
+The estimate is the mean weighted by the final fitness. These are the `paper` variants (`upf.variant`,
+`de.variant`). The paper never says what a DE trial's fitness is: `de.fitness: posterior` (default) scores it by
+L p, the path posterior; `ratio` by the importance ratio L p / q, which is unbounded (DE then maximises a
+ratio and walks particles out of their proposal: the emitter run-aways of round 1).
+
+The `mcmc` variants (default, the emitter) are resample-move on the static posterior: `upf` proposes from the
+UKF's Gaussian (the cloud before the newest point, updated with it, widened) as an independence MH move, plus a
+random walk; `upfde` runs DE-MC (ter Braak: x_i + F2 (x_r1 - x_r2) on the paper's crossover mask, a tiny
+jitter, Metropolis acceptance) and the same independence move; `pfde` DE-MC alone.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.de import evolve
+from aoa_localizer.filters.resample_move import MIN_SPREAD_M2, ResampleMove
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
-from aoa_localizer.models.base import TransitionDensity, UnscentedForm
+from aoa_localizer.models.base import StaticPosterior, TransitionDensity, UnscentedForm
+
+WIDEN = 1.5  # the UKF's Gaussian is widened before it proposes: a bearing posterior has heavier tails
+JITTER = 0.01  # DE-MC's jitter, in standard deviations of the cloud
+RW_SCALE = 2.38 / 2**0.5
 
 
 class UkfProposalFilter(ParticleFilter):
@@ -42,9 +56,9 @@ class UkfProposalFilter(ParticleFilter):
         return self.model.transition_logpdf(self.x, self.x_prev, self.k) - gauss_logpdf(self.x, m, P)
 
     def fitness(self, x, z):
-        """The full importance weight of x as particle i's draw (log)."""
-        return (self.loglik(x, z) + self.model.transition_logpdf(x, self.x_prev, self.k)
-                - gauss_logpdf(x, self.q_mean, self.P))
+        """A trial's log fitness as particle i's draw: L p (`de.fitness: posterior`) or L p / q (`ratio`)."""
+        path = self.loglik(x, z) + self.model.transition_logpdf(x, self.x_prev, self.k)
+        return path if self.cfg.de.fitness == "posterior" else path - gauss_logpdf(x, self.q_mean, self.P)
 
 
 class UpfFilter(UkfProposalFilter):
@@ -79,3 +93,67 @@ class PfDeFilter(DeInsteadOfResampling, ParticleFilter):
     def fitness(self, x, z):
         """With the transition as proposal, p(x|x_prev)/q(x) = 1: the fitness is the likelihood."""
         return self.loglik(x, z)
+
+
+class UkfGaussianMoves(ResampleMove):
+    """Resample-move whose sweeps may use the UKF's Gaussian of the posterior after the newest point."""
+
+    needs = (StaticPosterior, UnscentedForm)
+
+    def move(self, z):
+        """The UKF's Gaussian: the weighted cloud before the newest point, updated with it by one UKF step."""
+        d = self.model.dim
+        w = np.exp(self.prev_logw - self.prev_logw.max())
+        w /= w.sum()
+        m0 = w @ self.x_prev
+        dev = self.x_prev - m0
+        P0 = (w[:, None] * dev).T @ dev + MIN_SPREAD_M2 * np.eye(d)
+        f, Q, h, R, angles, zvec = self.model.ukf(self.k, z)
+        ukf = BatchedUKF(d)
+        m, P = ukf.update(m0[None, :], P0[None, :, :], h, R, zvec, angles)
+        self.ukf_mean = m[0]
+        try:
+            self.ukf_chol = WIDEN * np.linalg.cholesky(P[0] + MIN_SPREAD_M2 * np.eye(d))
+        except np.linalg.LinAlgError:  # a degenerate update: the cloud's own spread proposes instead
+            self.ukf_mean, self.ukf_chol = m0, self.chol(WIDEN)
+        super().move(z)
+
+    def independence(self, target):
+        return moves.independence(self.x, target, self.log_target, self.rng, self.ukf_mean, self.ukf_chol)
+
+    def de_mc(self, x, target):
+        de = self.cfg.de
+        return moves.de_mc(x, target, self.log_target, self.rng, de.f2, de.cr, self.chol(JITTER))
+
+
+class UpfMoves(UkfGaussianMoves):
+    """`upf.variant: mcmc`: the UKF's Gaussian as an independence proposal, then a random walk."""
+
+    name = "upf"
+
+    def sweep(self, target, z):
+        x, target, a1 = self.independence(target)
+        x, target, a2 = moves.random_walk(x, target, self.log_target, self.rng, self.chol(RW_SCALE))
+        return x, target, a1 + a2, 2 * self.n
+
+
+class UpfDeMoves(UkfGaussianMoves):
+    """`de.variant: mcmc` for upfde: DE-MC, then the UKF independence move."""
+
+    name = "upfde"
+
+    def sweep(self, target, z):
+        x, target, a1 = self.independence(target)
+        x, target, a2 = self.de_mc(x, target)
+        return x, target, a1 + a2, 2 * self.n
+
+
+class PfDeMoves(ResampleMove):
+    """`de.variant: mcmc` for pfde: DE-MC on the posterior."""
+
+    name = "pfde"
+
+    def sweep(self, target, z):
+        de = self.cfg.de
+        x, target, accepted = moves.de_mc(self.x, target, self.log_target, self.rng, de.f2, de.cr, self.chol(JITTER))
+        return x, target, accepted, self.n

@@ -1,0 +1,86 @@
+"""Each paper operator made a Metropolis-Hastings move leaves its target invariant: a cloud drawn from a known
+law is still that law after many sweeps (mean and covariance within sampling error), and the moves do move."""
+import numpy as np
+import pytest
+
+from aoa_localizer.filters import moves
+from aoa_localizer.filters.espf import sbx_scale
+
+MEAN = np.array([3.0, -2.0])
+COV = np.array([[4.0, 2.4], [2.4, 2.25]])
+PREC = np.linalg.inv(COV)
+N, SWEEPS = 4000, 25
+
+
+def log_target(x):
+    d = x - MEAN
+    return -0.5 * np.einsum("ni,ij,nj->n", d, PREC, d)
+
+
+def arithmetic_scale(rng):
+    """The arithmetic crossover's s = 2a - 1 with its inverse added: s ~ U(-1, 1) or 1/s, half and half."""
+    def draw(m):
+        s = rng.uniform(-1.0, 1.0, m)
+        return np.where(rng.random(m) < 0.5, s, 1.0 / s)
+    return draw
+
+
+def swarm_mean(step, visual):
+    """Towards the centre of the fixed half's members within `visual` of the particle (itself excluded)."""
+    def mean_of(xs, others, _others_target):
+        others = others[:200]  # a fixed subset of the fixed half: cheaper, and still independent of xs
+        d2 = np.sum((xs[:, None, :] - others[None, :, :]) ** 2, axis=-1)
+        near = d2 < visual**2
+        count = near.sum(axis=1)
+        centre = np.where(count[:, None] > 0, (near @ others) / np.maximum(count, 1)[:, None], xs)
+        return xs + step * (centre - xs)
+    return mean_of
+
+
+def run(move, seed=0):
+    rng = np.random.default_rng(seed)
+    x = rng.multivariate_normal(MEAN, COV, N)
+    target = log_target(x)
+    accepted = 0
+    for _ in range(SWEEPS):
+        x, target, a = move(x, target, rng)
+        accepted += a
+    assert np.allclose(target, log_target(x))
+    return x, accepted / (N * SWEEPS)
+
+
+CHOL = np.linalg.cholesky(0.5 * COV)
+MOVES = {
+    "de_mc": lambda x, t, rng: moves.de_mc(x, t, log_target, rng, gamma=1.19, cr=0.9, jitter=0.01 * np.eye(2)),
+    "sbx_pairs": lambda x, t, rng: moves.pair_scale(x, t, log_target, rng, lambda m: sbx_scale(rng, m, 2.0)),
+    "arithmetic_pairs": lambda x, t, rng: moves.pair_scale(x, t, log_target, rng, arithmetic_scale(rng)),
+    "swarm_drift": lambda x, t, rng: moves.drift(x, t, log_target, rng, swarm_mean(0.5, 1.5), CHOL),
+    "multiple_try": lambda x, t, rng: moves.multiple_try(x, t, log_target, rng, 5, CHOL),
+}
+
+
+@pytest.mark.parametrize("name", sorted(MOVES))
+def test_the_move_keeps_its_target(name):
+    x, acceptance = run(MOVES[name])
+    assert 0.05 < acceptance < 1.0, acceptance
+    # standard errors of the mean about sqrt(4 / 4000) = 0.03 (correlated chains: a few times more)
+    assert np.allclose(x.mean(axis=0), MEAN, atol=0.15), x.mean(axis=0)
+    assert np.allclose(np.cov(x.T), COV, rtol=0.12, atol=0.12), np.cov(x.T)
+
+
+def test_a_pair_move_without_its_jacobian_drifts_off_the_target():
+    """The check above can fail: the same SBX pair move without the |s|^d factor does not keep the target."""
+    rng = np.random.default_rng(1)
+    x = rng.multivariate_normal(MEAN, COV, N)
+    target = log_target(x)
+    for _ in range(SWEEPS):
+        order = rng.permutation(N)
+        i, j = order[0::2], order[1::2]
+        s = sbx_scale(rng, i.size, 2.0)
+        m, half = 0.5 * (x[i] + x[j]), 0.5 * (x[i] - x[j])
+        c1, c2 = m + s[:, None] * half, m - s[:, None] * half
+        log_ratio = log_target(c1) + log_target(c2) - target[i] - target[j]  # d log|s| left out
+        take = np.log(rng.random(i.size)) < log_ratio
+        x[i[take]], x[j[take]] = c1[take], c2[take]
+        target = log_target(x)
+    assert not np.allclose(np.cov(x.T), COV, rtol=0.12, atol=0.12)
