@@ -70,6 +70,11 @@ def cells(runs_override: int | None) -> list[Cell]:
             px, py = values[algo]
             out.append(Cell("espf", "Table 2", "Model 3 (coordinated turn)", B.espf_model3, algo, n, 60, r(50),
                             {"rmse_x": px, "rmse_y": py}))
+    # Round 1's selection (the N largest of the pool, ties by position) beside the default draw by weight.
+    out.append(Cell("espf", "top-N selection (round 1)", "Model 1 (Gamma)", B.espf_model1, "espf", 200, 60, r(50),
+                    {"rmse": None}, changes={"espf.selection": "top"}))
+    out.append(Cell("espf", "top-N selection (round 1)", "Model 3 (coordinated turn)", B.espf_model3, "espf", 200,
+                    60, r(50), {"rmse_x": None, "rmse_y": None}, changes={"espf.selection": "top"}))
     for lam in (0.0, 2.0, 10.0, 50.0):
         for model, make in (("Model 1 (Gamma)", B.espf_model1), ("Model 2 (UNGM)", B.espf_model2)):
             out.append(Cell("espf", f"SBX lambda = {lam:g} (ours)", model, make, "espf", 200, 60, r(50),
@@ -129,6 +134,15 @@ def cells(runs_override: int | None) -> list[Cell]:
                 per_run=True,
             )
         )
+    for algo in upfde:  # the other reading of Gamma(3, 2): shape 3, scale 2 (Matlab's gamrnd)
+        out.append(Cell("upfde", "Tables 1-2, Gamma(3, 2) as shape 3, scale 2", "Gamma model, switch at t = 30",
+                        lambda: B.upfde_model("scale"), algo, 10, 50, r(500),
+                        {"rmse": upfde[algo][0], "rmse_var": upfde[algo][1], "time_s": None}, per_run=True))
+    for gamma in ("rate", "scale"):  # round 1's DE fitness, the importance ratio L p / q
+        out.append(Cell("upfde", f"de.fitness: ratio (round 1), Gamma as {gamma}", "Gamma model, switch at t = 30",
+                        lambda g=gamma: B.upfde_model(g), "upfde", 10, 50, r(500),
+                        {"rmse": None, "rmse_var": None, "time_s": None}, per_run=True,
+                        changes={"de.fitness": "ratio"}))
     out.append(
         Cell(
             "upfde",

@@ -42,3 +42,13 @@ def test_the_paper_variant_runs_on_a_papers_model_finitely_and_repeatably(algori
         return
     b = run_model(model, algorithm, 20, 30, 4, 5, **changes)
     assert np.all(np.isfinite(a[1])) and np.array_equal(a[1], b[1])
+
+
+@pytest.mark.slow
+def test_the_batch_reference_of_the_benchmark_runs():
+    """The robust batch-ML reference the robustness benchmark compares every filter with (it broke once the
+    parameter caps were declared: it asked for init_bearings 1e9)."""
+    from aoa_localizer.engine.evaluation import run_batch_ml
+
+    scores = run_batch_ml(simulate(SMALL_SEED, 3), LocalizerConfig(seed=1))
+    assert scores["converged"] and scores["error"] < 20.0

@@ -24,9 +24,13 @@ def test_published_ellipse_is_honest_over_seeded_runs():
     assert 0.8 < np.mean(values) < 4.0
 
 
+BOOTSTRAP = {"algorithm": "sir", "sir.variant": "paper"}  # the bootstrap filter (sir's default is resample-move)
+
+
 def _straight_rmse(**changes) -> float:
     errors = [
-        run(simulate("straight", r), LocalizerConfig(seed=10000 + r, **changes)).scores["error"] for r in range(3)
+        run(simulate("straight", r), LocalizerConfig(seed=10000 + r).with_changes(**changes)).scores["error"]
+        for r in range(3)
     ]
     return float(np.sqrt(np.mean(np.square(errors))))
 
@@ -35,14 +39,14 @@ def _straight_rmse(**changes) -> float:
 def test_afsa_beats_the_bootstrap_filter_where_it_collapses():
     """The filters alone (no safety layer, as the papers have them): AFSA's moves keep what SIR loses."""
     afsa = _straight_rmse(global_safety=False)
-    sir = _straight_rmse(algorithm="sir", global_safety=False)
+    sir = _straight_rmse(**BOOTSTRAP, global_safety=False)
     assert afsa < 0.5 * sir
 
 
 @pytest.mark.slow
 def test_the_safety_layer_rescues_the_bootstrap_filter_too():
     """The safety layer sits in the skeleton, so SIR gets its moves: it no longer collapses on `straight`."""
-    assert _straight_rmse(algorithm="sir") < 0.5 * _straight_rmse(algorithm="sir", global_safety=False)
+    assert _straight_rmse(**BOOTSTRAP) < 0.5 * _straight_rmse(**BOOTSTRAP, global_safety=False)
 
 
 def test_paper_variant_runs_and_localises_roughly():

@@ -117,3 +117,15 @@ def _rmse(model, algorithm, n, steps, runs, **changes):
 def test_the_unscented_and_de_filters_beat_the_bootstrap_filter_on_their_papers_model(algorithm):
     model = B.upfde_model()
     assert _rmse(model, algorithm, 10, 50, 10) < 0.5 * _rmse(model, "sir", 10, 50, 10, ess_threshold=1.0)
+
+
+def test_aga_pf_offspring_carry_equal_weights_the_newest_likelihood_counted_once():
+    """AGA-PF's round-1 bug: selection by the likelihood, then the offspring weighted by it again."""
+    model = B.upfde_model()
+    cfg = LocalizerConfig(algorithm="agapf", num_particles=50, seed=2).with_changes(**{"agapf.variant": "paper"})
+    f = make_filter(cfg, np.random.default_rng(2), model)
+    f.initialise(model.initial(50, np.random.default_rng(3)))
+    _, zs = model.simulate(5, np.random.default_rng(4))
+    for z in zs:
+        assert f.update(z)
+        assert np.all(f.logw == 0.0)  # the estimate is the plain mean of the selected, crossed, mutated population

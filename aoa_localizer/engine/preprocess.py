@@ -22,7 +22,10 @@ def quality_weight(quality):
 
     The paper defines Q >= 55. For 40 <= Q < 55 we continue its pattern (offsets 0, 1/8, 1/4 -> 3/8,
     slope denominators 10, 25, 40 -> 55): W = (Q-40)/(55*15) + 3/8, and use the same line below 40.
-    Unknown quality (NaN) gets W = 0: no correction.
+    Unknown quality (NaN) gets W = 0: no correction. As printed, eq. 20 is discontinuous and not monotone: W
+    jumps from 0.165 at Q = 84.9 down to 0 at Q = 85, so W(84.9) = 0.165 > W(70) = 0.125 (a better reading
+    corrected more than a worse one). Implemented as printed; `point_weighting: inverse_variance` (the default
+    since round 2) does not use it.
     """
     q = np.asarray(quality, dtype=float)
     w = np.where(q >= 85, (q - 85) / (10 * 15),

@@ -207,10 +207,13 @@ def gfapf_ungm() -> GrowthModel:
     return GrowthModel(a=1.0, b=12.0, c=8.0, kappa=20.0, q=1.0, r=1.0, x0_value=0.5, p0_value=5.0)
 
 
-def upfde_model() -> GammaSineModel:
+def upfde_model(gamma: str = "rate") -> GammaSineModel:
     """UPF-DE's model (eq. 12): sin(0.4 pi (t-1)) as printed (the classic form has 0.04), Gamma(3, 2),
-    z = 0.2 x^2 (t <= 30), 0.5 x - 2 (t > 30), N(0, 1e-5); x0 = 1 (P0 = 0.75 ours)."""
-    return GammaSineModel(omega=0.4, shape=3.0, rate=2.0, switch_k=30, r=1e-5, x0_value=1.0, p0_value=0.75)
+    z = 0.2 x^2 (t <= 30), 0.5 x - 2 (t > 30), N(0, 1e-5); x0 = 1 (P0 = 0.75 ours). `gamma`: Gamma(3, 2) read as
+    shape 3, rate 2 (`rate`, the unscented-PF literature's convention) or shape 3, scale 2 (`scale`: Matlab's
+    gamrnd(3, 2), which the paper's experiments likely called)."""
+    rate = {"rate": 2.0, "scale": 0.5}[gamma]
+    return GammaSineModel(omega=0.4, shape=3.0, rate=rate, switch_k=30, r=1e-5, x0_value=1.0, p0_value=0.75)
 
 
 def agapf_ungm() -> GrowthModel:
