@@ -27,12 +27,13 @@ from rosbags.typesys import Stores, get_typestore
 
 from . import build
 from .bag_files import BagFiles, BagFilesError, TopicInfo, describe_topics
-from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, stamp_seconds
+from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, heading_from_imu, stamp_seconds
 from .mcap_salvage import RawMessage, Salvage, read_salvaged
 
 log = logging.getLogger("aoa_localizer.bag")
 
-TOPICS = {"fix": "/gps/fix", "bearing": "/df/bearing", "truth": "/sim/truth", "datum": "/sim/datum"}
+TOPICS = {"fix": "/gps/fix", "bearing": "/df/bearing", "truth": "/sim/truth", "datum": "/sim/datum",
+          "heading": "/heading/imu"}
 _TYPES = {"fix": "sensor_msgs/msg/NavSatFix", "bearing": "geometry_msgs/msg/Vector3Stamped",
           "truth": "geometry_msgs/msg/PointStamped", "datum": "sensor_msgs/msg/NavSatFix"}
 
@@ -59,7 +60,8 @@ def _qos(reliable: bool, latched: bool) -> Qos:
 # What each kind of topic may carry, by message type; anything else there is 'foreign': counted, skipped.
 _ACCEPTED = {"fix": ("sensor_msgs/msg/NavSatFix",),
              "bearing": ("geometry_msgs/msg/Vector3Stamped", "geometry_msgs/msg/PoseWithCovarianceStamped"),
-             "truth": ("geometry_msgs/msg/PointStamped",), "datum": ("sensor_msgs/msg/NavSatFix",)}
+             "truth": ("geometry_msgs/msg/PointStamped",), "datum": ("sensor_msgs/msg/NavSatFix",),
+             "heading": ("sensor_msgs/msg/Imu",)}
 _POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 
 
@@ -138,6 +140,8 @@ def _convert(kind: str, msg):
         return df_from_vector3stamped(msg)
     if kind == "bearing_pose":
         return bearing_from_pose(msg)
+    if kind == "heading":
+        return heading_from_imu(msg)
     return (stamp_seconds(msg.header), msg.point.x, msg.point.y)
 
 

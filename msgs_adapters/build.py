@@ -42,14 +42,14 @@ def rclpy_types() -> SimpleNamespace:
         Vector3Stamped,
     )
     from nav_msgs.msg import Path
-    from sensor_msgs.msg import NavSatFix, NavSatStatus
+    from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
     from std_msgs.msg import ColorRGBA, Header
     from visualization_msgs.msg import Marker, MarkerArray
 
     return SimpleNamespace(**{c.__name__: c for c in (
         Time, Header, NavSatFix, NavSatStatus, Vector3Stamped, Vector3, PointStamped, Point, Pose, PoseArray,
         PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, ColorRGBA, Marker, MarkerArray,
-        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped)})
+        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu)})
 
 
 def header(T, stamp: float, frame_id: str):

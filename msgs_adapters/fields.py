@@ -85,6 +85,20 @@ def yaw_of(q) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
+class HeadingRecord(NamedTuple):
+    """An IMU's heading as Localizer.add_heading takes it: REP-103 yaw (rad, counter-clockwise from east)."""
+
+    stamp: float
+    yaw_rad: float
+
+
+def heading_from_imu(msg) -> HeadingRecord:
+    """sensor_msgs/Imu -> HeadingRecord (the yaw of its orientation; NaN when the orientation is unknown, which
+    REP-145 marks with orientation_covariance[0] = -1)."""
+    known = _float(msg.orientation_covariance[0]) != -1.0
+    return HeadingRecord(stamp_seconds(msg.header), yaw_of(msg.orientation) if known else math.nan)
+
+
 def bearing_from_pose(msg) -> PoseBearing:
     """geometry_msgs/PoseWithCovarianceStamped bearing -> PoseBearing (variance from covariance[35])."""
     return PoseBearing(stamp_seconds(msg.header), yaw_of(msg.pose.pose.orientation), _float(msg.pose.covariance[35]))

@@ -321,6 +321,41 @@ class LocalizerConfig:
         "added to every DF stamp to put it on the GPS clock (a receiver that "
         "stamps 0.5 s late: -0.5); /diagnostics suggests one when the bearings show it",
     )
+    # What a DF azimuth is measured from (docs/design.md, "Bearing reference").
+    bearing_reference: str = choice(
+        "true_north",
+        ("true_north", "magnetic_north", "vehicle"),
+        "what a DF azimuth is measured from, clockwise: `true_north`, `magnetic_north` (with "
+        "`magnetic_declination_deg`) or `vehicle` (the vehicle's forward axis, with `mount_offset_deg` and "
+        "the heading from `heading_source`)",
+        read_only=True,
+    )
+    magnetic_declination_deg: float = param(
+        0.0, "magnetic declination, east positive (as navsat_transform has it): true = magnetic + declination",
+        low=-180.0, high=180.0,
+    )
+    mount_offset_deg: float = param(
+        0.0, "the DF array's zero, clockwise from the vehicle's forward axis (deg), `bearing_reference: vehicle`",
+        low=-360.0, high=360.0,
+    )
+    heading_source: str = choice(
+        "track", ("track", "imu"),
+        "the vehicle's heading for `bearing_reference: vehicle`: `track` (course over ground from the GPS fixes) "
+        "or `imu` (REP-103 yaw of sensor_msgs/Imu on heading/imu, `Localizer.add_heading`)",
+        read_only=True,
+    )
+    heading_min_speed_mps: float = param(
+        1.0, "`heading_source: track`: slower than this the course is not trusted and the last good heading is "
+        "held (m/s)", low=0.0, low_open=True,
+    )
+    heading_hold_s: float = param(
+        60.0, "longest a heading is held (stopped vehicle, IMU gap) before readings are refused as "
+        "`heading_unknown` (s)", low=0.0,
+    )
+    heading_window_s: float = param(
+        3.0, "`heading_source: track`: span of fixes the course is fitted over, centred on the reading (s)",
+        low=0.0, low_open=True,
+    )
     gps_sigma_m: float = param(
         0.0,
         "GPS position noise (m), added to each bearing's variance by range; 0: each "

@@ -4,6 +4,8 @@ from __future__ import annotations
 import bisect
 from enum import Enum
 
+import numpy as np
+
 # Fixes kept: enough to bracket any bearing still pending (bearings arrive within gps_max_gap_s).
 _KEEP_FIXES = 512
 _VELOCITY_SPAN = 3  # fix-to-fix segments a velocity is measured over
@@ -59,6 +61,20 @@ class GpsTrack:
         f = (stamp - t0) / (t1 - t0)
         at = tuple(c[k - 1] + f * (c[k] - c[k - 1]) for c in (self.e, self.n, self.north, self.sigma))
         return Where.OK, (*at, *self._velocity(k))
+
+    def fitted_velocity(self, t0: float, t1: float) -> tuple[float, float] | None:
+        """East and north velocity (m/s): the least-squares slope of the fixes stamped in [t0, t1], None with fewer
+        than two. Centred on a reading, it is the course over ground at the reading without the lag of a
+        one-sided difference."""
+        lo, hi = bisect.bisect_left(self.t, t0), bisect.bisect_right(self.t, t1)
+        if hi - lo < 2:
+            return None
+        t = np.asarray(self.t[lo:hi])
+        dt = t - t.mean()
+        denom = float(dt @ dt)
+        if denom <= 0:
+            return None
+        return float(dt @ np.asarray(self.e[lo:hi]) / denom), float(dt @ np.asarray(self.n[lo:hi]) / denom)
 
     def _velocity(self, k: int) -> tuple[float, float]:
         """East and north velocity (m/s) over the fixes up to `_VELOCITY_SPAN` segments before fix k (after it for

@@ -15,8 +15,9 @@ from typing import Protocol
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.geodesy import LocalFrame, azimuth_to_enu
+from aoa_localizer.engine.geodesy import LocalFrame, azimuth_to_enu, wrap_pi
 from aoa_localizer.engine.gps_track import GpsTrack, Where
+from aoa_localizer.engine.heading import ImuHeading, TrackHeading
 from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.preprocess import PointBuilder, reading_sigma
@@ -59,6 +60,11 @@ REASONS = {
     "bearing_stamp_jump": "bearing stamp more than max_stamp_jump_s ahead of the DF stream: not adopted",
     "clock_jump": "a bearing of the old timeline still waiting for a fix when the DF clock jumped",
     "covariance_degenerate": "the filter's covariance was not positive definite: estimate not published",
+    "heading_unknown": "a vehicle-relative bearing with no heading at its stamp: too slow for a course, or no IMU "
+    "heading, for longer than heading_hold_s",
+    "bad_heading": "heading stamp or yaw is not a finite number",
+    "heading_out_of_order": "heading stamp not after the previous heading",
+    "heading_ignored": "a heading given while bearing_reference is not `vehicle` or heading_source is not `imu`",
 }
 
 
@@ -112,6 +118,7 @@ class Localizer:
 
     def _reset_track(self):
         self.track = GpsTrack(self.cfg.gps_max_gap_s)
+        self.heading = TrackHeading(self.cfg) if self.cfg.heading_source == "track" else ImuHeading(self.cfg)
         # (stamp, azimuth deg, quality, sigma rad or NaN) of bearings awaiting a fix after them
         self.pending: deque[tuple[float, float, float, float]] = deque()
         self.builder = PointBuilder(self.cfg)
@@ -237,6 +244,8 @@ class Localizer:
             return None
         if verdict is Verdict.CLOCK_JUMP:  # the track starts again on the new timeline
             self.track = GpsTrack(self.cfg.gps_max_gap_s)
+            if isinstance(self.heading, TrackHeading):
+                self.heading = TrackHeading(self.cfg)  # courses of the old timeline
             self._datum_candidate = None  # a first fix on the old timeline confirms nothing now
         if self.frame is None:
             candidate = self._datum_candidate
@@ -276,6 +285,8 @@ class Localizer:
             self._reject(reason)
             return None
         self._recent.append(None)
+        if isinstance(self.heading, TrackHeading):
+            self.heading.note_fix(self.track)
         if self.observer is not None:
             self.observer.on_fix(stamp, float(east), float(north))
         estimate = self._release_pending()
@@ -285,6 +296,17 @@ class Localizer:
         if open_point and not self.pending and stamp - open_point[0].stamp > self.cfg.obs_max_duration_s:
             estimate = self._use_points([self.builder.flush()]) or estimate
         return estimate
+
+    def add_heading(self, stamp, yaw_rad) -> None:
+        """The vehicle's heading from an IMU: REP-103 yaw (rad, counter-clockwise from east, ENU at the vehicle), as
+        sensor_msgs/Imu gives it. Used with `bearing_reference: vehicle` and `heading_source: imu`."""
+        stamp, yaw = _as_float(stamp), _as_float(yaw_rad)
+        if self.cfg.bearing_reference != "vehicle" or not isinstance(self.heading, ImuHeading):
+            self._reject("heading_ignored")
+        elif not (math.isfinite(stamp) and math.isfinite(yaw)):
+            self._reject("bad_heading")
+        elif not self.heading.add(stamp, yaw):
+            self._reject("heading_out_of_order")
 
     def add_bearing(self, stamp, azimuth_deg, quality=float("nan")) -> Estimate | None:
         """A DF record. Returns the estimate this reading produced (when it closed an observation point), else None."""
@@ -393,16 +415,33 @@ class Localizer:
                 self._reject(where.value)
                 continue
             east, north, north_angle, gps_sigma, v_east, v_north = at
+            theta = self._theta(stamp, azimuth, north_angle)
+            if theta is None:
+                self._reject("heading_unknown")
+                continue
             if math.isnan(quality):
                 self.unknown_quality += 1
             if math.isnan(sigma):
                 sigma = reading_sigma(quality, self.cfg)
-            reading = Reading(stamp, float(azimuth_to_enu(azimuth, north_angle)), quality, sigma, east, north,
-                              float(gps_sigma), float(v_east), float(v_north))
+            reading = Reading(stamp, theta, quality, sigma, east, north, float(gps_sigma), float(v_east),
+                              float(v_north))
             closed = self.builder.add(reading)
             if closed:
                 estimate = self._use_points(closed) or estimate
         return estimate
+
+    def _theta(self, stamp: float, azimuth: float, north_angle: float) -> float | None:
+        """The reading's ENU angle (rad) from its azimuth as `bearing_reference` defines it; None when a
+        vehicle-relative azimuth has no heading at its stamp."""
+        cfg = self.cfg
+        if cfg.bearing_reference == "true_north":
+            return float(azimuth_to_enu(azimuth, north_angle))
+        if cfg.bearing_reference == "magnetic_north":
+            return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle))
+        heading = self.heading.at(self.track, stamp, north_angle)  # the forward axis, ENU in the map plane
+        if heading is None:
+            return None
+        return float(wrap_pi(heading - math.radians(azimuth + cfg.mount_offset_deg)))
 
     def _reject_many(self, reason: str, count: int):
         for _ in range(count):

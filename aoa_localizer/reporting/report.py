@@ -27,7 +27,14 @@ from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.reporting import export, plots
 from aoa_localizer.tools.bag_run import run_bag
-from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, add_topic_args, config_from_args, setup_logging
+from aoa_localizer.tools.cli import (
+    HelpFormatter,
+    add_engine_args,
+    add_topic_args,
+    bag_topics,
+    config_from_args,
+    setup_logging,
+)
 from msgs_adapters.bag import BagError
 
 
@@ -207,7 +214,7 @@ def make_report(args) -> int:
     loc = Localizer(cfg, observer=trace)
     estimates: list[Estimate] = []
     try:
-        run = run_bag(bag, {"fix": args.fix_topic, "bearing": args.bearing_topic}, loc, estimates.append, desc="report")
+        run = run_bag(bag, bag_topics(args), loc, estimates.append, desc="report")
     except BagError as exc:
         raise ReportError(str(exc)) from exc
     if run.damage:

@@ -40,6 +40,7 @@ from msgs_adapters.fields import (
     bearing_from_pose,
     df_from_vector3stamped,
     fix_from_navsatfix,
+    heading_from_imu,
 )
 
 NODE_NAME = "aoa_localizer"
@@ -133,6 +134,10 @@ class LocalizerNode(Node):
         self.bearing_sub = self.create_subscription(
             bearing_type, "df/bearing", self.on_bearing, sensor, event_callbacks=self._lost_counter("bearings_lost")
         )
+        # A vehicle-relative DF array with an IMU: the heading comes on heading/imu (REP-103 yaw).
+        self.heading_sub = None
+        if self.cfg.bearing_reference == "vehicle" and self.cfg.heading_source == "imu":
+            self.heading_sub = self.create_subscription(self.T.Imu, "heading/imu", self.on_heading, sensor)
         self.pub_pose = self.create_publisher(self.T.PoseWithCovarianceStamped, "emitter/pose", latched)
         self.pub_fix = self.create_publisher(self.T.NavSatFix, "emitter/fix", 10)
         self.pub_particles = self.create_publisher(self.T.PoseArray, "emitter/particles", 10)
@@ -232,6 +237,14 @@ class LocalizerNode(Node):
         self._publish(self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m))
         self._publish_datum()
         self._timed(t0)
+
+    def on_heading(self, msg):
+        try:
+            r = heading_from_imu(msg)
+        except (AttributeError, TypeError, ValueError, IndexError):
+            self.counts["adapter_errors"] += 1
+            return
+        self.loc.add_heading(r.stamp, r.yaw_rad)
 
     def on_bearing(self, msg):
         t0 = time.perf_counter()

@@ -40,13 +40,14 @@ def _remaps(items) -> dict[str, str] | str:
 
 def played_topics(args, inventory) -> list:
     """The topics live replay publishes: --topics, every topic with --all-topics, else the inputs (fix, bearing,
-    and the simulated truth and datum), so that a bag's recorded node outputs never reach a running node's graph."""
+    IMU heading, and the simulated truth and datum), so that a bag's recorded node outputs never reach a running
+    node's graph."""
     if args.topics:
         chosen = set(args.topics)
     elif args.all_topics:
         chosen = {t.name for t in inventory}
     else:
-        chosen = {args.fix_topic, args.bearing_topic, TOPICS["truth"], TOPICS["datum"]}
+        chosen = {args.fix_topic, args.bearing_topic, args.heading_topic, TOPICS["truth"], TOPICS["datum"]}
     return [t for t in inventory if t.name in chosen]
 
 

@@ -22,6 +22,8 @@ def feed(loc: Localizer, event):
         return loc.add_bearing(r.stamp, r.azimuth_deg, r.quality)
     if event.kind == "bearing_pose":
         return loc.add_bearing_enu(r.stamp, r.yaw_rad, r.variance_rad2)
+    if event.kind == "heading":
+        loc.add_heading(r.stamp, r.yaw_rad)
     return None
 
 

@@ -38,6 +38,14 @@ def add_topic_args(parser: argparse.ArgumentParser):
     parser.add_argument("--fix-topic", default="/gps/fix", help="the bag's GPS topic (sensor_msgs/msg/NavSatFix)")
     parser.add_argument("--bearing-topic", default="/df/bearing",
                         help="the bag's DF topic (a Vector3Stamped DF record, or a PoseWithCovarianceStamped bearing)")
+    parser.add_argument("--heading-topic", default="/heading/imu",
+                        help="the bag's IMU topic (sensor_msgs/msg/Imu), read with -p bearing_reference=vehicle "
+                        "-p heading_source=imu")
+
+
+def bag_topics(args) -> dict[str, str]:
+    """The bag topics the topic options name, by kind (msgs_adapters.bag.read_bag's keys)."""
+    return {"fix": args.fix_topic, "bearing": args.bearing_topic, "heading": args.heading_topic}
 
 
 def add_engine_args(parser: argparse.ArgumentParser):

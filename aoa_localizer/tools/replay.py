@@ -20,7 +20,14 @@ from pathlib import Path
 from aoa_localizer.engine.config import ConfigError, LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.tools.bag_run import run_bag, summary
-from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, add_topic_args, config_from_args, setup_logging
+from aoa_localizer.tools.cli import (
+    HelpFormatter,
+    add_engine_args,
+    add_topic_args,
+    bag_topics,
+    config_from_args,
+    setup_logging,
+)
 from msgs_adapters.bag import BagError
 
 
@@ -44,7 +51,7 @@ def run_offline(args) -> int:
         written += 1
 
     try:
-        run = run_bag(args.bag, {"fix": args.fix_topic, "bearing": args.bearing_topic}, loc, write)
+        run = run_bag(args.bag, bag_topics(args), loc, write)
     except BagError as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 2

@@ -1,0 +1,108 @@
+"""What a user pays per measurement through the public API, beside the `particles` IBIS step in the same run.
+
+    python scripts/api_speed.py [--runs 10] [--scenario seed]
+
+For each run of a public scenario: every `add_fix` and `add_bearing` call of the Localizer (default
+configuration, N = 100) is timed; a *measurement* is one observation point's worth of calls (the fixes and
+readings up to the call that closed the point). Reported: the median and mean of the time per measurement, the
+geodesy's share (LocalFrame calls, timed separately), and the IBIS sampler's median and mean step on the same
+points (docs/benchmarks.md has the figures). Nothing here is a test: speed targets live in benchmarks.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import particles_peers  # noqa: E402
+
+from aoa_localizer import Localizer, LocalizerConfig  # noqa: E402
+from aoa_localizer.engine import geodesy  # noqa: E402
+from aoa_localizer.engine.evaluation import scenario_config  # noqa: E402
+from aoa_localizer.engine.scenarios import SCENARIOS, simulate  # noqa: E402
+
+logging.getLogger("aoa_localizer").setLevel(logging.ERROR)
+
+
+class GeodesyClock:
+    """Wraps LocalFrame's methods to add up their time (the share of the per-call geodesy)."""
+
+    def __init__(self):
+        self.seconds = 0.0
+        self.originals = {}
+
+    def __enter__(self):
+        for name in ("to_enu", "to_geodetic", "north_angle"):
+            original = getattr(geodesy.LocalFrame, name)
+            self.originals[name] = original
+
+            def timed(frame, *args, _original=original, **kwargs):
+                t0 = time.perf_counter()
+                try:
+                    return _original(frame, *args, **kwargs)
+                finally:
+                    self.seconds += time.perf_counter() - t0
+
+            setattr(geodesy.LocalFrame, name, timed)
+        return self
+
+    def __exit__(self, *exc):
+        for name, original in self.originals.items():
+            setattr(geodesy.LocalFrame, name, original)
+
+
+def one_run(scenario: str, r: int):
+    data = simulate(scenario, r)
+    loc = Localizer(scenario_config(data, LocalizerConfig(seed=10000 + r)))
+    per_point, spent, points = [], 0.0, loc.points_used
+    with GeodesyClock() as geo:
+        for kind, row in data.events():
+            t0 = time.perf_counter()
+            if kind == "fix":
+                loc.add_fix(row[0], row[1], row[2], row[3])
+            else:
+                loc.add_bearing(row[0], row[1], row[2])
+            spent += time.perf_counter() - t0
+            if loc.points_used > points:  # this call closed (and used) an observation point
+                per_point.append(spent / (loc.points_used - points))
+                spent, points = 0.0, loc.points_used
+        geo_share = geo.seconds
+    total = sum(per_point)
+    pts = loc.recent_points()
+    start = loc.start_cloud
+    mean, cov = start.mean(axis=0), 2.0 * np.cov(start.T)
+    _, ibis_steps = particles_peers.run_ibis(pts, mean, cov, 100, loc.cfg.outlier_prob, 10000 + r)
+    return per_point, geo_share / max(total, 1e-12), ibis_steps
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=int, default=10)
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS), default="seed")
+    args = parser.parse_args(argv)
+    if not particles_peers.AVAILABLE:
+        print("the `particles` package is needed (pip install -e '.[bench]')", file=sys.stderr)
+        return 2
+    ours, ibis, shares = [], [], []
+    for r in range(args.runs):
+        per_point, share, steps = one_run(args.scenario, r)
+        ours += per_point
+        ibis += steps
+        shares.append(share)
+    o, i = 1e3 * np.array(ours), 1e3 * np.array(ibis)
+    print(f"{args.scenario}, {args.runs} runs, N = 100: per measurement through the API median {np.median(o):.3f} "
+          f"ms, mean {o.mean():.3f} ms (geodesy {100 * np.mean(shares):.1f} % of it); IBIS step median "
+          f"{np.median(i):.3f} ms, mean {i.mean():.3f} ms; ratio of medians {np.median(o) / np.median(i):.2f}, "
+          f"of means {o.mean() / i.mean():.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,149 @@
+"""Bearings measured from true north, from magnetic north, or from the vehicle's forward axis (with the array's
+mount offset and the heading from the GPS course or an IMU): the same emitter, the same accuracy."""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer.engine.evaluation import run
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+
+DATUM = (39.1, 117.2, 5.0)
+FRAME = LocalFrame(*DATUM)
+# urban's track (the seed polyline, three corners) driven at 10 m/s, without GPS noise or wild readings
+DRIVE = dataclasses.replace(SCENARIOS["urban"], name="drive", gps_noise_m=0.0, wild_share=0.0)
+MOUNT = 30.0
+
+
+def _course_deg(data) -> np.ndarray:
+    """The vehicle's true heading (deg clockwise from north) at each reading, from its true positions."""
+    d = np.diff(data.sensor_enu, axis=0)
+    d = np.vstack([d, d[-1:]])
+    return np.degrees(np.arctan2(d[:, 0], d[:, 1]))
+
+
+def _relative(data, mount: float):
+    """The same run with each azimuth turned into a bearing from the vehicle's forward axis."""
+    rel = data.bearings.copy()
+    rel[:, 1] = (data.bearings[:, 1] - _course_deg(data) - mount) % 360.0
+    return dataclasses.replace(data, bearings=rel)
+
+
+def _cfg(**changes):
+    return LocalizerConfig(seed=5).with_changes(**changes)
+
+
+@pytest.mark.slow
+def test_relative_bearings_on_a_curved_track_give_the_accuracy_of_true_ones():
+    true_err, rel_err = [], []
+    for r in range(3):
+        data = simulate(DRIVE, r)
+        true_err.append(run(data, _cfg()).scores["error"])
+        res = run(_relative(data, MOUNT), _cfg(bearing_reference="vehicle", mount_offset_deg=MOUNT))
+        rel_err.append(res.scores["error"])
+        assert res.localizer.rejected["heading_unknown"] == 0
+    rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731
+    assert rms(rel_err) < 1.5 * rms(true_err) + 0.5, (true_err, rel_err)
+
+
+def _drive_east(loc, az_of, speed=10.0, seconds=20, stop_after=None):
+    """A vehicle driving east from the datum (stopping at `stop_after` s): 1 Hz fixes, a reading at each
+    half second, azimuth az_of(t, east)."""
+    for k in range(seconds + 1):
+        east = speed * min(k, stop_after if stop_after is not None else k)
+        lat, lon, _ = FRAME.to_geodetic(east, 0.0, 0.0)
+        loc.add_fix(float(k), float(lat), float(lon), 5.0)
+        t = k + 0.5
+        loc.add_bearing(t, az_of(t, speed * min(t, stop_after if stop_after is not None else t)), 90.0)
+
+
+def test_a_relative_bearing_is_turned_by_the_heading_and_the_mount_by_hand():
+    """Driving east (heading 90 deg), an array mounted 30 deg right of the nose reading 60 deg: true azimuth 180,
+    so the reading points due south, ENU angle -90 deg."""
+    loc = Localizer(_cfg(bearing_reference="vehicle", mount_offset_deg=30.0, datum_lat=DATUM[0],
+                         datum_lon=DATUM[1], datum_alt=DATUM[2]))
+    readings = []
+    loc.observer = type("Obs", (), {"on_fix": lambda *a: None,
+                                    "on_point": lambda self, rs, kept: readings.extend(rs)})()
+    _drive_east(loc, lambda t, e: 60.0, seconds=8)
+    loc.flush()
+    assert readings and all(r.theta == pytest.approx(-math.pi / 2, abs=1e-3) for r in readings)
+
+
+def test_magnetic_azimuths_are_turned_by_the_declination():
+    loc = Localizer(_cfg(bearing_reference="magnetic_north", magnetic_declination_deg=-7.0, datum_lat=DATUM[0],
+                         datum_lon=DATUM[1], datum_alt=DATUM[2]))
+    readings = []
+    loc.observer = type("Obs", (), {"on_fix": lambda *a: None,
+                                    "on_point": lambda self, rs, kept: readings.extend(rs)})()
+    _drive_east(loc, lambda t, e: 97.0, seconds=6)  # magnetic 97 = true 90: due east
+    loc.flush()
+    assert readings and all(r.theta == pytest.approx(0.0, abs=1e-3) for r in readings)
+
+
+def test_a_stopped_vehicle_holds_its_heading_then_refuses_with_a_reason():
+    cfg = _cfg(bearing_reference="vehicle", heading_hold_s=5.0, datum_lat=DATUM[0], datum_lon=DATUM[1],
+               datum_alt=DATUM[2])
+    loc = Localizer(cfg)
+    readings = []
+    loc.observer = type("Obs", (), {"on_fix": lambda *a: None,
+                                    "on_point": lambda self, rs, kept: readings.extend(rs)})()
+    _drive_east(loc, lambda t, e: 0.0, seconds=20, stop_after=6)  # stops at 6 s, readings until 20.5 s
+    loc.flush()
+    # The course over the 3 s before each fix is still fast enough at the fix at 8 s (3 m/s): that heading is
+    # held up to 13 s, so the readings at 13.5 ... 19.5 s (7) are refused; the one at 20.5 s has no fix after it.
+    assert loc.rejected["heading_unknown"] == 7
+    assert len(readings) + loc.rejected["heading_unknown"] + loc.rejected["no_fix_after"] == 21
+    assert all(r.theta == pytest.approx(0.0, abs=1e-3) for r in readings)  # straight ahead of an east-bound car
+
+
+def test_an_imu_heading_is_interpolated_at_the_reading_and_bad_ones_are_counted():
+    cfg = _cfg(bearing_reference="vehicle", heading_source="imu", datum_lat=DATUM[0], datum_lon=DATUM[1],
+               datum_alt=DATUM[2])
+    loc = Localizer(cfg)
+    readings = []
+    loc.observer = type("Obs", (), {"on_fix": lambda *a: None,
+                                    "on_point": lambda self, rs, kept: readings.extend(rs)})()
+    for k in range(41):  # yaw turning from 0 (east) to pi/2 (north) over 20 s, 2 Hz
+        loc.add_heading(0.5 * k, math.pi / 2 * min(0.5 * k / 20.0, 1.0))
+    loc.add_heading(3.0, 0.0)  # out of order
+    loc.add_heading(30.0, float("nan"))
+    for k in range(21):
+        lat, lon, _ = FRAME.to_geodetic(0.0, 0.0, 0.0)
+        loc.add_fix(float(k), float(lat), float(lon), 5.0)
+        loc.add_bearing(k + 0.25, 0.0, 90.0)  # straight ahead
+    loc.flush()
+    expected = [math.pi / 2 * (r.stamp / 20.0) for r in readings]
+    assert readings and np.allclose([r.theta for r in readings], expected, atol=2e-3)
+    assert loc.rejected["heading_out_of_order"] == 1 and loc.rejected["bad_heading"] == 1
+    true_north = Localizer(_cfg())
+    true_north.add_heading(1.0, 0.0)
+    assert true_north.rejected["heading_ignored"] == 1  # never silently used
+
+
+def test_an_imu_message_gives_its_yaw_and_an_unknown_orientation_is_nan():
+    from msgs_adapters.build import header, rclpy_types
+    from msgs_adapters.fields import heading_from_imu
+
+    T = rclpy_types()
+    yaw = 0.7
+    msg = T.Imu(header=header(T, 12.5, "imu"))
+    msg.orientation.z, msg.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+    r = heading_from_imu(msg)
+    assert r.stamp == 12.5 and r.yaw_rad == pytest.approx(yaw)
+    msg.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
+    assert math.isnan(heading_from_imu(msg).yaw_rad)
+
+
+def test_offline_replay_feeds_a_bags_imu_headings_to_the_engine():
+    from aoa_localizer.tools.bag_run import feed
+    from msgs_adapters.bag import BagEvent
+    from msgs_adapters.fields import HeadingRecord
+
+    loc = Localizer(_cfg(bearing_reference="vehicle", heading_source="imu"))
+    assert feed(loc, BagEvent("heading", 0, HeadingRecord(1.0, 0.3))) is None
+    assert feed(loc, BagEvent("heading", 0, HeadingRecord(0.5, 0.3))) is None
+    assert loc.heading.samples.t == [1.0] and loc.rejected["heading_out_of_order"] == 1
