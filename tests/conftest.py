@@ -1,4 +1,12 @@
-"""Shared helpers: a Localizer fed from simple synthetic geometry; programs run in process."""
+"""Shared helpers: a Localizer fed from simple synthetic geometry; programs run in process; ROS processes in a
+domain of the test's own."""
+import itertools
+import os
+import random
+import signal
+import subprocess
+import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -7,6 +15,46 @@ import pytest
 from aoa_localizer.engine.geodesy import LocalFrame
 
 DATUM = (39.1, 117.2, 5.0)
+ROOT = Path(__file__).resolve().parent.parent
+
+
+_domains = itertools.count(random.Random(os.getpid()).randrange(101))
+
+
+
+@pytest.fixture
+def domain():
+    """A ROS domain of this test's own (1-101, the range ROS recommends)."""
+    return 1 + next(_domains) % 101
+
+
+def ros_env(domain):
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+
+
+@pytest.fixture
+def spawn(tmp_path):
+    """Start `python -m ...` in a domain; every process is stopped at teardown, pass or fail."""
+    started = []
+
+    def start(module_args, domain):
+        log = open(tmp_path / f"proc{len(started)}.log", "w")
+        p = subprocess.Popen([sys.executable, "-m", *module_args], env=ros_env(domain), cwd=ROOT, stdout=log,
+                             stderr=subprocess.STDOUT, start_new_session=True)
+        p.log_path = log.name
+        started.append((p, log))
+        return p
+
+    yield start
+    for p, log in started:
+        for sig in (signal.SIGINT, signal.SIGKILL):
+            if p.poll() is None:
+                try:
+                    os.killpg(p.pid, sig)
+                    p.wait(5)
+                except (ProcessLookupError, subprocess.TimeoutExpired):
+                    pass
+        log.close()
 
 
 @pytest.fixture

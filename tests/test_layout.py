@@ -29,7 +29,8 @@ def test_the_documented_program_modules_are_thin_entry_points():
     import importlib
 
     for name, home in [("node", "ros.node"), ("sim_vehicle", "ros.sim_vehicle"), ("launch", "ros.launch"),
-                       ("replay", "tools.replay"), ("report", "reporting.report"), ("simulate", "tools.simulate")]:
+                       ("replay", "tools.replay"), ("report", "reporting.report"), ("simulate", "tools.simulate"),
+                       ("kraken_bridge", "ros.kraken_bridge")]:
         source = importlib.util.find_spec(f"aoa_localizer.{name}").origin
         text = open(source).read()
         assert f"from aoa_localizer.{home} import main" in text and len(text.splitlines()) <= 8, name

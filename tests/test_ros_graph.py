@@ -1,10 +1,8 @@
 """Launch tests: the real node, vehicle, launcher and replay as processes over Fast DDS, each test in its
 own ROS domain; children are killed by process group whether the test passes or not."""
-import itertools
 import json
 import math
 import os
-import random
 import re
 import signal
 import subprocess
@@ -16,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
+from conftest import ros_env
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.qos import QoSProfile
@@ -28,44 +27,8 @@ from msgs_adapters.fields import diagnostics_values, estimate_from_pose
 ROOT = Path(__file__).resolve().parent.parent
 T = build.rclpy_types()
 DATUM = (39.1, 117.2, 5.0)
-_domains = itertools.count(random.Random(os.getpid()).randrange(101))
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]  # real processes over Fast DDS
-
-
-@pytest.fixture
-def domain():
-    """A ROS domain of this test's own (1-101, the range ROS recommends)."""
-    return 1 + next(_domains) % 101
-
-
-def ros_env(domain):
-    return dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
-
-
-@pytest.fixture
-def spawn(tmp_path):
-    """Start `python -m ...` in a domain; every process is stopped at teardown, pass or fail."""
-    started = []
-
-    def start(module_args, domain):
-        log = open(tmp_path / f"proc{len(started)}.log", "w")
-        p = subprocess.Popen([sys.executable, "-m", *module_args], env=ros_env(domain), cwd=ROOT, stdout=log,
-                             stderr=subprocess.STDOUT, start_new_session=True)
-        p.log_path = log.name
-        started.append((p, log))
-        return p
-
-    yield start
-    for p, log in started:
-        for sig in (signal.SIGINT, signal.SIGKILL):
-            if p.poll() is None:
-                try:
-                    os.killpg(p.pid, sig)
-                    p.wait(5)
-                except (ProcessLookupError, subprocess.TimeoutExpired):
-                    pass
-        log.close()
 
 
 @contextmanager

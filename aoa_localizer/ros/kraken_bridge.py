@@ -1,0 +1,155 @@
+"""KrakenSDR bridge (`kraken_bridge`): polls the Kraken App output of krakensdr_doa and publishes DF records.
+
+    python -m aoa_localizer.kraken_bridge --url http://HOST:8081/DOA_value.html --gps [--ros-args -r ...]
+
+Each new line (one per VFO) becomes a DF record on `df/bearing` (geometry_msgs/Vector3Stamped): the stamp at the
+middle of the acquisition interval, `vector.x` the azimuth, `vector.y` a quality from the confidence (40 at
+`--conf-low` dB, 100 at `--conf-high`), `vector.z` the VFO frequency (Hz). With `--gps`, the line's position goes
+out on `gps/fix` too (NavSatFix, skipped while the receiver has no fix).
+
+Azimuths: the Kraken App line gives the DoA clockwise from the array's zero, not turned by any heading.
+`--azimuth true` (default) adds the line's heading (the receiver's GPS track), so the azimuths are from true
+north and the node's default `bearing_reference: true_north` agrees; lines without a GPS fix are then skipped
+(their heading is 0, not a heading). `--azimuth relative` publishes the array-relative DoA: run the node with
+`bearing_reference:=vehicle` (and its `mount_offset_deg`, `heading_source`).
+
+Lines that repeat (the page holds a line until the next CPI), go backwards or are malformed are counted and
+skipped, never fatal; a dead or slow server is retried every second with one log line per outage. Exit 0 on
+Ctrl-C or SIGTERM, with the counts; 2 for bad options.
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections import Counter
+
+import rclpy
+from rclpy.node import Node
+
+from aoa_localizer.engine.geodesy import wrap_360
+from aoa_localizer.ros.ros_main import run_node
+from aoa_localizer.tools.kraken_csv import KrakenLine, LineFilter, MalformedLine, parse_line, quality_from_confidence
+from msgs_adapters import build
+
+RETRY_S = 1.0
+
+
+def parse_args(argv) -> argparse.Namespace:
+    own = list(argv[1:] if argv else sys.argv[1:])
+    own = own[: own.index("--ros-args")] if "--ros-args" in own else own
+    parser = argparse.ArgumentParser(prog="python -m aoa_localizer.kraken_bridge", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--url", required=True, help="the Kraken App page, e.g. http://192.168.1.10:8081/DOA_value.html")
+    parser.add_argument("--rate", type=float, default=10.0, help="polls per second (default 10)")
+    parser.add_argument("--gps", action="store_true", help="also publish the lines' positions on gps/fix")
+    parser.add_argument("--azimuth", choices=("true", "relative"), default="true",
+                        help="true: add the line's heading (default); relative: the array-relative DoA")
+    parser.add_argument("--conf-low", type=float, default=1.0, help="confidence (dB) mapped to quality 40 (default 1)")
+    parser.add_argument("--conf-high", type=float, default=10.0,
+                        help="confidence (dB) mapped to quality 100 (default 10)")
+    parser.add_argument("--timeout", type=float, default=2.0, help="HTTP timeout per poll, s (default 2)")
+    args = parser.parse_args(own)
+    if not args.url.startswith(("http://", "https://")):
+        parser.error(f"--url must be an http(s) address, got {args.url!r}")
+    if args.rate <= 0 or args.conf_high <= args.conf_low or args.timeout <= 0:
+        parser.error("--rate and --timeout must be > 0 and --conf-high > --conf-low")
+    return args
+
+
+class KrakenBridge(Node):
+    """Polls the page, turns new lines into DF records (and fixes), counts what it skips."""
+
+    def __init__(self, args: argparse.Namespace):
+        super().__init__("kraken_bridge")
+        self.args = args
+        self.T = build.rclpy_types()
+        self.pub_df = self.create_publisher(self.T.Vector3Stamped, "df/bearing", 100)
+        self.pub_fix = self.create_publisher(self.T.NavSatFix, "gps/fix", 100) if args.gps else None
+        self.filter = LineFilter()
+        self.counts: Counter = Counter()
+        self.down_since: float | None = None
+        # Our own SIGINT/SIGTERM: rclpy's would invalidate the context under a publish (an RCLError traceback).
+        self.stopped_by: str | None = None
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self.stop)
+        self.get_logger().info(
+            f"polling {args.url} at {args.rate:g} Hz; publishing "
+            + ("azimuths from true north (DoA + the line's heading)" if args.azimuth == "true"
+               else "array-relative azimuths: run the node with bearing_reference:=vehicle")
+        )
+
+    def stop(self, signum, _frame):
+        self.stopped_by = signal.Signals(signum).name
+
+    def fetch(self) -> str | None:
+        """The page's text, or None while the server is unreachable (one log line per outage)."""
+        try:
+            with urllib.request.urlopen(self.args.url, timeout=self.args.timeout) as page:
+                text = page.read().decode("utf-8", errors="replace")
+        except (urllib.error.URLError, OSError, ValueError) as exc:
+            if self.down_since is None:
+                self.down_since = time.monotonic()
+                self.get_logger().warning(f"cannot read {self.args.url} ({exc}); retrying every {RETRY_S:g} s")
+            self.counts["poll_failed"] += 1
+            return None
+        if self.down_since is not None:
+            self.get_logger().info(f"{self.args.url} answers again after {time.monotonic() - self.down_since:.0f} s")
+            self.down_since = None
+        return text
+
+    def take(self, text: str):
+        for line in text.splitlines():
+            if not line.strip():
+                continue
+            try:
+                r = parse_line(line)
+            except MalformedLine as exc:
+                if not self.counts["malformed"]:
+                    self.get_logger().warning(f"malformed line skipped ({exc}); further ones are counted")
+                self.counts["malformed"] += 1
+                continue
+            if self.filter.fresh(r):
+                self.publish(r)
+
+    def publish(self, r: KrakenLine):
+        if self.args.azimuth == "true" and not r.has_gps:
+            self.counts["no_gps_heading"] += 1
+            return
+        azimuth = r.doa_deg + (r.heading_deg if self.args.azimuth == "true" else 0.0)
+        quality = quality_from_confidence(r.confidence_db, self.args.conf_low, self.args.conf_high)
+        if self.pub_fix is not None and r.has_gps:
+            self.pub_fix.publish(build.navsatfix(self.T, r.stamp, r.lat, r.lon, 0.0, frame_id="gps"))
+        self.pub_df.publish(build.df_record(self.T, r.stamp, float(wrap_360(azimuth)), quality, r.frequency_hz,
+                                            frame_id=r.station or "df_antenna"))
+        self.counts["published"] += 1
+
+    def run(self):
+        period = 1.0 / self.args.rate
+        while self.stopped_by is None:
+            t0 = time.monotonic()
+            text = self.fetch()
+            if text is not None and self.stopped_by is None:
+                self.take(text)
+            wait = (RETRY_S if text is None else period) - (time.monotonic() - t0)
+            rclpy.spin_once(self, timeout_sec=max(min(wait, 0.1), 0.0))
+            while self.stopped_by is None and time.monotonic() - t0 < (RETRY_S if text is None else period):
+                rclpy.spin_once(self, timeout_sec=0.05)
+
+    def destroy_node(self):
+        counts = dict(self.counts, **{k: v for k, v in self.filter.dropped.items() if v})
+        print("kraken_bridge: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v), file=sys.stderr,
+              flush=True)
+        return super().destroy_node()
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    return run_node("kraken_bridge", lambda: KrakenBridge(args), KrakenBridge.run, (ValueError,), argv, __doc__)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,170 @@
+"""The KrakenSDR bridge: Kraken App lines as krakensdr_doa writes them, parsed by hand-checked fields, and a
+simulated drive served over HTTP, bridged and localised by the node."""
+import dataclasses
+import http.server
+import math
+import threading
+
+import numpy as np
+import pytest
+from test_ros_graph import client, spin_until
+
+from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.tools.kraken_csv import LineFilter, MalformedLine, parse_line, quality_from_confidence
+
+SPECTRUM = ", ".join("0.00" for _ in range(360))
+
+
+def kraken_line(timestamp_ms, doa, conf, freq, lat, lon, heading, latency_ms=100, power=-40.0, station="KRK1"):
+    """A line in the Kraken App format (kraken_sdr_signal_processor.py: timestamp, 360 - theta_0, confidence,
+    power, freq, array, latency, station id, lat, lon, heading, heading, GPS, R, R, R, R, spectrum)."""
+    return (f"{timestamp_ms}, {doa}, {conf}, {power}, {freq}, UCA, {latency_ms}, {station}, {lat}, {lon}, "
+            f"{heading}, {heading}, GPS, R, R, R, R, {SPECTRUM} ")
+
+
+def test_a_kraken_app_line_by_hand():
+    r = parse_line(kraken_line(1795000000100, 350.5, 7.25, 433920000, 39.1012, 117.2034, 87.5, latency_ms=200))
+    assert r.stamp == pytest.approx(1795000000.0)  # the middle of the 200 ms acquisition before the stamp
+    assert (r.doa_deg, r.confidence_db, r.frequency_hz, r.heading_deg) == (350.5, 7.25, 433920000.0, 87.5)
+    assert (r.array, r.station, r.lat, r.lon) == ("UCA", "KRK1", 39.1012, 117.2034) and r.has_gps
+    assert not parse_line(kraken_line(1, 10, 1, 1, 0.0, 0.0, 0.0)).has_gps  # the receiver's 0, 0 without a fix
+
+
+@pytest.mark.parametrize("line, words", [
+    ("", "1 fields"),
+    ("1795000000100, 350.5, 7.25", "3 fields"),
+    (kraken_line("abc", 1, 1, 1, 0, 0, 0), "timestamp is not a number"),
+    (kraken_line(1, "nan", 1, 1, 0, 0, 0), "DoA is not finite"),
+    (kraken_line(1, 1, 1, 1, 95.0, 0, 0), "out of range"),
+])
+def test_malformed_lines_say_why(line, words):
+    with pytest.raises(MalformedLine, match=words):
+        parse_line(line)
+
+
+def test_quality_from_confidence_and_the_line_filter():
+    assert quality_from_confidence(0.7, 1.0, 10.0) == 40.0 and quality_from_confidence(12.0, 1.0, 10.0) == 100.0
+    assert quality_from_confidence(5.5, 1.0, 10.0) == pytest.approx(70.0)
+    f = LineFilter()
+    a, b = (parse_line(kraken_line(t, 1, 1, 433e6, 0, 0, 0)) for t in (1000, 2000))
+    other = parse_line(kraken_line(1000, 1, 1, 446e6, 0, 0, 0))  # another VFO, same stamp: its own sequence
+    assert [f.fresh(x) for x in (a, a, b, a, other)] == [True, False, True, False, True]
+    assert f.dropped == {"repeated": 1, "backwards": 1}
+
+
+# -- the bridge with the node, over a local HTTP server -----------------------------------------------------
+DRIVE = dataclasses.replace(SCENARIOS["urban"], name="kraken", df_rate_hz=2.0, wild_share=0.0, gps_noise_m=0.0)
+
+
+def drive_lines(seed=0):
+    """The drive as a KrakenSDR on the car would write it: array-relative DoA, the GPS track as heading, the
+    antenna's position, stamps in ms at the end of a 100 ms acquisition; plus the truth (lat, lon)."""
+    data = simulate(DRIVE, seed)
+    d = np.diff(data.sensor_enu, axis=0)
+    course = np.degrees(np.arctan2(d[:, 0], d[:, 1]))
+    course = np.append(course, course[-1])
+    lines = []
+    for (t, az, q), (e, n), heading in zip(data.bearings, data.sensor_enu, course, strict=True):
+        lat, lon, _ = data.frame.to_geodetic(float(e), float(n))
+        conf = 1.0 + (q - 40.0) / 60.0 * 9.0
+        lines.append(kraken_line(int(round(t * 1000 + 50)), f"{(az - heading) % 360:.3f}", f"{conf:.2f}",
+                                 433920000, f"{lat:.8f}", f"{lon:.8f}", f"{heading % 360:.2f}"))
+    return lines, data.emitter_lat_lon
+
+
+class Served:
+    """One line per request, in order; each line served twice (the page holds a line until the next CPI), then a
+    malformed one and a stale one, then the last line forever."""
+
+    def __init__(self, lines):
+        self.queue = []
+        for line in lines:
+            self.queue += [line, line]
+        self.queue.insert(10, "this is not a kraken line")
+        self.queue.insert(20, lines[0])  # backwards
+        self.sent = 0
+
+    def next(self) -> str:
+        line = self.queue[min(self.sent, len(self.queue) - 1)]
+        self.sent += 1
+        return line
+
+
+@pytest.fixture
+def server():
+    lines, truth = drive_lines()
+    served = Served(lines)
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 - the http.server API
+            body = (served.next() + "\n").encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    thread = threading.Thread(target=httpd.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{httpd.server_address[1]}/DOA_value.html", served, truth, len(lines)
+    httpd.shutdown()
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_simulated_krakensdr_drive_is_bridged_and_localised(server, spawn, domain):
+    import signal
+    import time
+
+    from aoa_localizer.engine.geodesy import LocalFrame
+    from msgs_adapters import build
+    from msgs_adapters.fields import estimate_from_pose
+
+    url, served, truth, n_lines = server
+    spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=3", "-p", "input_reliability:=reliable"], domain)
+    T = build.rclpy_types()
+    with client(domain) as (node, executor):
+        import rclpy
+
+        got = {}
+        latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+        node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: got.update(pose=m), latched)
+        node.create_subscription(T.NavSatFix, "emitter/datum", lambda m: got.update(datum=m), latched)
+        assert spin_until(executor, lambda: node.count_publishers("/emitter/pose") > 0, 15)
+        bridge = spawn(["aoa_localizer.kraken_bridge", "--url", url, "--gps", "--rate", "200"], domain)
+        deadline = time.monotonic() + 60
+        while served.sent < 2 * n_lines + 2 and time.monotonic() < deadline:
+            spin_until(executor, lambda: False, 0.2)
+        spin_until(executor, lambda: False, 2.0)
+        assert "pose" in got and "datum" in got, open(bridge.log_path).read()
+        bridge.send_signal(signal.SIGINT)
+        assert bridge.wait(15) == 0
+    log = open(bridge.log_path).read()
+    assert "Traceback" not in log and "malformed 1" in log and "backwards 1" in log, log
+    _, east, north, _ = estimate_from_pose(got["pose"])
+    d = got["datum"]
+    e, n = LocalFrame(d.latitude, d.longitude, d.altitude).to_enu(*truth)
+    assert math.hypot(east - e, north - n) < 10.0  # a few metres with 2 Hz readings; 10 m is generous
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_dead_server_is_retried_with_one_log_line_and_the_bridge_stops_cleanly(spawn, domain):
+    import signal
+    import socket
+    import time
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    bridge = spawn(["aoa_localizer.kraken_bridge", "--url", f"http://127.0.0.1:{port}/DOA_value.html"], domain)
+    time.sleep(4.0)
+    bridge.send_signal(signal.SIGTERM)
+    assert bridge.wait(15) == 0
+    log = open(bridge.log_path).read()
+    assert log.count("cannot read") == 1 and "retrying every 1 s" in log and "Traceback" not in log, log
+    assert "poll_failed" in log  # the count at exit: three or four failed polls, one a second
