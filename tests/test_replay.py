@@ -91,6 +91,9 @@ def test_unreadable_input_exits_non_zero_with_a_message(tmp_path, make, cli):
     res = cli(replay_main, path, "--offline", "--output", tmp_path / "e.jsonl")
     assert res.returncode == 2
     assert "replay:" in res.stderr
+    assert (tmp_path / "e.jsonl").read_text() == ""  # no header line for a bag that could not be read
+    to_stdout = cli(replay_main, path, "--offline")
+    assert to_stdout.returncode == 2 and to_stdout.stdout == ""
 
 
 def test_invalid_parameter_is_refused(tmp_path, cli):

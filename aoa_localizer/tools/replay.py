@@ -40,18 +40,24 @@ def run_offline(args) -> int:
     loc = Localizer(cfg)
     written = 0
     out = open(args.output, "w") if args.output != "-" else sys.stdout
-    # The header line: the configuration the estimates were made with (the report redraws the gate and the
-    # bound with it), and the bag.
-    out.write(json.dumps({"configuration": cfg.to_dict(), "bag": str(args.bag)}) + "\n")
+    header = [json.dumps({"configuration": cfg.to_dict(), "bag": str(args.bag)}) + "\n"]
+
+    def write_header():
+        """The header line, once the bag proved readable: the configuration the estimates were made with (the
+        report redraws the gate and the bound with it), and the bag."""
+        if header:
+            out.write(header.pop())
 
     def write(est):
         nonlocal written
+        write_header()
         out.write(json.dumps(est.to_json_dict()) + "\n")
         out.flush()
         written += 1
 
     try:
         run = run_bag(args.bag, bag_topics(args), loc, write)
+        write_header()
     except BagError as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 2
