@@ -2,6 +2,7 @@
 SIGINT or SIGTERM, always destroy the node and shut rclpy down (exit 0)."""
 from __future__ import annotations
 
+import os
 import sys
 
 import rclpy
@@ -19,7 +20,10 @@ def run_node(name: str, make, run, refusals: tuple, argv=None, usage: str = "") 
     """make() builds the node (raising one of `refusals` to refuse); run(node) works until done. With -h or
     --help, `usage` is printed and nothing starts."""
     if wants_help(argv):
-        print(usage)
+        try:
+            print(usage, flush=True)
+        except BrokenPipeError:  # `--help | head`: the reader left; not an error of ours
+            sys.stdout = open(os.devnull, "w")  # the interpreter's exit flush must not fail either
         return 0
     rclpy.init(args=argv)
     try:
