@@ -99,6 +99,12 @@ def choice(default: str, choices: tuple[str, ...], doc: str, **constraints):
     return param(default, doc, choices=choices, **constraints)
 
 
+def variant_choice(who: str):
+    """A filter group's `variant`: the default mcmc (moves that keep the posterior) or the paper as printed."""
+    return choice("mcmc", ("mcmc", "paper"), f"{who}: `mcmc` (default: the paper's operator as a move that keeps the "
+                  "posterior of all kept points, docs/design.md) or `paper` (as printed)")
+
+
 @dataclass(frozen=True)
 class AfsaConfig:
     """Fish-school settings (AFSA paper sec. 2.2 and 5). `variant` picks the paper's greedy school or ours."""
@@ -122,8 +128,7 @@ class AfsaConfig:
 class EspfConfig:
     """ESPF settings: the SBX distribution index lambda (any non-negative real in the paper; docs/seed_tables.md)."""
 
-    variant: str = choice("mcmc", ("mcmc", "paper"), "ESPF: `mcmc` (default: the paper's operator as a move that "
-                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    variant: str = variant_choice("ESPF")
     sbx_lambda: float = param(2.0, "ESPF: distribution index of the simulated binary crossover (larger: children "
                               "nearer their parents)", low=0.0)
     selection: str = choice("draw", ("draw", "top"), "ESPF paper variant: `draw` N of the 2N pool by weight "
@@ -136,8 +141,7 @@ class GfapfConfig:
     attraction and the range of the repulsion. `scale`: `absolute` reads the two distances in state units (the
     paper's 1-D models); `spread` in standard deviations of the cloud (the emitter problem, any scale)."""
 
-    variant: str = choice("mcmc", ("mcmc", "paper"), "GFA-PF: `mcmc` (default: the paper's operator as a move that "
-                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    variant: str = variant_choice("GFA-PF")
     attraction: float = param(0.0618, "GFA-PF: attraction weight M towards the central dust", low=0.0)
     rotation_max: float = param(0.3, "GFA-PF: largest rotation factor f of the repulsion", low=0.0)
     iterations: int = param(8, "GFA-PF: gravitation iterations D per measurement", low=0)
@@ -152,8 +156,7 @@ class DeConfig:
     """Differential evolution of UPF-DE and PF-DE: V = F1 X_r1 + F2 (X_r2 - X_r3), binomial crossover Cr, G
     generations."""
 
-    variant: str = choice("mcmc", ("mcmc", "paper"), "UPF-DE/PF-DE: `mcmc` (default: the paper's operator as a move "
-                          "that keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    variant: str = variant_choice("UPF-DE/PF-DE")
     fitness: str = choice("posterior", ("posterior", "ratio"), "UPF-DE/PF-DE paper variant: a trial's fitness, "
                           "`posterior` (L p: the path posterior, default) or `ratio` (L p / q, unbounded)")
     f1: float = param(
@@ -169,24 +172,21 @@ class SirConfig:
     """The bootstrap filter on the emitter: `mcmc` resample-move (Gaussian random-walk MH) or `paper` (the plain
     bootstrap with the random-walk process noise: the papers' PF baseline)."""
 
-    variant: str = choice("mcmc", ("mcmc", "paper"), "SIR: `mcmc` (default: the paper's operator as a move that "
-                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    variant: str = variant_choice("SIR")
 
 
 @dataclass(frozen=True)
 class UpfConfig:
     """The unscented PF on the emitter: `mcmc` (the UKF's Gaussian as an independence MH proposal) or `paper`."""
 
-    variant: str = choice("mcmc", ("mcmc", "paper"), "UPF: `mcmc` (default: the paper's operator as a move that "
-                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    variant: str = variant_choice("UPF")
 
 
 @dataclass(frozen=True)
 class AgapfConfig:
     """AGA-PF's adaptive crossover and mutation probabilities (eqs. 18-19)."""
 
-    variant: str = choice("mcmc", ("mcmc", "paper"), "AGA-PF: `mcmc` (default: the paper's operator as a move that "
-                          "keeps the posterior of all kept points, docs/design.md) or `paper` (as printed)")
+    variant: str = variant_choice("AGA-PF")
     curve: str = choice("kuang", ("kuang", "printed"), "AGA-PF: the adaptive curves of eqs. 18-19, `kuang` (with "
                         "the - 1 of Kuang et al.'s sigmoid: pc1 at the average fitness, pc2 at the best) or "
                         "`printed`")

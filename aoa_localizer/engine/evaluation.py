@@ -72,15 +72,20 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
         return {"converged": False, "crlb": bound, "wall_s": wall}
     lat, lon, _ = loc.datum_frame().to_geodetic(mode.mean[0], mode.mean[1])
     err = np.array(data.frame.to_enu(lat, lon)) - truth
+    return {**final_scores(err, mode.cov, bound), "wall_s": wall}
+
+
+def final_scores(err: np.ndarray, cov, bound: float) -> dict:
+    """A final estimate's scores: its error (m, and east/north), the bound, NEES and whether the 95 % ellipse holds
+    the truth."""
     return {
         "converged": True,
         "error": float(np.hypot(*err)),
         "err_east": float(err[0]),
         "err_north": float(err[1]),
         "crlb": bound,
-        "nees": nees(err, mode.cov),
-        "inside95": inside_ellipse(err, mode.cov),
-        "wall_s": wall,
+        "nees": nees(err, cov),
+        "inside95": inside_ellipse(err, cov),
     }
 
 
@@ -99,13 +104,7 @@ def score(data: ScenarioData, result: RunResult) -> dict:
     final = result.estimates[-1]
     err = np.array([east[-1], north[-1]]) - truth
     return {
-        "converged": True,
-        "error": float(np.hypot(*err)),
-        "err_east": float(err[0]),
-        "err_north": float(err[1]),
-        "crlb": bound,
-        "nees": nees(err, final.cov),
-        "inside95": inside_ellipse(err, final.cov),
+        **final_scores(err, final.cov, bound),
         "rel_x": float(abs(err[0]) / abs(truth[0])),
         "rel_y": float(abs(err[1]) / abs(truth[1])),
         "bias_x": float(err[0] / truth[0]),

@@ -118,7 +118,7 @@ class Localizer:
 
     def _reset_track(self):
         self.track = GpsTrack(self.cfg.gps_max_gap_s)
-        self.heading = TrackHeading(self.cfg) if self.cfg.heading_source == "track" else ImuHeading(self.cfg)
+        self.heading = self._new_heading()
         # (stamp, azimuth deg, quality, sigma rad or NaN) of bearings awaiting a fix after them
         self.pending: deque[tuple[float, float, float, float]] = deque()
         self.builder = PointBuilder(self.cfg)
@@ -244,8 +244,7 @@ class Localizer:
             return None
         if verdict is Verdict.CLOCK_JUMP:  # the track starts again on the new timeline
             self.track = GpsTrack(self.cfg.gps_max_gap_s)
-            if isinstance(self.heading, TrackHeading):
-                self.heading = TrackHeading(self.cfg)  # courses of the old timeline
+            self.heading = self._new_heading()  # courses of the old timeline
             self._datum_candidate = None  # a first fix on the old timeline confirms nothing now
         if self.frame is None:
             candidate = self._datum_candidate
@@ -301,7 +300,7 @@ class Localizer:
         """The vehicle's heading from an IMU: REP-103 yaw (rad, counter-clockwise from east, ENU at the vehicle), as
         sensor_msgs/Imu gives it. Used with `bearing_reference: vehicle` and `heading_source: imu`."""
         stamp, yaw = _as_float(stamp), _as_float(yaw_rad)
-        if self.cfg.bearing_reference != "vehicle" or not isinstance(self.heading, ImuHeading):
+        if not isinstance(self.heading, ImuHeading):  # only with bearing_reference vehicle and heading_source imu
             self._reject("heading_ignored")
         elif not (math.isfinite(stamp) and math.isfinite(yaw)):
             self._reject("bad_heading")
@@ -430,6 +429,12 @@ class Localizer:
                 estimate = self._use_points(closed) or estimate
         return estimate
 
+    def _new_heading(self) -> TrackHeading | ImuHeading | None:
+        """The heading source for vehicle-relative bearings; None (nothing kept per fix) for the other references."""
+        if self.cfg.bearing_reference != "vehicle":
+            return None
+        return TrackHeading(self.cfg) if self.cfg.heading_source == "track" else ImuHeading(self.cfg)
+
     def _theta(self, stamp: float, azimuth: float, north_angle: float) -> float | None:
         """The reading's ENU angle (rad) from its azimuth as `bearing_reference` defines it; None when a
         vehicle-relative azimuth has no heading at its stamp."""
@@ -438,6 +443,7 @@ class Localizer:
             return float(azimuth_to_enu(azimuth, north_angle))
         if cfg.bearing_reference == "magnetic_north":
             return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle))
+        assert self.heading is not None  # built for bearing_reference: vehicle
         heading = self.heading.at(self.track, stamp, north_angle)  # the forward axis, ENU in the map plane
         if heading is None:
             return None

@@ -19,13 +19,14 @@ from scipy.special import gammaln
 from scipy.stats import binom
 
 from aoa_localizer.engine.global_search import Mode
+from aoa_localizer.filters import moves
+from aoa_localizer.filters.moves import RW_SCALE
 
 _T_DOF = 3.0  # heavy tails: the ratio posterior / proposal stays bounded in the mode's tails
 _WIDEN = 1.5  # the Laplace covariance underestimates a bearing posterior's banana tails
 _DEFENSIVE = 0.1  # share of the broad component
 _MIN_COMPONENT = 0.02  # every kept mode is proposed at least this often
 _KEEP_LOG_MASS = 30.0  # modes more than this many nats below the best are not proposed
-_RW_SCALE = 2.38 / math.sqrt(2.0)  # optimal random-walk scale in 2-D (Roberts, Gelman, Gilks 1997)
 
 
 class HealthMonitor:
@@ -109,11 +110,7 @@ class ModeProposal:
 def random_walk_sweep(x: np.ndarray, target: np.ndarray, log_target, cov: np.ndarray, rng: np.random.Generator):
     """One Gaussian random-walk MH move per particle, scaled by the cloud's covariance; returns (x, target,
     accepted)."""
-    chol = np.linalg.cholesky(cov + 1e-4 * np.eye(2))
-    prop = x + _RW_SCALE * rng.standard_normal(x.shape) @ chol.T
-    prop_target = log_target(prop)
-    take = np.log(rng.random(x.shape[0])) < prop_target - target
-    return np.where(take[:, None], prop, x), np.where(take, prop_target, target), int(take.sum())
+    return moves.random_walk(x, target, log_target, rng, RW_SCALE * np.linalg.cholesky(cov + 1e-4 * np.eye(2)))
 
 
 def independence_sweep(x: np.ndarray, target: np.ndarray, log_target, proposal: ModeProposal, rng: np.random.Generator):

@@ -26,9 +26,8 @@ import numpy as np
 
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
+from aoa_localizer.filters.moves import RW_SCALE
 from aoa_localizer.filters.resample_move import ResampleMove
-
-RW_SCALE = 2.38 / 2**0.5  # the mutation's random walk, in standard deviations of the cloud
 
 
 def kuang(f, f_avg: float, f_max: float, p1: float, p2: float, a: float):

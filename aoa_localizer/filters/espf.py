@@ -22,7 +22,7 @@ from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
 
-RW_SCALE = 0.5  # the small random-walk step after the pair move, in standard deviations of the cloud
+SMALL_STEP = 0.5  # the small random-walk step after the pair move, in standard deviations of the cloud
 
 
 def sbx_beta(u: np.ndarray, lam: float) -> np.ndarray:
@@ -91,5 +91,5 @@ class EspfMoves(ResampleMove):
     def sweep(self, target, z):
         lam, rng = self.cfg.espf.sbx_lambda, self.rng
         x, target, crossed = moves.pair_scale(self.x, target, self.log_target, rng, lambda m: sbx_scale(rng, m, lam))
-        x, target, walked = moves.random_walk(x, target, self.log_target, rng, self.chol(RW_SCALE))
+        x, target, walked = moves.random_walk(x, target, self.log_target, rng, self.chol(SMALL_STEP))
         return x, target, crossed + walked, 2 * self.n

@@ -13,6 +13,7 @@ from collections.abc import Callable
 import numpy as np
 
 LogTarget = Callable[[np.ndarray], np.ndarray]
+RW_SCALE = 2.38 / 2**0.5  # the optimal random-walk scale in 2-D (Roberts, Gelman, Gilks 1997), in cloud sigmas
 
 
 def halves(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

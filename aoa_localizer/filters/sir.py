@@ -2,9 +2,8 @@
 variant, resample-move with Gaussian random-walk Metropolis moves (the IBIS sampler's kernel)."""
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.moves import RW_SCALE
 from aoa_localizer.filters.resample_move import ResampleMove
-
-RW_SCALE = 2.38 / 2**0.5  # the optimal random-walk scale in 2-D (Roberts, Gelman, Gilks 1997)
 
 
 class SirFilter(ParticleFilter):

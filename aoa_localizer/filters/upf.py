@@ -24,13 +24,13 @@ import numpy as np
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.de import evolve
+from aoa_localizer.filters.moves import RW_SCALE
 from aoa_localizer.filters.resample_move import MIN_SPREAD_M2, ResampleMove
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
 from aoa_localizer.models.base import StaticPosterior, TransitionDensity, UnscentedForm
 
 WIDEN = 1.5  # the UKF's Gaussian is widened before it proposes: a bearing posterior has heavier tails
 JITTER = 0.01  # DE-MC's jitter, in standard deviations of the cloud
-RW_SCALE = 2.38 / 2**0.5
 
 
 class UkfProposalFilter(ParticleFilter):
