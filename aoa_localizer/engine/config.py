@@ -321,6 +321,19 @@ class LocalizerConfig:
         "added to every DF stamp to put it on the GPS clock (a receiver that "
         "stamps 0.5 s late: -0.5); /diagnostics suggests one when the bearings show it",
     )
+    # Several emitters at once, keyed by the DF record's frequency (docs/design.md, "Channels").
+    channel_tolerance_hz: float = param(
+        5000.0, "a DF record within this of a channel's frequency belongs to it (Hz); records with frequency 0 or "
+        "NaN share the default channel", low=0.0, low_open=True,
+    )
+    max_channels: int = param(
+        64, "most frequency channels tracked at once; a record that would open one more is refused "
+        "(`channel_limit`)", low=1, high=10_000,
+    )
+    channel_timeout_s: float = param(
+        300.0, "a frequency channel silent this long (DF time) is retired, its last estimate kept (s; 0: never)",
+        low=0.0,
+    )
     # What a DF azimuth is measured from (docs/design.md, "Bearing reference").
     bearing_reference: str = choice(
         "true_north",

@@ -14,6 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
+from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, azimuth_to_enu, wrap_pi
 from aoa_localizer.engine.gps_track import GpsTrack, Where
@@ -21,6 +22,7 @@ from aoa_localizer.engine.heading import ImuHeading, TrackHeading
 from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.preprocess import PointBuilder, reading_sigma
+from aoa_localizer.engine.station import Pending, Station
 from aoa_localizer.engine.track import EmitterTrack
 from aoa_localizer.engine.types import Estimate, ObservationPoint, Reading
 
@@ -65,14 +67,17 @@ REASONS = {
     "bad_heading": "heading stamp or yaw is not a finite number",
     "heading_out_of_order": "heading stamp not after the previous heading",
     "heading_ignored": "a heading given while bearing_reference is not `vehicle` or heading_source is not `imu`",
+    "bad_frequency": "frequency negative or infinite (0 or NaN: the default channel)",
+    "channel_limit": "a new frequency while max_channels channels are tracked",
+    "channel_retired": "a bearing still waiting for a fix when its channel was retired (channel_timeout_s)",
 }
 
 
 class Observer(Protocol):
     """What a program may watch, per input, without reading the engine's internals (reports keep a trace)."""
 
-    def on_fix(self, stamp: float, east: float, north: float) -> None:
-        """An accepted fix, at its ENU position."""
+    def on_fix(self, stamp: float, east: float, north: float, station: str) -> None:
+        """An accepted fix, at its ENU position, and its station ("" : the default one)."""
 
     def on_point(self, readings: list[Reading], kept: np.ndarray) -> None:
         """The readings of a closed observation point, and which of them it kept (False: gated out as wild)."""
@@ -95,7 +100,8 @@ def _as_float(value) -> float:
 
 
 class Localizer:
-    """Pairs bearings with the interpolated GPS track, builds observation points, starts and runs a filter."""
+    """Pairs bearings with the interpolated GPS track, builds observation points, starts and runs a filter; one
+    track per emitter (channel, by frequency) and one GPS track per station."""
 
     def __init__(self, config: LocalizerConfig | None = None, observer: Observer | None = None,
                  on_estimate: Callable[[Estimate], None] | None = None):
@@ -114,20 +120,48 @@ class Localizer:
         # Fate of the latest inputs (None: used, else the reason): the status says when most are refused.
         self._recent: deque[str | None] = deque(maxlen=_RECENT_INPUTS)
         self.unknown_quality = 0  # readings used with NaN quality (no correction, default sigma)
+        self._fixed_stations: dict[str, tuple[float, float, float, float] | None] = {}  # configured positions
         self._reset_track()
 
     def _reset_track(self):
-        self.track = GpsTrack(self.cfg.gps_max_gap_s)
-        self.heading = self._new_heading()
-        # (stamp, azimuth deg, quality, sigma rad or NaN) of bearings awaiting a fix after them
-        self.pending: deque[tuple[float, float, float, float]] = deque()
-        self.builder = PointBuilder(self.cfg)
-        self.emitter = EmitterTrack(self.cfg, self.rng, self._reject_many)
-        self.fix_clock = StreamClock(self.cfg.max_stamp_jump_s)
-        self.df_clock = StreamClock(self.cfg.max_stamp_jump_s)
-        self._datum_candidate: tuple[float, float, float, float, float] | None = None  # first fix, until confirmed
+        self.stations: dict[str, Station] = {}
+        self.channels = Channels(self.cfg, self.rng, self._reject_many)
+        self.main: Channel = self.channels.default  # the channel of the latest estimate (the default before one)
+        self._retire_check = -math.inf  # DF stamp of the last look for silent channels
         self.estimate: Estimate | None = None
         self._status = "waiting for a GPS fix"
+        for name, position in self._fixed_stations.items():
+            self.add_station(name, fixed=True)
+            if position is not None:
+                self._place(self.stations[name], *position)
+
+    # -- the default station and the main channel, as single-station, single-emitter programs see them ----------
+    @property
+    def station(self) -> Station:
+        return self._station("")
+
+    @property
+    def track(self) -> GpsTrack:
+        return self.station.track  # type: ignore[return-value]  # the default station always moves
+
+    @property
+    def heading(self) -> TrackHeading | ImuHeading | None:
+        return self.station.heading
+
+    @property
+    def pending(self) -> deque[Pending]:
+        """Bearings of the default station waiting for a fix after them."""
+        return self.station.pending
+
+    @property
+    def builder(self) -> PointBuilder:
+        """The main channel's open observation point at the default station."""
+        return self.main.builder("")
+
+    @property
+    def emitter(self) -> EmitterTrack:
+        """The main channel's emitter track (the default channel until a frequency channel makes an estimate)."""
+        return self.main.emitter
 
     # -- what programs read ------------------------------------------------------------------------
     @property
@@ -149,7 +183,7 @@ class Localizer:
     @property
     def _waiting_for_gps(self) -> bool:
         """Before the datum: no fix yet, or the first one waiting for its confirmation."""
-        return self.frame is None or not len(self.track)
+        return self.frame is None or not any(len(st.track) for st in self.stations.values())
 
     @property
     def init_points(self) -> list[ObservationPoint]:
@@ -186,11 +220,13 @@ class Localizer:
         (fix_clock_jump, df_clock_jump)."""
         return self.emitter.events + self.input_events
 
-    def noise_summary(self) -> dict:
-        """The self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier rates."""
+    def noise_summary(self, channel: Channel | None = None) -> dict:
+        """The self-calibrated noise of a channel (default: the main one): sigma (deg) per quality band with data,
+        reading and point outlier rates."""
         cfg = self.cfg
-        summary = self.emitter.noise.summary(lambda q: math.degrees(reading_sigma(q, cfg)))
-        summary["point_outlier_prob"] = round(self.emitter.outlier_prob, 4)
+        emitter = (channel or self.main).emitter
+        summary = emitter.noise.summary(lambda q: math.degrees(reading_sigma(q, cfg)))
+        summary["point_outlier_prob"] = round(emitter.outlier_prob, 4)
         return summary
 
     def clock_hint_sentence(self) -> str | None:
@@ -220,9 +256,47 @@ class Localizer:
         return lines
 
     # -- public API -----------------------------------------------------------------------------
-    def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0, sigma_m=float("nan")) -> Estimate | None:
-        """A NavSatFix's content; `sigma_m` the horizontal position sigma from its covariance (NaN: unknown).
-        Returns the newest estimate this fix made possible, if any."""
+    def add_station(self, name: str, fixed: bool = False) -> Station:
+        """Declare a station (stations are also made at their first input, moving). `fixed`: a site that does not
+        move; its position comes from `set_station_position` or its fixes (the newest wins), not a track."""
+        st = self.stations.get(name)
+        if st is None or st.fixed != fixed:
+            st = self.stations[name] = Station(name, self.cfg, fixed)
+        if fixed:
+            self._fixed_stations.setdefault(name, None)
+        return st
+
+    def set_station_position(self, name: str, lat, lon, alt=float("nan"), sigma_m=0.0) -> bool:
+        """A fixed station's position (kept across reset()); it sets the datum when none is set yet. False (the
+        reason counted) for a position a fix could not have."""
+        lat, lon, alt, sigma_m = map(_as_float, (lat, lon, alt, sigma_m))
+        why = self._bad_position(lat, lon, alt)
+        if why:
+            self._reject(why)
+            return False
+        self.add_station(name, fixed=True)
+        self._fixed_stations[name] = (lat, lon, alt, sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 else 0.0)
+        self._place(self.stations[name], *self._fixed_stations[name])
+        return True
+
+    def _place(self, st: Station, lat: float, lon: float, alt: float, sigma_m: float):
+        """A fixed station at lat/lon; its waiting bearings can now be placed."""
+        if self.frame is None:
+            self._set_datum(lat, lon, alt)
+        frame = self.datum_frame()
+        east, north = frame.to_enu(lat, lon)
+        st.fix_at(float(east), float(north), float(frame.north_angle(lat, lon)), sigma_m)
+
+    def _bad_position(self, lat: float, lon: float, alt: float) -> str | None:
+        if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
+            return "fix_bad_position"
+        return implausible_fix(lat, lon, alt)
+
+    def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0, sigma_m=float("nan"),
+                station: str = "") -> Estimate | None:
+        """A NavSatFix's content; `sigma_m` the horizontal position sigma from its covariance (NaN: unknown);
+        `station` the station it places ("": the default one). Returns the newest estimate this fix made
+        possible, if any."""
         stamp, lat, lon, alt, sigma_m = map(_as_float, (stamp, lat, lon, alt, sigma_m))
         # gps_sigma_m, when set, overrides the fixes' own covariances (it enters the likelihood as a constant)
         sigma_m = sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 and not self.cfg.gps_sigma_m else 0.0
@@ -232,31 +306,37 @@ class Localizer:
         if status < 0:
             self._reject("fix_no_fix")
             return None
-        if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
-            self._reject("fix_bad_position")
-            return None
-        why = implausible_fix(lat, lon, alt)
+        why = self._bad_position(lat, lon, alt)
         if why:
             self._reject(why)
             return None
-        verdict = self._admit(self.fix_clock, "fix", "fix_clock_jump", stamp)
+        st = self._station(station)
+        verdict = self._admit(st.fix_clock, "fix", "fix_clock_jump", stamp)
         if verdict is None:
             return None
         if verdict is Verdict.CLOCK_JUMP:  # the track starts again on the new timeline
-            self.track = GpsTrack(self.cfg.gps_max_gap_s)
-            self.heading = self._new_heading()  # courses of the old timeline
-            self._datum_candidate = None  # a first fix on the old timeline confirms nothing now
+            st.restart_track()  # a first fix on the old timeline confirms nothing now
+        if st.fixed:  # a site's fix is its position: trusted like a configured one, no confirmation
+            self._place(st, lat, lon, alt, sigma_m)
+            self._recent.append(None)
+            return self._release_pending(st)
         if self.frame is None:
-            candidate = self._datum_candidate
+            candidate = st.datum_candidate
             if candidate is None or not confirms(candidate[:3], (stamp, lat, lon), self.cfg.max_stamp_jump_s):
                 if candidate is not None:
                     self._reject("fix_unconfirmed")
-                self._datum_candidate = (stamp, lat, lon, alt, sigma_m)
+                st.datum_candidate = (stamp, lat, lon, alt, sigma_m)
                 self._status = "waiting for a second GPS fix to confirm the datum"
                 return None
-            self._set_datum(*candidate)
-            self._store_fix(*candidate)
-        return self._store_fix(stamp, lat, lon, alt, sigma_m)
+            self._set_datum(*candidate[1:4])
+        if st.datum_candidate is not None:  # confirmed now (or another station set the datum meanwhile)
+            candidate, st.datum_candidate = st.datum_candidate, None
+            self._store_fix(st, *candidate)
+        return self._store_fix(st, stamp, lat, lon, alt, sigma_m)
+
+    def _station(self, name: str) -> Station:
+        st = self.stations.get(name)
+        return st if st is not None else self.add_station(name)
 
     def _admit(self, clock: StreamClock, kind: str, jump_event: str, stamp: float) -> Verdict | None:
         """The stream clock's verdict on a stamp: None (refused, counted as `<kind>_<reason>`), OK, or
@@ -270,57 +350,67 @@ class Localizer:
             log.warning("%s: the clock jumped to %.3f; going on on the new timeline", jump_event, stamp)
         return verdict
 
-    def _set_datum(self, stamp, lat, lon, alt, _sigma_m=0.0):
+    def _set_datum(self, lat, lon, alt):
         datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)
         self.frame = LocalFrame(lat, lon, datum_alt)
-        self._datum_candidate = None
         log.info("datum set from the first valid fix, confirmed by the next: %.7f, %.7f, %.1f m", lat, lon, datum_alt)
 
-    def _store_fix(self, stamp, lat, lon, alt, sigma_m=0.0) -> Estimate | None:
+    def _store_fix(self, st: Station, stamp, lat, lon, alt, sigma_m=0.0) -> Estimate | None:
         frame = self.datum_frame()
         east, north = frame.to_enu(lat, lon)
-        reason = self.track.add(stamp, float(east), float(north), float(frame.north_angle(lat, lon)), sigma_m)
+        track = st.track
+        assert isinstance(track, GpsTrack)  # a moving station's
+        reason = track.add(stamp, float(east), float(north), float(frame.north_angle(lat, lon)), sigma_m)
         if reason:
             self._reject(reason)
             return None
         self._recent.append(None)
-        if isinstance(self.heading, TrackHeading):
-            self.heading.note_fix(self.track)
+        if isinstance(st.heading, TrackHeading):
+            st.heading.note_fix(track)
         if self.observer is not None:
-            self.observer.on_fix(stamp, float(east), float(north))
-        estimate = self._release_pending()
-        # A fix well after the open point's first reading closes it: a vehicle that stopped taking
+            self.observer.on_fix(stamp, float(east), float(north), st.name)
+        estimate = self._release_pending(st)
+        # A fix well after an open point's first reading closes it: a vehicle that stopped taking
         # readings still gets its estimate, without waiting for the next reading.
-        open_point = self.builder.readings
-        if open_point and not self.pending and stamp - open_point[0].stamp > self.cfg.obs_max_duration_s:
-            estimate = self._use_points([self.builder.flush()]) or estimate
+        if not st.pending:
+            for channel in list(self.channels.live.values()):
+                builder = channel.builders.get(st.name)
+                open_point = builder.readings if builder is not None else None
+                if open_point and stamp - open_point[0].stamp > self.cfg.obs_max_duration_s:
+                    estimate = self._use_points(channel, [builder.flush()]) or estimate
         return estimate
 
-    def add_heading(self, stamp, yaw_rad) -> None:
+    def add_heading(self, stamp, yaw_rad, station: str = "") -> None:
         """The vehicle's heading from an IMU: REP-103 yaw (rad, counter-clockwise from east, ENU at the vehicle), as
         sensor_msgs/Imu gives it. Used with `bearing_reference: vehicle` and `heading_source: imu`."""
         stamp, yaw = _as_float(stamp), _as_float(yaw_rad)
-        if not isinstance(self.heading, ImuHeading):  # only with bearing_reference vehicle and heading_source imu
+        heading = self._station(station).heading
+        if not isinstance(heading, ImuHeading):  # only with bearing_reference vehicle and heading_source imu
             self._reject("heading_ignored")
         elif not (math.isfinite(stamp) and math.isfinite(yaw)):
             self._reject("bad_heading")
-        elif not self.heading.add(stamp, yaw):
+        elif not heading.add(stamp, yaw):
             self._reject("heading_out_of_order")
 
-    def add_bearing(self, stamp, azimuth_deg, quality=float("nan")) -> Estimate | None:
-        """A DF record. Returns the estimate this reading produced (when it closed an observation point), else None."""
-        return self._add_bearing(stamp, azimuth_deg, quality, float("nan"))
+    def add_bearing(self, stamp, azimuth_deg, quality=float("nan"), station: str = "",
+                    frequency_hz=float("nan")) -> Estimate | None:
+        """A DF record: azimuth (deg) and quality of the carrier at `frequency_hz` (0 or NaN: the default
+        channel) seen from `station`. Returns the estimate this reading produced (when it closed an observation
+        point), else None."""
+        return self._add_bearing(stamp, azimuth_deg, quality, float("nan"), station, frequency_hz)
 
-    def add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan")) -> Estimate | None:
+    def add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan"), station: str = "",
+                        frequency_hz=float("nan")) -> Estimate | None:
         """A bearing as a REP-103 yaw (rad, counter-clockwise from east at the antenna) with its variance
         (the `pose` encoding). No quality: counted as unknown quality; NaN or non-positive variance
         means the configured sigma."""
         yaw, var = _as_float(yaw_rad), _as_float(variance_rad2)
         sigma = math.sqrt(var) if var > 0 and math.isfinite(var) else float("nan")
-        return self._add_bearing(stamp, 90.0 - math.degrees(yaw) if math.isfinite(yaw) else yaw, float("nan"), sigma)
+        azimuth = 90.0 - math.degrees(yaw) if math.isfinite(yaw) else yaw
+        return self._add_bearing(stamp, azimuth, float("nan"), sigma, station, frequency_hz)
 
-    def _add_bearing(self, stamp, azimuth_deg, quality, sigma) -> Estimate | None:
-        stamp, azimuth, quality = map(_as_float, (stamp, azimuth_deg, quality))
+    def _add_bearing(self, stamp, azimuth_deg, quality, sigma, station, frequency_hz) -> Estimate | None:
+        stamp, azimuth, quality, frequency = map(_as_float, (stamp, azimuth_deg, quality, frequency_hz))
         stamp += self.cfg.df_time_offset_s  # on the GPS clock
         if not math.isfinite(stamp):
             self._reject("bad_stamp")
@@ -334,56 +424,88 @@ class Localizer:
         if quality < self.cfg.quality_min:  # False for NaN: unknown quality passes, counted below
             self._reject("low_quality")
             return None
-        verdict = self._admit(self.df_clock, "bearing", "df_clock_jump", stamp)
+        channel = self.channels.for_frequency(frequency)
+        if isinstance(channel, str):
+            self._reject(channel)
+            return None
+        st = self._station(station)
+        verdict = self._admit(st.df_clock(channel.id), "bearing", "df_clock_jump", stamp)
         if verdict is None:
             return None
-        if verdict is Verdict.CLOCK_JUMP:
-            while self.pending:  # waiting on the old timeline: no fix will place them in order any more
-                self.pending.popleft()
-                self._reject("clock_jump")
-        first = self.track.t[0] if len(self.track) else (self._datum_candidate or (math.inf,))[0]
-        if stamp < first:
+        if verdict is Verdict.CLOCK_JUMP:  # waiting on the old timeline: no fix will place them in order any more
+            kept = [p for p in st.pending if p.channel != channel.id]
+            self._reject_many("clock_jump", len(st.pending) - len(kept))
+            st.pending.clear()
+            st.pending.extend(kept)
+        if stamp < st.first_stamp:
             self._reject("before_first_fix")
             return None
         self._recent.append(None)
-        self.pending.append((stamp, azimuth % 360.0, quality, sigma))
-        return self._release_pending()
+        channel.last_heard = stamp  # on its clock's timeline (a step back is followed)
+        st.pending.append(Pending(stamp, azimuth % 360.0, quality, sigma, channel.id))
+        return self._retire_silent(stamp) or self._release_pending(st)
 
-    def flush(self) -> Estimate | None:
-        """End of data: bearings still waiting for a fix are dropped, the open observation point is used."""
-        while self.pending:
-            self.pending.popleft()
-            self._reject("no_fix_after")
-        group = self.builder.flush()
-        return self._use_points([group]) if group else None
-
-    def finish(self) -> Estimate | None:
-        """After flush(), offline: one last global check over all the data (calibration, modes, moves), so the
-        final estimate and its modes reflect everything; its Estimate has `end_of_data` set (None if no filter
-        runs, or the last point just had a check). A live node never sees the end of data and never calls it."""
-        if not self.emitter.finish():
+    def _retire_silent(self, now: float) -> Estimate | None:
+        """Once per second of DF time: retire the channels silent for channel_timeout_s, using their open points."""
+        if now - self._retire_check < 1.0:
             return None
-        mean, cov = self.filter.estimate()
-        if not _positive_definite(cov):
-            self._reject("covariance_degenerate")
-            return None
-        estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
-        estimate.end_of_data = True
-        self._new_estimate(estimate)
+        self._retire_check = now
+        estimate = None
+        for channel in self.channels.retire_silent(now):
+            for builder in channel.builders.values():
+                group = builder.flush()
+                if group:
+                    estimate = self._use_points(channel, [group]) or estimate
+            log.info("channel %s (%.0f Hz) silent for %.0f s: retired, its last estimate kept", channel.id,
+                     channel.frequency_hz, now - channel.last_heard)
         return estimate
 
-    def _new_estimate(self, estimate: Estimate):
-        self.estimate = estimate
+    def flush(self) -> Estimate | None:
+        """End of data: bearings still waiting for a fix are dropped, the open observation points are used."""
+        for st in self.stations.values():
+            self._reject_many("no_fix_after", len(st.pending))
+            st.pending.clear()
+        estimate = None
+        for channel in list(self.channels.live.values()):
+            for builder in channel.builders.values():
+                group = builder.flush()
+                if group:
+                    estimate = self._use_points(channel, [group]) or estimate
+        return estimate
+
+    def finish(self) -> Estimate | None:
+        """After flush(), offline: one last global check over all the data (calibration, modes, moves) on every
+        live channel, so the final estimates and their modes reflect everything; those Estimates have
+        `end_of_data` set. Returns the last of them (None if no filter runs, or the last points just had a check).
+        A live node never sees the end of data and never calls it."""
+        estimate = None
+        for channel in list(self.channels.live.values()):
+            if not channel.emitter.finish():
+                continue
+            mean, cov = channel.emitter.running.estimate()
+            if not _positive_definite(cov):
+                self._reject("covariance_degenerate")
+                continue
+            made = self._make_estimate(channel, channel.emitter.last_stamp, mean, cov)
+            made.end_of_data = True
+            self._new_estimate(channel, made)
+            estimate = made
+        return estimate
+
+    def _new_estimate(self, channel: Channel, estimate: Estimate):
+        channel.estimate = self.estimate = estimate
+        self.main = channel
         if self.on_estimate is not None:
             self.on_estimate(estimate)
 
     def reset(self, drop_datum: bool = False):
-        """Drop the track, the points and the filter; keep the counters (the node's ~/reset). The datum is kept,
-        so the map frame stays put, unless `drop_datum` and it was not configured: then the next confirmed fix
-        sets a new one (the way out of a datum taken from a bad fix)."""
-        self._reset_track()
+        """Drop the tracks, the points, the filters and the channels; keep the counters and the fixed stations'
+        configured positions (the node's ~/reset). The datum is kept, so the map frame stays put, unless
+        `drop_datum` and it was not configured: then the next confirmed fix sets a new one (the way out of a datum
+        taken from a bad fix)."""
         if drop_datum and not self.cfg.has_datum:
             self.frame = None
+        self._reset_track()
 
     # -- pipeline -------------------------------------------------------------------------------
     def _reject(self, reason: str) -> None:
@@ -393,49 +515,48 @@ class Localizer:
             log.warning("input not used: %s (%s); further ones are counted", reason, REASONS[reason])
         return None
 
-    def _release_pending(self) -> Estimate | None:
-        """Pair held bearings with the track in stamp order; stop at the first one still waiting for a fix."""
+    def _release_pending(self, st: Station) -> Estimate | None:
+        """Pair a station's held bearings with its track in stamp order; stop at the first one still waiting for
+        a fix."""
         estimate = None
-        newest = self.df_clock.last if self.df_clock.last is not None else -math.inf
-        while self.pending:
-            stamp, azimuth, quality, sigma = self.pending[0]
+        newest = st.newest_df
+        track = st.track
+        while st.pending:
+            p = st.pending[0]
             # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s behind the DF stream, no fix will come.
-            if newest - stamp > 2 * self.cfg.gps_max_gap_s or len(self.pending) > _MAX_PENDING:
-                self.pending.popleft()
-                self._reject("gps_gap" if len(self.track) else "before_first_fix")
+            if newest - p.stamp > 2 * self.cfg.gps_max_gap_s or len(st.pending) > _MAX_PENDING:
+                st.pending.popleft()
+                self._reject("gps_gap" if len(track) else "before_first_fix")
                 continue
-            if not len(self.track):
+            if not len(track):
                 break  # the datum waits for its confirming fix
-            where, at = self.track.locate(stamp)
+            where, at = track.locate(p.stamp)
             if where is Where.WAIT:
                 break
-            self.pending.popleft()
-            if where is not Where.OK:
+            st.pending.popleft()
+            if where is not Where.OK or at is None:
                 self._reject(where.value)
                 continue
+            channel = self.channels.live.get(p.channel)
+            if channel is None:
+                self._reject("channel_retired")
+                continue
             east, north, north_angle, gps_sigma, v_east, v_north = at
-            theta = self._theta(stamp, azimuth, north_angle)
+            theta = self._theta(st, p.stamp, p.azimuth, north_angle)
             if theta is None:
                 self._reject("heading_unknown")
                 continue
-            if math.isnan(quality):
+            if math.isnan(p.quality):
                 self.unknown_quality += 1
-            if math.isnan(sigma):
-                sigma = reading_sigma(quality, self.cfg)
-            reading = Reading(stamp, theta, quality, sigma, east, north, float(gps_sigma), float(v_east),
+            sigma = reading_sigma(p.quality, self.cfg) if math.isnan(p.sigma) else p.sigma
+            reading = Reading(p.stamp, theta, p.quality, sigma, east, north, float(gps_sigma), float(v_east),
                               float(v_north))
-            closed = self.builder.add(reading)
+            closed = channel.builder(st.name).add(reading)
             if closed:
-                estimate = self._use_points(closed) or estimate
+                estimate = self._use_points(channel, closed) or estimate
         return estimate
 
-    def _new_heading(self) -> TrackHeading | ImuHeading | None:
-        """The heading source for vehicle-relative bearings; None (nothing kept per fix) for the other references."""
-        if self.cfg.bearing_reference != "vehicle":
-            return None
-        return TrackHeading(self.cfg) if self.cfg.heading_source == "track" else ImuHeading(self.cfg)
-
-    def _theta(self, stamp: float, azimuth: float, north_angle: float) -> float | None:
+    def _theta(self, st: Station, stamp: float, azimuth: float, north_angle: float) -> float | None:
         """The reading's ENU angle (rad) from its azimuth as `bearing_reference` defines it; None when a
         vehicle-relative azimuth has no heading at its stamp."""
         cfg = self.cfg
@@ -443,8 +564,9 @@ class Localizer:
             return float(azimuth_to_enu(azimuth, north_angle))
         if cfg.bearing_reference == "magnetic_north":
             return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle))
-        assert self.heading is not None  # built for bearing_reference: vehicle
-        heading = self.heading.at(self.track, stamp, north_angle)  # the forward axis, ENU in the map plane
+        if st.heading is None:  # built for bearing_reference: vehicle
+            return None
+        heading = st.heading.at(st.track, stamp, north_angle)  # the forward axis, ENU in the map plane
         if heading is None:
             return None
         return float(wrap_pi(heading - math.radians(azimuth + cfg.mount_offset_deg)))
@@ -453,25 +575,26 @@ class Localizer:
         for _ in range(count):
             self._reject(reason)
 
-    def _use_points(self, groups: list[list[Reading]]) -> Estimate | None:
+    def _use_points(self, channel: Channel, groups: list[list[Reading]]) -> Estimate | None:
         estimate = None
+        emitter = channel.emitter
         for readings in groups:
-            took = self.emitter.add(readings)
+            took = emitter.add(readings)
             if self.observer is not None:
-                self.observer.on_point(readings, self.emitter.last_kept)
+                self.observer.on_point(readings, emitter.last_kept)
             if took:
-                mean, cov = self.filter.estimate()
+                mean, cov = emitter.running.estimate()
                 if not _positive_definite(cov):
                     self._reject("covariance_degenerate")
                     continue
-                estimate = self._make_estimate(self.emitter.last_stamp, mean, cov)
-                self._new_estimate(estimate)
+                estimate = self._make_estimate(channel, emitter.last_stamp, mean, cov)
+                self._new_estimate(channel, estimate)
         return estimate
 
     def adopt_datum(self, frame: LocalFrame | None):
         """Keep the map frame of an earlier Localizer (a datum it took from a fix) so that a restart with new
         settings does not move the map; a configured datum (datum_lat, datum_lon) wins and is kept."""
-        if frame is not None and not self.cfg.has_datum and self.frame is None and not len(self.track):
+        if frame is not None and not self.cfg.has_datum and self.frame is None and not self.stations:
             self.frame = frame
 
     def datum_frame(self) -> LocalFrame:
@@ -480,11 +603,15 @@ class Localizer:
             raise RuntimeError("no datum yet: no fix has been confirmed")
         return self.frame
 
-    def _make_estimate(self, stamp: float, mean, cov) -> Estimate:
+    def _make_estimate(self, channel: Channel, stamp: float, mean, cov) -> Estimate:
         lat, lon, _ = self.datum_frame().to_geodetic(mean[0], mean[1])
+        emitter = channel.emitter
+        f = emitter.running
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
-                        cov=cov, bearings_used=self.bearings_used, points_used=self.points_used,
-                        ess=self.filter.ess(), algorithm=self.cfg.algorithm,
-                        particles=self.filter.x.copy(), weights=self.filter.weights,
-                        modes=self.emitter.mode_masses(),
-                        noise=self.noise_summary() if self.cfg.calibrate_noise else None)
+                        cov=cov, bearings_used=emitter.bearings_used, points_used=emitter.points_used,
+                        ess=f.ess(), algorithm=self.cfg.algorithm,
+                        particles=f.x.copy(), weights=f.weights,
+                        modes=emitter.mode_masses(),
+                        noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,
+                        channel=channel.id, frequency_hz=channel.frequency_hz)
+

@@ -1,6 +1,7 @@
 """Plain data the engine passes around: GPS fixes, DF readings paired with a position, observation points, estimates."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,6 +55,8 @@ class Estimate:
     modes: list = field(default_factory=list)
     noise: dict | None = None  # the self-calibrated noise (Localizer.noise_summary), when calibration is on
     end_of_data: bool = False  # made by Localizer.finish(), the offline end-of-data global check
+    channel: str = "default"  # the emitter's channel id (docs/interface.md, "Channels")
+    frequency_hz: float = float("nan")  # the channel's frequency (NaN: the default channel, no frequency)
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of docs/interface.md (offline replay output)."""
@@ -71,4 +74,6 @@ class Estimate:
             "modes": [[round(e, 3), round(n, 3), round(m, 4)] for e, n, m in self.modes],
             "noise": self.noise,
             "end_of_data": self.end_of_data,
+            "channel": self.channel,
+            "frequency_hz": self.frequency_hz if math.isfinite(self.frequency_hz) else None,
         }

@@ -47,7 +47,7 @@ class Trace:
         self.fixes: list[tuple] = []
         self.readings: list[tuple] = []
 
-    def on_fix(self, stamp: float, east: float, north: float) -> None:
+    def on_fix(self, stamp: float, east: float, north: float, station: str = "") -> None:
         self.fixes.append((stamp, east, north))
 
     def on_point(self, readings, kept) -> None:

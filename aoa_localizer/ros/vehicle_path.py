@@ -19,7 +19,7 @@ class VehiclePath:
         self.sent = 0  # fixes added since the path was last taken by new_path()
         self.added = 0
 
-    def on_fix(self, stamp: float, east: float, north: float) -> None:
+    def on_fix(self, stamp: float, east: float, north: float, station: str = "") -> None:
         self.poses.append((stamp, east, north))
         self.added += 1
         self.on_valid_fix()

@@ -1,0 +1,98 @@
+"""Emitters keyed by carrier frequency: a DF record's frequency picks its channel (within `channel_tolerance_hz`
+of the channel's), each channel has its own emitter track, point builders (one per station) and estimate.
+Records without a frequency (0 or NaN) share the default channel, so single-emitter use is unchanged."""
+from __future__ import annotations
+
+import math
+import zlib
+
+import numpy as np
+
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.preprocess import PointBuilder
+from aoa_localizer.engine.track import EmitterTrack
+from aoa_localizer.engine.types import Estimate
+
+DEFAULT = "default"  # the channel of records without a frequency
+
+
+def channel_id(frequency_hz: float) -> str:
+    """The stable id of a channel first heard at `frequency_hz`: 'f' and the frequency in whole Hz (a valid ROS
+    name token, so it can name a topic namespace)."""
+    return f"f{int(round(frequency_hz))}"
+
+
+class Channel:
+    """One emitter: its frequency (NaN for the default channel), track, builders per station and latest estimate."""
+
+    def __init__(self, cid: str, frequency_hz: float, cfg: LocalizerConfig, rng: np.random.Generator, reject):
+        self.id, self.frequency_hz, self.cfg = cid, frequency_hz, cfg
+        self.emitter = EmitterTrack(cfg, rng, reject)
+        self.builders: dict[str, PointBuilder] = {}
+        self.estimate: Estimate | None = None
+        self.last_heard = -math.inf  # the newest DF stamp admitted on this channel (GPS clock)
+        self.retired = False
+
+    def builder(self, station: str) -> PointBuilder:
+        b = self.builders.get(station)
+        if b is None:
+            b = self.builders[station] = PointBuilder(self.cfg)
+        return b
+
+
+class Channels:
+    """The live channels, the retired ones, and the rule that maps a frequency to a channel."""
+
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject):
+        self.cfg, self.rng, self._reject = cfg, rng, reject
+        self.live: dict[str, Channel] = {}
+        self.retired: dict[str, Channel] = {}  # the last retired channel of each id, its final estimate kept
+        self.default = self._open(DEFAULT, math.nan)
+
+    def _open(self, cid: str, frequency_hz: float) -> Channel:
+        # The default channel draws from the Localizer's generator (a seed reproduces today's runs); each other
+        # channel from its own, derived from the seed and its id, so its run does not depend on the others'.
+        if cid == DEFAULT:
+            rng = self.rng
+        elif self.cfg.seed is None:
+            rng = np.random.default_rng()
+        else:
+            rng = np.random.default_rng([self.cfg.seed, zlib.crc32(cid.encode())])
+        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject)
+        self.live[cid] = channel
+        return channel
+
+    def for_frequency(self, frequency_hz: float) -> Channel | str:
+        """The channel of a record's frequency (a new one if none is near), or the reason it has none."""
+        f = frequency_hz
+        if math.isnan(f) or f == 0:
+            return self.live.get(DEFAULT) or self._open(DEFAULT, math.nan)
+        if not math.isfinite(f) or f < 0:
+            return "bad_frequency"
+        best, gap = None, self.cfg.channel_tolerance_hz
+        for ch in self.live.values():
+            d = abs(ch.frequency_hz - f)  # NaN for the default channel: never <= gap
+            if d <= gap:
+                best, gap = ch, d
+        if best is not None:
+            return best
+        if sum(1 for c in self.live.values() if c.id != DEFAULT) >= self.cfg.max_channels:
+            return "channel_limit"
+        return self._open(channel_id(f), f)
+
+    def retire_silent(self, now: float) -> list[Channel]:
+        """Retire the frequency channels silent for `channel_timeout_s` of DF time before `now` (0: never);
+        returns them (their open points still to be used by the caller)."""
+        timeout = self.cfg.channel_timeout_s
+        if timeout <= 0:
+            return []
+        gone = [c for c in self.live.values() if c.id != DEFAULT and now - c.last_heard > timeout]
+        for c in gone:
+            c.retired = True
+            del self.live[c.id]
+            self.retired[c.id] = c
+        return gone
+
+    def all(self) -> list[Channel]:
+        """Live channels, then retired ones not live again, in the order they were opened."""
+        return list(self.live.values()) + [c for cid, c in self.retired.items() if cid not in self.live]

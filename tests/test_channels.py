@@ -1,0 +1,136 @@
+"""Several emitters at once, keyed by the DF record's frequency (engine/channels.py)."""
+import math
+
+import numpy as np
+import pytest
+
+from aoa_localizer.engine.channels import DEFAULT, channel_id
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.fleet import simulate_fleet
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+
+EMITTERS = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0), 868.3e6: (1800.0, 200.0)}
+
+
+def play(loc: Localizer, fleet, frequency=True):
+    estimates = []
+    loc.on_estimate = estimates.append
+    for kind, station, row in fleet.events():
+        if kind == "fix":
+            loc.add_fix(*row[:4], station=station)
+        else:
+            loc.add_bearing(*row[:3], station=station, frequency_hz=row[3] if frequency else math.nan)
+    loc.flush()
+    loc.finish()
+    return estimates
+
+
+def test_three_emitters_heard_at_the_same_stamps_are_each_found():
+    """A receiver's VFOs share one stamp: three records per stamp, one per carrier; each channel finds its
+    emitter, every estimate names its channel and frequency, and nothing is refused as repeated."""
+    fleet = simulate_fleet({"": SCENARIOS["seed"]}, EMITTERS, 0)
+    loc = Localizer(LocalizerConfig(seed=1))
+    estimates = play(loc, fleet)
+    assert "bearing_repeated" not in loc.rejected
+    frame = loc.datum_frame()
+    for f, truth in EMITTERS.items():
+        channel = loc.channels.live[channel_id(f)]
+        assert channel.frequency_hz == f and channel.estimate.channel == channel.id
+        e, n = frame.to_enu(channel.estimate.lat, channel.estimate.lon)
+        origin = fleet.scenario.datum
+        assert (origin[0], origin[1]) == pytest.approx((frame.lat0, frame.lon0), abs=1e-9)
+        assert math.hypot(e - truth[0], n - truth[1]) < 10.0
+        assert channel.estimate.points_used == 60
+    assert {est.channel for est in estimates} == {channel_id(f) for f in EMITTERS}
+    assert loc.channels.default.estimate is None  # no record came without a frequency
+
+
+def test_records_without_a_frequency_behave_exactly_as_before():
+    """Frequency 0 and NaN go to the default channel: the same estimates, bit for bit, as add_bearing without one."""
+    data = simulate("seed", 2)
+    runs = []
+    for freq in (None, 0.0, math.nan):
+        loc = Localizer(LocalizerConfig(seed=4))
+        for kind, row in data.events():
+            if kind == "fix":
+                loc.add_fix(*row[:4])
+            elif freq is None:
+                loc.add_bearing(*row[:3])
+            else:
+                loc.add_bearing(*row[:3], frequency_hz=freq)
+        loc.flush()
+        runs.append((loc.estimate.east, loc.estimate.north, loc.estimate.cov.tolist(), loc.estimate.channel))
+    assert runs[0] == runs[1] == runs[2] and runs[0][3] == DEFAULT
+
+
+def test_the_tolerance_decides_which_records_share_a_channel():
+    loc = Localizer(LocalizerConfig(channel_tolerance_hz=5000.0))
+    loc.add_fix(0.0, 39.1, 117.2)
+    loc.add_fix(1.0, 39.1, 117.2)
+    loc.add_bearing(0.1, 10.0, 90.0, frequency_hz=100e6)
+    loc.add_bearing(0.2, 10.0, 90.0, frequency_hz=100e6 + 4000)  # within 5 kHz of the channel's first frequency
+    loc.add_bearing(0.3, 10.0, 90.0, frequency_hz=100e6 + 20000)  # a new channel
+    assert sorted(loc.channels.live) == [DEFAULT, "f100000000", "f100020000"]
+    assert len(loc.channels.live["f100000000"].builder("").readings) == 2
+
+
+def test_more_channels_than_max_channels_are_refused_and_counted():
+    loc = Localizer(LocalizerConfig(max_channels=2))
+    loc.add_fix(0.0, 39.1, 117.2)
+    loc.add_fix(1.0, 39.1, 117.2)
+    for k, f in enumerate((1e8, 2e8, 3e8, 3e8, 1e8)):
+        loc.add_bearing(0.1 + 0.01 * k, 10.0, 90.0, frequency_hz=f)
+    assert loc.rejected["channel_limit"] == 2 and len(loc.channels.live) == 3  # the default one is not counted
+
+
+@pytest.mark.parametrize("freq", [-1.0, math.inf, -math.inf])
+def test_a_bad_frequency_is_refused_with_its_reason(freq):
+    loc = Localizer()
+    loc.add_fix(0.0, 39.1, 117.2)
+    loc.add_fix(1.0, 39.1, 117.2)
+    loc.add_bearing(0.5, 10.0, 90.0, frequency_hz=freq)
+    assert loc.rejected["bad_frequency"] == 1 and list(loc.channels.live) == [DEFAULT]
+
+
+def test_a_silent_channel_is_retired_with_its_last_estimate_and_a_new_one_starts_fresh():
+    """Emitter 446 MHz stops after half the drive; channel_timeout_s later it is retired (its estimate kept);
+    when it comes back it starts a new track under the same id."""
+    fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 1)
+    rows = fleet.bearings[""]
+    start, end = rows[0, 0], rows[-1, 0]
+    quiet = start + 0.3 * (end - start), start + 0.7 * (end - start)
+    gone = (rows[:, 3] == 446.0e6) & (rows[:, 0] > quiet[0]) & (rows[:, 0] < quiet[1])
+    fleet.bearings[""] = rows[~gone]
+    loc = Localizer(LocalizerConfig(seed=1, channel_timeout_s=0.2 * (end - start)))
+    play(loc, fleet)
+    retired = loc.channels.retired["f446000000"]
+    assert retired.retired and retired.estimate is not None and retired.estimate.points_used >= 10
+    back = loc.channels.live["f446000000"]
+    assert back is not retired and back.emitter.points_seen < 60 - retired.emitter.points_seen
+    assert [c.id for c in loc.channels.all()].count("f446000000") == 1  # the live one; the retired kept aside
+
+
+def test_the_json_line_carries_channel_and_frequency():
+    loc = Localizer(LocalizerConfig(seed=1))
+    fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0)}, 0)
+    play(loc, fleet)
+    line = loc.estimate.to_json_dict()
+    assert line["channel"] == "f433920000" and line["frequency_hz"] == 433.92e6
+    default = Localizer(LocalizerConfig(seed=1))
+    play(default, fleet, frequency=False)
+    line = default.estimate.to_json_dict()
+    assert line["channel"] == "default" and line["frequency_hz"] is None
+
+
+def test_each_channel_draws_from_its_own_generator():
+    """A channel's run depends on the seed and its id only, not on the other channels heard with it."""
+    both = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 0)
+    alone = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 0)
+    alone.bearings[""] = alone.bearings[""][alone.bearings[""][:, 3] == 446.0e6]
+    runs = []
+    for fleet in (both, alone):
+        loc = Localizer(LocalizerConfig(seed=3))
+        play(loc, fleet)
+        runs.append(loc.channels.live["f446000000"].estimate)
+    assert np.array_equal(runs[0].particles, runs[1].particles)

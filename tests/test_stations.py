@@ -1,0 +1,108 @@
+"""Several DF stations fused: moving vehicles with their own GPS tracks, and fixed sites (engine/station.py)."""
+import math
+
+import numpy as np
+from pymap3d import vincenty
+
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.crlb import ellipse_axes
+from aoa_localizer.engine.fleet import PAIR, simulate_fleet
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.localizer import Localizer
+
+TRUTH = (1200.0, 800.0)
+
+
+def run(fleet, only=None, loc=None):
+    loc = loc or Localizer(LocalizerConfig(seed=1))
+    for kind, station, row in fleet.events():
+        if only is not None and station not in only:
+            continue
+        if kind == "fix":
+            loc.add_fix(*row[:4], station=station)
+        else:
+            loc.add_bearing(*row[:3], station=station)
+    loc.flush()
+    loc.finish()
+    return loc
+
+
+def error(loc, fleet) -> float:
+    e, n = LocalFrame(*fleet.scenario.datum).to_enu(loc.estimate.lat, loc.estimate.lon)
+    return math.hypot(e - TRUTH[0], n - TRUTH[1])
+
+
+def test_two_vehicles_fix_the_emitter_better_than_either_alone():
+    """Each car sees the emitter over a narrow span of directions; their bearings cross at wide angles."""
+    fleet = simulate_fleet(PAIR, {0.0: TRUTH}, 0)
+    alone = [run(fleet, [name]) for name in PAIR]
+    both = run(fleet)
+    assert both.estimate.points_used == sum(a.estimate.points_used for a in alone) == 40
+    assert "bearing_repeated" not in both.rejected  # the two receivers' stamps coincide; each has its own clock
+    major = [ellipse_axes(loc.estimate.cov)[0] for loc in alone]
+    assert ellipse_axes(both.estimate.cov)[0] < 0.7 * min(major)
+    assert error(both, fleet) < 10.0
+    assert set(both.stations) == set(PAIR)
+
+
+def site_bearings(frame: LocalFrame, site_enu, stamps, sigma_deg, rng) -> np.ndarray:
+    s_lat, s_lon, _ = frame.to_geodetic(*site_enu, 0.0)
+    e_lat, e_lon, _ = frame.to_geodetic(*TRUTH, 0.0)
+    _, az = vincenty.vdist(s_lat, s_lon, e_lat, e_lon)
+    return float(az) + sigma_deg * rng.standard_normal(len(stamps))
+
+
+def test_a_fixed_site_gives_its_position_once_and_bearings_for_hours():
+    """A site declared at a position sends a bearing a minute for three hours, never a fix: every one is used,
+    and with one car's short drive the emitter is fixed far better than by the car alone."""
+    fleet = simulate_fleet({"car1": PAIR["car1"]}, {0.0: TRUTH}, 0)
+    frame = LocalFrame(*fleet.scenario.datum)
+    site = (2500.0, 0.0)  # across the car's long axis
+    stamps = np.arange(5.0, 3 * 3600.0, 60.0)
+    az = site_bearings(frame, site, stamps, 0.5, np.random.default_rng(0))
+    loc = Localizer(LocalizerConfig(seed=1))
+    lat, lon, _ = frame.to_geodetic(*site, 0.0)
+    assert loc.set_station_position("site", lat, lon)
+    events = [(t, "bearing", "site", (t, a, 90.0, 0.0)) for t, a in zip(stamps, az)]
+    events += [(row[0], kind, name, row) for kind, name, row in fleet.events()]
+    for _, kind, name, row in sorted(events, key=lambda e: e[0]):
+        if kind == "fix":
+            loc.add_fix(*row[:4], station=name)
+        else:
+            loc.add_bearing(*row[:3], station=name, frequency_hz=row[3])
+    loc.flush()
+    assert not loc.rejected, loc.rejected
+    car = run(fleet)
+    assert loc.estimate.bearings_used == car.estimate.bearings_used + len(stamps)
+    assert ellipse_axes(loc.estimate.cov)[0] < 0.5 * ellipse_axes(car.estimate.cov)[0]
+    assert error(loc, fleet) < 10.0
+    assert loc.frame == LocalFrame(lat, lon, 0.0)  # the site's position set the datum: it came first
+
+
+def test_a_fixed_station_takes_its_position_from_a_single_fix_and_keeps_a_configured_one_across_reset():
+    loc = Localizer()
+    loc.add_station("mast", fixed=True)
+    loc.add_bearing(1.0, 45.0, 90.0, station="mast")
+    assert loc.rejected["before_first_fix"] == 1
+    loc.add_fix(2.0, 39.1, 117.2, station="mast")  # one fix: no confirmation needed for a site, no track either
+    loc.add_bearing(250.0, 45.0, 90.0, station="mast")  # long after the fix: still placed at the site
+    assert len(loc.channels.default.builder("mast").readings) == 1
+    assert loc.set_station_position("hill", 39.11, 117.21)
+    assert not loc.set_station_position("bad", 95.0, 117.0) and loc.rejected["fix_bad_position"] == 1
+    loc.reset()
+    loc.add_bearing(260.0, 45.0, 90.0, station="hill")
+    assert len(loc.channels.default.builder("hill").readings) == 1
+
+
+def test_stations_keep_their_own_tracks():
+    """A fix of one station never places another's bearings."""
+    loc = Localizer()
+    loc.add_fix(0.0, 39.1, 117.2, station="a")
+    loc.add_fix(1.0, 39.1, 117.2, station="a")
+    loc.add_bearing(0.5, 10.0, 90.0, station="b")
+    assert loc.rejected["before_first_fix"] == 1
+    loc.add_fix(2.0, 39.1, 117.21, station="b")
+    loc.add_fix(3.0, 39.1, 117.21, station="b")
+    loc.add_bearing(2.5, 10.0, 90.0, station="b")
+    (reading,) = loc.channels.default.builder("b").readings
+    assert reading.east > 800  # at b's track, 0.01 deg of longitude east of a's
