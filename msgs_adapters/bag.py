@@ -81,33 +81,45 @@ class BagEvent:
     kind: str
     log_time_ns: int
     record: Any
+    station: str = ""  # the station whose topic carried it ("": the default topics)
 
 
-def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None):
-    """Write fixes (stamp, lat, lon, alt rows), DF records (stamp, azimuth, quality rows) and, for
-    simulated runs, the truth (/sim/truth, ENU in `map`) and the datum (/sim/datum) as a rosbag2 MCAP bag."""
+def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None, stations=None):
+    """Write fixes (stamp, lat, lon, alt rows), DF records (stamp, azimuth, quality[, frequency] rows) and, for
+    simulated runs, the truth (/sim/truth, ENU in `map`) and the datum (/sim/datum) as a rosbag2 MCAP bag.
+    `stations` ({NAME: (fixes, bearings)}) adds each station's on /NAME/gps/fix and /NAME/df/bearing."""
     ts = typestore()
     T = build.rosbags_types(ts)
-    messages = [(f[0], "fix", build.navsatfix(T, f[0], f[1], f[2], f[3])) for f in fixes]
-    messages += [(b[0], "bearing", build.df_record(T, b[0], b[1], b[2])) for b in bearings]
+    sources = {"": (fixes, bearings), **(stations or {})}
+    messages = []
+    for name, (its_fixes, its_bearings) in sources.items():
+        prefix = f"/{name}" if name else ""
+        messages += [(f[0], prefix + TOPICS["fix"], "fix", build.navsatfix(T, f[0], f[1], f[2], f[3]))
+                     for f in its_fixes]
+        messages += [(b[0], prefix + TOPICS["bearing"], "bearing", build.df_record(T, b[0], b[1], b[2], *b[3:4]))
+                     for b in its_bearings]
     t0 = min(m[0] for m in messages) if messages else 0.0
     if truth_enu is not None:
-        messages.append((t0, "truth", build.point_stamped(T, t0, float(truth_enu[0]), float(truth_enu[1]))))
+        truth = build.point_stamped(T, t0, float(truth_enu[0]), float(truth_enu[1]))
+        messages.append((t0, TOPICS["truth"], "truth", truth))
     if datum is not None:
-        messages.append((t0, "datum", build.navsatfix(T, t0, datum[0], datum[1], datum[2], frame_id="map")))
+        origin = build.navsatfix(T, t0, datum[0], datum[1], datum[2], frame_id="map")
+        messages.append((t0, TOPICS["datum"], "datum", origin))
     messages.sort(key=lambda m: m[0])
     with Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conns = {}
-        for kind in dict.fromkeys(k for _, k, _ in messages):
+        for topic, kind in dict.fromkeys((t, k) for _, t, k, _ in messages):
             latched = kind in ("truth", "datum")
-            conns[kind] = writer.add_connection(TOPICS[kind], _TYPES[kind], typestore=ts,
-                                                offered_qos_profiles=[_qos(reliable=True, latched=latched)])
+            conns[topic] = (writer.add_connection(topic, _TYPES[kind], typestore=ts,
+                                                  offered_qos_profiles=[_qos(reliable=True, latched=latched)]),
+                            _TYPES[kind])
         sealed = t0
-        for stamp, kind, msg in messages:
+        for stamp, topic, _, msg in messages:
             if stamp - sealed >= SEAL_EVERY_S:  # chunks of about a second, like a recording
                 seal_chunk(writer)
                 sealed = stamp
-            writer.write(conns[kind], int(round(stamp * 1e9)), ts.serialize_cdr(msg, _TYPES[kind]))
+            conn, msgtype = conns[topic]
+            writer.write(conn, int(round(stamp * 1e9)), ts.serialize_cdr(msg, msgtype))
         seal_chunk(writer)
 
 
@@ -154,28 +166,38 @@ def _needs(topics: dict[str, str]) -> str:
             f"{topics['bearing']} ({' or '.join(_ACCEPTED['bearing'])})")
 
 
-def read_bag(path: Path | str, topics: dict[str, str] | None = None) -> Iterator[BagEvent]:
+def read_bag(path: Path | str, topics: dict[str, str] | None = None,
+             stations: dict[str, dict[str, str]] | None = None) -> Iterator[BagEvent]:
     """Events of the given topics ({kind: topic}, default TOPICS) of a rosbag2 bag (MCAP or sqlite3, split,
-    compressed), file by file in recording order, each file in log-time order.
+    compressed), file by file in recording order, each file in log-time order. `stations` ({NAME: {kind: topic}},
+    kinds fix, bearing and optionally heading) replace the default fix, bearing and heading topics; their events
+    carry the station's name.
 
     Raises BagTopicsError before any event when the bag lacks the fix or the bearing topic, BagError for an
     unreadable bag, and for a damaged one after yielding every message that could be trusted.
     """
     topics = {**TOPICS, **(topics or {})}
-    by_topic = {t: k for k, t in topics.items()}
+    by_topic = {t: (k, "") for k, t in topics.items()}
+    needed = [topics]
+    if stations:
+        by_topic = {t: (k, "") for k, t in topics.items() if k not in ("fix", "bearing", "heading")}
+        by_topic.update({t: (k, name) for name, its in stations.items() for k, t in its.items()})
+        needed = list(stations.values())
     try:
         with BagFiles(path) as files:
             reader = RawReader(files)
             inventory = reader.topics()
-            if not {topics["fix"], topics["bearing"]} <= {t.name for t in inventory}:
-                raise BagTopicsError(f"{path}: no usable fix and bearing topics; it has {describe_topics(inventory)}; "
-                                     f"the engine needs {_needs(topics)} (choose others with --fix-topic and "
-                                     "--bearing-topic)")
+            for need in needed:
+                if not {need["fix"], need["bearing"]} <= {t.name for t in inventory}:
+                    raise BagTopicsError(f"{path}: no usable fix and bearing topics; it has "
+                                         f"{describe_topics(inventory)}; the engine needs {_needs(need)} (choose "
+                                         "others with --fix-topic and --bearing-topic, or --station)")
             ts, count = typestore(), 0
             for msg in reader.messages(set(by_topic)):
-                kind = event_kind(by_topic[msg.topic], msg.msgtype)
+                of_kind, station = by_topic[msg.topic]
+                kind = event_kind(of_kind, msg.msgtype)
                 if kind == "foreign":
-                    yield BagEvent(kind, msg.log_time, (msg.topic, msg.msgtype))
+                    yield BagEvent(kind, msg.log_time, (msg.topic, msg.msgtype), station)
                 else:
                     try:
                         decoded = ts.deserialize_cdr(msg.data, msg.msgtype)
@@ -184,7 +206,7 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None) -> Iterator
                                              f"({type(exc).__name__}: {exc})")
                         reader.lost += 1
                         continue
-                    yield BagEvent(kind, msg.log_time, _convert(kind, decoded))
+                    yield BagEvent(kind, msg.log_time, _convert(kind, decoded), station)
                 count += 1
     except BagFilesError as exc:
         raise BagError(str(exc)) from exc

@@ -4,6 +4,7 @@ The outputs of the node (pose, fix, particles, markers, diagnostics) are built w
 from __future__ import annotations
 
 import math
+import zlib
 from types import SimpleNamespace
 
 import numpy as np
@@ -43,13 +44,13 @@ def rclpy_types() -> SimpleNamespace:
     )
     from nav_msgs.msg import Path
     from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
-    from std_msgs.msg import ColorRGBA, Header
+    from std_msgs.msg import ColorRGBA, Header, String
     from visualization_msgs.msg import Marker, MarkerArray
 
     return SimpleNamespace(**{c.__name__: c for c in (
         Time, Header, NavSatFix, NavSatStatus, Vector3Stamped, Vector3, PointStamped, Point, Pose, PoseArray,
         PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, ColorRGBA, Marker, MarkerArray,
-        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu)})
+        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu, String)})
 
 
 def header(T, stamp: float, frame_id: str):
@@ -132,30 +133,45 @@ def particle_array(T, est, frame_id: str = "map"):
     return T.PoseArray(header=header(T, est.stamp, frame_id), poses=poses)
 
 
+# Each frequency channel's estimate and ellipse in its own colour (the default channel keeps red and amber).
+PALETTE = ((0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.17, 0.63, 0.17), (0.84, 0.15, 0.16), (0.58, 0.4, 0.74),
+           (0.55, 0.34, 0.29), (0.89, 0.47, 0.76), (0.5, 0.5, 0.5), (0.74, 0.74, 0.13), (0.09, 0.75, 0.81))
+
+
+def channel_colour(channel: str) -> tuple[float, float, float] | None:
+    """A channel's colour, stable across runs (from its id); None for the default channel."""
+    if channel == "default":
+        return None
+    return PALETTE[zlib.crc32(channel.encode()) % len(PALETTE)]
+
+
 def markers(T, est, rays, ring, frame_id: str = "map"):
     """emitter/markers: the estimate (sphere), its 95 % ellipse (line strip through `ring`, (P, 2) east/north
-    points), the bearing rays (line list; rays: (M, 3) antenna east, north and ENU bearing of the latest points)."""
+    points), the bearing rays (line list; rays: (M, 3) antenna east, north and ENU bearing of the latest points).
+    A frequency channel's markers have its id as namespace prefix and its colour (channel_colour)."""
     h = header(T, est.stamp, frame_id)
     colour = lambda r, g, b: T.ColorRGBA(r=r, g=g, b=b, a=1.0)  # noqa: E731
+    own = channel_colour(est.channel)
+    prefix = "" if own is None else f"{est.channel}/"
     sphere = T.Marker(
         header=h,
-        ns="estimate",
+        ns=prefix + "estimate",
         id=0,
         type=2,
         action=0,
         scale=T.Vector3(x=4.0, y=4.0, z=4.0),
-        color=colour(1.0, 0.1, 0.1),
+        color=colour(*(own or (1.0, 0.1, 0.1))),
         pose=T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0)),
     )
     ring = [T.Point(x=float(x), y=float(y), z=0.0) for x, y in ring]
     ellipse = T.Marker(
         header=h,
-        ns="ellipse95",
+        ns=prefix + "ellipse95",
         id=1,
         type=4,
         action=0,
         scale=T.Vector3(x=1.0),
-        color=colour(1.0, 0.8, 0.0),
+        color=colour(*(own or (1.0, 0.8, 0.0))),
         pose=T.Pose(orientation=T.Quaternion(w=1.0)),
         points=ring,
     )
@@ -168,7 +184,7 @@ def markers(T, est, rays, ring, frame_id: str = "map"):
         ]
     ray_marker = T.Marker(
         header=h,
-        ns="bearings",
+        ns=prefix + "bearings",
         id=2,
         type=5,
         action=0,
@@ -180,13 +196,18 @@ def markers(T, est, rays, ring, frame_id: str = "map"):
     return T.MarkerArray(markers=[sphere, ellipse, ray_marker])
 
 
-def diagnostic_array(T, stamp: float, name: str, level: int, message: str, values: dict, hardware_id: str = ""):
-    """/diagnostics with one status; values become KeyValue strings."""
-    status = T.DiagnosticStatus(
-        level=bytes([level]),
-        name=name,
-        message=message,
-        hardware_id=hardware_id,
-        values=[T.KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
-    )
-    return T.DiagnosticArray(header=header(T, stamp, ""), status=[status])
+def diagnostic_array(T, stamp: float, name: str, level: int, message: str, values: dict, hardware_id: str = "",
+                     more: list | None = None):
+    """/diagnostics with one status, and one more per (name, level, message, values) of `more`; values become
+    KeyValue strings."""
+    statuses = [
+        T.DiagnosticStatus(
+            level=bytes([lv]),
+            name=nm,
+            message=msg,
+            hardware_id=hardware_id,
+            values=[T.KeyValue(key=str(k), value=str(v)) for k, v in vals.items()],
+        )
+        for nm, lv, msg, vals in [(name, level, message, values)] + list(more or [])
+    ]
+    return T.DiagnosticArray(header=header(T, stamp, ""), status=statuses)

@@ -39,17 +39,19 @@ def test_repeated_restarts_within_the_window_are_an_error_and_age_out():
 def test_the_path_keeps_the_latest_fixes_and_reports_only_news():
     fixes = []
     path = VehiclePath(3, on_valid_fix=lambda: fixes.append(1))
-    assert path.new_path() is None
+    assert path.new_paths() == {}
     for k in range(5):
         path.on_fix(float(k), 10.0 * k, 0.0)
-    assert path.new_path() == [(2.0, 20.0, 0.0), (3.0, 30.0, 0.0), (4.0, 40.0, 0.0)] and len(fixes) == 5
-    assert path.new_path() is None  # nothing new since
+    assert path.new_paths() == {"": [(2.0, 20.0, 0.0), (3.0, 30.0, 0.0), (4.0, 40.0, 0.0)]} and len(fixes) == 5
+    assert path.new_paths() == {}  # nothing new since
+    path.on_fix(4.5, 7.0, 8.0, "car2")  # each station its own path
+    assert path.new_paths() == {"car2": [(4.5, 7.0, 8.0)]}
     path.resize(1)
     path.on_fix(5.0, 50.0, 0.0)
-    assert path.new_path() == [(5.0, 50.0, 0.0)]
+    assert path.new_paths() == {"": [(5.0, 50.0, 0.0)]}
     path.resize(0)
     path.on_fix(6.0, 60.0, 0.0)
-    assert path.new_path() is None  # path_length 0: not published
+    assert path.new_paths() == {}  # path_length 0: not published
 
 
 @pytest.mark.parametrize(

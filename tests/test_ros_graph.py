@@ -382,6 +382,14 @@ def test_node_refuses_to_start_with_an_invalid_parameter(tmp_path, domain):
     (["--params-file", "PARAMS"], "num_particle: unknown parameter; did you mean num_particles?"),
     (["-p", "nosuch:=1"], "nosuch: unknown parameter"),
     (["-p", "diagnostics_period_s:=0.0"], "diagnostics_period_s out of range Min: 0.01"),
+    (["-p", "stations:=[car1,2car]"], "stations must be a list of names"),
+    (["-p", "stations:=[car1,car1]"], "stations lists car1 more than once"),
+    (["-p", "stations:=[car1]", "-p", "fixed_stations:=[mast]"], "fixed_stations mast not in stations"),
+    (["-p", "stations:=[mast]", "-p", "fixed_stations:=[mast]", "-p", "mast.position:=[39.1]"],
+     "mast.position must be [lat, lon] or [lat, lon, alt]"),
+    (["-p", "stations:=[mast]", "-p", "fixed_stations:=[mast]", "-p", "mast.position:=[0.0,0.0]"],
+     "mast.position [0.0, 0.0] is not a usable position"),
+    (["-p", "stations:=[car1]", "-p", "car1.position:=[39.1,117.2]"], "car1.position: unknown parameter"),
 ])
 def test_the_node_refuses_unknown_names_and_bad_node_only_values_at_start(tmp_path, domain, args, words):
     """ROS-package issue: misspelt names ran with defaults, diagnostics_period_s:=0 flooded /diagnostics and -1
@@ -635,3 +643,61 @@ def test_two_ctrl_c_in_a_row_stop_the_launcher_cleanly(domain):
         _, err = p.communicate(timeout=30)
         assert p.returncode == 2 and "stopped by SIGINT" in err and "Traceback" not in err, err
         assert wait_for(lambda: no_process_with(marker), 10)
+
+
+def test_two_stations_and_two_emitters_each_get_their_topics_summary_and_status(spawn, domain):
+    """`stations:=[car1,car2]`: each car on its own NAME/gps/fix and NAME/df/bearing, both hearing two carriers at
+    the same stamps; every channel's pose under emitter/<channel>/, the summary on emitter/channels, a status per
+    channel, a path per car, and nothing on the default channel's emitter/pose."""
+    from aoa_localizer.engine.fleet import PAIR, simulate_fleet
+
+    emitters = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}
+    fleet = simulate_fleet(PAIR, emitters, 0)
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1", "-p", "stations:=[car1,car2]",
+                    "-p", "input_reliability:=reliable", "-p", "diagnostics_period_s:=0.3"], domain)
+    with client(domain) as (node, executor):
+        got: dict = {"status": {}, "paths": {}}
+        latched = QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+        for f in emitters:
+            cid = f"f{int(f)}"
+            node.create_subscription(T.PoseWithCovarianceStamped, f"emitter/{cid}/pose",
+                                     lambda m, cid=cid: got.update({cid: m}), latched)
+        node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: got.update(default=m),
+                                 latched)
+        node.create_subscription(T.String, "emitter/channels", lambda m: got.update(summary=json.loads(m.data)),
+                                 latched)
+        node.create_subscription(T.DiagnosticArray, "/diagnostics",
+                                 lambda m: got["status"].update({st.name: st for st in m.status}), 10)
+        for car in PAIR:
+            node.create_subscription(T.Path, f"{car}/vehicle/path", lambda m, car=car: got["paths"].update({car: m}),
+                                     10)
+        reliable = QoSProfile(depth=1000)
+        pubs = {(car, kind): node.create_publisher(msg, f"{car}/{topic}", reliable) for car in PAIR
+                for kind, msg, topic in (("fix", T.NavSatFix, "gps/fix"), ("bearing", T.Vector3Stamped, "df/bearing"))}
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs.values()), 10)
+        spin_until(executor, lambda: False, 1.0)
+        for kind, car, row in fleet.events():
+            if kind == "fix":
+                msg = build.navsatfix(T, row[0], row[1], row[2], row[3])
+            else:
+                msg = build.df_record(T, row[0], row[1], row[2], row[3])
+            pubs[(car, kind)].publish(msg)
+            executor.spin_once(timeout_sec=0.001)
+        ids = {f"f{int(f)}" for f in emitters}
+        assert spin_until(executor, lambda: ids <= set(got) and ids <= set(got.get("summary", {}).get("channels", {})),
+                          15), open(node_p.log_path).read()
+        spin_until(executor, lambda: False, 1.5)
+        frame = LocalFrame(*DATUM)
+        for f, truth in emitters.items():
+            cid = f"f{int(f)}"
+            entry = got["summary"]["channels"][cid]
+            assert entry["topics"] == f"emitter/{cid}/" and entry["frequency_hz"] == f and entry["state"] == "live"
+            e, n = frame.to_enu(entry["lat"], entry["lon"])
+            assert math.hypot(e - truth[0], n - truth[1]) < 15.0
+            assert got[cid].header.frame_id == "map"
+            status = got["status"][f"aoa_localizer: localizer channel {cid}"]
+            assert status.level == b"\x00" and diagnostics_values(T.DiagnosticArray(status=[status]))[
+                status.name]["frequency_hz"] == f"{f:.0f}"
+        assert "default" not in got  # nothing came without a frequency
+        assert set(got["paths"]) == set(PAIR)
+    assert node_p.poll() is None

@@ -63,7 +63,7 @@ def test_a_fixed_site_gives_its_position_once_and_bearings_for_hours():
     loc = Localizer(LocalizerConfig(seed=1))
     lat, lon, _ = frame.to_geodetic(*site, 0.0)
     assert loc.set_station_position("site", lat, lon)
-    events = [(t, "bearing", "site", (t, a, 90.0, 0.0)) for t, a in zip(stamps, az)]
+    events = [(t, "bearing", "site", (t, a, 90.0, 0.0)) for t, a in zip(stamps, az, strict=True)]
     events += [(row[0], kind, name, row) for kind, name, row in fleet.events()]
     for _, kind, name, row in sorted(events, key=lambda e: e[0]):
         if kind == "fix":

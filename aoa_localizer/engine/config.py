@@ -38,6 +38,7 @@ class Spec:
     choices: tuple[str, ...] = ()
     optional: bool = False
     read_only: bool = False
+    items: type = float  # a list's elements: finite numbers, or (str) names
 
     def check(self, name: str, value: Any):
         """Raise ConfigError naming the parameter when `value` breaks this declaration."""
@@ -54,12 +55,16 @@ class Spec:
         if self.kind is float:
             return _finite_number(value)
         if self.kind is list:
-            return isinstance(value, Sequence) and not isinstance(value, str) and all(map(_finite_number, value))
+            element = _name if self.items is str else _finite_number
+            return isinstance(value, Sequence) and not isinstance(value, str) and all(map(element, value)) and (
+                self.low is None or self.low <= len(value)) and (self.high is None or len(value) <= self.high)
         if not isinstance(value, str):
             return False
         return value in self.choices if self.choices else bool(value) and not any(c.isspace() for c in value)
 
     def _in_range(self, value) -> bool:
+        if self.kind is list:  # bounds on its length, checked with the type
+            return True
         if self.low is not None and (value <= self.low if self.low_open else value < self.low):
             return False
         return self.high is None or (value < self.high if self.high_open else value <= self.high)
@@ -71,7 +76,10 @@ class Spec:
         if self.kind is bool:
             return "true or false"
         if self.kind is list:
-            return "a list of finite numbers"
+            what = "names (letters, digits, _; not starting with a digit)" if self.items is str else "finite numbers"
+            if self.low is not None and self.high is not None:
+                return f"a list of {self.low:g} to {self.high:g} {what}"
+            return f"a list of {what}"
         what = "an integer" if self.kind is int else "a finite number"
         if self.low is not None and self.high is not None:
             span = f"{'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}"
@@ -81,6 +89,11 @@ class Spec:
         elif self.high is not None:
             what += f" {'<' if self.high_open else '<='} {self.high:g}"
         return what + (" or unset" if self.optional else "")
+
+
+def _name(value) -> bool:
+    """A ROS name token: it can name a topic namespace (a station's inputs)."""
+    return isinstance(value, str) and value.isidentifier() and value.isascii()
 
 
 def _finite_number(value) -> bool:

@@ -79,7 +79,7 @@ class ImuHeading:
         """False (not used) for a stamp not after the newest one."""
         return self.samples.add(stamp, yaw_rad)
 
-    def at(self, _track: GpsTrack, stamp: float, north_angle: float) -> float | None:
+    def at(self, _track: object, stamp: float, north_angle: float) -> float | None:
         t, h = self.samples.t, self.samples.h
         k = bisect.bisect_left(t, stamp)
         if 0 < k < len(t) and t[k] - t[k - 1] <= self.cfg.heading_hold_s:

@@ -275,8 +275,9 @@ class Localizer:
             self._reject(why)
             return False
         self.add_station(name, fixed=True)
-        self._fixed_stations[name] = (lat, lon, alt, sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 else 0.0)
-        self._place(self.stations[name], *self._fixed_stations[name])
+        position = (lat, lon, alt, sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 else 0.0)
+        self._fixed_stations[name] = position
+        self._place(self.stations[name], *position)
         return True
 
     def _place(self, st: Station, lat: float, lon: float, alt: float, sigma_m: float):
@@ -564,9 +565,13 @@ class Localizer:
             return float(azimuth_to_enu(azimuth, north_angle))
         if cfg.bearing_reference == "magnetic_north":
             return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle))
-        if st.heading is None:  # built for bearing_reference: vehicle
-            return None
-        heading = st.heading.at(st.track, stamp, north_angle)  # the forward axis, ENU in the map plane
+        track, source = st.track, st.heading
+        if isinstance(source, ImuHeading):
+            heading = source.at(track, stamp, north_angle)
+        elif isinstance(source, TrackHeading) and isinstance(track, GpsTrack):  # a fixed site has no course
+            heading = source.at(track, stamp, north_angle)
+        else:
+            return None  # the forward axis, ENU in the map plane
         if heading is None:
             return None
         return float(wrap_pi(heading - math.radians(azimuth + cfg.mount_offset_deg)))

@@ -31,6 +31,7 @@ from aoa_localizer.tools.cli import (
     HelpFormatter,
     add_engine_args,
     add_topic_args,
+    bag_stations,
     bag_topics,
     config_from_args,
     setup_logging,
@@ -208,13 +209,14 @@ def make_report(args) -> int:
             raise ReportError(f"no such input: {path}")
     try:
         cfg = config_from_args(args, _made_with(args.input) if jsonl else None)
+        stations = bag_stations(args)
     except ConfigError as exc:
         raise ReportError(str(exc)) from exc
     trace = Trace()
     loc = Localizer(cfg, observer=trace)
     estimates: list[Estimate] = []
     try:
-        run = run_bag(bag, bag_topics(args), loc, estimates.append, desc="report")
+        run = run_bag(bag, bag_topics(args), loc, estimates.append, desc="report", stations=stations)
     except BagError as exc:
         raise ReportError(str(exc)) from exc
     if run.damage:

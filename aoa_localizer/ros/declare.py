@@ -2,8 +2,10 @@
 read_only, and the values checked against it, for every node of the package."""
 from __future__ import annotations
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 from aoa_localizer.engine.config import ConfigError, ParameterSpec, unknown_names
 
@@ -22,6 +24,8 @@ def descriptor(p: ParameterSpec) -> ParameterDescriptor:
         elif spec.kind is float:
             d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high),
                                                          step=0.0)]
+    if spec.kind is list:
+        d.type = ParameterType.PARAMETER_STRING_ARRAY if spec.items is str else ParameterType.PARAMETER_DOUBLE_ARRAY
     if spec.choices:
         d.additional_constraints = f"one of {', '.join(spec.choices)}"
     return d
@@ -30,9 +34,20 @@ def descriptor(p: ParameterSpec) -> ParameterDescriptor:
 def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
     """Declare every spec on `node` and return the values; raises ConfigError (the caller refuses to start) for a
     value outside its declaration when `check`."""
+    values = {}
     for p in specs:
-        node.declare_parameter(p.name, p.default, descriptor(p))
-    values = {p.name: node.get_parameter(p.name).value for p in specs}
+        d = descriptor(p)
+        if p.spec.kind is list:  # an empty list has no type of its own: declared by type, unset means the default
+            kind = Parameter.Type.STRING_ARRAY if p.spec.items is str else Parameter.Type.DOUBLE_ARRAY
+            node.declare_parameter(p.name, kind, d)
+        else:
+            node.declare_parameter(p.name, p.default, d)
+        try:
+            values[p.name] = node.get_parameter(p.name).value
+        except ParameterUninitializedException:
+            values[p.name] = p.default
+        if p.spec.kind is list:
+            values[p.name] = list(values[p.name])
     if check:
         for p in specs:
             p.spec.check(p.name, values[p.name])

@@ -2,18 +2,22 @@
 
     python -m aoa_localizer.node --ros-args -p algorithm:=afsa --params-file params.yaml -r df/bearing:=/df1/bearing
 
-Inputs `gps/fix`, `df/bearing` (sensor-data QoS: reliable and best-effort publishers both connect);
-outputs `emitter/pose` (latched), `emitter/fix`, `emitter/particles`, `emitter/markers`, `/diagnostics`
-at 1 Hz; services `~/reset` and `~/reset_datum`. Every LocalizerConfig field is a parameter (a filter's own
-settings as `<filter>.*`); a changed parameter restarts the track with the new settings, an invalid one is
-refused with its reason.
+Inputs `gps/fix`, `df/bearing` (sensor-data QoS: reliable and best-effort publishers both connect), or
+`NAME/gps/fix`, `NAME/df/bearing` per station of `stations`; outputs `emitter/pose` (latched), `emitter/fix`,
+`emitter/particles`, `emitter/markers`, the same under `emitter/<channel>/` per frequency channel, the latched
+summary `emitter/channels`, `/diagnostics` at 1 Hz; services `~/reset` and `~/reset_datum`. Every
+LocalizerConfig field is a parameter (a filter's own settings as `<filter>.*`); a changed parameter restarts the
+track with the new settings, an invalid one is refused with its reason.
 """
 
 from __future__ import annotations
 
+import json
 import logging
+import math
 import sys
 import time
+from types import SimpleNamespace
 from typing import Any
 
 import rclpy
@@ -25,14 +29,15 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
-from aoa_localizer.engine.config import ConfigError, LocalizerConfig, parameter_specs
+from aoa_localizer.engine.channels import DEFAULT
+from aoa_localizer.engine.config import ConfigError, LocalizerConfig, ParameterSpec, parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
 from aoa_localizer.engine.input_guard import StampGaps
-from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.localizer import REASONS, Localizer
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.ros.declare import declare, refuse_unknown
 from aoa_localizer.ros.node_health import NodeHealth
-from aoa_localizer.ros.node_params import NODE_PARAMS
+from aoa_localizer.ros.node_params import NODE_PARAMS, STATION_POSITION
 from aoa_localizer.ros.ros_main import run_node
 from aoa_localizer.ros.vehicle_path import VehiclePath
 from msgs_adapters import build
@@ -90,7 +95,8 @@ class LocalizerNode(Node):
         engine_log.setLevel(logging.INFO)
         engine_log.propagate = False  # the ROS logger prints it; no second copy through the root handler
         declare(self, parameter_specs(), check=False)  # the engine's values are checked together, by its config
-        declare(self, NODE_PARAMS)  # raises ConfigError: the caller refuses to start
+        node_values = declare(self, NODE_PARAMS)  # raises ConfigError: the caller refuses to start
+        self.station_names, self.fixed_positions = self._stations(node_values)
         refuse_unknown(self)
         self.cfg = self._config_from({})  # raises ConfigError too
         self.map_frame = self.get_parameter("map_frame").value
@@ -99,7 +105,10 @@ class LocalizerNode(Node):
         self.datum_sent: Any = None  # the LocalFrame last published on emitter/datum
         self.health = NodeHealth(self._now(), self.get_parameter("stale_after_s").value)
         self.path = VehiclePath(self.get_parameter("path_length").value, lambda: self.health.valid_fix(self._now()))
-        self.loc = Localizer(self.cfg, observer=self.path)
+        self.made: dict[str, Any] = {}  # the newest estimate of each channel made by the input being handled
+        self.loc = self._new_localizer(self.cfg)
+        self.channel_pubs: dict[str, SimpleNamespace] = {}
+        self.summary_sent: Any = None  # the channel summary last published on emitter/channels
         self.T = build.rclpy_types()
         self.counts = {
             "fixes_received": 0,
@@ -109,7 +118,7 @@ class LocalizerNode(Node):
             "bearings_lost": 0,
         }
         self.lost_reported = 0  # fixes_lost + bearings_lost at the last diagnostics
-        self.df_gaps = StampGaps()
+        self.df_gaps: dict[str, StampGaps] = {}  # per station (a receiver's channels share its stamps)
         self.callback_s: list[float] = []
         self.pending_params: dict = {}  # the first parameters of a group set together, held until it is complete
         self.callback_max_s = 0.0
@@ -125,25 +134,29 @@ class LocalizerNode(Node):
         latched = QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
         )
-        self.fix_sub = self.create_subscription(
-            self.T.NavSatFix, "gps/fix", self.on_fix, sensor, event_callbacks=self._lost_counter("fixes_lost")
-        )
+        self.latched = latched
         bearing_type = (
             self.T.Vector3Stamped if self.cfg.bearing_encoding == "df_record" else self.T.PoseWithCovarianceStamped
         )
-        self.bearing_sub = self.create_subscription(
-            bearing_type, "df/bearing", self.on_bearing, sensor, event_callbacks=self._lost_counter("bearings_lost")
-        )
-        # A vehicle-relative DF array with an IMU: the heading comes on heading/imu (REP-103 yaw).
-        self.heading_sub = None
-        if self.cfg.bearing_reference == "vehicle" and self.cfg.heading_source == "imu":
-            self.heading_sub = self.create_subscription(self.T.Imu, "heading/imu", self.on_heading, sensor)
-        self.pub_pose = self.create_publisher(self.T.PoseWithCovarianceStamped, "emitter/pose", latched)
-        self.pub_fix = self.create_publisher(self.T.NavSatFix, "emitter/fix", 10)
-        self.pub_particles = self.create_publisher(self.T.PoseArray, "emitter/particles", 10)
-        self.pub_markers = self.create_publisher(self.T.MarkerArray, "emitter/markers", 10)
+        self.subs: list[tuple[Any, str]] = []  # (subscription, the message type it expects)
+        self.pub_path: dict[str, Any] = {}
+        for name in self.station_names:  # relative names: namespaces and remaps apply
+            prefix = f"{name}/" if name else ""
+            fix_sub = self.create_subscription(self.T.NavSatFix, prefix + "gps/fix",
+                                               lambda msg, station=name: self.on_fix(msg, station), sensor,
+                                               event_callbacks=self._lost_counter("fixes_lost"))
+            bearing_sub = self.create_subscription(bearing_type, prefix + "df/bearing",
+                                                   lambda msg, station=name: self.on_bearing(msg, station), sensor,
+                                                   event_callbacks=self._lost_counter("bearings_lost"))
+            self.subs += [(fix_sub, FIX_TYPE), (bearing_sub, INPUT_TYPES[self.cfg.bearing_encoding])]
+            # A vehicle-relative DF array with an IMU: the heading comes on heading/imu (REP-103 yaw).
+            if self.cfg.bearing_reference == "vehicle" and self.cfg.heading_source == "imu":
+                self.create_subscription(self.T.Imu, prefix + "heading/imu",
+                                         lambda msg, station=name: self.on_heading(msg, station), sensor)
+            self.pub_path[name] = self.create_publisher(self.T.Path, prefix + "vehicle/path", 1)
+        self.channel_pubs[DEFAULT] = self._channel_publishers("emitter/")
+        self.pub_channels = self.create_publisher(self.T.String, "emitter/channels", latched)
         self.pub_datum = self.create_publisher(self.T.NavSatFix, "emitter/datum", latched)
-        self.pub_path = self.create_publisher(self.T.Path, "vehicle/path", 1)
         self.pub_diag = self.create_publisher(self.T.DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.create_service(Trigger, "~/reset_datum", self.on_reset_datum)
@@ -154,6 +167,53 @@ class LocalizerNode(Node):
             f"started: algorithm {self.cfg.algorithm}, N = {self.cfg.num_particles}, "
             f"bearing encoding {self.cfg.bearing_encoding}"
         )
+
+    def _stations(self, values: dict) -> tuple[list[str], dict[str, list[float]]]:
+        """The station names (or [""]: the single default station) and the fixed ones' configured positions,
+        declared as `<NAME>.position`; ConfigError for duplicates or a fixed station not in `stations`."""
+        names, fixed = values["stations"], values["fixed_stations"]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ConfigError(f"stations lists {', '.join(twice)} more than once")
+        stray = [n for n in fixed if n not in names]
+        if stray:
+            raise ConfigError(f"fixed_stations {', '.join(stray)} not in stations {names}")
+        specs = [ParameterSpec(f"{n}.position", STATION_POSITION.default, STATION_POSITION.spec) for n in fixed]
+        given = declare(self, specs)
+        positions = {}
+        for n in fixed:
+            pos = given[f"{n}.position"]
+            if pos and len(pos) not in (2, 3):
+                raise ConfigError(f"{n}.position must be [lat, lon] or [lat, lon, alt], got {pos}")
+            positions[n] = pos
+        return names or [""], positions
+
+    def _new_localizer(self, cfg: LocalizerConfig) -> Localizer:
+        """A Localizer with the node's stations declared (fixed ones at their configured positions)."""
+        loc = Localizer(cfg, observer=self.path, on_estimate=self._made)
+        for name, pos in self.fixed_positions.items():
+            loc.add_station(name, fixed=True)
+            if pos and not loc.set_station_position(name, *pos):
+                reason = next(iter(loc.rejected))
+                raise ConfigError(f"{name}.position {pos} is not a usable position: {REASONS[reason]}")
+        return loc
+
+    def _gaps(self, station: str) -> StampGaps:
+        gaps = self.df_gaps.get(station)
+        if gaps is None:
+            gaps = self.df_gaps[station] = StampGaps()
+        return gaps
+
+    def _made(self, est):
+        self.made[est.channel] = est
+
+    def _channel_publishers(self, prefix: str) -> SimpleNamespace:
+        """pose (latched), fix, particles and markers under `prefix` (emitter/ or emitter/<channel>/)."""
+        T = self.T
+        return SimpleNamespace(pose=self.create_publisher(T.PoseWithCovarianceStamped, prefix + "pose", self.latched),
+                               fix=self.create_publisher(T.NavSatFix, prefix + "fix", 10),
+                               particles=self.create_publisher(T.PoseArray, prefix + "particles", 10),
+                               markers=self.create_publisher(T.MarkerArray, prefix + "markers", 10))
 
     def destroy_node(self):
         engine_log = logging.getLogger("aoa_localizer")
@@ -197,7 +257,7 @@ class LocalizerNode(Node):
             return SetParametersResult(successful=True)
         self.pending_params = {}
         old = self.loc
-        self.cfg, self.loc = cfg, Localizer(cfg, observer=self.path)
+        self.cfg, self.loc = cfg, self._new_localizer(cfg)
         if changes.keys() & DATUM_PARAMS:
             self.path.clear()  # drawn in the old map frame
         else:
@@ -226,7 +286,7 @@ class LocalizerNode(Node):
 
         return SubscriptionEventCallbacks(message_lost=on_lost)
 
-    def on_fix(self, msg):
+    def on_fix(self, msg, station: str = ""):
         t0 = time.perf_counter()
         self.counts["fixes_received"] += 1
         try:
@@ -234,35 +294,36 @@ class LocalizerNode(Node):
         except (AttributeError, TypeError, ValueError):
             self.counts["adapter_errors"] += 1
             return
-        self._publish(self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m))
+        self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
+        self._publish_made()
         self._publish_datum()
         self._timed(t0)
 
-    def on_heading(self, msg):
+    def on_heading(self, msg, station: str = ""):
         try:
             r = heading_from_imu(msg)
         except (AttributeError, TypeError, ValueError, IndexError):
             self.counts["adapter_errors"] += 1
             return
-        self.loc.add_heading(r.stamp, r.yaw_rad)
+        self.loc.add_heading(r.stamp, r.yaw_rad, station=station)
 
-    def on_bearing(self, msg):
+    def on_bearing(self, msg, station: str = ""):
         t0 = time.perf_counter()
         self.counts["bearings_received"] += 1
         self.health.reading(self._now())
         try:
             if self.cfg.bearing_encoding == "df_record":
                 r = df_from_vector3stamped(msg)
-                self.df_gaps.add(r.stamp)
-                est = self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality)
+                self._gaps(station).add(r.stamp)
+                self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz)
             else:
-                r = bearing_from_pose(msg)
-                self.df_gaps.add(r.stamp)
-                est = self.loc.add_bearing_enu(r.stamp, r.yaw_rad, r.variance_rad2)
+                p = bearing_from_pose(msg)
+                self._gaps(station).add(p.stamp)
+                self.loc.add_bearing_enu(p.stamp, p.yaw_rad, p.variance_rad2, station=station)
         except (AttributeError, TypeError, ValueError):
             self.counts["adapter_errors"] += 1
             return
-        self._publish(est)
+        self._publish_made()
         self._timed(t0)
 
     def _timed(self, t0: float):
@@ -271,17 +332,54 @@ class LocalizerNode(Node):
         self.callback_max_s = max(self.callback_max_s, dt)
 
     # -- outputs ------------------------------------------------------------------------------------
+    def _publish_made(self):
+        """Each channel's newest estimate made by the input just handled (a fix can close several channels'
+        points), on its topics; the summary when a channel is new."""
+        made, self.made = self.made, {}
+        for est in made.values():
+            self._publish(est)
+        if any(self.summary_sent is None or c not in self.summary_sent for c in made):
+            self._publish_summary()
+
     def _publish(self, est):
-        if est is None:
-            return
         T = self.T
         frame = self.map_frame
-        self.pub_pose.publish(build.emitter_pose(T, est, frame))
-        self.pub_fix.publish(build.emitter_fix(T, est, self.loc.datum_frame().alt0, self.emitter_frame))
-        self.pub_particles.publish(build.particle_array(T, est, frame))
-        rays = self.loc.recent_points(self.get_parameter("marker_rays").value)[:, :3]
+        pubs = self.channel_pubs.get(est.channel)
+        if pubs is None:
+            pubs = self.channel_pubs[est.channel] = self._channel_publishers(f"emitter/{est.channel}/")
+        pubs.pose.publish(build.emitter_pose(T, est, frame))
+        pubs.fix.publish(build.emitter_fix(T, est, self.loc.datum_frame().alt0, self.emitter_frame))
+        pubs.particles.publish(build.particle_array(T, est, frame))
+        channel = self.loc.channels.live.get(est.channel)
+        rows = channel.emitter.used_points() if channel is not None else self.loc.recent_points(0)
+        n = self.get_parameter("marker_rays").value
+        rays = rows[len(rows) - min(n, len(rows)):, :3]
         ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
-        self.pub_markers.publish(build.markers(T, est, rays, ring, frame))
+        pubs.markers.publish(build.markers(T, est, rays, ring, frame))
+
+    def channel_summary(self) -> dict[str, dict]:
+        """Every channel with an estimate: its frequency, topics, state (live or retired) and latest estimate."""
+        out = {}
+        for channel in self.loc.channels.all():
+            est = channel.estimate
+            if est is None:
+                continue
+            out[channel.id] = {
+                "frequency_hz": channel.frequency_hz if math.isfinite(channel.frequency_hz) else None,
+                "topics": "emitter/" if channel.id == DEFAULT else f"emitter/{channel.id}/",
+                "state": "retired" if channel.retired else "live",
+                "stamp": est.stamp, "lat": est.lat, "lon": est.lon, "east": round(est.east, 2),
+                "north": round(est.north, 2), "ellipse95_major_m": round(float(ellipse_axes(est.cov)[0]), 2),
+                "points_used": est.points_used,
+            }
+        return out
+
+    def _publish_summary(self):
+        """emitter/channels (latched std_msgs/String): a JSON object of the channels, when it changed."""
+        summary = self.channel_summary()
+        if summary != self.summary_sent:
+            self.pub_channels.publish(self.T.String(data=json.dumps({"channels": summary}, sort_keys=True)))
+            self.summary_sent = summary
 
     def _publish_datum(self):
         """emitter/datum (latched) whenever the map frame's origin is new: set from a fix, or configured."""
@@ -292,10 +390,11 @@ class LocalizerNode(Node):
             self.datum_sent = datum
 
     def _publish_path(self):
-        """vehicle/path when a fix was added since the last one (a full path each time: Path has no deltas)."""
-        poses = self.path.new_path()
-        if poses:
-            self.pub_path.publish(build.vehicle_path(self.T, poses[-1][0], poses, self.map_frame))
+        """Each station's vehicle/path when a fix was added since the last one (a full path each time: Path has no
+        deltas)."""
+        for station, poses in self.path.new_paths().items():
+            if station in self.pub_path:
+                self.pub_path[station].publish(build.vehicle_path(self.T, poses[-1][0], poses, self.map_frame))
 
     def _now(self) -> float:
         """The node's clock (ROS time: /clock under use_sim_time), seconds."""
@@ -309,7 +408,8 @@ class LocalizerNode(Node):
         values.update(self._robustness_values())
         if self.pending_params:
             values["parameters_held"] = ", ".join(sorted(self.pending_params)) + " (waiting for the rest of the group)"
-        values.update(df_stamp_gaps=self.df_gaps.gaps, df_missing_by_stamp=self.df_gaps.missing)
+        values.update(df_stamp_gaps=sum(g.gaps for g in self.df_gaps.values()),
+                      df_missing_by_stamp=sum(g.missing for g in self.df_gaps.values()))
         now = self._now()
         self.health.count_restarts(now, loc.events + loc.rejected)
         warnings = self._warnings() + self.health.stale(now)
@@ -394,11 +494,8 @@ class LocalizerNode(Node):
     def _wrong_publishers(self) -> list[str]:
         """Publishers on our input topics with another message type (DDS never delivers them)."""
         out = []
-        expected = (
-            (self.fix_sub.topic_name, FIX_TYPE),
-            (self.bearing_sub.topic_name, INPUT_TYPES[self.cfg.bearing_encoding]),
-        )
-        for topic, want in expected:
+        for sub, want in self.subs:
+            topic = sub.topic_name
             for info in self.get_publishers_info_by_topic(topic):
                 if info.topic_type != want:
                     out.append(f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}")
@@ -409,9 +506,30 @@ class LocalizerNode(Node):
         level, message, values = self.diagnostics()
         hardware_id = self.get_parameter("hardware_id").value
         self.pub_diag.publish(build.diagnostic_array(self.T, self._now(), self.diag_name, level, message, values,
-                                                     hardware_id))
+                                                     hardware_id, self.channel_diagnostics()))
         self.callback_s, self.callback_max_s = [], 0.0
         self._publish_path()
+        self._publish_summary()
+
+    def channel_diagnostics(self) -> list[tuple[str, int, str, dict]]:
+        """One status per frequency channel: WARN before its first estimate or while its check runs, OK tracking
+        or retired."""
+        out = []
+        for channel in self.loc.channels.all():
+            if channel.id == DEFAULT:
+                continue
+            emitter, est = channel.emitter, channel.estimate
+            values: dict[str, Any] = {"frequency_hz": f"{channel.frequency_hz:.0f}", "status": emitter.status,
+                                      "bearings_used": emitter.bearings_used, "points_used": emitter.points_used,
+                                      "topics": f"emitter/{channel.id}/"}
+            if est is not None:
+                values.update(east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}",
+                              lon=f"{est.lon:.7f}", ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
+            checking = emitter.health.alarm_since is not None
+            level = 0 if channel.retired else 1 if est is None or checking else 0
+            message = f"retired (silent for channel_timeout_s); {emitter.status}" if channel.retired else emitter.status
+            out.append((f"{self.diag_name} channel {channel.id}", level, message, values))
+        return out
 
     def on_reset(self, request, response):
         self.loc.reset()

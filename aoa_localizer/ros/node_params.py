@@ -22,6 +22,18 @@ NODE_PARAMS = [
                                                     high=3600.0, read_only=True)),
     ParameterSpec("stale_after_s", 5.0, Spec("/diagnostics warns when no DF reading or no valid GPS fix arrived for "
                                              "this long (s)", float, low=0.0, low_open=True, high=86_400.0)),
+    ParameterSpec("stations", [], Spec(
+        "DF stations whose inputs are fused: each NAME subscribes NAME/gps/fix, NAME/df/bearing (and NAME/heading/imu) "
+        "and publishes NAME/vehicle/path; empty: one station on gps/fix and df/bearing", list, items=str,
+        read_only=True)),
+    ParameterSpec("fixed_stations", [], Spec(
+        "the stations (of `stations`) that do not move: their position is `<NAME>.position` if set, else their "
+        "newest fix; a bearing is placed there at any time", list, items=str, read_only=True)),
     ParameterSpec("hardware_id", "df_receiver", Spec("hardware_id of the /diagnostics status (the DF receiver's name "
                                                      "or serial)", str)),
 ]
+
+# Declared once per fixed station, as `<NAME>.position` (the README shows it under this name).
+STATION_POSITION = ParameterSpec("<NAME>.position", [], Spec(
+    "a fixed station's position [lat, lon] or [lat, lon, alt] (deg, deg, m); empty: from its fixes", list, low=0,
+    high=3, read_only=True))

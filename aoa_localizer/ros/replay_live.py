@@ -48,6 +48,7 @@ def played_topics(args, inventory) -> list:
         chosen = {t.name for t in inventory}
     else:
         chosen = {args.fix_topic, args.bearing_topic, args.heading_topic, TOPICS["truth"], TOPICS["datum"]}
+        chosen |= {topic for _, topics in args.station or [] for topic in topics.values()}
     return [t for t in inventory if t.name in chosen]
 
 

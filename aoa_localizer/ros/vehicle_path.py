@@ -10,33 +10,39 @@ from aoa_localizer.engine.types import Reading
 
 
 class VehiclePath:
-    """The latest `length` accepted fixes as (stamp, east, north) in the map frame; each also calls
+    """The latest `length` accepted fixes of each station as (stamp, east, north) in the map frame; each also calls
     `on_valid_fix` (the node's stale-GPS watch)."""
 
     def __init__(self, length: int, on_valid_fix: Callable[[], None]):
-        self.poses: deque[tuple[float, float, float]] = deque(maxlen=length)
+        self.length = length
+        self.poses: dict[str, deque[tuple[float, float, float]]] = {}
         self.on_valid_fix = on_valid_fix
-        self.sent = 0  # fixes added since the path was last taken by new_path()
-        self.added = 0
+        self.sent: dict[str, int] = {}  # fixes of each station added when its path was last taken by new_paths()
+        self.added: dict[str, int] = {}
 
     def on_fix(self, stamp: float, east: float, north: float, station: str = "") -> None:
-        self.poses.append((stamp, east, north))
-        self.added += 1
+        self.poses.setdefault(station, deque(maxlen=self.length)).append((stamp, east, north))
+        self.added[station] = self.added.get(station, 0) + 1
         self.on_valid_fix()
 
     def on_point(self, readings: list[Reading], kept: np.ndarray) -> None:
         """Observation points are drawn by emitter/markers, not in the path."""
 
     def resize(self, length: int):
-        self.poses = deque(self.poses, maxlen=length)
+        self.length = length
+        self.poses = {k: deque(v, maxlen=length) for k, v in self.poses.items()}
 
     def clear(self):
         """The map frame moved: the old poses are in the wrong frame."""
-        self.poses.clear()
+        for poses in self.poses.values():
+            poses.clear()
 
-    def new_path(self) -> list[tuple[float, float, float]] | None:
-        """The poses when a fix came since the last call (None otherwise, or when the path is empty)."""
-        if self.added == self.sent or not self.poses or self.poses.maxlen == 0:
-            return None
-        self.sent = self.added
-        return list(self.poses)
+    def new_paths(self) -> dict[str, list[tuple[float, float, float]]]:
+        """The poses of each station that had a fix since the last call (none when its path is empty, or the
+        length is 0)."""
+        out = {}
+        for station, poses in self.poses.items():
+            if self.added[station] != self.sent.get(station) and poses and self.length:
+                self.sent[station] = self.added[station]
+                out[station] = list(poses)
+        return out

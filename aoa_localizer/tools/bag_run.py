@@ -7,6 +7,7 @@ import sys
 
 from tqdm import tqdm
 
+from aoa_localizer.engine.channels import DEFAULT
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
@@ -15,42 +16,49 @@ from msgs_adapters.bag import BagError, read_bag
 
 def feed(loc: Localizer, event):
     """Give one bag event to the engine; returns an estimate or None."""
-    r = event.record
+    r, station = event.record, event.station
     if event.kind == "fix":
-        return loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m)
+        return loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
     if event.kind == "bearing":
-        return loc.add_bearing(r.stamp, r.azimuth_deg, r.quality)
+        return loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz)
     if event.kind == "bearing_pose":
-        return loc.add_bearing_enu(r.stamp, r.yaw_rad, r.variance_rad2)
+        return loc.add_bearing_enu(r.stamp, r.yaw_rad, r.variance_rad2, station=station)
     if event.kind == "heading":
-        loc.add_heading(r.stamp, r.yaw_rad)
+        loc.add_heading(r.stamp, r.yaw_rad, station=station)
     return None
 
 
 def summary(loc: Localizer, truth, datum) -> list[str]:
-    """Human-readable closing lines: estimate, ellipse, counts, and error when the bag carries the truth."""
-
+    """Human-readable closing lines: the estimate (one line per channel when frequencies were heard), ellipse,
+    counts, and error when the bag carries the truth."""
     lines = []
-    est = loc.estimate
-    if est is None:
+    heard = [c for c in loc.channels.all() if c.estimate is not None]
+    if not heard:
         lines.append(f"no estimate: {loc.status}")
-    else:
-        a, b, _ = ellipse_axes(est.cov)
-        # East/north in one frame only: the truth's (sim/datum) when the bag has it, else the engine's datum.
-        if truth is not None and datum is not None:
-            e, n = LocalFrame(*datum).to_enu(est.lat, est.lon)
-            where = f"E {e:.1f} m, N {n:.1f} m from the bag's datum {datum[0]:.7f}, {datum[1]:.7f}"
-        else:
-            origin = loc.datum_frame()
-            where = f"E {est.east:.1f} m, N {est.north:.1f} m from the datum {origin.lat0:.7f}, {origin.lon0:.7f}"
-        lines.append(f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} ({where}), 95% ellipse {a:.1f} x {b:.1f} m, "
-                     f"{est.bearings_used} bearings in {est.points_used} points")
-        if truth is not None and datum is not None:
-            lines.append(f"error against the bag's truth (E {truth[1]:.1f} m, N {truth[2]:.1f} m, same frame): "
-                         f"{math.hypot(e - truth[1], n - truth[2]):.2f} m")
+    for channel in heard:
+        label = "" if channel.id == DEFAULT and len(heard) == 1 else (
+            f"channel {channel.id}{' (retired)' if channel.retired else ''}: ")
+        lines += [label + line for line in _estimate_lines(loc, channel.estimate, truth, datum)]
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(loc.rejected.items())) or "none"
     lines.append(f"inputs not used: {rejected}")
     return lines + loc.robustness_lines()
+
+
+def _estimate_lines(loc: Localizer, est, truth, datum) -> list[str]:
+    a, b, _ = ellipse_axes(est.cov)
+    # East/north in one frame only: the truth's (sim/datum) when the bag has it, else the engine's datum.
+    if truth is not None and datum is not None:
+        e, n = LocalFrame(*datum).to_enu(est.lat, est.lon)
+        where = f"E {e:.1f} m, N {n:.1f} m from the bag's datum {datum[0]:.7f}, {datum[1]:.7f}"
+    else:
+        origin = loc.datum_frame()
+        where = f"E {est.east:.1f} m, N {est.north:.1f} m from the datum {origin.lat0:.7f}, {origin.lon0:.7f}"
+    lines = [f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} ({where}), 95% ellipse {a:.1f} x {b:.1f} m, "
+             f"{est.bearings_used} bearings in {est.points_used} points"]
+    if truth is not None and datum is not None:
+        lines.append(f"error against the bag's truth (E {truth[1]:.1f} m, N {truth[2]:.1f} m, same frame): "
+                     f"{math.hypot(e - truth[1], n - truth[2]):.2f} m")
+    return lines
 
 
 class BagRun:
@@ -64,13 +72,22 @@ class BagRun:
         self.foreign: dict[str, int] = {}  # "topic (type)": messages of a type the topic should not carry
 
 
-def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay") -> BagRun:
-    """Feed a bag's fixes and bearings to `loc` in log-time order, call on_estimate(est) for each estimate
-    (the final flush included). Raises BagError when nothing could be read; damage later is recorded."""
+def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay", stations=None) -> BagRun:
+    """Feed a bag's fixes and bearings (of `stations`, {NAME: {kind: topic}}, when given) to `loc` in log-time
+    order, call on_estimate(est) with each channel's newest estimate after each input (the final flush and
+    check included). Raises BagError when nothing could be read; damage later is recorded."""
     result = BagRun()
+    made: dict[str, object] = {}  # channel -> its newest estimate from the input being fed
+    loc.on_estimate = lambda est: made.__setitem__(est.channel, est)
+
+    def hand_over():
+        for est in made.values():
+            on_estimate(est)
+        made.clear()
+
     with tqdm(desc=desc, unit="msg", disable=None, file=sys.stderr) as bar:
         try:
-            for event in read_bag(bag, topics):
+            for event in read_bag(bag, topics, stations):
                 bar.update()
                 result.messages += 1
                 if event.kind == "truth":
@@ -80,14 +97,14 @@ def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay"
                 elif event.kind == "foreign":
                     key = "{} ({})".format(*event.record)
                     result.foreign[key] = result.foreign.get(key, 0) + 1
-                est = feed(loc, event)
-                if est is not None:
-                    on_estimate(est)
+                feed(loc, event)
+                hand_over()
         except BagError as exc:
             if not result.messages:
                 raise
             result.damage = str(exc)
-    for est in (loc.flush(), loc.finish()):
-        if est is not None:
-            on_estimate(est)
+    loc.flush()
+    hand_over()
+    loc.finish()
+    hand_over()
     return result

@@ -41,6 +41,30 @@ def add_topic_args(parser: argparse.ArgumentParser):
     parser.add_argument("--heading-topic", default="/heading/imu",
                         help="the bag's IMU topic (sensor_msgs/msg/Imu), read with -p bearing_reference=vehicle "
                         "-p heading_source=imu")
+    parser.add_argument("--station", action="append", type=station_value, metavar="NAME=FIX,BEARING[,HEADING]",
+                        help="a DF station's topics in the bag (repeatable): its bearings are placed on its own GPS "
+                        "track and fused with the other stations'; given, it replaces --fix-topic and --bearing-topic")
+
+
+def station_value(text: str) -> tuple[str, dict[str, str]]:
+    """argparse type of --station NAME=FIX_TOPIC,BEARING_TOPIC[,HEADING_TOPIC]."""
+    name, _, rest = text.partition("=")
+    topics = rest.split(",")
+    if not (name.isidentifier() and name.isascii()) or len(topics) not in (2, 3) or not all(topics):
+        raise argparse.ArgumentTypeError(f"a station is NAME=FIX_TOPIC,BEARING_TOPIC[,HEADING_TOPIC] with NAME a ROS "
+                                         f"name token (letters, digits, _), got {text!r}")
+    return name, dict(zip(("fix", "bearing", "heading"), topics, strict=False))
+
+
+def bag_stations(args) -> dict[str, dict[str, str]] | None:
+    """The --station options by name (None: one station on the fix and bearing topics); ConfigError when a name
+    comes twice."""
+    given = getattr(args, "station", None) or []
+    names = [name for name, _ in given]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ConfigError(f"--station {', '.join(twice)} given more than once")
+    return dict(given) or None
 
 
 def bag_topics(args) -> dict[str, str]:

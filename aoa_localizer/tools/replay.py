@@ -24,6 +24,7 @@ from aoa_localizer.tools.cli import (
     HelpFormatter,
     add_engine_args,
     add_topic_args,
+    bag_stations,
     bag_topics,
     config_from_args,
     setup_logging,
@@ -34,6 +35,7 @@ from msgs_adapters.bag import BagError
 def run_offline(args) -> int:
     try:
         cfg = config_from_args(args, LocalizerConfig())
+        stations = bag_stations(args)
     except ConfigError as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 2
@@ -56,7 +58,7 @@ def run_offline(args) -> int:
         written += 1
 
     try:
-        run = run_bag(args.bag, bag_topics(args), loc, write)
+        run = run_bag(args.bag, bag_topics(args), loc, write, stations=stations)
         write_header()
     except BagError as exc:
         print(f"replay: {exc}", file=sys.stderr)
