@@ -202,3 +202,51 @@ def test_salvage_keeps_an_intact_file_whole_and_refuses_a_foreign_one():
     assert sorted((m.topic, m.log_time, m.data) for m in salvaged) == sorted(stored)
     report = Salvage()
     assert list(read_salvaged(b"not an mcap file", report)) == [] and report.damage == ["no MCAP magic"]
+
+
+PAIR_STATIONS = ["--station", "car1=/car1/gps/fix,/car1/df/bearing", "--station", "car2=/car2/gps/fix,/car2/df/bearing"]
+
+
+def test_the_two_station_sample_bag_is_fused_with_station_options(tmp_path, cli):
+    """bags/pair: two cars on their own topics; with --station each car's bearings go on its own track and the
+    emitter comes out of both (40 points), near the bag's truth. Without --station the bag's topics are listed."""
+    out = tmp_path / "pair.jsonl"
+    res = cli(replay_main, ROOT / "bags/pair", "--offline", "--output", out, "--seed", 1, *PAIR_STATIONS)
+    assert res.returncode == 0, res.stderr
+    last = lines(out)[-1]
+    assert last["points_used"] == 40 and last["channel"] == "default" and last["frequency_hz"] is None
+    error = float(re.search(r"error against the bag's truth .*: ([\d.]+) m", res.stderr)[1])
+    assert error < 10.0
+    res = cli(replay_main, ROOT / "bags/pair", "--offline", "--output", tmp_path / "none.jsonl")
+    assert res.returncode == 2 and "/car1/gps/fix" in res.stderr and "--station" in res.stderr
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--station", "car1=/a"], "a station is NAME=FIX_TOPIC,BEARING_TOPIC"),
+    (["--station", "1car=/a,/b"], "a station is NAME=FIX_TOPIC,BEARING_TOPIC"),
+    (["--station", "car1=/a,/b", "--station", "car1=/c,/d"], "--station car1 given more than once"),
+    (["--station", "car1=/car1/gps/fix,/nosuch"], "no usable fix and bearing topics"),
+])
+def test_bad_station_options_are_refused(tmp_path, cli, args, words):
+    res = cli(replay_main, ROOT / "bags/pair", "--offline", "--output", tmp_path / "x.jsonl", *args)
+    assert res.returncode == 2 and words in res.stderr, res.stderr
+
+
+def test_channels_in_a_bag_give_one_line_per_channel_and_json_lines_per_emitter(tmp_path, cli):
+    """A DF record's frequency (vector.z) picks its channel offline too: the closing lines name each channel and
+    every JSON line carries its channel and frequency."""
+    from aoa_localizer.engine.fleet import simulate_fleet
+
+    fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 0)
+    write_bag(tmp_path / "bag", fleet.fixes[""], fleet.bearings[""], datum=fleet.scenario.datum)
+    out = tmp_path / "e.jsonl"
+    res = cli(replay_main, tmp_path / "bag", "--offline", "--output", out, "--seed", 1)
+    assert res.returncode == 0, res.stderr
+    rows = lines(out)
+    assert {(r["channel"], r["frequency_hz"]) for r in rows} == {("f433920000", 433.92e6), ("f446000000", 446.0e6)}
+    frame = LocalFrame(*fleet.scenario.datum)
+    for cid, truth in (("f433920000", (1200.0, 800.0)), ("f446000000", (300.0, 1200.0))):
+        last = [r for r in rows if r["channel"] == cid][-1]
+        e, n = frame.to_enu(last["lat"], last["lon"])
+        assert math.hypot(e - truth[0], n - truth[1]) < 10.0
+        assert f"channel {cid}: estimate: lat" in res.stderr

@@ -48,7 +48,7 @@ def enu_area(ring):
 
 
 def test_kml_is_kml_with_a_closed_ellipse_around_the_estimate(estimate):
-    root = ET.fromstring(kml(FRAME, estimate, TRACK))
+    root = ET.fromstring(kml(FRAME, [estimate], {"": TRACK}))
     ns = {"k": KML_NS}
     assert root.tag == f"{{{KML_NS}}}kml"
     names = [p.findtext("k:name", namespaces=ns) for p in root.iter(f"{{{KML_NS}}}Placemark")]
@@ -62,7 +62,7 @@ def test_kml_is_kml_with_a_closed_ellipse_around_the_estimate(estimate):
 
 
 def test_geojson_structure_lon_lat_order_and_ellipse_area(estimate):
-    gj = json.loads(json.dumps(geojson(FRAME, estimate, TRACK)))
+    gj = json.loads(json.dumps(geojson(FRAME, [estimate], {"": TRACK})))
     assert gj["type"] == "FeatureCollection"
     kinds = {f["geometry"]["type"]: f for f in gj["features"]}
     assert set(kinds) == {"Point", "Polygon", "LineString"}
@@ -169,3 +169,33 @@ def test_rmse_curves_give_every_series_its_own_style_and_clip_a_diverged_one(tmp
     assert drawn["clip"] == pytest.approx(CLIP_FACTOR * 52.0)
     assert "diverged (diverged: clipped at 5.2e+04)" in drawn["styles"] and "f3" in drawn["styles"]
     assert (tmp_path / "c.png").stat().st_size > 10_000
+
+
+def test_a_report_of_two_stations_and_two_emitters_draws_and_exports_each(tmp_path):
+    """Two cars hearing two carriers: one point and one ellipse per emitter (named by channel, with its frequency),
+    one track per car, and the other emitter in the summary."""
+    from aoa_localizer.engine.fleet import PAIR, simulate_fleet
+    from aoa_localizer.report import main as report_main
+    from msgs_adapters.bag import write_bag
+
+    emitters = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}
+    fleet = simulate_fleet(PAIR, emitters, 0)
+    write_bag(tmp_path / "bag", [], [], datum=fleet.scenario.datum,
+              stations={name: (fleet.fixes[name], fleet.bearings[name]) for name in PAIR})
+    stations = [a for name in PAIR for a in ("--station", f"{name}=/{name}/gps/fix,/{name}/df/bearing")]
+    assert report_main([str(tmp_path / "bag"), "--out", str(tmp_path / "r"), "--seed", "1", *stations]) == 0
+    gj = json.loads((tmp_path / "r/emitter.geojson").read_text())
+    by_name = {f["properties"]["name"]: f for f in gj["features"]}
+    assert set(by_name) == {"emitter f433920000 (433.920 MHz)", "95 % error ellipse f433920000",
+                            "emitter f446000000 (446.000 MHz)", "95 % error ellipse f446000000",
+                            "vehicle track car1", "vehicle track car2"}
+    for f, truth in emitters.items():
+        point = by_name[f"emitter f{int(f)} ({f / 1e6:.3f} MHz)"]
+        assert point["properties"]["frequency_hz"] == f
+        lon, lat = point["geometry"]["coordinates"]
+        e, n = LocalFrame(*fleet.scenario.datum).to_enu(lat, lon)
+        assert math.hypot(e - truth[0], n - truth[1]) < 10.0
+    root = ET.fromstring((tmp_path / "r/emitter.kml").read_text())
+    assert len(list(root.iter(f"{{{KML_NS}}}Point"))) == 2
+    summary = (tmp_path / "r/summary.md").read_text()
+    assert "## Other emitters (channels)" in summary and "MHz" in summary

@@ -13,11 +13,11 @@ from aoa_localizer.engine.scenarios import SCENARIOS, Scenario, simulate
 @dataclass
 class FleetData:
     """What the stations recorded: fixes (stamp, lat, lon, alt) and DF records (stamp, azimuth, quality,
-    frequency Hz) per station, and each emitter's true ENU position by frequency."""
+    frequency Hz) per station, and each emitter's true ENU position by frequency (`truth`)."""
 
     fixes: dict[str, np.ndarray]
     bearings: dict[str, np.ndarray]
-    emitters: dict[float, np.ndarray]
+    truth: dict[float, np.ndarray]
     scenario: Scenario  # the first station's (datum, receiver settings)
 
     def events(self):
@@ -51,3 +51,22 @@ PAIR = {
     "car1": replace(SCENARIOS["seed"], name="car1", track=((0, 0), (1000, 0)), points=20),
     "car2": replace(SCENARIOS["seed"], name="car2", track=((2200, 1800), (2200, 800)), points=20),
 }
+
+
+@dataclass(frozen=True)
+class Fleet:
+    """A scenario with several stations: what the simulated vehicle plays (each station on NAME/gps/fix and
+    NAME/df/bearing) and the node parameters that fuse them."""
+
+    stations: dict[str, Scenario]
+    emitters: dict[float, tuple[float, float]]
+
+    @property
+    def first(self) -> Scenario:
+        return next(iter(self.stations.values()))
+
+    def node_params(self) -> dict:
+        return {"stations": list(self.stations)}
+
+
+FLEETS = {"pair": Fleet(PAIR, {0.0: (1200.0, 800.0)})}

@@ -1,5 +1,6 @@
-"""The estimate for GIS tools: GeoJSON and KML with the point, the 95 % ellipse as a real lat/lon polygon,
-and the vehicle track; time, algorithm and bearing count as properties."""
+"""The estimates for GIS tools: GeoJSON and KML with, per emitter (channel), the point and the 95 % ellipse as a
+real lat/lon polygon, and each station's track; time, algorithm, bearing count, channel and frequency as
+properties."""
 from __future__ import annotations
 
 import datetime
@@ -19,7 +20,21 @@ def properties(est: Estimate) -> dict:
     return {"time": datetime.datetime.fromtimestamp(est.stamp, datetime.UTC).isoformat(),
             "stamp": est.stamp, "algorithm": est.algorithm, "bearings_used": est.bearings_used,
             "points_used": est.points_used, "ellipse95_semi_major_m": round(a, 2),
-            "ellipse95_semi_minor_m": round(b, 2), "ellipse95_major_azimuth_deg": round(azimuth, 1)}
+            "ellipse95_semi_minor_m": round(b, 2), "ellipse95_major_azimuth_deg": round(azimuth, 1),
+            "channel": est.channel,
+            "frequency_hz": est.frequency_hz if np.isfinite(est.frequency_hz) else None}
+
+
+def names(est: Estimate) -> tuple[str, str]:
+    """The point's and the ellipse's names: plain for the default channel, with the channel and frequency else."""
+    if est.channel == "default":
+        return "emitter estimate", "95 % error ellipse"
+    mhz = f" ({est.frequency_hz / 1e6:.3f} MHz)" if np.isfinite(est.frequency_hz) else ""
+    return f"emitter {est.channel}{mhz}", f"95 % error ellipse {est.channel}"
+
+
+def track_name(station: str) -> str:
+    return f"vehicle track {station}" if station else "vehicle track"
 
 
 def _lonlat(frame: LocalFrame, enu: np.ndarray) -> list[list[float]]:
@@ -34,39 +49,44 @@ def ellipse_ring(frame: LocalFrame, est: Estimate) -> list[list[float]]:
     return ring
 
 
-def geojson(frame: LocalFrame, est: Estimate, track_enu: np.ndarray) -> dict:
-    """A FeatureCollection: the estimate (Point), its 95 % ellipse (Polygon), the vehicle track (LineString)."""
-    props = properties(est)
-    features = [
-        {"type": "Feature", "geometry": {"type": "Point", "coordinates": [est.lon, est.lat]},
-         "properties": {"name": "emitter estimate", **props}},
-        {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ellipse_ring(frame, est)]},
-         "properties": {"name": "95 % error ellipse", **props}},
-    ]
-    if len(track_enu) >= 2:
-        features.append(
-            {
-                "type": "Feature",
-                "geometry": {"type": "LineString", "coordinates": _lonlat(frame, track_enu)},
-                "properties": {"name": "vehicle track"},
-            }
-        )
+def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray]) -> dict:
+    """A FeatureCollection: per emitter its estimate (Point) and 95 % ellipse (Polygon); per station its track
+    (LineString, ENU rows east, north)."""
+    features = []
+    for est in estimates:
+        props = properties(est)
+        point_name, ellipse_name = names(est)
+        features += [
+            {"type": "Feature", "geometry": {"type": "Point", "coordinates": [est.lon, est.lat]},
+             "properties": {"name": point_name, **props}},
+            {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ellipse_ring(frame, est)]},
+             "properties": {"name": ellipse_name, **props}},
+        ]
+    for station, track_enu in tracks.items():
+        if len(track_enu) >= 2:
+            features.append(
+                {
+                    "type": "Feature",
+                    "geometry": {"type": "LineString", "coordinates": _lonlat(frame, track_enu)},
+                    "properties": {"name": track_name(station)},
+                }
+            )
     return {"type": "FeatureCollection", "features": features}
 
 
-def kml(frame: LocalFrame, est: Estimate, track_enu: np.ndarray) -> str:
-    """A KML document with the same three placemarks (opens in Google Earth and GIS tools)."""
+def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray]) -> str:
+    """A KML document with the same placemarks (opens in Google Earth and GIS tools)."""
     ET.register_namespace("", KML_NS)
     q = lambda tag: f"{{{KML_NS}}}{tag}"  # noqa: E731
     root = ET.Element(q("kml"))
     doc = ET.SubElement(root, q("Document"))
-    ET.SubElement(doc, q("name")).text = f"aoa_localizer: emitter estimate ({est.algorithm})"
-    props = properties(est)
+    algorithms = ", ".join(sorted({est.algorithm for est in estimates}))
+    ET.SubElement(doc, q("name")).text = f"aoa_localizer: emitter estimates ({algorithms})"
 
-    def placemark(name: str, with_data: bool):
+    def placemark(name: str, props: dict | None):
         pm = ET.SubElement(doc, q("Placemark"))
         ET.SubElement(pm, q("name")).text = name
-        if with_data:
+        if props is not None:
             ET.SubElement(ET.SubElement(pm, q("TimeStamp")), q("when")).text = props["time"]
             data = ET.SubElement(pm, q("ExtendedData"))
             for key, value in props.items():
@@ -74,13 +94,17 @@ def kml(frame: LocalFrame, est: Estimate, track_enu: np.ndarray) -> str:
         return pm
 
     coords = lambda pts: " ".join(f"{lon:.8f},{lat:.8f},0" for lon, lat in pts)  # noqa: E731
-    point = ET.SubElement(placemark("emitter estimate", True), q("Point"))
-    ET.SubElement(point, q("coordinates")).text = coords([[est.lon, est.lat]])
-    poly = ET.SubElement(placemark("95 % error ellipse", True), q("Polygon"))
-    ring = ET.SubElement(ET.SubElement(poly, q("outerBoundaryIs")), q("LinearRing"))
-    ET.SubElement(ring, q("coordinates")).text = coords(ellipse_ring(frame, est))
-    if len(track_enu) >= 2:
-        line = ET.SubElement(placemark("vehicle track", False), q("LineString"))
-        ET.SubElement(line, q("coordinates")).text = coords(_lonlat(frame, track_enu))
+    for est in estimates:
+        props = properties(est)
+        point_name, ellipse_name = names(est)
+        point = ET.SubElement(placemark(point_name, props), q("Point"))
+        ET.SubElement(point, q("coordinates")).text = coords([[est.lon, est.lat]])
+        poly = ET.SubElement(placemark(ellipse_name, props), q("Polygon"))
+        ring = ET.SubElement(ET.SubElement(poly, q("outerBoundaryIs")), q("LinearRing"))
+        ET.SubElement(ring, q("coordinates")).text = coords(ellipse_ring(frame, est))
+    for station, track_enu in tracks.items():
+        if len(track_enu) >= 2:
+            line = ET.SubElement(placemark(track_name(station), None), q("LineString"))
+            ET.SubElement(line, q("coordinates")).text = coords(_lonlat(frame, track_enu))
     ET.indent(root)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -18,6 +18,12 @@ RAYS_MAX = 400  # used rays drawn (evenly thinned beyond that); every gated-out 
 CLIP_FACTOR = 1000.0  # rmse_curves: a series above this many times the reference is clipped
 
 
+# The other emitters' colours (matplotlib's tab10 without red and orange, which the main estimate uses), and the
+# stations' track styles.
+PALETTE = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:green", "tab:blue", "tab:gray")
+TRACK_STYLES = ("-", "--", ":", "-.")
+
+
 def nice_length(span: float) -> float:
     """A 1-2-5 length near a fifth of span, for the scale bar."""
     target = max(span / 5.0, 1e-9)
@@ -38,16 +44,22 @@ def _rays(readings: np.ndarray, target, keep_all: bool, t_range, colour) -> Line
                           linestyles="dashed" if keep_all else "solid")
 
 
-def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.ndarray, est,
-               truth=None, title_extra: str = ""):
-    """map.png: track, bearing rays (used: blue, fading with age; gated out as wild: red dashed), particles,
-    estimate with its 95 % ellipse, truth if known; metres at the datum, scale bar. The zoom on the estimate and
+def map_figure(path, frame, tracks: dict[str, np.ndarray], readings: np.ndarray, kept: np.ndarray, est,
+               truth=None, title_extra: str = "", others=()):
+    """map.png: each station's track (rows stamp, east, north), bearing rays (used: blue, fading with age; gated
+    out as wild: red dashed), particles, estimate with its 95 % ellipse, the other emitters' (channels') estimates
+    and ellipses in their colours, truth if known; metres at the datum, scale bar. The zoom on the estimate and
     the legend sit in their own panels beside the map, so neither hides any of the track."""
     fig = plt.figure(figsize=(12, 8), dpi=110)
     grid = fig.add_gridspec(2, 2, width_ratios=(3, 1.15), height_ratios=(1, 1.1))
     ax = fig.add_subplot(grid[:, 0])
     target = (est.east, est.north)
-    _draw_inputs(ax, fixes, readings, kept, target)
+    _draw_inputs(ax, tracks, readings, kept, target)
+    for k, other in enumerate(others):
+        colour = PALETTE[k % len(PALETTE)]
+        ring_o = ellipse_points((other.east, other.north), other.cov)
+        ax.plot(ring_o[:, 0], ring_o[:, 1], color=colour, lw=1.2, zorder=4)
+        ax.plot(other.east, other.north, "x", color=colour, ms=9, mew=2, zorder=5, label=f"emitter {other.channel}")
     ring = ellipse_points(target, est.cov)
     if est.particles is not None:
         ax.scatter(est.particles[:, 0], est.particles[:, 1], s=4, color="0.45", alpha=0.6, label="particles", zorder=3)
@@ -63,8 +75,8 @@ def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.nd
     ax.plot([], [], color=(0.12, 0.35, 0.85), lw=1, label="bearings used (older: fainter)")
     if not kept.all():
         ax.plot([], [], color=(0.85, 0.1, 0.1), lw=1, ls="--", label="bearings gated out as wild")
-    pts = [fixes[:, 1:3]] if len(fixes) else []
-    pts.append(np.array([target]))
+    pts = [rows[:, 1:3] for rows in tracks.values() if len(rows)]
+    pts.append(np.array([target] + [(o.east, o.north) for o in others]))
     if truth is not None:
         pts.append(np.array([truth]))
     allp = np.vstack(pts)
@@ -95,8 +107,8 @@ def map_figure(path, frame, fixes: np.ndarray, readings: np.ndarray, kept: np.nd
     plt.close(fig)
 
 
-def _draw_inputs(ax, fixes: np.ndarray, readings: np.ndarray, kept: np.ndarray, target):
-    """The vehicle track and the bearing rays (at most RAYS_MAX of the used ones; the wild ones dashed)."""
+def _draw_inputs(ax, tracks: dict[str, np.ndarray], readings: np.ndarray, kept: np.ndarray, target):
+    """The stations' tracks and the bearing rays (at most RAYS_MAX of the used ones; the wild ones dashed)."""
     t_range = (readings[:, 0].min(), readings[:, 0].max()) if len(readings) else (0.0, 1.0)
     used, wild = readings[kept], readings[~kept]
     if len(used) > RAYS_MAX:
@@ -105,9 +117,12 @@ def _draw_inputs(ax, fixes: np.ndarray, readings: np.ndarray, kept: np.ndarray, 
         ax.add_collection(_rays(used, target, False, t_range, (0.12, 0.35, 0.85)))
     if len(wild):
         ax.add_collection(_rays(wild, target, True, t_range, (0.85, 0.1, 0.1)))
-    if len(fixes):
-        ax.plot(fixes[:, 1], fixes[:, 2], color="0.25", lw=1.6, label="vehicle track")
-        ax.plot(fixes[0, 1], fixes[0, 2], "o", color="0.25", ms=5)
+    for k, (station, fixes) in enumerate(tracks.items()):
+        if len(fixes):
+            style = TRACK_STYLES[k % len(TRACK_STYLES)]
+            ax.plot(fixes[:, 1], fixes[:, 2], color="0.25", lw=1.6, ls=style,
+                    label=f"vehicle track {station}" if station else "vehicle track")
+            ax.plot(fixes[0, 1], fixes[0, 2], "o", color="0.25", ms=5)
 
 
 def _zoom(ins, est, ring: np.ndarray, truth, a: float):

@@ -46,10 +46,18 @@ class Trace:
 
     def __init__(self):
         self.fixes: list[tuple] = []
+        self.fix_stations: list[str] = []  # the station of each fix
         self.readings: list[tuple] = []
 
     def on_fix(self, stamp: float, east: float, north: float, station: str = "") -> None:
         self.fixes.append((stamp, east, north))
+        self.fix_stations.append(station)
+
+    def tracks(self) -> dict[str, np.ndarray]:
+        """Each station's fixes as rows stamp, east, north."""
+        rows = np.array(self.fixes, float).reshape(-1, 3)
+        of = np.array(self.fix_stations, dtype=object)
+        return {name: rows[of == name] for name in dict.fromkeys(self.fix_stations)}
 
     def on_point(self, readings, kept) -> None:
         self.readings += [
@@ -90,6 +98,8 @@ def estimates_from_jsonl(path: Path, frame_of) -> list[Estimate]:
                     points_used=int(d.get("points_used", 0)),
                     ess=float(d.get("ess", float("nan"))),
                     algorithm=str(d.get("algorithm", "?")),
+                    channel=str(d.get("channel", "default")),
+                    frequency_hz=float(d.get("frequency_hz") or float("nan")),
                 )
             )
         except (ValueError, KeyError, TypeError) as exc:
@@ -107,13 +117,14 @@ def error_series(estimates, readings: np.ndarray, truth) -> tuple[np.ndarray, np
     return t, err, bound, major
 
 
-def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, truth, bound, damage):
+def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, truth, bound, damage, others=()):
     a, b, azimuth = ellipse_axes(est.cov)
     used = int(sum(1 for r in trace.readings if r[5]))
     lines = [
         f"# Emitter localisation: {Path(inp).name}",
         "",
-        f"* **Estimate**: {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
+        f"* **Estimate**{'' if est.channel == 'default' else f' (channel {est.channel}, {_mhz(est.frequency_hz)})'}"
+        f": {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
         f"of the datum {loc.datum_frame().lat0:.7f}, {loc.datum_frame().lon0:.7f})",
         f"* **95 % error ellipse**: semi-axes {a:.1f} m x {b:.1f} m, major axis at {azimuth:.0f} deg from north",
         f"* **Algorithm**: {est.algorithm}, N = {loc.cfg.num_particles}, "
@@ -142,6 +153,12 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
                 )
             )
         )
+    if others:
+        lines += ["", "## Other emitters (channels)", "", "| channel | frequency | estimate | 95 % ellipse | points |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| `{e.channel}` | {_mhz(e.frequency_hz)} | {e.lat:.7f}, {e.lon:.7f} | "
+                  f"{ellipse_axes(e.cov)[0]:.1f} x {ellipse_axes(e.cov)[1]:.1f} m | {e.points_used} |" for e in others]
+        lines.append("")
     events = {k: v for k, v in loc.events.items() if k != "alarm_points"}
     if events:
         lines.append("* **Robustness events**: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
@@ -157,6 +174,10 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
         "",
     ]
     path.write_text("\n".join(lines))
+
+
+def _mhz(frequency_hz: float) -> str:
+    return f"{frequency_hz / 1e6:.3f} MHz" if math.isfinite(frequency_hz) else "none"
 
 
 class ReportError(Exception):
@@ -236,26 +257,30 @@ def make_report(args) -> int:
 
 
 def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], run):
-    """map.png, error.png (with the truth), emitter.kml, emitter.geojson and summary.md in args.out."""
+    """map.png, error.png (with the truth), emitter.kml, emitter.geojson and summary.md in args.out. Every emitter
+    (channel) is drawn and exported; the error plot and the summary's figures are the last estimate's channel's."""
     frame, est = loc.datum_frame(), estimates[-1]
+    finals = list({e.channel: e for e in estimates}.values())  # each channel's last estimate
+    estimates = [e for e in estimates if e.channel == est.channel]
     truth = None
     if run.truth is not None and run.datum is not None:
         lat, lon, _ = LocalFrame(*run.datum).to_geodetic(run.truth[1], run.truth[2], 0.0)
         truth = tuple(float(v) for v in frame.to_enu(lat, lon))
-    fixes = np.array(trace.fixes).reshape(-1, 3)
+    tracks = trace.tracks()
     readings = np.array(trace.readings, dtype=float).reshape(-1, 6)
     kept = readings[:, 5].astype(bool)
     args.out.mkdir(parents=True, exist_ok=True)
-    plots.map_figure(args.out / "map.png", frame, fixes, readings[:, :5], kept, est, truth)
+    others = [e for e in finals if e.channel != est.channel]
+    plots.map_figure(args.out / "map.png", frame, tracks, readings[:, :5], kept, est, truth, others=others)
     bound = None
     if truth is not None:
         t, err, bounds, major = error_series(estimates, readings[kept][:, :5], truth)
         plots.error_figure(args.out / "error.png", t, err, bounds, major)
         bound = crlb_rmse(truth, readings[kept][:, 1:3], readings[kept][:, 4]) if kept.any() else float("inf")
-    track = fixes[:, 1:3]
-    (args.out / "emitter.kml").write_text(export.kml(frame, est, track))
-    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, est, track), indent=1))
-    write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage)
+    enu = {name: rows[:, 1:3] for name, rows in tracks.items()}
+    (args.out / "emitter.kml").write_text(export.kml(frame, finals, enu))
+    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, finals, enu), indent=1))
+    write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage, others)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ def descriptor(p: ParameterSpec) -> ParameterDescriptor:
         elif spec.kind is float:
             d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high),
                                                          step=0.0)]
-    if spec.kind is list:
+    if isinstance(p.default, list):
         d.type = ParameterType.PARAMETER_STRING_ARRAY if spec.items is str else ParameterType.PARAMETER_DOUBLE_ARRAY
     if spec.choices:
         d.additional_constraints = f"one of {', '.join(spec.choices)}"
@@ -37,7 +37,7 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
     values = {}
     for p in specs:
         d = descriptor(p)
-        if p.spec.kind is list:  # an empty list has no type of its own: declared by type, unset means the default
+        if isinstance(p.default, list):  # an empty list has no type of its own: declared by type, unset: the default
             kind = Parameter.Type.STRING_ARRAY if p.spec.items is str else Parameter.Type.DOUBLE_ARRAY
             node.declare_parameter(p.name, kind, d)
         else:
@@ -46,7 +46,7 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
             values[p.name] = node.get_parameter(p.name).value
         except ParameterUninitializedException:
             values[p.name] = p.default
-        if p.spec.kind is list:
+        if isinstance(values[p.name], (list, tuple)):
             values[p.name] = list(values[p.name])
     if check:
         for p in specs:

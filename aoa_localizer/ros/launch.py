@@ -30,6 +30,7 @@ import yaml
 from aoa_localizer.engine.config import ConfigError, parameter_specs, unknown_names
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 from aoa_localizer.engine.crlb import nees as crlb_nees
+from aoa_localizer.engine.fleet import FLEETS
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scenarios import SCENARIOS
 from aoa_localizer.ros.node_params import NODE_PARAMS
@@ -66,6 +67,8 @@ def ros_value(v) -> str:
         return "true" if v else "false"
     if isinstance(v, float):
         return repr(v)
+    if isinstance(v, list):
+        return "[" + ",".join(ros_value(x) for x in v) + "]"
     return str(v)
 
 
@@ -132,8 +135,10 @@ def build_commands(args, node_params: dict) -> tuple[list[str], list[str]]:
     for k, v in node_params.items():
         node += ["-p", f"{k}:={ros_value(v)}"]
     if args.bag:
+        inputs = [f"/{name}/{topic}" for name in FLEETS[args.scenario].stations for topic in ("gps/fix", "df/bearing")
+                  ] if args.scenario in FLEETS else ["/gps/fix", "/df/bearing"]
         source = [py, "-m", "aoa_localizer.replay", str(args.bag), "--rate", str(args.rate),
-                  "--topics", "/gps/fix", "/df/bearing", "/sim/truth", "/sim/datum"]
+                  "--topics", *inputs, "/sim/truth", "/sim/datum"]
     else:
         source = [py, "-m", "aoa_localizer.sim_vehicle", "--ros-args", "-p", f"scenario:={args.scenario}",
                   "-p", f"speedup:={float(args.speedup)}", "-p", f"data_seed:={args.data_seed}",
@@ -149,10 +154,13 @@ def node_parameters(args) -> dict:
     """The scenario's frame and filter settings (so the node's map is the truth's), then the user's -p."""
     params: dict = {}
     if args.scenario:
-        sc = SCENARIOS[args.scenario]
+        fleet = FLEETS.get(args.scenario)
+        sc = fleet.first if fleet else SCENARIOS[args.scenario]
         if not args.bag:
             params.update(datum_lat=sc.datum[0], datum_lon=sc.datum[1], datum_alt=sc.datum[2])
         params.update(sc.filter_overrides)
+        if fleet:
+            params.update(fleet.node_params())
     if args.seed is not None:
         params["seed"] = args.seed
     # The node must read what the vehicle publishes: its bearing encoding goes to the node too.
@@ -270,7 +278,7 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
 def parse_args(argv) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.launch", description=__doc__,
                                      formatter_class=HelpFormatter)
-    parser.add_argument("--scenario", choices=sorted(SCENARIOS),
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS) + sorted(FLEETS),
                         help="public scenario to simulate (docs/benchmarks.md, Scenarios; unset: seed); with --bag, "
                         "the scenario whose receiver settings the node gets (unset: the node's defaults)")
     parser.add_argument("--speedup", type=float, default=10.0, help="simulated seconds per wall second")

@@ -7,7 +7,9 @@ emitter, datum, GPS rate/noise/drop-outs, DF rate, bearing noise, quality range,
 the data seed. Messages are paced in real time divided by `speedup` (0: as fast as `max_rate_hz`
 allows); header stamps follow the simulated clock, starting at the wall time of the start. The
 truth goes out latched on `sim/truth` (PointStamped, emitter in `map` at the scenario's datum) and
-`sim/datum` (NavSatFix of that datum). The node exits when the scenario is played.
+`sim/datum` (NavSatFix of that datum). The node exits when the scenario is played. A scenario with several
+stations (`pair`: two cars) plays each on NAME/gps/fix and NAME/df/bearing; overrides apply to single-vehicle
+scenarios only.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from aoa_localizer.engine.config import ConfigError, ParameterSpec, Spec
+from aoa_localizer.engine.fleet import FLEETS, simulate_fleet
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
 from aoa_localizer.ros.declare import declare, refuse_unknown
 from aoa_localizer.ros.ros_main import run_node
@@ -58,7 +61,8 @@ OVERRIDES = [
 
 # The vehicle's own settings besides the scenario overrides.
 SETTINGS = [
-    ParameterSpec("scenario", "seed", Spec("public scenario", str, choices=tuple(SCENARIOS))),
+    ParameterSpec("scenario", "seed", Spec("public scenario (`pair`: two stations)", str,
+                                           choices=tuple(SCENARIOS) + tuple(FLEETS))),
     ParameterSpec("data_seed", 0, Spec("seed of the simulated data", int, low=0)),
     ParameterSpec("speedup", 1.0, Spec("simulated seconds per wall second; 0: as fast as max_rate_hz", float,
                                        low=0.0)),
@@ -112,6 +116,7 @@ class SimVehicle(Node):
 
     def __init__(self):
         super().__init__("sim_vehicle")
+        self.sigma_rad = 0.0
         s = declare(self, SETTINGS)  # raises ConfigError: refused at start with the reason
         overrides = declare(self, OVERRIDES)
         refuse_unknown(self)
@@ -119,16 +124,41 @@ class SimVehicle(Node):
         self.max_rate_hz, self.duration_s, self.encoding = s["max_rate_hz"], s["duration_s"], s["bearing_encoding"]
         self.wait_for, self.start_timeout_s = s["wait_for_subscribers"], s["start_timeout_s"]
         self.start_delay_s = s["start_delay_s"]
-        self.data = simulate(scenario_from(self.scenario_name, overrides), self.data_seed)
         self.T = build.rclpy_types()
+        self.stations = self._simulate(overrides)
         latched = QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
         )
-        self.pub_fix = self.create_publisher(self.T.NavSatFix, "gps/fix", 100)
         bearing_type = self.T.Vector3Stamped if self.encoding == "df_record" else self.T.PoseWithCovarianceStamped
-        self.pub_bearing = self.create_publisher(bearing_type, "df/bearing", 100)
+        self.pubs = {}
+        for name in self.stations:
+            prefix = f"{name}/" if name else ""
+            self.pubs[name] = (self.create_publisher(self.T.NavSatFix, prefix + "gps/fix", 100),
+                               self.create_publisher(bearing_type, prefix + "df/bearing", 100))
         self.pub_truth = self.create_publisher(self.T.PointStamped, "sim/truth", latched)
         self.pub_datum = self.create_publisher(self.T.NavSatFix, "sim/datum", latched)
+
+    def _simulate(self, overrides: dict) -> list[str]:
+        """Simulate the run; sets `events` ((t, station, kind, row) in stamp order), `datum`, `emitter` (ENU) and
+        `sigma_of` (each bearing's noise, for the pose encoding); returns the station names ("" for one vehicle)."""
+        fleet = FLEETS.get(self.scenario_name)
+        if fleet is None:
+            d = simulate(scenario_from(self.scenario_name, overrides), self.data_seed)
+            self.events = [(row[0], "", kind, row) for kind, row in d.events()]
+            self.datum, self.emitter, self.counts = d.scenario.datum, d.emitter_enu, (len(d.fixes), len(d.bearings))
+            self.sigma_of = dict(zip(d.bearings[:, 0].tolist(), d.sigma.tolist(), strict=False))
+            return [""]
+        given = sorted(k for k, v in overrides.items() if v is not None)
+        if given:
+            raise ConfigError(f"{', '.join(given)}: overrides apply to single-vehicle scenarios, not "
+                              f"{self.scenario_name}")
+        f = simulate_fleet(fleet.stations, fleet.emitters, self.data_seed)
+        self.events = [(row[0], name, kind, row) for kind, name, row in f.events()]
+        self.datum, self.emitter = f.scenario.datum, next(iter(f.truth.values()))
+        self.counts = (sum(map(len, f.fixes.values())), sum(map(len, f.bearings.values())))
+        self.sigma_of = {}  # the fleet's scenarios have a constant noise
+        self.sigma_rad = f.scenario.sigma_rad
+        return list(fleet.stations)
 
     def serve(self, seconds: float):
         """Wait `seconds` while serving the node's callbacks (parameter services, discovery), not sleeping."""
@@ -138,28 +168,27 @@ class SimVehicle(Node):
 
     def play(self):
         """Publish the run; returns when it is played (or the duration is reached)."""
-        d, T = self.data, self.T
+        T = self.T
         deadline = time.monotonic() + self.start_timeout_s
+        every = [pub for pair in self.pubs.values() for pub in pair]
         while (
             time.monotonic() < deadline
             and rclpy.ok()
-            and min(self.pub_fix.get_subscription_count(), self.pub_bearing.get_subscription_count()) < self.wait_for
+            and min(pub.get_subscription_count() for pub in every) < self.wait_for
         ):
             self.serve(0.05)
         self.serve(self.start_delay_s)
         base = time.time()
-        self.pub_datum.publish(build.navsatfix(T, base, *d.scenario.datum, frame_id="map"))
-        self.pub_truth.publish(build.point_stamped(T, base, *d.emitter_enu))
-        sigma_of = dict(zip(d.bearings[:, 0].tolist(), d.sigma.tolist(), strict=False))
-        events = d.events()
-        end = events[-1][1][0] if not self.duration_s else min(events[-1][1][0], self.duration_s)
+        self.pub_datum.publish(build.navsatfix(T, base, *self.datum, frame_id="map"))
+        self.pub_truth.publish(build.point_stamped(T, base, *self.emitter))
+        events = self.events
+        end = events[-1][0] if not self.duration_s else min(events[-1][0], self.duration_s)
         self.get_logger().info(
-            f"playing {self.scenario_name}: {len(d.fixes)} fixes, {len(d.bearings)} DF readings, "
+            f"playing {self.scenario_name}: {self.counts[0]} fixes, {self.counts[1]} DF readings, "
             f"{end:.0f} s simulated at speed-up {self.speedup:g}"
         )
         t_wall0, next_log = time.monotonic(), 0.0
-        for kind, row in events:
-            t = row[0]
+        for t, station, kind, row in events:
             if t > end or not rclpy.ok():
                 break
             if self.speedup > 0:
@@ -168,13 +197,14 @@ class SimVehicle(Node):
                 delay = 1.0 / self.max_rate_hz
             if delay > 0:
                 self.serve(delay)
+            pub_fix, pub_bearing = self.pubs[station]
             if kind == "fix":
-                self.pub_fix.publish(build.navsatfix(T, base + t, row[1], row[2], row[3]))
+                pub_fix.publish(build.navsatfix(T, base + t, row[1], row[2], row[3]))
             elif self.encoding == "df_record":
-                self.pub_bearing.publish(build.df_record(T, base + t, row[1], row[2]))
+                pub_bearing.publish(build.df_record(T, base + t, *row[1:4]))
             else:
                 yaw = math.radians(90.0 - row[1])
-                self.pub_bearing.publish(build.pose_bearing(T, base + t, yaw, sigma_of[t] ** 2))
+                pub_bearing.publish(build.pose_bearing(T, base + t, yaw, self.sigma_of.get(t, self.sigma_rad) ** 2))
             if t >= next_log:
                 self.get_logger().info(f"t = {t:.0f} s")
                 next_log += 30.0
