@@ -47,6 +47,7 @@ class Channels:
         self.cfg, self.rng, self._reject = cfg, rng, reject
         self.live: dict[str, Channel] = {}
         self.retired: dict[str, Channel] = {}  # the last retired channel of each id, its final estimate kept
+        self._heard: dict[float, Channel] = {}  # frequency -> its channel, for frequencies heard before
         self.default = self._open(DEFAULT, math.nan)
 
     def _open(self, cid: str, frequency_hz: float) -> Channel:
@@ -69,16 +70,20 @@ class Channels:
             return self.live.get(DEFAULT) or self._open(DEFAULT, math.nan)
         if not math.isfinite(f) or f < 0:
             return "bad_frequency"
+        known = self._heard.get(f)  # a receiver reports a carrier's frequency the same way every time
+        if known is not None:
+            return known
         best, gap = None, self.cfg.channel_tolerance_hz
         for ch in self.live.values():
             d = abs(ch.frequency_hz - f)  # NaN for the default channel: never <= gap
             if d <= gap:
                 best, gap = ch, d
-        if best is not None:
-            return best
-        if sum(1 for c in self.live.values() if c.id != DEFAULT) >= self.cfg.max_channels:
-            return "channel_limit"
-        return self._open(channel_id(f), f)
+        if best is None:
+            if sum(1 for c in self.live.values() if c.id != DEFAULT) >= self.cfg.max_channels:
+                return "channel_limit"
+            best = self._open(channel_id(f), f)
+        self._heard[f] = best
+        return best
 
     def retire_silent(self, now: float) -> list[Channel]:
         """Retire the frequency channels silent for `channel_timeout_s` of DF time before `now` (0: never);
@@ -87,6 +92,8 @@ class Channels:
         if timeout <= 0:
             return []
         gone = [c for c in self.live.values() if c.id != DEFAULT and now - c.last_heard > timeout]
+        if gone:
+            self._heard.clear()
         for c in gone:
             c.retired = True
             del self.live[c.id]

@@ -438,6 +438,7 @@ class Localizer:
             self._reject_many("clock_jump", len(st.pending) - len(kept))
             st.pending.clear()
             st.pending.extend(kept)
+        st.df_admitted(stamp, verdict is Verdict.CLOCK_JUMP)
         if stamp < st.first_stamp:
             self._reject("before_first_fix")
             return None
@@ -581,6 +582,7 @@ class Localizer:
             self._reject(reason)
 
     def _use_points(self, channel: Channel, groups: list[list[Reading]]) -> Estimate | None:
+        """The channel's filter takes the closed groups; returns the newest estimate they made."""
         estimate = None
         emitter = channel.emitter
         for readings in groups:

@@ -9,6 +9,7 @@ unless they are.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -96,30 +97,58 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig,
     covariance under `df_correlation`. `sigma`: the readings' sigmas when not their own (self-calibrated noise);
     the gate uses the larger of the two.
     """
-    theta = np.array([r.theta for r in readings])
-    own = np.array([r.sigma for r in readings])
+    cols = columns(readings)
+    theta, own = cols.theta, cols.sigma
     sigma = own if sigma is None else np.asarray(sigma, float)
     # The gate is never stricter than the configured sigma: the readings of a moving vehicle's point also
     # differ by its motion, which a small calibrated sigma would call wild.
     keep = ~point_outliers(theta, np.maximum(sigma, own), cfg.point_gate_sigma)
-    kept = [r for r, k in zip(readings, keep, strict=False) if k]
     theta, sigma = theta[keep], sigma[keep]
-    quality = np.array([r.quality for r in kept])
-    a = point_coefficients(quality, sigma, cfg.point_weighting)
+    a = point_coefficients(cols.quality[keep], sigma, cfg.point_weighting)
     ref = circular_mean(theta)
     rho = cfg.df_correlation
     cov = rho * np.outer(sigma, sigma) + (1.0 - rho) * np.diag(sigma**2)
     point = ObservationPoint(
-        stamp=float(a @ np.array([r.stamp for r in kept])),
-        east=float(a @ np.array([r.east for r in kept])),
-        north=float(a @ np.array([r.north for r in kept])),
+        stamp=float(a @ cols.stamp[keep]),
+        east=float(a @ cols.east[keep]),
+        north=float(a @ cols.north[keep]),
         theta=float(wrap_pi(ref + a @ wrap_pi(theta - ref))),
         sigma=float(math.sqrt(a @ cov @ a)),
-        n_readings=len(kept),
+        n_readings=int(keep.sum()),
         # GPS errors at one place are the same error: the point's antenna is as uncertain as its readings'.
-        gps_sigma=float(a @ np.array([r.gps_sigma for r in kept])),
+        gps_sigma=float(a @ cols.gps_sigma[keep]),
     )
     return point, keep
+
+
+class Columns(NamedTuple):
+    """The readings' fields as arrays, one each (separate allocations: the same sums, to the last bit, as arrays
+    made field by field)."""
+
+    stamp: np.ndarray
+    theta: np.ndarray
+    quality: np.ndarray
+    sigma: np.ndarray
+    east: np.ndarray
+    north: np.ndarray
+    gps_sigma: np.ndarray
+
+
+class Group(list):
+    """The readings of one observation point, with their fields as arrays made once (points are rebuilt from
+    their readings at every noise calibration)."""
+
+    cols: Columns | None = None
+
+
+def columns(readings: list[Reading]) -> Columns:
+    """The readings' fields as arrays (made once for a Group)."""
+    cols = getattr(readings, "cols", None)
+    if cols is None:
+        cols = Columns(*(np.array([getattr(r, f) for r in readings], float) for f in Columns._fields))
+        if isinstance(readings, Group):
+            readings.cols = cols
+    return cols
 
 
 class PointBuilder:
@@ -146,7 +175,7 @@ class PointBuilder:
         return closed
 
     def _take(self) -> list[Reading]:
-        readings, self.readings = self.readings, []
+        readings, self.readings = Group(self.readings), []
         return readings
 
     def flush(self) -> list[Reading] | None:

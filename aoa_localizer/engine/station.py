@@ -53,6 +53,7 @@ class Station:
         self.pending: deque[Pending] = deque()
         self.fix_clock = StreamClock(cfg.max_stamp_jump_s)
         self.df_clocks: dict[str, StreamClock] = {}  # per channel: VFOs of one receiver share their stamps
+        self.newest_df = -math.inf  # the newest DF stamp of any channel's stream, as its clock follows it
         self.datum_candidate: tuple[float, float, float, float, float] | None = None  # first fix, until confirmed
 
     def df_clock(self, channel: str) -> StreamClock:
@@ -61,10 +62,13 @@ class Station:
             clock = self.df_clocks[channel] = StreamClock(self.cfg.max_stamp_jump_s)
         return clock
 
-    @property
-    def newest_df(self) -> float:
-        """The newest DF stamp of any channel's stream, as its clock follows it (a clock step back included)."""
-        return max((c.last for c in self.df_clocks.values() if c.last is not None), default=-math.inf)
+    def df_admitted(self, stamp: float, clock_jumped: bool):
+        """A DF stamp a channel's clock admitted: `newest_df` follows (recomputed over the channels' clocks when
+        one jumped, so a clock step back is followed)."""
+        if clock_jumped:
+            self.newest_df = max((c.last for c in self.df_clocks.values() if c.last is not None), default=stamp)
+        else:
+            self.newest_df = max(self.newest_df, stamp)
 
     def restart_track(self):
         """A GPS clock jump: the track and the courses start again on the new timeline."""

@@ -38,7 +38,7 @@ from aoa_localizer.engine.global_search import (
     residuals,
 )
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
-from aoa_localizer.engine.preprocess import make_point
+from aoa_localizer.engine.preprocess import columns, make_point
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
 from aoa_localizer.engine.triangulation import initial_particles
 from aoa_localizer.engine.types import ObservationPoint, Reading
@@ -94,10 +94,10 @@ class EmitterTrack:
     # -- points -----------------------------------------------------------------------------------
     def sigmas(self, readings: list[Reading]) -> np.ndarray:
         """Each reading's sigma under the calibrated noise model (the configured one until calibrated)."""
-        base = np.array([r.sigma for r in readings])
+        cols = columns(readings)
         if not self.cfg.calibrate_noise:
-            return base
-        return base * self.noise.scale(np.array([r.quality for r in readings]))
+            return cols.sigma
+        return cols.sigma * self.noise.scale(cols.quality)
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         return make_point(readings, self.cfg, self.sigmas(readings))
@@ -391,8 +391,8 @@ class EmitterTrack:
         """The kept points rebuilt from their readings with the sigmas of `noise` (None: the configured ones)."""
         rows = []
         for group, _, _ in self.window:
-            base = np.array([r.sigma for r in group])
-            sigma = base if noise is None else base * noise.scale(np.array([r.quality for r in group]))
+            cols = columns(group)
+            sigma = cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
             p = make_point(group, self.cfg, sigma)[0]
             rows.append([p.east, p.north, p.theta, p.sigma, p.gps_sigma])
         return Points.of(np.array(rows))

@@ -20,11 +20,12 @@ import time
 from types import SimpleNamespace
 from typing import Any
 
+import numpy as np
 import rclpy
 from rcl_interfaces.msg import (
     SetParametersResult,
 )
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
@@ -120,6 +121,8 @@ class LocalizerNode(Node):
         self.lost_reported = 0  # fixes_lost + bearings_lost at the last diagnostics
         self.df_gaps: dict[str, StampGaps] = {}  # per station (a receiver's channels share its stamps)
         self.callback_s: list[float] = []
+        self.arrival_ns = time.time_ns()
+        self.latency_ms: list[float] = []  # from a message's arrival to the publication of each pose it made
         self.pending_params: dict = {}  # the first parameters of a group set together, held until it is complete
         self.callback_max_s = 0.0
 
@@ -143,10 +146,12 @@ class LocalizerNode(Node):
         for name in self.station_names:  # relative names: namespaces and remaps apply
             prefix = f"{name}/" if name else ""
             fix_sub = self.create_subscription(self.T.NavSatFix, prefix + "gps/fix",
-                                               lambda msg, station=name: self.on_fix(msg, station), sensor,
+                                               lambda msg, info, station=name: self.on_fix(msg, station, info),
+                                               sensor,
                                                event_callbacks=self._lost_counter("fixes_lost"))
             bearing_sub = self.create_subscription(bearing_type, prefix + "df/bearing",
-                                                   lambda msg, station=name: self.on_bearing(msg, station), sensor,
+                                                   lambda msg, info, station=name: self.on_bearing(msg, station, info),
+                                                   sensor,
                                                    event_callbacks=self._lost_counter("bearings_lost"))
             self.subs += [(fix_sub, FIX_TYPE), (bearing_sub, INPUT_TYPES[self.cfg.bearing_encoding])]
             # A vehicle-relative DF array with an IMU: the heading comes on heading/imu (REP-103 yaw).
@@ -205,15 +210,22 @@ class LocalizerNode(Node):
         return gaps
 
     def _made(self, est):
+        """An estimate, kept until the input that made it is handled (_publish_made)."""
         self.made[est.channel] = est
 
     def _channel_publishers(self, prefix: str) -> SimpleNamespace:
-        """pose (latched), fix, particles and markers under `prefix` (emitter/ or emitter/<channel>/)."""
+        """pose (latched), fix, particles and markers under `prefix` (emitter/ or emitter/<channel>/). A frequency
+        channel's publishers go without rclpy's default QoS-event handlers: each is a waitable the executor walks
+        at every message, and 50 channels' 200 of them took most of the node's time."""
         T = self.T
-        return SimpleNamespace(pose=self.create_publisher(T.PoseWithCovarianceStamped, prefix + "pose", self.latched),
-                               fix=self.create_publisher(T.NavSatFix, prefix + "fix", 10),
-                               particles=self.create_publisher(T.PoseArray, prefix + "particles", 10),
-                               markers=self.create_publisher(T.MarkerArray, prefix + "markers", 10))
+        events = PublisherEventCallbacks(use_default_callbacks=prefix == "emitter/")
+
+        def make(kind, topic, qos):
+            return self.create_publisher(kind, prefix + topic, qos, event_callbacks=events)
+
+        return SimpleNamespace(pose=make(T.PoseWithCovarianceStamped, "pose", self.latched),
+                               fix=make(T.NavSatFix, "fix", 10), particles=make(T.PoseArray, "particles", 10),
+                               markers=make(T.MarkerArray, "markers", 10))
 
     def destroy_node(self):
         engine_log = logging.getLogger("aoa_localizer")
@@ -286,8 +298,15 @@ class LocalizerNode(Node):
 
         return SubscriptionEventCallbacks(message_lost=on_lost)
 
-    def on_fix(self, msg, station: str = ""):
+    def _arrived(self, info) -> None:
+        """When the message being handled reached this process (the middleware's receive time, else now): the
+        start of the latency of any pose it produces."""
+        received = info.get("received_timestamp", 0) if isinstance(info, dict) else 0
+        self.arrival_ns = received if received > 0 else time.time_ns()
+
+    def on_fix(self, msg, station: str = "", info=None):
         t0 = time.perf_counter()
+        self._arrived(info)
         self.counts["fixes_received"] += 1
         try:
             r = fix_from_navsatfix(msg)
@@ -307,8 +326,9 @@ class LocalizerNode(Node):
             return
         self.loc.add_heading(r.stamp, r.yaw_rad, station=station)
 
-    def on_bearing(self, msg, station: str = ""):
+    def on_bearing(self, msg, station: str = "", info=None):
         t0 = time.perf_counter()
+        self._arrived(info)
         self.counts["bearings_received"] += 1
         self.health.reading(self._now())
         try:
@@ -338,6 +358,7 @@ class LocalizerNode(Node):
         made, self.made = self.made, {}
         for est in made.values():
             self._publish(est)
+            self.latency_ms.append(1e-6 * (time.time_ns() - self.arrival_ns))
         if any(self.summary_sent is None or c not in self.summary_sent for c in made):
             self._publish_summary()
 
@@ -349,13 +370,16 @@ class LocalizerNode(Node):
             pubs = self.channel_pubs[est.channel] = self._channel_publishers(f"emitter/{est.channel}/")
         pubs.pose.publish(build.emitter_pose(T, est, frame))
         pubs.fix.publish(build.emitter_fix(T, est, self.loc.datum_frame().alt0, self.emitter_frame))
-        pubs.particles.publish(build.particle_array(T, est, frame))
-        channel = self.loc.channels.live.get(est.channel)
-        rows = channel.emitter.used_points() if channel is not None else self.loc.recent_points(0)
-        n = self.get_parameter("marker_rays").value
-        rays = rows[len(rows) - min(n, len(rows)):, :3]
-        ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
-        pubs.markers.publish(build.markers(T, est, rays, ring, frame))
+        # The cloud and the markers cost about 1 ms to build: only for someone listening.
+        if pubs.particles.get_subscription_count():
+            pubs.particles.publish(build.particle_array(T, est, frame))
+        if pubs.markers.get_subscription_count():
+            channel = self.loc.channels.live.get(est.channel)
+            rows = channel.emitter.used_points() if channel is not None else self.loc.recent_points(0)
+            n = self.get_parameter("marker_rays").value
+            rays = rows[len(rows) - min(n, len(rows)):, :3]
+            ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
+            pubs.markers.publish(build.markers(T, est, rays, ring, frame))
 
     def channel_summary(self) -> dict[str, dict]:
         """Every channel with an estimate: its frequency, topics, state (live or retired) and latest estimate."""
@@ -434,6 +458,10 @@ class LocalizerNode(Node):
             values.update(callback_mean_ms=f"{1e3 * sum(self.callback_s) / len(self.callback_s):.3f}",
                           callback_max_ms=f"{1e3 * self.callback_max_s:.3f}",
                           callbacks_in_period=len(self.callback_s), load_pct=f"{100 * self._load():.0f}")
+        if self.latency_ms:
+            p50, p99, top = np.percentile(self.latency_ms, (50, 99, 100), method="higher")
+            values.update(poses_in_period=len(self.latency_ms), pose_latency_p50_ms=f"{p50:.3f}",
+                          pose_latency_p99_ms=f"{p99:.3f}", pose_latency_max_ms=f"{top:.3f}")
         est = loc.estimate
         if est is not None:
             values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * loc.last_update_s:.3f}", east=f"{est.east:.2f}",
@@ -507,7 +535,7 @@ class LocalizerNode(Node):
         hardware_id = self.get_parameter("hardware_id").value
         self.pub_diag.publish(build.diagnostic_array(self.T, self._now(), self.diag_name, level, message, values,
                                                      hardware_id, self.channel_diagnostics()))
-        self.callback_s, self.callback_max_s = [], 0.0
+        self.callback_s, self.callback_max_s, self.latency_ms = [], 0.0, []
         self._publish_path()
         self._publish_summary()
 

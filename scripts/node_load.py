@@ -1,0 +1,174 @@
+"""Many emitters through one node: a vehicle circles a town at 15 m/s while its receiver reports --emitters carriers
+at --df-hz each (all channels of a scan share one stamp, as a KrakenSDR's VFOs do) plus 10 Hz GPS, for --seconds,
+into a real node process over Fast DDS with its default configuration. Every diagnostics period the node reports
+the latency from the arrival of each message that made a pose to that pose's publication (p50, p99, max over the
+period); this script keeps them, samples the node's resident memory every 10 s, and prints the figures of
+docs/benchmarks.md "Many emitters through one node". The overall p99 is at most the largest per-period p99.
+
+    python scripts/node_load.py --emitters 50 --df-hz 20 --seconds 600
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.qos import QoSProfile
+
+from aoa_localizer.engine.geodesy import LocalFrame
+from msgs_adapters import build
+from msgs_adapters.fields import diagnostics_values
+
+DATUM = (39.1, 117.2, 5.0)
+RADIUS_M, SPEED = 1000.0, 15.0  # the vehicle's loop
+
+
+def rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+class Attached:
+    """A node this script did not start: measured, left running."""
+
+    def __init__(self, pid: int):
+        self.pid = pid
+
+    def terminate(self):
+        pass
+
+    def wait(self, _timeout):
+        pass
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (s)."""
+    with open(f"/proc/{pid}/stat") as fh:
+        fields = fh.read().rsplit(")", 1)[1].split()
+    return round((int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"), 1)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--emitters", type=int, default=50)
+    parser.add_argument("--df-hz", type=float, default=20.0, help="DF records per second per emitter")
+    parser.add_argument("--seconds", type=float, default=600.0)
+    parser.add_argument("--quality", type=float, default=80.0,
+                        help="the records' quality (below the node's quality_min 30: transport cost alone)")
+    parser.add_argument("--node-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a node parameter besides the defaults (repeatable), e.g. num_particles:=50")
+    parser.add_argument("--attach", type=int, metavar="PID",
+                        help="measure a node already running (e.g. under a profiler) in ROS_DOMAIN_ID, not a new one")
+    parser.add_argument("--json", help="write the figures here too")
+    args = parser.parse_args()
+    rng = np.random.default_rng(0)
+    angle = rng.uniform(0, 2 * math.pi, args.emitters)
+    reach = rng.uniform(200.0, 2500.0, args.emitters)
+    emitters = np.column_stack([reach * np.cos(angle), reach * np.sin(angle)])
+    freqs = 400e6 + 25e3 * np.arange(args.emitters)
+    if args.attach:
+        domain, node_proc = int(os.environ["ROS_DOMAIN_ID"]), Attached(args.attach)
+    else:
+        domain = random.randint(1, 101)
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        cmd = [sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p", "seed:=1"]
+        cmd += [a for p in args.node_param for a in ("-p", p)]
+        node_proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                     start_new_session=True)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node("load", context=ctx)
+    periods, rss = [], []
+    try:
+        T = build.rclpy_types()
+        last: dict = {}
+
+        def on_diag(m):
+            values = diagnostics_values(m).get("aoa_localizer: localizer")
+            if values:
+                last.clear()
+                last.update(values)
+                if "pose_latency_p99_ms" in values:
+                    periods.append(values)
+
+        node.create_subscription(T.DiagnosticArray, "/diagnostics", on_diag, 10)
+        pub_fix = node.create_publisher(T.NavSatFix, "gps/fix", QoSProfile(depth=100))
+        pub_df = node.create_publisher(T.Vector3Stamped, "df/bearing", QoSProfile(depth=1000))
+        executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not (pub_df.get_subscription_count() and pub_fix.get_subscription_count()):
+            executor.spin_once(timeout_sec=0.05)
+        frame = LocalFrame(*DATUM)
+        t0, sent, scans, next_fix, next_rss = time.monotonic(), 0, 0, 0.0, 0.0
+        stamp0 = time.time()
+        while (t := time.monotonic() - t0) < args.seconds:
+            phase = SPEED * t / RADIUS_M
+            east, north = RADIUS_M * math.cos(phase), RADIUS_M * math.sin(phase)
+            if t >= next_fix:
+                lat, lon, alt = frame.to_geodetic(east, north, 0.0)
+                pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
+                next_fix += 0.1
+            if t >= next_rss:
+                rss.append((round(t, 1), round(rss_mb(node_proc.pid), 1)))
+                next_rss += 10.0
+            az = np.degrees(np.arctan2(emitters[:, 0] - east, emitters[:, 1] - north)) + rng.normal(0, 2.0, len(freqs))
+            for a, f in zip(az % 360, freqs, strict=True):
+                pub_df.publish(build.df_record(T, stamp0 + t, float(a), args.quality, float(f)))
+            sent += len(freqs)
+            scans += 1
+            target = t0 + scans / args.df_hz
+            while time.monotonic() < target:
+                executor.spin_once(timeout_sec=max(0.0, target - time.monotonic()))
+        end = time.monotonic() + 3
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        rss.append((round(time.monotonic() - t0, 1), round(rss_mb(node_proc.pid), 1)))
+        figures = {"node_cpu_s": cpu_seconds(node_proc.pid)}
+        figures.update(summarise(args, sent, last, periods, rss))
+        print(json.dumps(figures, indent=1))
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(figures, fh, indent=1)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        node_proc.terminate()
+        node_proc.wait(10)
+
+
+def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> dict:
+    p99 = [float(p["pose_latency_p99_ms"]) for p in periods]
+    p50 = [float(p["pose_latency_p50_ms"]) for p in periods]
+    top = [float(p["pose_latency_max_ms"]) for p in periods]
+    poses = sum(int(p["poses_in_period"]) for p in periods)
+    warm = [m for t, m in rss if t >= 60.0]  # after the channels and their filters exist
+    return {
+        "emitters": args.emitters, "df_hz_each": args.df_hz, "seconds": args.seconds,
+        "df_records_sent": sent, "df_records_received": int(last.get("bearings_received", 0)),
+        "fixes_received": int(last.get("fixes_received", 0)), "bearings_used": int(last.get("bearings_used", 0)),
+        "rejected": {k: v for k, v in last.items() if k.startswith("rejected.")},
+        "poses": poses, "periods": len(periods),
+        "latency_p50_ms_median_of_periods": float(np.median(p50)) if p50 else None,
+        "latency_p99_ms_worst_period": max(p99) if p99 else None,
+        "latency_p99_ms_median_of_periods": float(np.median(p99)) if p99 else None,
+        "latency_max_ms": max(top) if top else None,
+        "periods_with_p99_over_20ms": sum(v > 20.0 for v in p99),
+        "rss_mb_at_60s": warm[0] if warm else None, "rss_mb_at_end": warm[-1] if warm else None,
+        "rss_mb_samples": rss,
+        "load_pct_last_period": last.get("load_pct"), "status": last.get("status"),
+    }
+
+
+if __name__ == "__main__":
+    main()
