@@ -35,6 +35,8 @@ def test_nothing_cites_documents_outside_the_repository():
 def test_the_contract_names_every_topic_the_programs_use():
     sources = "".join((ROOT / "aoa_localizer" / "ros" / f).read_text() for f in ("node.py", "sim_vehicle.py"))
     topics = set(re.findall(r'create_(?:publisher|subscription)\(\s*[\w.]+,\s*"([^"]+)"', sources))
+    topics |= set(re.findall(r'prefix \+ "([^"]+)"', sources))  # a station's inputs and path
+    topics |= {"emitter/" + t for t in re.findall(r'make\(T\.\w+, "([^"]+)"', sources)}  # each channel's
     assert {"gps/fix", "df/bearing", "emitter/pose", "emitter/datum", "vehicle/path", "sim/truth"} <= topics
     for topic in topics:
         assert f"`{topic}`" in INTERFACE, topic

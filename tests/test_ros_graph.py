@@ -85,6 +85,18 @@ def test_vehicle_and_node_converge_and_the_launcher_leaves_no_process(tmp_path, 
     assert no_process_with(marker)
 
 
+def test_the_two_car_scenario_plays_both_cars_into_one_node_and_its_bag_replays(tmp_path, domain):
+    """`--scenario pair`: the vehicle plays car1 and car2 on their own topics, the launcher gives the node
+    `stations: [car1, car2]`; the ellipse is the fused one (each car alone: 21-23 m long, tests/test_stations.py).
+    The sample bag replays live the same way."""
+    for args in (["--scenario", "pair", "--speedup", 40], ["--bag", ROOT / "bags/pair", "--scenario", "pair",
+                                                           "--rate", 0]):
+        res = launch([*args, "--seed", 1, "--domain-id", domain, "--result", tmp_path / "r.json"])
+        assert res.returncode == 0, res.stdout + res.stderr
+        result = json.loads((tmp_path / "r.json").read_text())
+        assert result["converged"] and result["error_m"] < 10.0 and result["ellipse95_m"][0] < 15.0, result
+
+
 def test_pose_encoding_end_to_end(tmp_path, domain):
     res = launch(
         [
