@@ -283,7 +283,7 @@ class Localizer:
     def _place(self, st: Station, lat: float, lon: float, alt: float, sigma_m: float):
         """A fixed station at lat/lon; its waiting bearings can now be placed."""
         if self.frame is None:
-            self._set_datum(lat, lon, alt)
+            self._set_datum(lat, lon, alt, f"fixed station {st.name or '(default)'}'s position")
         frame = self.datum_frame()
         east, north = frame.to_enu(lat, lon)
         st.fix_at(float(east), float(north), float(frame.north_angle(lat, lon)), sigma_m)
@@ -351,10 +351,10 @@ class Localizer:
             log.warning("%s: the clock jumped to %.3f; going on on the new timeline", jump_event, stamp)
         return verdict
 
-    def _set_datum(self, lat, lon, alt):
+    def _set_datum(self, lat, lon, alt, source="the first valid fix, confirmed by the next"):
         datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)
         self.frame = LocalFrame(lat, lon, datum_alt)
-        log.info("datum set from the first valid fix, confirmed by the next: %.7f, %.7f, %.1f m", lat, lon, datum_alt)
+        log.info("datum set from %s: %.7f, %.7f, %.1f m", source, lat, lon, datum_alt)
 
     def _store_fix(self, st: Station, stamp, lat, lon, alt, sigma_m=0.0) -> Estimate | None:
         frame = self.datum_frame()
