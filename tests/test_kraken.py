@@ -132,9 +132,11 @@ def test_a_simulated_krakensdr_drive_is_bridged_and_localised(server, spawn, dom
 
         got = {}
         latched = rclpy.qos.QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
-        node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: got.update(pose=m), latched)
+        # The VFO's frequency makes its own channel: the pose comes under emitter/<channel>/ (f + Hz).
+        channel = "emitter/f433920000/pose"  # the served lines' 433.92 MHz
+        node.create_subscription(T.PoseWithCovarianceStamped, channel, lambda m: got.update(pose=m), latched)
         node.create_subscription(T.NavSatFix, "emitter/datum", lambda m: got.update(datum=m), latched)
-        assert spin_until(executor, lambda: node.count_publishers("/emitter/pose") > 0, 15)
+        assert spin_until(executor, lambda: node.count_publishers("/emitter/datum") > 0, 15)
         bridge = spawn(["aoa_localizer.kraken_bridge", "--url", url, "--gps", "--rate", "200"], domain)
         deadline = time.monotonic() + 60
         while served.sent < 2 * n_lines + 2 and time.monotonic() < deadline:

@@ -515,7 +515,7 @@ def test_messages_the_middleware_lost_make_a_warning_for_one_period(domain):
     rclpy.init(domain_id=domain)
     try:
         node = LocalizerNode()
-        assert node.bearing_sub.event_handlers and node.fix_sub.event_handlers  # the events are subscribed
+        assert node.subs and all(sub.event_handlers for sub, _ in node.subs)  # the events are subscribed
         node._lost_counter("bearings_lost").message_lost(SimpleNamespace(total_count_change=7))
         level, message, values = node.diagnostics()
         assert level == 1 and "being lost" in message and values["bearings_lost"] == 7
