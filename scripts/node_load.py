@@ -13,18 +13,13 @@ import argparse
 import json
 import math
 import os
-import random
-import subprocess
-import sys
 import time
 
 import numpy as np
-import rclpy
-from rclpy.qos import QoSProfile
+from node_rig import NodeRig
 
 from aoa_localizer.engine.geodesy import LocalFrame
 from msgs_adapters import build
-from msgs_adapters.fields import diagnostics_values
 
 DATUM = (39.1, 117.2, 5.0)
 RADIUS_M, SPEED = 1000.0, 15.0  # the vehicle's loop
@@ -36,19 +31,6 @@ def rss_mb(pid: int) -> float:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) / 1024
     return float("nan")
-
-
-class Attached:
-    """A node this script did not start: measured, left running."""
-
-    def __init__(self, pid: int):
-        self.pid = pid
-
-    def terminate(self):
-        pass
-
-    def wait(self, _timeout):
-        pass
 
 
 def cpu_seconds(pid: int) -> float:
@@ -76,40 +58,18 @@ def main():
     reach = rng.uniform(200.0, 2500.0, args.emitters)
     emitters = np.column_stack([reach * np.cos(angle), reach * np.sin(angle)])
     freqs = 400e6 + 25e3 * np.arange(args.emitters)
-    if args.attach:
-        domain, node_proc = int(os.environ["ROS_DOMAIN_ID"]), Attached(args.attach)
-    else:
-        domain = random.randint(1, 101)
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-        cmd = [sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p", "seed:=1"]
-        cmd += [a for p in args.node_param for a in ("-p", p)]
-        node_proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                     start_new_session=True)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node("load", context=ctx)
-    periods, rss = [], []
-    try:
-        T = build.rclpy_types()
-        last: dict = {}
+    last: dict = {}
+    periods: list[dict] = []
+    rss: list = []
 
-        def on_diag(m):
-            values = diagnostics_values(m).get("aoa_localizer: localizer")
-            if values:
-                last.clear()
-                last.update(values)
-                if "pose_latency_p99_ms" in values:
-                    periods.append(values)
+    def on_status(values):
+        last.clear()
+        last.update(values)
+        if "pose_latency_p99_ms" in values:
+            periods.append(values)
 
-        node.create_subscription(T.DiagnosticArray, "/diagnostics", on_diag, 10)
-        pub_fix = node.create_publisher(T.NavSatFix, "gps/fix", QoSProfile(depth=100))
-        pub_df = node.create_publisher(T.Vector3Stamped, "df/bearing", QoSProfile(depth=1000))
-        executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
-        executor.add_node(node)
-        end = time.monotonic() + 10
-        while time.monotonic() < end and not (pub_df.get_subscription_count() and pub_fix.get_subscription_count()):
-            executor.spin_once(timeout_sec=0.05)
-        frame = LocalFrame(*DATUM)
+    with NodeRig(args.node_param, on_status, args.attach) as rig:
+        T, frame = rig.T, LocalFrame(*DATUM)
         t0, sent, scans, next_fix, next_rss = time.monotonic(), 0, 0, 0.0, 0.0
         stamp0 = time.time()
         while (t := time.monotonic() - t0) < args.seconds:
@@ -117,34 +77,25 @@ def main():
             east, north = RADIUS_M * math.cos(phase), RADIUS_M * math.sin(phase)
             if t >= next_fix:
                 lat, lon, alt = frame.to_geodetic(east, north, 0.0)
-                pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
+                rig.pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
                 next_fix += 0.1
             if t >= next_rss:
-                rss.append((round(t, 1), round(rss_mb(node_proc.pid), 1)))
+                rss.append((round(t, 1), round(rss_mb(rig.proc.pid), 1)))
                 next_rss += 10.0
             az = np.degrees(np.arctan2(emitters[:, 0] - east, emitters[:, 1] - north)) + rng.normal(0, 2.0, len(freqs))
             for a, f in zip(az % 360, freqs, strict=True):
-                pub_df.publish(build.df_record(T, stamp0 + t, float(a), args.quality, float(f)))
+                rig.pub_df.publish(build.df_record(T, stamp0 + t, float(a), args.quality, float(f)))
             sent += len(freqs)
             scans += 1
-            target = t0 + scans / args.df_hz
-            while time.monotonic() < target:
-                executor.spin_once(timeout_sec=max(0.0, target - time.monotonic()))
-        end = time.monotonic() + 3
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
-        rss.append((round(time.monotonic() - t0, 1), round(rss_mb(node_proc.pid), 1)))
-        figures = {"node_cpu_s": cpu_seconds(node_proc.pid)}
-        figures.update(summarise(args, sent, last, periods, rss))
-        print(json.dumps(figures, indent=1))
-        if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(figures, fh, indent=1)
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
-        node_proc.terminate()
-        node_proc.wait(10)
+            rig.spin_until(t0 + scans / args.df_hz)
+        rig.spin_until(time.monotonic() + 3)
+        rss.append((round(time.monotonic() - t0, 1), round(rss_mb(rig.proc.pid), 1)))
+        figures = {"node_cpu_s": cpu_seconds(rig.proc.pid)}
+    figures.update(summarise(args, sent, last, periods, rss))
+    print(json.dumps(figures, indent=1))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(figures, fh, indent=1)
 
 
 def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> dict:

@@ -8,18 +8,13 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import random
-import subprocess
-import sys
 import time
 
-import rclpy
-from rclpy.qos import QoSProfile
+from node_rig import NodeRig
 
 from aoa_localizer.engine.geodesy import LocalFrame
 from msgs_adapters import build
-from msgs_adapters.fields import diagnostics_values
 
 DATUM = (39.1, 117.2, 5.0)
 EMITTER = (300.0, 250.0)
@@ -31,55 +26,28 @@ def main():
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--particles", type=int, default=100)
     args = parser.parse_args()
-    domain = random.randint(1, 101)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    node_proc = subprocess.Popen([sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p",
-                                  f"num_particles:={args.particles}", "-p", "seed:=1"], env=env,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node("throughput", context=ctx)
-    try:
-        T = build.rclpy_types()
-        diag = {}
-        node.create_subscription(T.DiagnosticArray, "/diagnostics",
-                                 lambda m: diag.update(diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
-        pub_fix = node.create_publisher(T.NavSatFix, "gps/fix", QoSProfile(depth=100))
-        pub_df = node.create_publisher(T.Vector3Stamped, "df/bearing", QoSProfile(depth=1000))
-        executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
-        executor.add_node(node)
-        end = time.monotonic() + 10
-        while time.monotonic() < end and not (pub_df.get_subscription_count() and pub_fix.get_subscription_count()):
-            executor.spin_once(timeout_sec=0.05)
-        frame = LocalFrame(*DATUM)
+    diag: dict = {}
+    with NodeRig([f"num_particles:={args.particles}"], on_status=diag.update) as rig:
+        T, frame = rig.T, LocalFrame(*DATUM)
         t0, sent, next_fix = time.monotonic(), 0, 0.0
         stamp0 = time.time()
         while (t := time.monotonic() - t0) < args.seconds:
             east, north = 20.0 * t, 0.0  # 20 m/s along the x axis, past the emitter
             if t >= next_fix:
                 lat, lon, alt = frame.to_geodetic(east, north, 0.0)
-                pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
+                rig.pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
                 next_fix += 0.1
             az = math.degrees(math.atan2(EMITTER[0] - east, EMITTER[1] - north)) % 360
-            pub_df.publish(build.df_record(T, stamp0 + t, az + random.gauss(0, 1.0), 90.0))
+            rig.pub_df.publish(build.df_record(T, stamp0 + t, az + random.gauss(0, 1.0), 90.0))
             sent += 1
-            target = t0 + sent / args.rate
-            while time.monotonic() < target:
-                executor.spin_once(timeout_sec=max(0.0, target - time.monotonic()))
-        end = time.monotonic() + 3
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
+            rig.spin_until(t0 + sent / args.rate)
+        rig.spin_until(time.monotonic() + 3)
         received = int(diag.get("bearings_received", 0))
         print(f"sent {sent} DF records in {args.seconds:g} s ({sent / args.seconds:.0f}/s); node received {received} "
               f"({100 * received / max(sent, 1):.1f} %); used {diag.get('bearings_used')} in {diag.get('points_used')} "
               f"points; status {diag.get('status')}")
         print(f"callback time in the last diagnostics period: mean {diag.get('callback_mean_ms')} ms, "
               f"max {diag.get('callback_max_ms')} ms; N = {args.particles}")
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
-        node_proc.terminate()
-        node_proc.wait(10)
 
 
 if __name__ == "__main__":

@@ -190,11 +190,12 @@ class Localizer:
         """Observation points buffered while waiting to start."""
         return [p for _, p, _ in self.emitter.window] if self.emitter.filter is None else []
 
-    def recent_points(self, n: int | None = None) -> np.ndarray:
-        """The latest `n` (all: None) observation points the filter uses, oldest first, as rows of antenna east,
-        north (m), bearing theta (ENU rad), its sigma (rad) and the antenna position's sigma (m); (0, 5) before
-        the start."""
-        rows = self.emitter.used_points()
+    def recent_points(self, n: int | None = None, channel: str | None = None) -> np.ndarray:
+        """The latest `n` (all: None) observation points the filter of `channel` (None: the main one) uses, oldest
+        first, as rows of antenna east, north (m), bearing theta (ENU rad), its sigma (rad) and the antenna
+        position's sigma (m); (0, 5) before the start."""
+        found = self.main if channel is None else self.channels.live.get(channel)
+        rows = found.emitter.used_points() if found is not None else np.zeros((0, 5))
         return rows if n is None else rows[len(rows) - min(n, len(rows)):]
 
     @property

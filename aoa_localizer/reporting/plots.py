@@ -13,14 +13,13 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar  # noqa: E402
 
 from aoa_localizer.engine.crlb import ellipse_axes, ellipse_points  # noqa: E402
+from msgs_adapters.build import channel_colour  # noqa: E402
 
 RAYS_MAX = 400  # used rays drawn (evenly thinned beyond that); every gated-out one is drawn
 CLIP_FACTOR = 1000.0  # rmse_curves: a series above this many times the reference is clipped
 
 
-# The other emitters' colours (matplotlib's tab10 without red and orange, which the main estimate uses), and the
-# stations' track styles.
-PALETTE = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:green", "tab:blue", "tab:gray")
+# The stations' track styles.
 TRACK_STYLES = ("-", "--", ":", "-.")
 
 
@@ -55,8 +54,8 @@ def map_figure(path, frame, tracks: dict[str, np.ndarray], readings: np.ndarray,
     ax = fig.add_subplot(grid[:, 0])
     target = (est.east, est.north)
     _draw_inputs(ax, tracks, readings, kept, target)
-    for k, other in enumerate(others):
-        colour = PALETTE[k % len(PALETTE)]
+    for other in others:
+        colour = channel_colour(other.channel) or (0.5, 0.5, 0.5)  # as in RViz; the default channel grey
         ring_o = ellipse_points((other.east, other.north), other.cov)
         ax.plot(ring_o[:, 0], ring_o[:, 1], color=colour, lw=1.2, zorder=4)
         ax.plot(other.east, other.north, "x", color=colour, ms=9, mew=2, zorder=5, label=f"emitter {other.channel}")

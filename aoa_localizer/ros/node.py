@@ -374,10 +374,7 @@ class LocalizerNode(Node):
         if pubs.particles.get_subscription_count():
             pubs.particles.publish(build.particle_array(T, est, frame))
         if pubs.markers.get_subscription_count():
-            channel = self.loc.channels.live.get(est.channel)
-            rows = channel.emitter.used_points() if channel is not None else self.loc.recent_points(0)
-            n = self.get_parameter("marker_rays").value
-            rays = rows[len(rows) - min(n, len(rows)):, :3]
+            rays = self.loc.recent_points(self.get_parameter("marker_rays").value, est.channel)[:, :3]
             ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
             pubs.markers.publish(build.markers(T, est, rays, ring, frame))
 
