@@ -58,7 +58,7 @@ def _geodetic_scalar(x: float, y: float, z: float) -> tuple[float, float, float]
     p = math.hypot(x, y)
     lat = math.atan2(z, p * (1.0 - WGS84_E2))
     n = alt = 0.0
-    for _ in range(_ECEF_ITERATIONS + 1):
+    for _ in range(_ECEF_ITERATIONS):  # the same iterations as the array path
         sin_lat = math.sin(lat)
         n = WGS84_A / math.sqrt(1.0 - WGS84_E2 * sin_lat * sin_lat)
         alt = p / math.cos(lat) - n
