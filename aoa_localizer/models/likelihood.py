@@ -8,6 +8,7 @@ import numpy as np
 from aoa_localizer.engine.geodesy import TWO_PI
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
+_BELOW_FLOOR = 40.0  # exp(-40) = 4e-18 < 2^-53: below this under log(c), exp(g) + c == c
 
 
 def gaussian_loglik(residual, sigma):
@@ -19,12 +20,15 @@ def gaussian_loglik(residual, sigma):
 def mixture_loglik(residual, sigma, outlier_prob: float):
     """log((1 - e) N(residual; 0, sigma^2) + e / 2pi): a wild bearing costs at most log(e / 2pi).
 
-    Written as log(exp(g) + c): where exp(g) underflows the result is log(c), exactly the floor.
+    Written as log(exp(g) + c): where exp(g) underflows the result is log(c), exactly the floor. g is first
+    raised to log(c) - 40, where exp(g) is already below half an ulp of c (the same result to the last bit):
+    exp's slow path for arguments that underflow took 90 % of this function's time.
     """
     g = gaussian_loglik(residual, sigma) + math.log1p(-outlier_prob)
     if outlier_prob == 0:
         return g
-    return np.log(np.exp(g) + outlier_prob / TWO_PI)
+    c = outlier_prob / TWO_PI
+    return np.log(np.exp(np.maximum(g, math.log(c) - _BELOW_FLOOR)) + c)
 
 
 class BearingLikelihood:
