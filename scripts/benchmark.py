@@ -118,13 +118,13 @@ def aggregate(rows, truth) -> dict:
     return out
 
 
-def bench_scenario(name, runs, n, filters, with_peers, bar):
+def bench_scenario(name, runs, n, filters, with_peers, bar, scheduling="reproducible"):
     rows = {f: [] for f in filters}
     rows.update({p: [] for p in (PEERS if with_peers else ())})
     for r in range(runs):
         data = simulate(name, r)
         for fname in filters:
-            cfg = LocalizerConfig(seed=10000 + r, num_particles=n).with_changes(**FILTERS[fname])
+            cfg = LocalizerConfig(seed=10000 + r, num_particles=n, scheduling=scheduling).with_changes(**FILTERS[fname])
             res = run(data, cfg)
             s = dict(res.scores, step_s=res.step_s, wall_s=res.wall_s)
             rows[fname].append(s)
@@ -212,11 +212,11 @@ GROSS_FACTOR = 10.0
 
 def robust_task(task):
     """One (cell, run, filter): the final estimate's scores and the run's wall time."""
-    cell, r, fname = task
+    cell, r, fname, scheduling = task
     logging.getLogger("aoa_localizer").setLevel(logging.ERROR)
     warnings.simplefilter("ignore")  # numpy RuntimeWarnings of diverging peers must not break the progress bar
     data = simulate(robustness_cells()[cell], r)
-    cfg = LocalizerConfig(seed=10000 + r)
+    cfg = LocalizerConfig(seed=10000 + r, scheduling=scheduling)
     if fname == "batch-ml":
         return cell, fname, run_batch_ml(data, cfg)
     res = run(data, cfg.with_changes(algorithm=fname))
@@ -247,9 +247,9 @@ def robust_aggregate(rows: list[dict]) -> dict:
     return out
 
 
-def bench_robustness(runs: int, filters, jobs: int) -> dict:
+def bench_robustness(runs: int, filters, jobs: int, scheduling: str = "reproducible") -> dict:
     cells = list(robustness_cells())
-    tasks = [(c, r, f) for c in cells for r in range(runs) for f in filters]
+    tasks = [(c, r, f, scheduling) for c in cells for r in range(runs) for f in filters]
     rows = {c: {f: [] for f in filters} for c in cells}
     with tqdm(total=len(tasks), unit="run", file=sys.stderr, desc="robustness") as bar:
         if jobs > 1:
@@ -309,6 +309,13 @@ def main(argv=None):
         help="public scenarios, robustness cells, or both (default)",
     )
     parser.add_argument(
+        "--scheduling",
+        choices=("reproducible", "realtime"),
+        default="reproducible",
+        help="the engine's scheduling (realtime: checks in the worker thread, paced as a receiver; default "
+        "reproducible)",
+    )
+    parser.add_argument(
         "--jobs",
         type=int,
         default=os.cpu_count() or 1,
@@ -331,7 +338,8 @@ def main(argv=None):
         warnings.simplefilter("always", RuntimeWarning)
         for name in args.scenarios:
             bar.set_description(name)
-            results[name], raw[name] = bench_scenario(name, args.runs, args.particles, args.filters, with_peers, bar)
+            results[name], raw[name] = bench_scenario(name, args.runs, args.particles, args.filters, with_peers, bar,
+                                                        args.scheduling)
     if caught:
         kinds = sorted({str(w.message) for w in caught})
         print(f"note: {len(caught)} numpy RuntimeWarnings during the runs (diverging filters): {'; '.join(kinds[:5])}",
@@ -357,7 +365,7 @@ def main(argv=None):
     robust = {}
     if args.section == "all":
         robust = bench_robustness(
-            args.runs, [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"], args.jobs
+            args.runs, [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"], args.jobs, args.scheduling
         )
         print_robustness(robust)
     if args.json:
@@ -367,7 +375,7 @@ def main(argv=None):
 def robustness_main(args):
     t0 = time.time()
     filters = [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"]
-    robust = bench_robustness(args.runs, filters, args.jobs)
+    robust = bench_robustness(args.runs, filters, args.jobs, args.scheduling)
     print_robustness(robust)
     meta = {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),

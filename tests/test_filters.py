@@ -39,6 +39,17 @@ def test_likelihood_wraps_the_residual_and_adds_gps_noise_by_range():
     assert with_gps.log(np.array([[100.0, 0.0]]), 0.0, 0.0, 0.0, 0.01)[0] == pytest.approx(gaussian_loglik(0.0, s_eff))
 
 
+def test_the_mixture_floor_is_the_naive_formula_to_the_last_bit():
+    """mixture_loglik raises g before exp (exp is slow where it underflows): the same value as log(exp(g) + c)."""
+    rng = np.random.default_rng(0)
+    resid = np.concatenate([rng.normal(0, 0.02, 500), rng.uniform(-math.pi, math.pi, 500), [0.0, math.pi, -math.pi]])
+    for sigma in (1e-4, 0.01, 0.05, 1.0):
+        for eps in (1e-6, 0.1, 0.5):
+            g = gaussian_loglik(resid, sigma) + math.log1p(-eps)
+            naive = np.log(np.exp(g) + eps / (2 * math.pi))
+            assert np.array_equal(mixture_loglik(resid, sigma, eps), naive)
+
+
 def _filter(**kw):
     cfg = LocalizerConfig(seed=1, num_particles=kw.pop("n", 4), **kw)
     return make_filter(cfg, np.random.default_rng(cfg.seed), EmitterModel(cfg))
@@ -137,3 +148,33 @@ def test_a_filter_refuses_a_model_without_the_capability_it_needs():
         # the default (mcmc) variant needs the static posterior, and says the paper variant may run
         with pytest.raises(ModelMismatch, match="variant: paper, may run on it"):
             make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), GrowthModel())
+
+
+def test_realtime_sweeps_are_spread_over_the_next_points():
+    """`sweeps_per_point` 1 (scheduling: realtime): one sweep at the resampling, then one at each following point
+    until all `sweeps` are made; a resampling that comes before the debt is paid pays it, so no cloud gets fewer
+    sweeps than without the spreading. Default: all of them at once."""
+    for per_point, expected in ((0, [5, 0, 0, 0, 0, 0]), (1, [1, 1, 1, 1, 1, 0])):
+        f = _filter(n=200)
+        f.sweeps_per_point = per_point
+        made = []
+        real = f.sweep
+        f.sweep = lambda target, z, made=made, real=real: made.append(1) or real(target, z)
+        rng = np.random.default_rng(0)
+        f.initialise(rng.normal(0.0, 10.0, (200, 2)), [0, 0], np.eye(2) * 1e6)
+        f.spread = np.eye(2) * 100.0
+        counts = []
+        f.resample()
+        f.after_resample(None)
+        counts.append(len(made))
+        for k in range(5):  # points that barely inform (sigma 1 rad): no resampling
+            made.clear()
+            assert f.update(ObservationPoint(float(k), 500.0, 500.0, 0.0, 1.0, 1)) and not f.resampled
+            counts.append(len(made))
+        assert counts == expected, per_point
+        made.clear()
+        f.resample()
+        f.after_resample(None)  # 1 now, 4 owed
+        f.resample()
+        f.after_resample(None)  # resampled again before the debt is paid: all 5 now (1 + the 4 owed)
+        assert len(made) == (10 if per_point == 0 else 6) and f.owed == (0 if per_point == 0 else 4)

@@ -8,6 +8,7 @@ import zlib
 
 import numpy as np
 
+from aoa_localizer.engine.checks import CheckWorker
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.preprocess import PointBuilder
 from aoa_localizer.engine.track import EmitterTrack
@@ -25,9 +26,10 @@ def channel_id(frequency_hz: float) -> str:
 class Channel:
     """One emitter: its frequency (NaN for the default channel), track, builders per station and latest estimate."""
 
-    def __init__(self, cid: str, frequency_hz: float, cfg: LocalizerConfig, rng: np.random.Generator, reject):
+    def __init__(self, cid: str, frequency_hz: float, cfg: LocalizerConfig, rng: np.random.Generator, reject,
+                 worker: CheckWorker | None = None):
         self.id, self.frequency_hz, self.cfg = cid, frequency_hz, cfg
-        self.emitter = EmitterTrack(cfg, rng, reject)
+        self.emitter = EmitterTrack(cfg, rng, reject, worker)
         self.builders: dict[str, PointBuilder] = {}
         self.estimate: Estimate | None = None
         self.last_heard = -math.inf  # the newest DF stamp admitted on this channel (GPS clock)
@@ -43,8 +45,9 @@ class Channel:
 class Channels:
     """The live channels, the retired ones, and the rule that maps a frequency to a channel."""
 
-    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject):
-        self.cfg, self.rng, self._reject = cfg, rng, reject
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject, worker: CheckWorker | None = None):
+        """`worker`: the Localizer's background-check worker, shared by the channels (None: checks inline)."""
+        self.cfg, self.rng, self._reject, self.worker = cfg, rng, reject, worker
         self.live: dict[str, Channel] = {}
         self.retired: dict[str, Channel] = {}  # the last retired channel of each id, its final estimate kept
         self._heard: dict[float, Channel] = {}  # frequency -> its channel, for frequencies heard before
@@ -59,7 +62,7 @@ class Channels:
             rng = np.random.default_rng()
         else:
             rng = np.random.default_rng([self.cfg.seed, zlib.crc32(cid.encode())])
-        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject)
+        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.worker)
         self.live[cid] = channel
         return channel
 

@@ -416,6 +416,15 @@ class LocalizerConfig:
         "health test, global searches, independence MH moves, re-starts and the "
         "emitter-moved test (false: the filters alone)",
     )
+    scheduling: str = choice(
+        "auto",
+        ("auto", "realtime", "reproducible"),
+        "`realtime`: the global checks' and start searches' noise fits and searches run in a worker thread (their "
+        "result applied at the emitter's next point) and at most one move sweep is made per point (the rest at the "
+        "next points), so no step blocks for long; `reproducible`: all in the call that made the point, so a seed "
+        "repeats a run exactly; `auto`: realtime in the node, reproducible offline and from Python",
+        read_only=True,
+    )
     health_window: int = param(
         10, "recent points whose outlier share is tested against the outlier rate", low=3, high=1000
     )

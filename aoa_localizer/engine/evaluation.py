@@ -30,11 +30,13 @@ def scenario_config(data: ScenarioData, base: LocalizerConfig) -> LocalizerConfi
 
 
 def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
-    """A scenario's fixes and bearings into `loc` in stamp order; on_result(what each call returned)."""
+    """A scenario's fixes and bearings into `loc` in stamp order; on_result(what each call returned). Under
+    `scheduling: realtime` each call waits for the worker, as a receiver's pace would (Localizer.settle)."""
     for kind, row in data.events():
         on_result(
             loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2])
         )
+        loc.settle()
 
 
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
@@ -51,6 +53,7 @@ def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
     feed(loc, data, keep)
     keep(loc.flush())
     keep(loc.finish())
+    loc.close()
     result = RunResult(estimates, step_s, loc, wall_s=time.perf_counter() - t0)
     result.scores = score(data, result)
     return result

@@ -10,11 +10,13 @@ import logging
 import math
 from collections import Counter, deque
 from collections.abc import Callable
+from concurrent.futures import wait
 from typing import Protocol
 
 import numpy as np
 
 from aoa_localizer.engine.channels import Channel, Channels
+from aoa_localizer.engine.checks import CheckWorker
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, azimuth_to_enu, wrap_pi
 from aoa_localizer.engine.gps_track import GpsTrack, Where
@@ -104,14 +106,17 @@ class Localizer:
     track per emitter (channel, by frequency) and one GPS track per station."""
 
     def __init__(self, config: LocalizerConfig | None = None, observer: Observer | None = None,
-                 on_estimate: Callable[[Estimate], None] | None = None):
+                 on_estimate: Callable[[Estimate], None] | None = None, live: bool = False):
         """`observer`: told of every accepted fix and every closed point (see Observer), for reports.
         `on_estimate`: called with every new estimate, whichever input made it (a fix often closes the point
-        that makes it); `estimate` always holds the latest one (None before the first)."""
+        that makes it); `estimate` always holds the latest one (None before the first). `live`: a node's
+        Localizer, scheduled `realtime` under `scheduling: auto`."""
         self.cfg = config or LocalizerConfig()
         self.observer = observer
         self.on_estimate = on_estimate
         self.rng = np.random.default_rng(self.cfg.seed)
+        mode = self.cfg.scheduling
+        self.worker = CheckWorker() if mode == "realtime" or (mode == "auto" and live) else None
         self.frame: LocalFrame | None = None
         if self.cfg.datum_lat is not None and self.cfg.datum_lon is not None:
             self.frame = LocalFrame(self.cfg.datum_lat, self.cfg.datum_lon, self.cfg.datum_alt or 0.0)
@@ -125,7 +130,7 @@ class Localizer:
 
     def _reset_track(self):
         self.stations: dict[str, Station] = {}
-        self.channels = Channels(self.cfg, self.rng, self._reject_many)
+        self.channels = Channels(self.cfg, self.rng, self._reject_many, self.worker)
         self.main: Channel = self.channels.default  # the channel of the latest estimate (the default before one)
         self._retire_check = -math.inf  # DF stamp of the last look for silent channels
         self.estimate: Estimate | None = None
@@ -500,6 +505,38 @@ class Localizer:
         self.main = channel
         if self.on_estimate is not None:
             self.on_estimate(estimate)
+
+    def poll(self) -> list[Estimate]:
+        """Apply the worker's finished results now (`scheduling: realtime`) instead of at each channel's next point:
+        a channel whose data paused (a bag's end, a silent carrier) still gets the start or check it was due.
+        Returns the estimates they made (each also goes to `on_estimate`)."""
+        made = []
+        for channel in list(self.channels.live.values()):
+            emitter = channel.emitter
+            if not emitter.collect() or emitter.filter is None:
+                continue
+            mean, cov = emitter.running.estimate()
+            if not _positive_definite(cov):
+                self._reject("covariance_degenerate")
+                continue
+            estimate = self._make_estimate(channel, emitter.last_stamp, mean, cov)
+            self._new_estimate(channel, estimate)
+            made.append(estimate)
+        return made
+
+    def settle(self):
+        """Wait until the worker has finished the jobs submitted so far (`scheduling: realtime`; nothing otherwise):
+        a replay calls it after each input to run at a receiver's pace, where a job ends before the next point,
+        however fast the data is fed. The results are applied at each channel's next point, as live."""
+        for channel in self.channels.live.values():
+            check = channel.emitter.check
+            if check is not None:
+                wait([check[0]])
+
+    def close(self):
+        """Stop the background checks' worker (a check running finishes; its result is dropped)."""
+        if self.worker is not None:
+            self.worker.close()
 
     def reset(self, drop_datum: bool = False):
         """Drop the tracks, the points, the filters and the channels; keep the counters and the fixed stations'

@@ -9,7 +9,8 @@ observation point and keeps the estimate honest on messy data:
   from their readings with the new sigmas and the cloud re-weighted by the change of posterior;
 * global-mode safety: the health monitor watches the outlier share of new points; on alarm, and on a
   growing schedule, the global search runs again and the cloud is moved by independence MH from the modes,
-  or re-started from a far better mode; while in alarm the cloud is moved at every point;
+  or re-started from a far better mode; while in alarm the cloud is moved at every point. The check's search
+  and noise fit run inline or in a worker thread (checks.py), its result applied at the next point;
 * emitter moved: when recent points agree on a place that the older points contradict (and vice versa),
   the older points are dropped and the track re-starts from the recent ones.
 """
@@ -20,13 +21,27 @@ import math
 import time
 from collections import Counter, deque
 from collections.abc import Callable
+from concurrent.futures import Future
+from functools import partial
 from typing import cast
 
 import numpy as np
 
-from aoa_localizer.engine.clock_check import ClockHint, best_shift
+from aoa_localizer.engine.checks import (
+    Built,
+    CheckResult,
+    CheckWorker,
+    Snapshot,
+    fit_noise,
+    points_of,
+    refined,
+    rows_of,
+    run_check,
+    search_start,
+    sigmas,
+)
+from aoa_localizer.engine.clock_check import ClockHint
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.global_search import (
     Mode,
     Points,
@@ -34,16 +49,16 @@ from aoa_localizer.engine.global_search import (
     find_modes,
     inlier_share,
     log_posterior,
-    refine,
     residuals,
 )
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
-from aoa_localizer.engine.preprocess import columns, make_point
+from aoa_localizer.engine.preprocess import make_point
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
 from aoa_localizer.engine.triangulation import initial_particles
 from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models.emitter import EmitterModel
 
 log = logging.getLogger("aoa_localizer")
@@ -62,13 +77,19 @@ _MODE_MIN_MASS = 0.01  # modes reported
 _MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
 _START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
 _MOVED_MAX_OLD_SHARE = 0.2  # most recent points that may still agree with the old place in a move
+_STALE_MIN, _STALE_SHARE = 2, 5  # a start search's result is stale once the points grew by more than max(2, 1/5)
 
 
 class EmitterTrack:
     """Points, filter and robustness state of one emitter. `reject(reason, count)` counts unused inputs."""
 
-    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject: Callable[[str, int], None]):
-        self.cfg, self.rng, self._reject = cfg, rng, reject
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject: Callable[[str, int], None],
+                 worker: CheckWorker | None = None):
+        """`worker`: runs the global checks' expensive part beside the filter (None: inline)."""
+        self.cfg, self.rng, self._reject, self.worker = cfg, rng, reject, worker
+        # A job running in the worker: a global check for this filter, or a start search (None: before the start),
+        # and the groups of its snapshot (the originals: the worker's copies come back as points in their order).
+        self.check: tuple[Future, ParticleFilter | None, list[list[Reading]]] | None = None
         self.noise = NoiseModel(cfg.outlier_prob)
         self.outlier_prob = cfg.outlier_prob  # point level, in the likelihood
         # (readings, point, readings gated out) per point: the points waiting for a start, then the filter's
@@ -94,10 +115,7 @@ class EmitterTrack:
     # -- points -----------------------------------------------------------------------------------
     def sigmas(self, readings: list[Reading]) -> np.ndarray:
         """Each reading's sigma under the calibrated noise model (the configured one until calibrated)."""
-        cols = columns(readings)
-        if not self.cfg.calibrate_noise:
-            return cols.sigma
-        return cols.sigma * self.noise.scale(cols.quality)
+        return sigmas(readings, self.noise if self.cfg.calibrate_noise else None)
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         return make_point(readings, self.cfg, self.sigmas(readings))
@@ -121,7 +139,7 @@ class EmitterTrack:
         return np.array(self.model.history.data, float).reshape(-1, 5)
 
     def points(self) -> Points:
-        return Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for _, p, _ in self.window]))
+        return points_of([p for _, p, _ in self.window])
 
     def robust(self, prior: bool = True) -> Robust:
         if prior and self.filter is not None and self.model.prior_prec.any():
@@ -142,6 +160,7 @@ class EmitterTrack:
     def add(self, readings: list[Reading]) -> bool:
         """One closed group of readings; True when the filter took it (or started) and has a new estimate."""
         t0 = time.perf_counter()
+        self._collect_check()  # a background check's findings first: they may change the noise the point is made with
         point, kept = self.make(readings)
         self.last_stamp = point.stamp
         self.last_kept = kept  # which readings the point kept (the report's trace)
@@ -158,7 +177,8 @@ class EmitterTrack:
         self.last_update_s = time.perf_counter() - t0
         return took
 
-    def _try_start(self):
+    def _try_start(self, inline: bool = False):
+        """Start the filter once the points allow (`inline`: the start search here, even with a worker)."""
         cfg = self.cfg
         if cfg.has_prior:
             return self._start_from_prior()
@@ -170,20 +190,39 @@ class EmitterTrack:
             return False
         if cfg.init_method == "triangulation":
             return self._start_triangulation()
-        if len(self.window) < self.next_start_try:
+        if len(self.window) < self.next_start_try or self.check is not None:
             return False
-        modes, why = self._search_start()
+        snap = self._snapshot()
+        job = partial(search_start, snap, _MIN_INLIERS, _MAX_ELLIPSE_RANGE_SHARE)
+        future = None if inline else self._submit(job)
+        if future is None:
+            return self._apply_start(job(), snap.groups)
+        self.check = (future, None, snap.groups)
+        return False
+
+    def _apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
+        """Start the filter from a start search's modes over the points held now (a background search's snapshot
+        may have fewer): an importance sample of the posterior, then MH sweeps; or wait for more points."""
+        cfg = self.cfg
+        if len(self.window) > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE):
+            # Points came far faster than the worker searched (a bag replayed at full speed): a mode of the few
+            # points searched is no start for the many held now. Search again, over all of them.
+            self.next_start_try = 0
+            return self._try_start()
+        if res.noise is not None and res.at is not None:
+            self._apply_calibration(res.noise, res.at, _by_group(groups, res.built))
+        modes = res.modes
         if not modes:
-            self.status = f"waiting for geometry: {why}"
-            # Search again when the points have grown by a tenth (at most _START_RETRY_MAX points later).
-            self.next_start_try = len(self.window) + min(_START_RETRY_MAX, max(1, len(self.window) // 10))
+            self.status = f"waiting for geometry: {res.why}"
+            # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later).
+            self.next_start_try = res.searched + min(_START_RETRY_MAX, max(1, res.searched // 10))
             return False
         best = modes[0]
         last = self.window[-1][1]
         sigma = max(
             _PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(best.mean[0] - last.east, best.mean[1] - last.north)
         )
-        self.filter = make_filter(cfg, self.rng, EmitterModel(cfg))
+        self.filter = self._new_filter()
         self.model.set_prior(best.mean, sigma**2 * np.eye(2))
         self.model.lik.outlier_prob = self.lik_outlier_prob
         for _, p, _ in self.window:
@@ -198,35 +237,6 @@ class EmitterTrack:
         self.points_used += len(self.window)
         self.bearings_used += sum(len(r) - g for r, _, g in self.window)
         return True
-
-    def _search_start(self) -> tuple[list[Mode], str]:
-        """Modes of the robust posterior over the buffered points (with calibration when on); ([], why) if none
-        is determined well enough to start from."""
-        flat = not self.cfg.has_prior
-        modes = find_modes(self.points(), self.robust(), by_density=flat)
-        determined = modes and modes[0].crossing_deg >= self.cfg.init_min_crossing_deg
-        if determined and self.cfg.calibrate_noise and self._calibrate([m.mean for m in modes[:2]], flat):
-            modes = find_modes(self.points(), self.robust(), by_density=flat)
-        if not modes:
-            return [], "no crossing of bearings in front of the antennas"
-        best = modes[0]
-        if best.inliers < _MIN_INLIERS:
-            return [], f"the best place explains only {best.inliers} points (needs {_MIN_INLIERS})"
-        if best.crossing_deg < self.cfg.init_min_crossing_deg:
-            return [], (
-                f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < "
-                f"{self.cfg.init_min_crossing_deg:g} deg"
-            )
-        size, reach = self._ellipse_and_range(best)
-        if size > _MAX_ELLIPSE_RANGE_SHARE * reach:
-            return [], (f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m from the track")
-        return modes, ""
-
-    def _ellipse_and_range(self, mode: Mode) -> tuple[float, float]:
-        """Semi-major axis of the mode's 95 % ellipse and its distance to the nearest antenna position (m)."""
-        pts = self.points()
-        reach = float(np.min(np.hypot(pts.east - mode.mean[0], pts.north - mode.mean[1])))
-        return float(np.sqrt(ELLIPSE_95 * np.linalg.eigvalsh(mode.cov)[-1])), max(reach, 1.0)
 
     def _start_triangulation(self):
         """The paper's start (sec. 3.3): crossings of sorted pairs; then every buffered point updates the filter."""
@@ -251,7 +261,7 @@ class EmitterTrack:
         return self._start_then_replay(particles, mean, cfg.prior_sigma_m**2 * np.eye(2), "prior")
 
     def _start_then_replay(self, particles, mean, cov, how: str):
-        self.filter = make_filter(self.cfg, self.rng, EmitterModel(self.cfg))
+        self.filter = self._new_filter()
         self.model.lik.outlier_prob = self.lik_outlier_prob
         self.running.initialise(particles, mean, cov)
         self.start_cloud = self.running.x.copy()
@@ -261,6 +271,12 @@ class EmitterTrack:
         for readings, point, gated in waiting:
             result = self._update(readings, point, gated) or result
         return result
+
+    def _new_filter(self) -> ParticleFilter:
+        f = make_filter(self.cfg, self.rng, EmitterModel(self.cfg))
+        if self.worker is not None and isinstance(f, ResampleMove):  # realtime: a bounded step
+            f.sweeps_per_point = 1
+        return f
 
     def _started(self, how: str):
         self.status = "tracking"
@@ -288,11 +304,7 @@ class EmitterTrack:
             self._reject("internal_error", 1)
             return False
         if not self._finite():
-            self.filter = None
-            self.window.clear()
-            self.status = "filter diverged: restarting from new bearings"
-            log.error("filter %s diverged (non-finite particles or estimate); restarting", self.cfg.algorithm)
-            self._reject("filter_diverged", 1)
+            self._diverged()
             return False
         if not ok:
             self._reject("weights_degenerate", 1)
@@ -300,6 +312,13 @@ class EmitterTrack:
         self.points_used += 1
         self.bearings_used += point.n_readings
         return True
+
+    def _diverged(self):
+        self.filter = None
+        self.window.clear()
+        self.status = "filter diverged: restarting from new bearings"
+        log.error("filter %s diverged (non-finite particles or estimate); restarting", self.cfg.algorithm)
+        self._reject("filter_diverged", 1)
 
     def _finite(self) -> bool:
         mean, cov = self.running.estimate()
@@ -313,7 +332,7 @@ class EmitterTrack:
             if self.cfg.calibrate_noise and n >= self.next_search:
                 self.next_search = min(int(math.ceil(n * _SEARCH_GROWTH)), n + _SEARCH_EVERY_MAX)
                 best = f.x[np.argmax(f.log_target(f.x))]
-                self._calibrate([self._refined(best)], False)
+                self._calibrate([refined(best, self.points(), self.robust())], False)
             return
         w = np.exp(logw_before - logw_before.max())
         eps = self.model.lik.outlier_prob
@@ -335,7 +354,7 @@ class EmitterTrack:
             self.status = "tracking"
         due = n >= self.next_search
         alarm_due = alarm and self.points_seen - self.last_search_point >= _ALARM_SEARCH_EVERY
-        if due or alarm_due:
+        if (due or alarm_due) and self.check is None:  # (one still running: due again once it is applied)
             if due:
                 self.next_search = min(int(math.ceil(n * _SEARCH_GROWTH)), n + _SEARCH_EVERY_MAX)
             self._global_check(alarm)
@@ -343,37 +362,107 @@ class EmitterTrack:
             f.rejuvenate(_ALARM_SWEEPS, self.proposal)
 
     def finish(self) -> bool:
-        """End of data: one more global check over everything kept (unless the last point just had one).
-        True when it ran (the estimate changed)."""
-        if self.filter is None or not self.cfg.global_safety or self.last_search_point == self.points_seen:
-            return False
+        """End of data: the worker's job still running is applied (and a start the worker lagged behind is tried
+        inline), then one more global check over everything kept runs inline (unless the last point just had
+        one). True when the estimate changed."""
         t0 = time.perf_counter()
-        self._global_check(self.health.alarm_since is not None)
+        changed = False
+        while self.check is not None:  # a stale start search is run again, over all the points: wait for that too
+            changed = self._collect_check(wait=True) or changed
+        if self.filter is None and self.worker is not None:
+            changed = self._try_start(inline=True) or changed
+        if self.filter is not None and self.cfg.global_safety and self.last_search_point != self.points_seen:
+            self._global_check(inline=True)
+            self._collect_check(wait=True)  # the start search of an emitter-moved re-start
+            changed = True
         self.last_update_s = time.perf_counter() - t0
-        return self.filter is not None
+        return changed and self.filter is not None
 
-    def _global_check(self, alarm: bool):
-        f = self.running
+    def _global_check(self, inline: bool = False):
+        """Noise calibration, emitter-moved test, global search, MH move or re-start: inline, or its expensive part
+        handed to the worker (applied at a later point by _collect_check)."""
         self.last_search_point = self.points_seen
-        if self.cfg.calibrate_noise:  # the joint fit is safe at any place: it compares several
-            best = f.x[np.argmax(f.log_target(f.x))]
-            self._calibrate([self._refined(best)] + [m.mean for m in self.modes[:1]], False)
-        if alarm and self._emitter_moved():
+        snap = self._snapshot()
+        future = None if inline else self._submit(partial(run_check, snap))
+        if future is None:
+            self._apply_check(run_check(snap), snap.groups)
+        else:
+            self.check = (future, self.running, snap.groups)
+
+    def _submit(self, job) -> Future | None:
+        """The job handed to the worker; None without one, or when it cannot take it (then the caller runs it)."""
+        if self.worker is None:
+            return None
+        try:
+            return self.worker.submit(job)
+        except (RuntimeError, OSError):  # a worker that cannot start, or one closed: the work is done here
+            log.exception("the check worker refused a job; running it in this call")
+            return None
+
+    def _snapshot(self) -> Snapshot:
+        f = self.filter
+        best = f.x[np.argmax(f.log_target(f.x))].copy() if f is not None and self.cfg.calibrate_noise else None
+        groups, rows = [g for g, _, _ in self.window], rows_of([p for _, p, _ in self.window])
+        velocity = np.array([[np.mean([r.v_east for r in g]), np.mean([r.v_north for r in g])] for g in groups])
+        return Snapshot(self.cfg, groups, rows, velocity.reshape(-1, 2), self.noise.copy(), self.outlier_prob,
+                        self.robust(), best, [m.mean.copy() for m in self.modes[:1]])
+
+    def collect(self) -> bool:
+        """Apply the worker's result if it is ready (without waiting for the next point); True when applied."""
+        return self._collect_check()
+
+    def _collect_check(self, wait: bool = False) -> bool:
+        """Apply the background check's result once it is ready (`wait`: wait for it); True when one was applied.
+        A result for a filter that has since been replaced (re-start, divergence) is dropped."""
+        if self.check is None or not (wait or self.check[0].done()):
+            return False
+        future, filt, groups = self.check
+        self.check = None
+        try:
+            result = future.result()
+        except Exception:  # the worker's boundary: a failed check never stops the track
+            log.exception("global check failed in the worker; skipped")
+            self._reject("internal_error", 1)
+            return False
+        if self.filter is not filt:
+            return False
+        try:
+            if filt is None:
+                return self._apply_start(result, groups)
+            self._apply_check(result, groups)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            log.exception("applying a global check failed; skipped")
+            self._reject("internal_error", 1)
+            return False
+        if self.filter is not None and not self._finite():
+            self._diverged()
+        return True
+
+    def _apply_check(self, res: CheckResult, groups: list[list[Reading]]):
+        """The cheap part of a global check, on the current cloud and points: re-weight by the fitted noise,
+        emitter-moved test (in alarm), then the modes' MH move or a re-start from a far better mode."""
+        if res.noise is not None and res.at is not None:
+            self._apply_calibration(res.noise, res.at, _by_group(groups, res.built))
+        if self.health.alarm_since is not None and self._emitter_moved():
             return
-        modes = find_modes(self.points(), self.robust())
+        modes = res.modes
         if not modes:
             return
+        f = self.running
         self.modes = modes
-        self.clock_hint = best_shift(self.points(), self._velocities(), modes[0].mean, self.robust())
+        self.clock_hint = res.hint
         self.proposal = ModeProposal(modes, self._broad_sigma(modes[0].mean))
         best_particle = float(np.max(f.log_target(f.x)))
-        if modes[0].log_post > best_particle + self.cfg.restart_log_odds:
+        best_mode = modes[0].log_post
+        if res.searched != len(self.window):  # a worker's check: the mode scored over the points held now
+            best_mode = float(log_posterior(modes[0].mean, self.points(), self.robust()))
+        if best_mode > best_particle + self.cfg.restart_log_odds:
             self.events["global_restart"] += 1
             log.warning(
                 "re-start: a mode at E %.1f N %.1f explains the points far better (log odds %.1f) than the cloud",
                 modes[0].mean[0],
                 modes[0].mean[1],
-                modes[0].log_post - best_particle,
+                best_mode - best_particle,
             )
             f.replace_cloud(importance_sample(f.log_target, self.proposal, f.n, self.rng))
             f.rejuvenate(_START_SWEEPS, self.proposal)
@@ -381,72 +470,32 @@ class EmitterTrack:
         else:
             f.rejuvenate(1, self.proposal)
 
-    def _refined(self, x: np.ndarray, noise: NoiseModel | None = None) -> np.ndarray:
-        """The posterior mode nearest x (Gauss-Newton), under `noise` (default: the current noise model)."""
-        pts = self.points() if noise is None else self._rebuilt_points(noise)
-        means, _, _ = refine(x[None, :], np.zeros(1), pts, self.robust())
-        return means[0]
-
-    def _rebuilt_points(self, noise: NoiseModel | None) -> Points:
-        """The kept points rebuilt from their readings with the sigmas of `noise` (None: the configured ones)."""
-        rows = []
-        for group, _, _ in self.window:
-            cols = columns(group)
-            sigma = cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
-            p = make_point(group, self.cfg, sigma)[0]
-            rows.append([p.east, p.north, p.theta, p.sigma, p.gps_sigma])
-        return Points.of(np.array(rows))
-
-    def _velocities(self) -> np.ndarray:
-        """The vehicle's mean velocity (east, north, m/s) over each kept point's readings, (K, 2)."""
-        return np.array(
-            [[np.mean([r.v_east for r in group]), np.mean([r.v_north for r in group])] for group, _, _ in self.window]
-        ).reshape(-1, 2)
-
     def _broad_sigma(self, centre: np.ndarray) -> float:
         pts = self.points()
         return float(max(_PRIOR_MIN_SIGMA_M, np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
 
     # -- noise self-calibration -----------------------------------------------------------------------
     def _calibrate(self, candidates: list[np.ndarray], by_density: bool) -> bool:
-        """Fit position and noise jointly: at each candidate place, and at the best mode under the configured
-        noise, EM fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins
-        (a wrong place explained by a wide noise loses to the right place with the right noise). Then the points
-        are rebuilt with it and the cloud re-weighted. True if a calibration was applied."""
-        readings = [r for group, _, _ in self.window for r in group]
-        if len(readings) < 2:
+        """Fit position and noise jointly (checks.fit_noise) from the candidate places, then rebuild the points with
+        the fitted noise and re-weight the cloud. True if a calibration was applied."""
+        fit = fit_noise([g for g, _, _ in self.window], self.cfg, self.noise, self.robust(), candidates, by_density)
+        if fit is None:
             return False
-        quality = np.array([r.quality for r in readings])
-        base = np.array([r.sigma for r in readings])
-        at_readings = Points(
-            np.array([r.east for r in readings]),
-            np.array([r.north for r in readings]),
-            np.array([r.theta for r in readings]),
-            base,
-        )
-        pts = self._rebuilt_points(None)
-        eps = self.cfg.outlier_prob if self.cfg.likelihood == "mixture" else 0.0
-        narrow = find_modes(pts, Robust(eps, self.cfg.gps_sigma_m), by_density=by_density)
-        best = None
-        for x in list(candidates) + [m.mean for m in narrow[:1]]:
-            trial = self.noise.copy()
-            ll = float("nan")
-            for _ in range(2):  # alternate: noise at x, then x under that noise
-                ll = trial.fit(residuals(x, at_readings), quality, base)
-                if not np.isfinite(ll):
-                    return False
-                x = self._refined(x, trial)
-            if best is None or ll > best[0]:
-                best = (ll, trial, x)
-        if best is None:
-            return False
-        _, self.noise, at = best
+        self._apply_calibration(*fit, {})
+        return True
+
+    def _apply_calibration(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]]):
+        """Adopt `noise` (fitted at the place `at`): rebuild the kept points with it (`built`: points already made
+        with it, by their group's identity), re-estimate the point outlier share, re-weight the cloud by the change
+        of posterior."""
+        self.noise = noise
         f = self.filter  # None while waiting to start: only the points are rebuilt
         old = f.log_target(f.x) if f is not None else None
         rebuilt: deque = deque()
         delta = 0
         for group, _, gated in self.window:
-            point, kept = self.make(group)
+            made = built.get(id(group))
+            point, kept = made[1] if made is not None and made[0] is group else self.make(group)
             now = int((~kept).sum())
             delta += now - gated
             rebuilt.append((group, point, now))
@@ -463,7 +512,6 @@ class EmitterTrack:
             if f.ess() < self.cfg.ess_threshold * f.n:
                 f.resample()
                 f.rejuvenate(_ALARM_SWEEPS, self.proposal)
-        return True
 
     # -- emitter moved ------------------------------------------------------------------------------
     def _emitter_moved(self) -> bool:
@@ -542,3 +590,8 @@ class EmitterTrack:
                 c = (w[sel] @ f.x[sel]) / mass
                 out.append((float(c[0]), float(c[1]), mass))
         return sorted(out, key=lambda t: -t[2])
+
+
+def _by_group(groups: list[list[Reading]], built: list[Built]) -> dict[int, tuple[list[Reading], Built]]:
+    """A check's points rebuilt with its noise, by their group's identity (empty when the check made none)."""
+    return {id(g): (g, b) for g, b in zip(groups, built, strict=True)} if built else {}

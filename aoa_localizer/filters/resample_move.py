@@ -26,6 +26,10 @@ class ResampleMove(ParticleFilter):
         self.spread = np.eye(model.dim)  # the weighted cloud's covariance just before the last resampling
         self.acceptance = float("nan")  # share of accepted moves in the last move stage
         self.sweeps = settings.move_sweeps
+        # 0: all `sweeps` right after the resampling; n: at most n there and at each following point until all are
+        # made (`scheduling: realtime`, a bounded step). Any sweep keeps the current posterior invariant.
+        self.sweeps_per_point = 0
+        self.owed = 0
 
     def predict(self):
         """The emitter does not move: no process noise (the moves keep the cloud diverse)."""
@@ -43,12 +47,30 @@ class ResampleMove(ParticleFilter):
         d = self.model.dim
         return scale * np.linalg.cholesky(self.spread + MIN_SPREAD_M2 * np.eye(d))
 
+    def update(self, z) -> bool:
+        ok = super().update(z)
+        if ok and not self.resampled and self.owed:
+            self._sweeps(min(self.owed, self.sweeps_per_point), z)
+        return ok
+
     def move(self, z):
         """`sweeps` sweeps of the filter's operator on the posterior; the weights (equal after resampling) stay.
-        `z`: the newest point (an operator may build its proposal from it)."""
+        `z`: the newest point (an operator may build its proposal from it). With `sweeps_per_point`, only that many
+        now and the rest owed to the next points, plus whatever the last resampling still owed: resamplings that
+        come faster than the debt is paid get all their sweeps, as without the spreading (the cloud would
+        otherwise collapse onto a few copies)."""
+        if not self.sweeps_per_point:
+            self.owed = self.sweeps
+            self._sweeps(self.sweeps, z)
+            return
+        self.owed += self.sweeps
+        self._sweeps(min(self.owed, self.sweeps_per_point + self.owed - self.sweeps), z)
+
+    def _sweeps(self, count: int, z):
+        self.owed -= count
         target = self.log_target(self.x)
         accepted = tried = 0
-        for _ in range(self.sweeps):
+        for _ in range(count):
             self.x, target, a, t = self.sweep(target, z)
             accepted, tried = accepted + a, tried + t
         self.acceptance = accepted / max(tried, 1)

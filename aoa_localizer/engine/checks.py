@@ -1,0 +1,250 @@
+"""A track's global check and its start search as jobs: the noise fit and the global search over a snapshot of its
+points, which can run beside the filter (in a worker process) while new points keep coming.
+
+The check's expensive part (EM noise fits at a few candidate places, the points rebuilt with the fitted noise,
+the search for every mode, the stamp-shift test) reads only the snapshot: readings and points are immutable, the
+noise model and the prior are copies. Its result is applied by the track, inline right away (`scheduling:
+reproducible`, so a seed repeats a run) or at the track's next point (`realtime`), where the cheap part
+runs on the current cloud and points: the re-weighting by the new noise, the emitter-moved test, the re-start test.
+A start search's result starts the filter from the modes it found over the points held then.
+
+The worker is a process, not a thread: a thread shares the interpreter lock, and a busy check stretched every
+callback of the node (measured: twice as long). A snapshot crosses as a few arrays (its readings' fields packed).
+"""
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from aoa_localizer.engine.clock_check import ClockHint, best_shift
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, refine, residuals
+from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
+from aoa_localizer.engine.preprocess import Columns, Group, columns, make_point
+from aoa_localizer.engine.types import ObservationPoint, Reading
+
+Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readings it kept
+
+
+def sigmas(group: list[Reading], noise: NoiseModel | None) -> np.ndarray:
+    """The readings' sigmas under `noise` (None: the configured ones)."""
+    cols = columns(group)
+    return cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
+
+
+def build(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: NoiseModel | None) -> list[Built]:
+    """Each group's observation point under `noise` (None: the configured sigmas)."""
+    return [make_point(group, cfg, sigmas(group, noise)) for group in groups]
+
+
+def rows_of(points: Sequence[ObservationPoint]) -> np.ndarray:
+    """(K, 5) rows east, north, theta, sigma, gps sigma of the points."""
+    return np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for p in points])
+
+
+def points_of(points: Sequence[ObservationPoint]) -> Points:
+    return Points.of(rows_of(points))
+
+
+def refined(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
+    """The posterior mode nearest x (Gauss-Newton)."""
+    return refine(x[None, :], np.zeros(1), pts, rob)[0][0]
+
+
+def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: NoiseModel, rob: Robust,
+              candidates: list[np.ndarray], by_density: bool) -> tuple[NoiseModel, np.ndarray] | None:
+    """Position and noise jointly: at each candidate place, and at the best mode under the configured noise, EM
+    fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins (a wrong place
+    explained by a wide noise loses to the right place with the right noise). None when the readings are too few
+    for a fit."""
+    cols = [columns(g) for g in groups]
+    if sum(c.theta.size for c in cols) < 2:
+        return None
+
+    def joined(name: str) -> np.ndarray:
+        # Made element by element, not concatenated: the EM's sums are the same to the last bit as before the
+        # checks could run in a worker (with concatenated arrays they changed with the heap's layout).
+        return np.array([v for c in cols for v in getattr(c, name).tolist()])
+
+    quality, base = joined("quality"), joined("sigma")
+    at_readings = Points(joined("east"), joined("north"), joined("theta"), base)
+    configured = points_of([p for p, _ in build(groups, cfg, None)])
+    eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
+    narrow = find_modes(configured, Robust(eps, cfg.gps_sigma_m), by_density=by_density)
+    best = None
+    for x in list(candidates) + [m.mean for m in narrow[:1]]:
+        trial = noise.copy()
+        ll = float("nan")
+        for _ in range(2):  # alternate: noise at x, then x under that noise
+            ll = trial.fit(residuals(x, at_readings), quality, base)
+            if not np.isfinite(ll):
+                return None
+            x = refined(x, points_of([p for p, _ in build(groups, cfg, trial)]), rob)
+        if best is None or ll > best[0]:
+            best = (ll, trial, x)
+    return None if best is None else (best[1], best[2])
+
+
+@dataclass
+class Snapshot:
+    """What a global check reads: the kept points' readings and points ((K, 5) rows), the noise model and point
+    outlier share, the robust posterior's prior, and the places the noise fit starts from (the cloud's best
+    particle, the best mode of the last check)."""
+
+    cfg: LocalizerConfig
+    groups: list[list[Reading]]
+    rows: np.ndarray
+    velocity: np.ndarray  # the vehicle's mean east/north velocity over each point's readings (K, 2), m/s
+    noise: NoiseModel
+    outlier_prob: float
+    rob: Robust
+    best_particle: np.ndarray | None = None  # None before the start
+    mode_means: list[np.ndarray] = field(default_factory=list)
+
+    def __getstate__(self) -> dict:
+        """For the worker process: the readings' fields as one array and the group sizes (a list of Reading
+        objects pickles tens of times slower)."""
+        state = dict(self.__dict__)
+        packed = [np.column_stack(columns(g)) for g in self.groups]
+        state["groups"] = (np.concatenate(packed) if packed else np.zeros((0, len(Columns._fields))),
+                           np.array([len(g) for g in self.groups]))
+        return state
+
+    def __setstate__(self, state: dict):
+        packed, sizes = state["groups"]
+        groups = []
+        for block in np.split(packed, np.cumsum(sizes)[:-1]) if len(sizes) else []:
+            g = Group()  # fields only: what make_point and the fits read
+            g.cols = Columns(*(block[:, i].copy() for i in range(block.shape[1])))
+            groups.append(g)
+        self.__dict__.update(state, groups=groups)
+
+    def robust(self, outlier_prob: float) -> Robust:
+        """The snapshot's robust posterior with another point outlier share (the likelihood's, as the track's)."""
+        eps = outlier_prob if self.cfg.likelihood == "mixture" else 0.0
+        return Robust(eps, self.rob.gps_sigma_m, self.rob.prior_mean, self.rob.prior_prec)
+
+
+@dataclass
+class CheckResult:
+    """A check's findings: the fitted noise and the place it was fitted at (None: no fit), each snapshot group's
+    point under it (in the snapshot's order; empty without a fit), and the modes and stamp-shift hint over those
+    points."""
+
+    noise: NoiseModel | None
+    at: np.ndarray | None
+    built: list[Built]
+    modes: list[Mode]
+    hint: ClockHint | None = None
+    why: str = ""  # a start search without a usable mode: why not
+    searched: int = 0  # points in the snapshot
+
+
+class _Calibrated:
+    """The snapshot's points and outlier share, after a noise fit when one was made."""
+
+    def __init__(self, snap: Snapshot):
+        self.snap, self.pts, self.outlier = snap, Points.of(snap.rows), snap.outlier_prob
+        self.noise: NoiseModel | None = None
+        self.at: np.ndarray | None = None
+        self.built: list[Built] = []
+
+    def fit(self, candidates: list[np.ndarray], by_density: bool):
+        snap = self.snap
+        fit = fit_noise(snap.groups, snap.cfg, snap.noise, snap.rob, candidates, by_density)
+        if fit is not None:
+            self.noise, self.at = fit
+            self.built = build(snap.groups, snap.cfg, self.noise)
+            self.pts = points_of([p for p, _ in self.built])
+            self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.outlier)
+
+    def result(self, modes: list[Mode], hint: ClockHint | None = None, why: str = "") -> CheckResult:
+        return CheckResult(self.noise, self.at, self.built, modes, hint, why, len(self.snap.rows))
+
+
+def run_check(snap: Snapshot) -> CheckResult:
+    """The expensive part of a global check over the snapshot (nothing outside it is read or changed)."""
+    cal = _Calibrated(snap)
+    if snap.cfg.calibrate_noise and snap.best_particle is not None:
+        start = refined(snap.best_particle, cal.pts, snap.rob)
+        cal.fit([start] + snap.mode_means, False)
+    pts, rob = cal.pts, snap.robust(cal.outlier)
+    modes = find_modes(pts, rob)
+    hint = None
+    if modes:
+        hint = best_shift(pts, snap.velocity, modes[0].mean, rob)
+    return cal.result(modes, hint)
+
+
+def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float) -> CheckResult:
+    """Modes of the robust posterior over the points waiting for a start (highest density first: under a flat
+    prior a far, poorly determined mode gains Laplace mass from its size), after a noise fit when the best is
+    determined; no modes, and why, when the best is not determined well enough to start from."""
+    cfg, cal = snap.cfg, _Calibrated(snap)
+    modes = find_modes(cal.pts, snap.rob, by_density=True)
+    if modes and modes[0].crossing_deg >= cfg.init_min_crossing_deg and cfg.calibrate_noise:
+        cal.fit([m.mean for m in modes[:2]], True)
+        if cal.noise is not None:
+            modes = find_modes(cal.pts, snap.robust(cal.outlier), by_density=True)
+    if not modes:
+        return cal.result([], why="no crossing of bearings in front of the antennas")
+    best = modes[0]
+    if best.inliers < min_inliers:
+        return cal.result([], why=f"the best place explains only {best.inliers} points (needs {min_inliers})")
+    if best.crossing_deg < cfg.init_min_crossing_deg:
+        return cal.result([], why=(f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < "
+                                   f"{cfg.init_min_crossing_deg:g} deg"))
+    pts = cal.pts
+    reach = max(1.0, float(np.min(np.hypot(pts.east - best.mean[0], pts.north - best.mean[1]))))
+    size = math.sqrt(ELLIPSE_95 * float(np.linalg.eigvalsh(best.cov)[-1]))
+    if size > max_ellipse_range_share * reach:
+        return cal.result([], why=f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m from the "
+                          "track")
+    return cal.result(modes)
+
+
+WORKER_NICENESS = 10  # the checks yield the CPU to the node's callbacks (and to the rest of the vehicle's software)
+
+
+def _background():
+    """In the worker process: a lower scheduling priority, so a check never delays the callbacks."""
+    os.nice(WORKER_NICENESS)
+
+
+class CheckWorker:
+    """One worker process that runs the Localizer's background jobs, one at a time, oldest first; started at the
+    first job, started again if it died (its job fails with BrokenProcessPool, counted by the track)."""
+
+    def __init__(self):
+        self._pool: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
+
+    def submit(self, job: Callable[[], CheckResult]) -> Future:
+        with self._lock:
+            for _ in range(2):
+                if self._pool is None:
+                    # spawn, not fork: the parent runs threads (rclpy's, the pool's own) that fork would copy mid-use
+                    self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                                                     initializer=_background)
+                try:
+                    return self._pool.submit(job)
+                except BrokenProcessPool:
+                    self._pool.shutdown(wait=False, cancel_futures=True)
+                    self._pool = None
+            raise BrokenProcessPool("the check worker could not be started")
+
+    def close(self):
+        """Stop taking jobs; the one running finishes, the waiting ones are dropped."""
+        with self._lock:
+            if self._pool is not None:
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = None
