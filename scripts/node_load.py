@@ -2,7 +2,8 @@
 at --df-hz each (all channels of a scan share one stamp, as a KrakenSDR's VFOs do) plus 10 Hz GPS, for --seconds,
 into a real node process over Fast DDS with its default configuration. Every diagnostics period the node reports
 the latency from the arrival of each message that made a pose to that pose's publication (p50, p99, max over the
-period); this script keeps them, samples the node's resident memory every 10 s, and prints the figures of
+period); this script keeps them, samples the resident memory of the node (and of its check
+worker process) every 10 s, and prints the figures of
 docs/benchmarks.md "Many emitters through one node". The overall p99 is at most the largest per-period p99.
 
     python scripts/node_load.py --emitters 50 --df-hz 20 --seconds 600
@@ -23,6 +24,20 @@ from msgs_adapters import build
 
 DATUM = (39.1, 117.2, 5.0)
 RADIUS_M, SPEED = 1000.0, 15.0  # the vehicle's loop
+
+
+def children(pid: int) -> list[int]:
+    """The node's child processes (its check worker)."""
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as fh:
+            return [int(c) for c in fh.read().split()]
+    except OSError:
+        return []
+
+
+def tree_rss_mb(pid: int) -> float:
+    """Resident memory of the node and its worker process (MB)."""
+    return rss_mb(pid) + sum(rss_mb(c) for c in children(pid))
 
 
 def rss_mb(pid: int) -> float:
@@ -80,7 +95,7 @@ def main():
                 rig.pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
                 next_fix += 0.1
             if t >= next_rss:
-                rss.append((round(t, 1), round(rss_mb(rig.proc.pid), 1)))
+                rss.append((round(t, 1), round(rss_mb(rig.proc.pid), 1), round(tree_rss_mb(rig.proc.pid), 1)))
                 next_rss += 10.0
             az = np.degrees(np.arctan2(emitters[:, 0] - east, emitters[:, 1] - north)) + rng.normal(0, 2.0, len(freqs))
             for a, f in zip(az % 360, freqs, strict=True):
@@ -89,8 +104,10 @@ def main():
             scans += 1
             rig.spin_until(t0 + scans / args.df_hz)
         rig.spin_until(time.monotonic() + 3)
-        rss.append((round(time.monotonic() - t0, 1), round(rss_mb(rig.proc.pid), 1)))
-        figures = {"node_cpu_s": cpu_seconds(rig.proc.pid)}
+        rss.append((round(time.monotonic() - t0, 1), round(rss_mb(rig.proc.pid), 1),
+                    round(tree_rss_mb(rig.proc.pid), 1)))
+        figures = {"node_cpu_s": cpu_seconds(rig.proc.pid),
+                   "worker_cpu_s": round(sum(cpu_seconds(c) for c in children(rig.proc.pid)), 1)}
     figures.update(summarise(args, sent, last, periods, rss))
     print(json.dumps(figures, indent=1))
     if args.json:
@@ -103,7 +120,8 @@ def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> di
     p50 = [float(p["pose_latency_p50_ms"]) for p in periods]
     top = [float(p["pose_latency_max_ms"]) for p in periods]
     poses = sum(int(p["poses_in_period"]) for p in periods)
-    warm = [m for t, m in rss if t >= 60.0]  # after the channels and their filters exist
+    warm = [m for t, m, _ in rss if t >= 60.0]  # after the channels and their filters exist
+    warm_tree = [m for t, _, m in rss if t >= 60.0]
     return {
         "emitters": args.emitters, "df_hz_each": args.df_hz, "seconds": args.seconds,
         "df_records_sent": sent, "df_records_received": int(last.get("bearings_received", 0)),
@@ -116,6 +134,8 @@ def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> di
         "latency_max_ms": max(top) if top else None,
         "periods_with_p99_over_20ms": sum(v > 20.0 for v in p99),
         "rss_mb_at_60s": warm[0] if warm else None, "rss_mb_at_end": warm[-1] if warm else None,
+        "with_worker_rss_mb_at_60s": warm_tree[0] if warm_tree else None,
+        "with_worker_rss_mb_at_end": warm_tree[-1] if warm_tree else None,
         "rss_mb_samples": rss,
         "load_pct_last_period": last.get("load_pct"), "status": last.get("status"),
     }

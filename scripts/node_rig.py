@@ -7,6 +7,7 @@ import os
 import random
 import subprocess
 import sys
+import tempfile
 import time
 
 import rclpy
@@ -27,6 +28,9 @@ class Attached:
     def terminate(self):
         pass
 
+    def poll(self):
+        return None if os.path.exists(f"/proc/{self.pid}") else 0
+
     def wait(self, _timeout):
         pass
 
@@ -44,13 +48,14 @@ class NodeRig:
             env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
             cmd = [sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p", "seed:=1"]
             cmd += [a for p in node_params for a in ("-p", p)]
-            self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            self.stderr = tempfile.TemporaryFile()  # read only if the node dies (a pipe could fill and stall it)
+            self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=self.stderr,
                                          start_new_session=True)
         self.on_status = on_status or (lambda values: None)
 
     def __enter__(self) -> NodeRig:
         self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx, domain_id=self.domain)
+        rclpy.init(args=[], context=self.ctx, domain_id=self.domain)
         self.node = rclpy.create_node("node_rig", context=self.ctx)
         self.T = T = build.rclpy_types()
         self.node.create_subscription(T.DiagnosticArray, "/diagnostics", self._diagnostics, 10)
@@ -62,7 +67,19 @@ class NodeRig:
         while time.monotonic() < end and not (self.pub_df.get_subscription_count()
                                               and self.pub_fix.get_subscription_count()):
             self.executor.spin_once(timeout_sec=0.05)
+            self._alive()
+        if not (self.pub_df.get_subscription_count() and self.pub_fix.get_subscription_count()):
+            raise SystemExit("the node's inputs did not match within 10 s")
         return self
+
+    def _alive(self):
+        """Stop the measurement, with the node's last words, when the node has exited."""
+        if self.proc.poll() is not None:
+            said = b""
+            if hasattr(self, "stderr"):
+                self.stderr.seek(0)
+                said = self.stderr.read()[-2000:]
+            raise SystemExit(f"the node exited (code {self.proc.poll()}): {said.decode(errors='replace')}")
 
     def _diagnostics(self, msg):
         values = diagnostics_values(msg).get(STATUS)
@@ -73,6 +90,7 @@ class NodeRig:
         """Serve the client until time.monotonic() reaches `target`."""
         while (left := target - time.monotonic()) > 0:
             self.executor.spin_once(timeout_sec=left)
+        self._alive()
 
     def __exit__(self, *exc):
         self.node.destroy_node()
