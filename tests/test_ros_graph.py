@@ -402,6 +402,8 @@ def test_node_refuses_to_start_with_an_invalid_parameter(tmp_path, domain):
     (["-p", "stations:=[mast]", "-p", "fixed_stations:=[mast]", "-p", "mast.position:=[0.0,0.0]"],
      "mast.position [0.0, 0.0] is not a usable position"),
     (["-p", "stations:=[car1]", "-p", "car1.position:=[39.1,117.2]"], "car1.position: unknown parameter"),
+    (["-p", "scheduling:=off"], "scheduling must be one of auto, realtime, reproducible (YAML reads on/off"),
+    (["-p", "num_particles:=abc"], "num_particles must be an integer in [2, 100000]"),
 ])
 def test_the_node_refuses_unknown_names_and_bad_node_only_values_at_start(tmp_path, domain, args, words):
     """ROS-package issue: misspelt names ran with defaults, diagnostics_period_s:=0 flooded /diagnostics and -1

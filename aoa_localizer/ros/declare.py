@@ -3,7 +3,7 @@ read_only, and the values checked against it, for every node of the package."""
 from __future__ import annotations
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import InvalidParameterTypeException, ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -37,11 +37,15 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
     values = {}
     for p in specs:
         d = descriptor(p)
-        if isinstance(p.default, list):  # an empty list has no type of its own: declared by type, unset: the default
-            kind = Parameter.Type.STRING_ARRAY if p.spec.items is str else Parameter.Type.DOUBLE_ARRAY
-            node.declare_parameter(p.name, kind, d)
-        else:
-            node.declare_parameter(p.name, p.default, d)
+        try:
+            if isinstance(p.default, list):  # an empty list has no type of its own: declared by type, unset: default
+                kind = Parameter.Type.STRING_ARRAY if p.spec.items is str else Parameter.Type.DOUBLE_ARRAY
+                node.declare_parameter(p.name, kind, d)
+            else:
+                node.declare_parameter(p.name, p.default, d)
+        except InvalidParameterTypeException as exc:  # rclpy's words name the type only: say what is valid
+            hint = " (YAML reads on/off/yes/no as booleans: quote them)" if "BOOL" in str(exc) else ""
+            raise ConfigError(f"{p.name} must be {p.spec.describe()}{hint}; {exc}") from exc
         try:
             values[p.name] = node.get_parameter(p.name).value
         except ParameterUninitializedException:
