@@ -83,6 +83,8 @@ def test_vehicle_and_node_converge_and_the_launcher_leaves_no_process(tmp_path, 
     assert result["converged"] and result["error_m"] < 10.0
     assert "error against the simulated truth" in res.stdout
     assert no_process_with(marker)
+    logdir = Path(re.search(r"logs in (\S+);", res.stdout).group(1))
+    assert "Traceback" not in (logdir / "aoa_localizer.log").read_text()  # nor the check worker's, at Ctrl-C
 
 
 def test_the_two_car_scenario_plays_both_cars_into_one_node_and_its_bag_replays(tmp_path, domain):

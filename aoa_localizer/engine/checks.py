@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import signal
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -216,8 +217,10 @@ WORKER_NICENESS = 10  # the checks yield the CPU to the node's callbacks (and to
 
 
 def _background():
-    """In the worker process: a lower scheduling priority, so a check never delays the callbacks."""
+    """In the worker process: a lower scheduling priority, so a check never delays the callbacks; Ctrl-C (sent to
+    the whole process group) is the parent's to handle: the pool stops the worker when the parent exits."""
     os.nice(WORKER_NICENESS)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 class CheckWorker:
