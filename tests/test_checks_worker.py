@@ -128,18 +128,25 @@ def test_a_failing_check_is_counted_and_the_track_goes_on(monkeypatch):
     loc.close()
 
 
-def test_a_worker_that_cannot_take_jobs_leaves_the_work_inline(monkeypatch):
-    """A worker process that cannot start (no processes allowed, say): each job runs in the call, as reproducible."""
-    def refuse(self, job):
+def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monkeypatch, caplog):
+    """A worker process that cannot start (no processes allowed; a script's unguarded main under spawn): each job
+    runs in the call, as reproducible, the worker is not tried again and one warning says why."""
+    starts = []
+
+    def cannot_start(*args, **kwargs):
+        starts.append(1)
         raise OSError("cannot start a process")
 
-    monkeypatch.setattr(checks.CheckWorker, "submit", refuse)
+    monkeypatch.setattr(checks, "ProcessPoolExecutor", cannot_start)
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)
     err, nees = error_and_nees(loc, data)
     assert loc.emitter.check is None and loc.emitter.events["recalibrated"] >= 2
     assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.rejected
+    assert len(starts) == 1 and loc.worker.unusable == "cannot start a process"
+    said = [r.getMessage() for r in caplog.records if "could not start" in r.getMessage()]
+    assert len(said) == 1 and "__main__" in said[0]
 
 
 def test_a_check_for_a_filter_since_replaced_is_dropped():

@@ -13,6 +13,7 @@ callback of the node (measured: twice as long). A snapshot crosses as a few arra
 """
 from __future__ import annotations
 
+import logging
 import math
 import multiprocessing
 import os
@@ -33,6 +34,7 @@ from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.preprocess import Columns, Group, columns, make_point
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
+log = logging.getLogger("aoa_localizer")
 Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readings it kept
 
 
@@ -225,29 +227,46 @@ def _background():
 
 class CheckWorker:
     """One worker process that runs the Localizer's background jobs, one at a time, oldest first; started at the
-    first job, started again if it died (its job fails with BrokenProcessPool, counted by the track)."""
+    first job, started again if it died (its job fails with BrokenProcessPool, counted by the track). A worker
+    that cannot start is not tried again: submit returns None and the jobs run in the caller."""
 
     def __init__(self):
         self._pool: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
+        self.unusable = ""  # why the worker could not start (then every job runs inline)
 
-    def submit(self, job: Callable[[], CheckResult]) -> Future:
+    def submit(self, job: Callable[[], CheckResult]) -> Future | None:
         with self._lock:
+            if self.unusable:
+                return None
             for _ in range(2):
-                if self._pool is None:
-                    # spawn, not fork: the parent runs threads (rclpy's, the pool's own) that fork would copy mid-use
-                    self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                                                     initializer=_background)
                 try:
+                    if self._pool is None:
+                        # spawn, not fork: the parent runs threads (rclpy's, the pool's own) that fork would copy
+                        self._pool = ProcessPoolExecutor(
+                            max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_background)
                     return self._pool.submit(job)
                 except BrokenProcessPool:
-                    self._pool.shutdown(wait=False, cancel_futures=True)
-                    self._pool = None
-            raise BrokenProcessPool("the check worker could not be started")
+                    self._stop()
+                except (RuntimeError, OSError) as exc:  # no processes allowed, or a script's unguarded main
+                    self._give_up(str(exc).strip().splitlines()[0])
+                    return None
+            self._give_up("the check worker died at its start twice")
+            return None
+
+    def _give_up(self, reason: str):
+        self.unusable = reason
+        self._stop()
+        log.warning("the check worker could not start (%s): the checks run in the calls from now on, as with "
+                    "scheduling: reproducible. A script that sets scheduling: realtime needs its main code under "
+                    "`if __name__ == \"__main__\":` (the worker is a spawned process)", reason)
 
     def close(self):
         """Stop taking jobs; the one running finishes, the waiting ones are dropped."""
         with self._lock:
-            if self._pool is not None:
-                self._pool.shutdown(wait=False, cancel_futures=True)
-                self._pool = None
+            self._stop()
+
+    def _stop(self):
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None

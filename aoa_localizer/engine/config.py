@@ -419,7 +419,7 @@ class LocalizerConfig:
     scheduling: str = choice(
         "auto",
         ("auto", "realtime", "reproducible"),
-        "`realtime`: the global checks' and start searches' noise fits and searches run in a worker thread (their "
+        "`realtime`: the global checks' and start searches' noise fits and searches run in a worker process (their "
         "result applied at the emitter's next point) and at most one move sweep is made per point (the rest at the "
         "next points), so no step blocks for long; `reproducible`: all in the call that made the point, so a seed "
         "repeats a run exactly; `auto`: realtime in the node, reproducible offline and from Python",

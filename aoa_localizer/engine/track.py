@@ -10,7 +10,7 @@ observation point and keeps the estimate honest on messy data:
 * global-mode safety: the health monitor watches the outlier share of new points; on alarm, and on a
   growing schedule, the global search runs again and the cloud is moved by independence MH from the modes,
   or re-started from a far better mode; while in alarm the cloud is moved at every point. The check's search
-  and noise fit run inline or in a worker thread (checks.py), its result applied at the next point;
+  and noise fit run inline or in a worker process (checks.py), its result applied at the next point;
 * emitter moved: when recent points agree on a place that the older points contradict (and vice versa),
   the older points are dropped and the track re-starts from the recent ones.
 """
@@ -391,13 +391,7 @@ class EmitterTrack:
 
     def _submit(self, job) -> Future | None:
         """The job handed to the worker; None without one, or when it cannot take it (then the caller runs it)."""
-        if self.worker is None:
-            return None
-        try:
-            return self.worker.submit(job)
-        except (RuntimeError, OSError):  # a worker that cannot start, or one closed: the work is done here
-            log.exception("the check worker refused a job; running it in this call")
-            return None
+        return None if self.worker is None else self.worker.submit(job)
 
     def _snapshot(self) -> Snapshot:
         f = self.filter
