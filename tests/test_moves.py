@@ -84,3 +84,14 @@ def test_a_pair_move_without_its_jacobian_drifts_off_the_target():
         x[i[take]], x[j[take]] = c1[take], c2[take]
         target = log_target(x)
     assert not np.allclose(np.cov(x.T), COV, rtol=0.12, atol=0.12)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_whiten_is_the_triangular_solve(d):
+    """The 2-D substitution (and the general path) give L^-1 v row by row, as LAPACK's solve does."""
+    rng = np.random.default_rng(4)
+    a = rng.standard_normal((d, d))
+    chol = np.linalg.cholesky(a @ a.T + d * np.eye(d))
+    v = rng.standard_normal((7, d)) * 50.0
+    assert np.allclose(moves.whiten(v, chol), np.linalg.solve(chol, v.T).T, rtol=1e-12, atol=1e-12)
+    assert np.allclose(moves.whiten(v[:, None, :], chol)[:, 0], np.linalg.solve(chol, v.T).T, rtol=1e-12)

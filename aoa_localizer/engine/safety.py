@@ -71,7 +71,7 @@ class HealthMonitor:
 
 
 def _t_logpdf(x: np.ndarray, mean: np.ndarray, chol: np.ndarray, logdet: float) -> np.ndarray:
-    d = np.linalg.solve(chol, (x - mean).T).T
+    d = moves.whiten(x - mean, chol)
     m2 = np.sum(d * d, axis=-1)
     nu = _T_DOF
     return (gammaln((nu + 2) / 2) - gammaln(nu / 2) - math.log(nu * math.pi) - 0.5 * logdet

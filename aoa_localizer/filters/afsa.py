@@ -115,11 +115,10 @@ class AfsaMoves(ResampleMove):
         look = self.chol(a.visual)
         x, target, prey = moves.multiple_try(self.x, target, self.log_target, rng, min(a.mcmc_tries, a.try_number),
                                              look)
-        inverse = np.linalg.inv(look)  # distances in visual ranges
 
         def towards_centre(xs, others, _others_target):
             others = others[:SWARM_PEERS]  # the halves are random, so this is a random subset, fixed for the move
-            u, v = xs @ inverse.T, others @ inverse.T
+            u, v = moves.whiten(xs, look), moves.whiten(others, look)  # distances in visual ranges
             near = np.sum((u[:, None, :] - v[None, :, :]) ** 2, axis=-1) < 1.0
             count = near.sum(axis=1)
             centre = np.where(count[:, None] > 0, (near @ others) / np.maximum(count, 1)[:, None], xs)
