@@ -13,22 +13,47 @@ _BELOW_FLOOR = 40.0  # exp(-40) = 4e-18 < 2^-53: below this under log(c), exp(g)
 
 def gaussian_loglik(residual, sigma):
     """log N(residual; 0, sigma^2): the paper's likelihood (eq. 24) with its normalising constant."""
-    log_sigma = math.log(sigma) if np.ndim(sigma) == 0 else np.log(sigma)
-    return (-0.5 / sigma**2) * residual**2 - (log_sigma + _LOG_SQRT_2PI)
+    return gaussian_loglik_var(residual, np.square(sigma))
+
+
+def gaussian_loglik_var(residual, var):
+    """log N(residual; 0, var), from the variance: no square root where the variance varies per particle."""
+    if np.ndim(var) == 0:
+        return (-0.5 / var) * np.square(residual) - (0.5 * math.log(var) + _LOG_SQRT_2PI)
+    g = np.square(residual)
+    g /= var
+    g += np.log(var)
+    g *= -0.5
+    g -= _LOG_SQRT_2PI
+    return g
 
 
 def mixture_loglik(residual, sigma, outlier_prob: float):
-    """log((1 - e) N(residual; 0, sigma^2) + e / 2pi): a wild bearing costs at most log(e / 2pi).
+    """log((1 - e) N(residual; 0, sigma^2) + e / 2pi): a wild bearing costs at most log(e / 2pi)."""
+    return mixture_loglik_var(residual, np.square(sigma), outlier_prob)
 
-    Written as log(exp(g) + c): where exp(g) underflows the result is log(c), exactly the floor. g is first
-    raised to log(c) - 40, where exp(g) is already below half an ulp of c (the same result to the last bit):
-    exp's slow path for arguments that underflow took 90 % of this function's time.
-    """
-    g = gaussian_loglik(residual, sigma) + math.log1p(-outlier_prob)
+
+def mixture_loglik_var(residual, var, outlier_prob: float):
+    """mixture_loglik from the variance. Written as log(exp(g) + c): where exp(g) underflows the result is log(c),
+    exactly the floor. g is first raised to log(c) - 40, where exp(g) is already below half an ulp of c (the same
+    result to the last bit): exp's slow path for arguments that underflow took 90 % of this function's time. The
+    steps are made in place on one array (a fresh temporary per step cost more than its arithmetic)."""
+    g = np.asarray(gaussian_loglik_var(residual, var), dtype=float)
+    if g.ndim == 0:
+        g = g.reshape(1)
+        return _mixture_in_place(g, outlier_prob)[0]
+    return _mixture_in_place(g, outlier_prob)
+
+
+def _mixture_in_place(g: np.ndarray, outlier_prob: float) -> np.ndarray:
+    g += math.log1p(-outlier_prob)
     if outlier_prob == 0:
         return g
     c = outlier_prob / TWO_PI
-    return np.log(np.exp(np.maximum(g, math.log(c) - _BELOW_FLOOR)) + c)
+    np.maximum(g, math.log(c) - _BELOW_FLOOR, out=g)
+    np.exp(g, out=g)
+    g += c
+    return np.log(g, out=g)
 
 
 class BearingLikelihood:
@@ -54,8 +79,14 @@ class BearingLikelihood:
         else:
             c, s = np.cos(theta), np.sin(theta)
         r = np.arctan2(dx * s - dy * c, dx * c + dy * s)
+        var = np.square(sigma)
         gps_var = self.gps_var + np.square(gps_sigma)
         if np.any(gps_var):
             with np.errstate(over="ignore"):  # a particle run off to 1e200 m: its GPS term is simply 0
-                sigma = np.sqrt(sigma**2 + gps_var / np.maximum(dx * dx + dy * dy, 1.0))
-        return mixture_loglik(r, sigma, self.outlier_prob)
+                d2 = np.square(dx)
+                d2 += np.square(dy)
+                np.maximum(d2, 1.0, out=d2)
+                np.divide(gps_var, d2, out=d2)
+                d2 += var
+                var = d2
+        return mixture_loglik_var(r, var, self.outlier_prob)
