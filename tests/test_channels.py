@@ -134,3 +134,32 @@ def test_each_channel_draws_from_its_own_generator():
         play(loc, fleet)
         runs.append(loc.channels.live["f446000000"].estimate)
     assert np.array_equal(runs[0].particles, runs[1].particles)
+
+
+def test_channels_sharing_stamps_close_their_points_at_different_readings():
+    """Five carriers of one scan (shared stamps, 20 Hz, a vehicle at 15 m/s): each channel's first point is cut
+    shorter by its own share, so their points close at different readings instead of all in one scan (a burst of
+    work); the first frequency channel's points are a single emitter's, and every later point is full size."""
+    from aoa_localizer.engine.geodesy import LocalFrame
+    frame = LocalFrame(39.1, 117.2, 5.0)
+    loc = Localizer(LocalizerConfig(seed=1))
+    freqs = [400e6 + 25e3 * k for k in range(5)]
+    closes: dict[str, list] = {}
+    for step in range(400):  # 20 s
+        t = 0.05 * step
+        if step % 2 == 0:
+            lat, lon, alt = frame.to_geodetic(15.0 * t, 0.0, 0.0)
+            loc.add_fix(1e9 + t, float(lat), float(lon), float(alt))
+        for f in freqs:
+            loc.add_bearing(1e9 + t, 45.0, 80.0, frequency_hz=f)
+        if step == 0:
+            for channel in [c for c in loc.channels.live.values() if c.id != DEFAULT]:
+                got = closes[channel.id] = []
+                channel.emitter.add = lambda readings, real=channel.emitter.add, got=got: (
+                    got.append((readings[0].stamp, len(readings))) or real(readings))
+    sizes = {cid: [n for _, n in got] for cid, got in closes.items()}
+    first = sizes[channel_id(freqs[0])]
+    assert len(set(first)) == 1  # a single emitter's: every point full size (10 m at 15 m/s: 14 readings)
+    assert len({s[0] for s in sizes.values()}) == 5 and all(set(s[1:]) == set(first) for s in sizes.values())
+    starts = [stamp for got in closes.values() for stamp, _ in got[1:]]
+    assert max(starts.count(s) for s in set(starts)) == 1  # no two channels close a point on the same reading

@@ -17,6 +17,9 @@ from aoa_localizer.engine.types import Estimate
 DEFAULT = "default"  # the channel of records without a frequency
 
 
+GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # its multiples mod 1 fill [0, 1) evenly whatever their count
+
+
 def channel_id(frequency_hz: float) -> str:
     """The stable id of a channel first heard at `frequency_hz`: 'f' and the frequency in whole Hz (a valid ROS
     name token, so it can name a topic namespace)."""
@@ -27,8 +30,9 @@ class Channel:
     """One emitter: its frequency (NaN for the default channel), track, builders per station and latest estimate."""
 
     def __init__(self, cid: str, frequency_hz: float, cfg: LocalizerConfig, rng: np.random.Generator, reject,
-                 worker: CheckWorker | None = None):
-        self.id, self.frequency_hz, self.cfg = cid, frequency_hz, cfg
+                 worker: CheckWorker | None = None, first_point: float = 1.0):
+        """`first_point`: the share of the observation-point limits its builders give their first point."""
+        self.id, self.frequency_hz, self.cfg, self.first_point = cid, frequency_hz, cfg, first_point
         self.emitter = EmitterTrack(cfg, rng, reject, worker)
         self.builders: dict[str, PointBuilder] = {}
         self.estimate: Estimate | None = None
@@ -38,7 +42,7 @@ class Channel:
     def builder(self, station: str) -> PointBuilder:
         b = self.builders.get(station)
         if b is None:
-            b = self.builders[station] = PointBuilder(self.cfg)
+            b = self.builders[station] = PointBuilder(self.cfg, self.first_point)
         return b
 
 
@@ -51,6 +55,7 @@ class Channels:
         self.live: dict[str, Channel] = {}
         self.retired: dict[str, Channel] = {}  # the last retired channel of each id, its final estimate kept
         self._heard: dict[float, Channel] = {}  # frequency -> its channel, for frequencies heard before
+        self._opened = 0  # frequency channels opened so far
         self.default = self._open(DEFAULT, math.nan)
 
     def _open(self, cid: str, frequency_hz: float) -> Channel:
@@ -62,9 +67,19 @@ class Channels:
             rng = np.random.default_rng()
         else:
             rng = np.random.default_rng([self.cfg.seed, zlib.crc32(cid.encode())])
-        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.worker)
+        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.worker, self._first_point(cid))
         self.live[cid] = channel
         return channel
+
+    def _first_point(self, cid: str) -> float:
+        """Carriers of one scan share their stamps, so their points would all close at the same reading and make a
+        burst of work (docs/design.md, "Many channels"): the k-th frequency channel's first point is cut at
+        1 - 0.9 frac(k / golden ratio) of the limits, which spreads the closings evenly; the default channel's
+        and the first frequency channel's points are as a single emitter's."""
+        if cid == DEFAULT:
+            return 1.0
+        k, self._opened = self._opened, self._opened + 1
+        return 1.0 - 0.9 * ((k * GOLDEN) % 1.0)
 
     def for_frequency(self, frequency_hz: float) -> Channel | str:
         """The channel of a record's frequency (a new one if none is near), or the reason it has none."""

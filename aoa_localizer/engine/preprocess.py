@@ -154,30 +154,36 @@ def columns(readings: list[Reading]) -> Columns:
 class PointBuilder:
     """Groups readings into observation points: a point closes when the next reading is more than
     `obs_max_duration_s` later or `obs_max_distance_m` away from its first reading, when it holds
-    `obs_max_readings`, or on flush()."""
+    `obs_max_readings`, or on flush(). `first` (0-1] scales those limits for the first point (and the first after a
+    flush): channels that share stamps then close their points at different readings instead of all in one scan."""
 
-    def __init__(self, cfg: LocalizerConfig):
-        self.cfg = cfg
+    def __init__(self, cfg: LocalizerConfig, first: float = 1.0):
+        self.cfg, self.first = cfg, first
+        self.scale = first
         self.readings: list[Reading] = []
 
     def add(self, r: Reading) -> list[list[Reading]]:
         """Add a reading; returns the readings of each point it closed (zero, one or two)."""
         closed = []
+        cfg, scale = self.cfg, self.scale
         if self.readings:
             first = self.readings[0]
-            too_late = r.stamp - first.stamp > self.cfg.obs_max_duration_s
-            too_far = math.hypot(r.east - first.east, r.north - first.north) > self.cfg.obs_max_distance_m
+            too_late = r.stamp - first.stamp > scale * cfg.obs_max_duration_s
+            too_far = math.hypot(r.east - first.east, r.north - first.north) > scale * cfg.obs_max_distance_m
             if too_late or too_far:
                 closed.append(self._take())
         self.readings.append(r)
-        if len(self.readings) >= self.cfg.obs_max_readings:
+        if len(self.readings) >= max(1.0, self.scale * cfg.obs_max_readings):
             closed.append(self._take())
         return closed
 
     def _take(self) -> list[Reading]:
-        readings, self.readings = Group(self.readings), []
+        readings, self.readings, self.scale = Group(self.readings), [], 1.0
         return readings
 
     def flush(self) -> list[Reading] | None:
-        """Close the open point (end of data, reset) and return its readings (None when none is open)."""
-        return self._take() or None
+        """Close the open point (end of data, reset) and return its readings (None when none is open); the next
+        point is a first point again."""
+        taken = self._take() or None
+        self.scale = self.first
+        return taken
