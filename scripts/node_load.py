@@ -133,6 +133,7 @@ def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> di
         "latency_p99_ms_median_of_periods": float(np.median(p99)) if p99 else None,
         "latency_max_ms": max(top) if top else None,
         "periods_with_p99_over_20ms": sum(v > 20.0 for v in p99),
+        "p99_ms_by_period": [round(v, 1) for v in p99],
         "rss_mb_at_60s": warm[0] if warm else None, "rss_mb_at_end": warm[-1] if warm else None,
         "with_worker_rss_mb_at_60s": warm_tree[0] if warm_tree else None,
         "with_worker_rss_mb_at_end": warm_tree[-1] if warm_tree else None,

@@ -1,6 +1,7 @@
 """`scheduling: realtime`: global checks and start searches in the worker thread (engine/checks.py), move sweeps
 spread over the points after a resampling (filters/resample_move.py)."""
 import multiprocessing
+import os
 import pickle
 from concurrent.futures import wait
 
@@ -64,6 +65,30 @@ def test_realtime_scheduling_finds_the_emitter_as_reproducible_does(scenario):
     assert worker_nees < 13.8  # inside the 99.9 % ellipse
 
 
+@pytest.mark.parametrize("scenario", ["seed", "urban"])
+def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_ellipse_honest(scenario):
+    """The node's idle time (pay_owed between messages) makes the sweeps a resampling owes: the points then carry
+    almost none, every owed sweep is made, and the emitter is found with an ellipse that holds it."""
+    data = simulate(scenario, 2)
+    loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling="realtime")))
+    between = at_points = 0
+    for kind, row in data.events():
+        owed = loc.emitter.owed
+        loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
+        at_points += max(0, owed - loc.emitter.owed)  # sweeps a point made (a resampling adds to `owed`)
+        loc.settle()
+        while loc.pay_owed():
+            between += 1
+    assert not loc.pay_owed() and loc.emitter.owed == 0  # nothing left owed
+    assert between >= 20 and at_points <= between // 10
+    loc.flush()
+    loc.finish()
+    err, nees = error_and_nees(loc, data)
+    assert err < 15.0 and nees < 13.8 and "internal_error" not in loc.rejected
+    loc.close()
+    assert not Localizer(LocalizerConfig(seed=3)).pay_owed()  # reproducible: nothing is ever owed
+
+
 def test_the_default_is_reproducible_from_python_and_realtime_in_the_node():
     assert Localizer(LocalizerConfig()).worker is None
     live = Localizer(LocalizerConfig(seed=3), live=True)
@@ -94,6 +119,28 @@ def check_failing_in_the_worker(snap):
     if multiprocessing.parent_process() is not None:
         raise FloatingPointError("a bug in a search")
     return checks.run_check(snap)  # the end-of-data check runs inline
+
+
+def search_killing_the_worker(*args):
+    """search_start, but its worker process dies (a crash in a C library, an out-of-memory kill)."""
+    if multiprocessing.parent_process() is not None:
+        os._exit(1)
+    return checks.search_start(*args)
+
+
+def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inline(monkeypatch, caplog):
+    """Each dead worker costs its job (counted internal_error, the first logged with its traceback); after three in
+    a row the worker is given up with one warning and the checks run in the calls: the emitter is still found."""
+    monkeypatch.setattr(track_module, "search_start", search_killing_the_worker)
+    data = simulate("seed", 2)
+    loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
+    play(loc, data)
+    assert loc.worker.unusable == "its process died 3 times in a row"
+    assert loc.rejected["internal_error"] == 3 and loc.emitter.filter is not None  # started inline
+    said = [r for r in caplog.records if r.exc_info]
+    assert len(said) == 1  # one traceback, not one per job
+    err, nees = error_and_nees(loc, data)
+    assert err < 5.0 and nees < 13.8
 
 
 def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():

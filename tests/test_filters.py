@@ -150,11 +150,11 @@ def test_a_filter_refuses_a_model_without_the_capability_it_needs():
             make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), GrowthModel())
 
 
-def test_realtime_sweeps_are_spread_over_the_next_points():
-    """`sweeps_per_point` 1 (scheduling: realtime): one sweep at the resampling, then one at each following point
-    until all `sweeps` are made; a resampling that comes before the debt is paid pays it, so no cloud gets fewer
-    sweeps than without the spreading. Default: all of them at once."""
-    for per_point, expected in ((0, [5, 0, 0, 0, 0, 0]), (1, [1, 1, 1, 1, 1, 0])):
+def test_realtime_sweeps_are_owed_and_made_between_or_at_the_next_points():
+    """`sweeps_per_point` 1 (scheduling: realtime): none at the resampling, then one at each following point until
+    all `sweeps` are made, unless pay_owed() (the node's idle time) made them first; a resampling that comes before
+    the debt is paid pays it, so no cloud gets fewer sweeps than without the spreading. Default: all at once."""
+    def filter_counting(per_point):
         f = _filter(n=200)
         f.sweeps_per_point = per_point
         made = []
@@ -163,18 +163,33 @@ def test_realtime_sweeps_are_spread_over_the_next_points():
         rng = np.random.default_rng(0)
         f.initialise(rng.normal(0.0, 10.0, (200, 2)), [0, 0], np.eye(2) * 1e6)
         f.spread = np.eye(2) * 100.0
+        return f, made
+
+    def vague(k):  # a point that barely informs (sigma 1 rad): no resampling
+        return ObservationPoint(float(k), 500.0, 500.0, 0.0, 1.0, 1)
+
+    for per_point, expected in ((0, [5, 0, 0, 0, 0, 0, 0]), (1, [0, 1, 1, 1, 1, 1, 0])):
+        f, made = filter_counting(per_point)
         counts = []
         f.resample()
         f.after_resample(None)
         counts.append(len(made))
-        for k in range(5):  # points that barely inform (sigma 1 rad): no resampling
+        for k in range(6):
             made.clear()
-            assert f.update(ObservationPoint(float(k), 500.0, 500.0, 0.0, 1.0, 1)) and not f.resampled
+            assert f.update(vague(k)) and not f.resampled
             counts.append(len(made))
         assert counts == expected, per_point
         made.clear()
         f.resample()
-        f.after_resample(None)  # 1 now, 4 owed
+        f.after_resample(None)  # realtime: none now, 5 owed
         f.resample()
-        f.after_resample(None)  # resampled again before the debt is paid: all 5 now (1 + the 4 owed)
-        assert len(made) == (10 if per_point == 0 else 6) and f.owed == (0 if per_point == 0 else 4)
+        f.after_resample(None)  # resampled again before the debt is paid: the 5 owed now, 5 more owed
+        assert len(made) == (10 if per_point == 0 else 5) and f.owed == (0 if per_point == 0 else 5)
+
+    f, made = filter_counting(1)
+    assert f.update(vague(0)) and not f.pay_owed() and not made  # nothing owed
+    f.resample()
+    f.after_resample(None)
+    assert f.pay_owed() and f.pay_owed() and len(made) == 2 and f.owed == 3  # between points, one per call
+    made.clear()
+    assert f.update(vague(1)) and len(made) == 1 and f.owed == 2  # the next point makes one of the rest

@@ -30,6 +30,7 @@ from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, refine, residuals
+from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.preprocess import Columns, Group, columns, make_point
 from aoa_localizer.engine.types import ObservationPoint, Reading
@@ -223,21 +224,36 @@ def _background():
     the whole process group) is the parent's to handle: the pool stops the worker when the parent exits."""
     os.nice(WORKER_NICENESS)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    keep_freed_memory()
 
 
 class CheckWorker:
     """One worker process that runs the Localizer's background jobs, one at a time, oldest first; started at the
     first job, started again if it died (its job fails with BrokenProcessPool, counted by the track). A worker
-    that cannot start is not tried again: submit returns None and the jobs run in the caller."""
+    that cannot start, or that died MAX_BREAKS times in a row, is not tried again: submit returns None and the jobs
+    run in the caller."""
+
+    MAX_BREAKS = 3
 
     def __init__(self):
         self._pool: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
         self.unusable = ""  # why the worker could not start (then every job runs inline)
+        self.failures = 0  # jobs that raised (the first is logged with its traceback, the rest counted)
+        self._breaks = 0  # jobs in a row lost to a dead worker process
+
+    def _done(self, future: Future):
+        """A job ended (in the pool's thread: only counts here)."""
+        exc = None if future.cancelled() else future.exception()
+        self._breaks = self._breaks + 1 if isinstance(exc, BrokenProcessPool) else 0
+        self.failures += exc is not None
 
     def submit(self, job: Callable[[], CheckResult]) -> Future | None:
         with self._lock:
             if self.unusable:
+                return None
+            if self._breaks >= self.MAX_BREAKS:
+                self._give_up(f"its process died {self._breaks} times in a row")
                 return None
             for _ in range(2):
                 try:
@@ -245,7 +261,9 @@ class CheckWorker:
                         # spawn, not fork: the parent runs threads (rclpy's, the pool's own) that fork would copy
                         self._pool = ProcessPoolExecutor(
                             max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_background)
-                    return self._pool.submit(job)
+                    future = self._pool.submit(job)
+                    future.add_done_callback(self._done)
+                    return future
                 except BrokenProcessPool:
                     self._stop()
                 except (RuntimeError, OSError) as exc:  # no processes allowed, or a script's unguarded main

@@ -524,6 +524,19 @@ class Localizer:
             made.append(estimate)
         return made
 
+    def pay_owed(self) -> bool:
+        """Make one of the move sweeps a resampling owes (`scheduling: realtime`), for the channel that owes the most:
+        the node calls it when idle, so the points that follow carry no sweep. False when nothing is owed."""
+        owing = max(self.channels.live.values(), key=lambda c: c.emitter.owed, default=None)
+        if owing is None or not owing.emitter.owed:
+            return False
+        try:
+            return owing.emitter.pay_owed()
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            log.exception("a move sweep between points failed; skipped")
+            self._reject("internal_error")
+            return False
+
     def settle(self):
         """Wait until the worker has finished the jobs submitted so far (`scheduling: realtime`; nothing otherwise):
         a replay calls it after each input to run at a receiver's pace, where a job ends before the next point,

@@ -401,6 +401,15 @@ class EmitterTrack:
         return Snapshot(self.cfg, groups, rows, velocity.reshape(-1, 2), self.noise.copy(), self.outlier_prob,
                         self.robust(), best, [m.mean.copy() for m in self.modes[:1]])
 
+    def pay_owed(self) -> bool:
+        """One sweep the filter owes (`scheduling: realtime`), made between points; False if none is owed."""
+        f = self.filter
+        return isinstance(f, ResampleMove) and self._finite() and f.pay_owed()
+
+    @property
+    def owed(self) -> int:
+        return self.filter.owed if isinstance(self.filter, ResampleMove) else 0
+
     def collect(self) -> bool:
         """Apply the worker's result if it is ready (without waiting for the next point); True when applied."""
         return self._collect_check()
@@ -415,7 +424,8 @@ class EmitterTrack:
         try:
             result = future.result()
         except Exception:  # the worker's boundary: a failed check never stops the track
-            log.exception("global check failed in the worker; skipped")
+            if self.worker is None or self.worker.failures <= 1:
+                log.exception("global check failed in the worker; skipped (further failures are counted)")
             self._reject("internal_error", 1)
             return False
         if self.filter is not filt:

@@ -26,10 +26,12 @@ class ResampleMove(ParticleFilter):
         self.spread = np.eye(model.dim)  # the weighted cloud's covariance just before the last resampling
         self.acceptance = float("nan")  # share of accepted moves in the last move stage
         self.sweeps = settings.move_sweeps
-        # 0: all `sweeps` right after the resampling; n: at most n there and at each following point until all are
-        # made (`scheduling: realtime`, a bounded step). Any sweep keeps the current posterior invariant.
+        # 0: all `sweeps` right after the resampling; n (`scheduling: realtime`, a bounded step): none there, owed,
+        # and at most n at each following point until all are made, unless pay_owed() (idle time) made them first.
+        # Any sweep keeps the current posterior invariant.
         self.sweeps_per_point = 0
         self.owed = 0
+        self.last_z = None  # the newest point, for sweeps made between points
 
     def predict(self):
         """The emitter does not move: no process noise (the moves keep the cloud diverse)."""
@@ -49,22 +51,33 @@ class ResampleMove(ParticleFilter):
 
     def update(self, z) -> bool:
         ok = super().update(z)
+        if ok:
+            self.last_z = z
         if ok and not self.resampled and self.owed:
             self._sweeps(min(self.owed, self.sweeps_per_point), z)
         return ok
 
+    def pay_owed(self) -> bool:
+        """One owed sweep now (the node's idle time), so the next point need not make it; False if none is owed."""
+        if not self.owed or self.last_z is None:
+            return False
+        self._sweeps(1, self.last_z)
+        return True
+
     def move(self, z):
         """`sweeps` sweeps of the filter's operator on the posterior; the weights (equal after resampling) stay.
-        `z`: the newest point (an operator may build its proposal from it). With `sweeps_per_point`, only that many
-        now and the rest owed to the next points, plus whatever the last resampling still owed: resamplings that
-        come faster than the debt is paid get all their sweeps, as without the spreading (the cloud would
-        otherwise collapse onto a few copies)."""
+        `z`: the newest point (an operator may build its proposal from it). With `sweeps_per_point`, none now: they
+        are owed, made by pay_owed() between points or `sweeps_per_point` at each following point; whatever the
+        last resampling still owed is made now: resamplings that come faster than the debt is paid get all their
+        sweeps, as without the spreading (the cloud would otherwise collapse onto a few copies)."""
         if not self.sweeps_per_point:
             self.owed = self.sweeps
             self._sweeps(self.sweeps, z)
             return
+        still = self.owed
         self.owed += self.sweeps
-        self._sweeps(min(self.owed, self.sweeps_per_point + self.owed - self.sweeps), z)
+        if still:
+            self._sweeps(still, z)
 
     def _sweeps(self, count: int, z):
         self.owed -= count

@@ -37,6 +37,7 @@ from aoa_localizer.engine.config import ConfigError, LocalizerConfig, ParameterS
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
 from aoa_localizer.engine.input_guard import StampGaps
 from aoa_localizer.engine.localizer import REASONS, Localizer
+from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.ros.declare import declare, refuse_unknown
 from aoa_localizer.ros.node_health import NodeHealth
@@ -191,6 +192,8 @@ class LocalizerNode(Node):
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.create_service(Trigger, "~/reset_datum", self.on_reset_datum)
         self.create_timer(self.get_parameter("diagnostics_period_s").value, self.on_period)
+        self.old_objects = OldObjects()
+        self.create_timer(IDLE_MOVES_PERIOD_S, self.on_idle)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self._publish_datum()  # a configured datum is known at once
         self.get_logger().info(
@@ -301,6 +304,8 @@ class LocalizerNode(Node):
             self.path.clear()  # drawn in the old map frame
         else:
             self.loc.adopt_datum(old.frame)  # only datum_* move the map frame
+        del old
+        self.old_objects.thaw()  # the dropped Localizer's reference cycles go now
         self._publish_datum()
         self.get_logger().info(f"parameters changed ({', '.join(sorted(changes))}): track restarted")
         return SetParametersResult(successful=True)
@@ -561,6 +566,13 @@ class LocalizerNode(Node):
                     out.append(f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}")
         return out
 
+    def on_idle(self):
+        """Between messages: one move sweep a channel's last resampling owes (`scheduling: realtime`), so the point
+        that follows carries none and its pose is not held up; once a second, the objects that survived leave the
+        garbage collector's full passes (docs/ros.md, "Latency")."""
+        self.loc.pay_owed()
+        self.old_objects.tick()
+
     def on_period(self):
         """Every diagnostics_period_s: the worker's finished results of channels whose data paused, /diagnostics,
         and vehicle/path if it grew."""
@@ -598,6 +610,7 @@ class LocalizerNode(Node):
 
     def on_reset(self, request, response):
         self.loc.reset()
+        self.old_objects.thaw()
         response.success = True
         response.message = "track dropped; waiting for new bearings"
         self.get_logger().info(response.message)
@@ -610,6 +623,7 @@ class LocalizerNode(Node):
             response.message = "the datum is configured (datum_lat, datum_lon): change those parameters to move it"
             return response
         self.loc.reset(drop_datum=True)
+        self.old_objects.thaw()
         self.path.clear()  # drawn in the dropped map frame
         response.success = True
         response.message = "track and datum dropped; the next confirmed fix sets the datum"
@@ -636,10 +650,13 @@ def usage() -> str:
 # The interpreter hands its lock between threads at this interval: the callback thread waits up to this long for
 # it each time the global checks' worker holds it (Python's default, 5 ms, would make every message that late).
 SWITCH_INTERVAL_S = 0.0005
+# One owed sweep (about 2 ms at 300 points) per tick: 50 a second, several times what 50 emitters owe.
+IDLE_MOVES_PERIOD_S = 0.02
 
 
 def main(argv=None) -> int:
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    keep_freed_memory()
     return run_node(NODE_NAME, LocalizerNode, rclpy.spin, (ConfigError,), argv, usage())
 
 

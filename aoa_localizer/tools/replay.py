@@ -19,6 +19,7 @@ from pathlib import Path
 
 from aoa_localizer.engine.config import ConfigError, LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.tools.bag_run import run_bag, summary
 from aoa_localizer.tools.cli import (
     HelpFormatter,
@@ -101,6 +102,7 @@ def main(argv=None) -> int:
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
+    keep_freed_memory()
     if args.offline:
         return run_offline(args)
     if not args.bag or not Path(args.bag).exists():

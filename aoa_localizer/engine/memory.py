@@ -1,0 +1,57 @@
+"""Memory settings for a long-running process. keep_freed_memory: the C allocator keeps freed memory for reuse (the
+filters' particles x points temporaries are a few MB each, and glibc by default maps each afresh and returns it at
+free, so every temporary paid its pages' first-touch faults: 2-4x the arithmetic on this machine); the node, its
+check worker and the programs call it at start, a Python user may too. OldObjects: the node's kept readings out of
+the cyclic garbage collector's full passes (docs/ros.md, "Latency")."""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import gc
+import logging
+import time
+
+log = logging.getLogger("aoa_localizer")
+
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
+MMAP_THRESHOLD = 32 * 1024 * 1024  # glibc's largest: blocks below come from the heap and are reused
+TRIM_THRESHOLD = 256 * 1024 * 1024  # free memory kept at the heap's top before any is given back
+
+
+def keep_freed_memory() -> bool:
+    """Tell glibc's malloc to serve blocks up to 32 MiB from its heap and keep up to 256 MiB of freed memory;
+    True when applied (False on another C library: nothing changes)."""
+    name = ctypes.util.find_library("c")
+    try:
+        mallopt = ctypes.CDLL(name).mallopt if name else None
+    except (OSError, AttributeError):
+        mallopt = None
+    if mallopt is None:
+        log.debug("no glibc mallopt: the allocator keeps its defaults")
+        return False
+    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
+class OldObjects:
+    """Every `period_s`, from the node's idle time: collect the young generations, then gc.freeze() what survived,
+    so the collector's full passes never walk the hundreds of thousands of readings 50 channels keep (one pass
+    held the callbacks 200 ms). Frozen objects are still freed when their last reference goes; only reference
+    cycles among them wait for thaw(), which a node calls when it drops its Localizer (reset, parameter change)."""
+
+    def __init__(self, period_s: float = 1.0):
+        self.period_s = period_s
+        self.last = time.monotonic()
+
+    def tick(self):
+        now = time.monotonic()
+        if now - self.last >= self.period_s:
+            self.last = now
+            gc.collect(1)
+            gc.freeze()
+
+    @staticmethod
+    def thaw():
+        """All objects back under the collector and one full pass: the dropped Localizer's cycles are freed."""
+        gc.unfreeze()
+        gc.collect()
