@@ -1,10 +1,11 @@
 """The node's own diagnostics and path, without ROS: stale inputs, a filter that keeps restarting, the path."""
+import math
 from collections import Counter
 
 import pytest
 
 from aoa_localizer.engine.config import ConfigError
-from aoa_localizer.ros.node_health import RESTART_WINDOW_S, RESTARTS_FOR_ERROR, NodeHealth
+from aoa_localizer.ros.node_health import RESTART_WINDOW_S, RESTARTS_FOR_ERROR, LatencyHistogram, NodeHealth
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.vehicle_path import VehiclePath
 
@@ -64,3 +65,16 @@ def test_node_parameters_refuse_values_outside_their_declaration(name, bad):
     spec.spec.check(name, spec.default)
     with pytest.raises(ConfigError, match=name):
         spec.spec.check(name, bad)
+
+
+def test_latency_percentiles_since_start_are_read_at_their_bins_upper_edge():
+    hist = LatencyHistogram()
+    assert hist.total == 0 and math.isnan(hist.percentile(99))
+    hist.add([1.0] * 99)
+    hist.add([1000.0])
+    assert hist.total == 100
+    assert hist.percentile(99) == pytest.approx(1.0) and hist.percentile(100) == pytest.approx(1000.0)
+    hist.add([1.5] * 900)
+    assert 1.5 <= hist.percentile(50) <= 1.5 * 10 ** (1 / 40)  # never below the true value, at most a bin above
+    hist.add([1e9])
+    assert hist.percentile(100) == math.inf

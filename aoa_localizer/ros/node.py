@@ -40,7 +40,7 @@ from aoa_localizer.engine.localizer import REASONS, Localizer
 from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.ros.declare import declare, refuse_unknown
-from aoa_localizer.ros.node_health import NodeHealth
+from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth
 from aoa_localizer.ros.node_params import NODE_PARAMS, STATION_POSITION
 from aoa_localizer.ros.ros_main import run_node
 from aoa_localizer.ros.vehicle_path import VehiclePath
@@ -149,6 +149,7 @@ class LocalizerNode(Node):
         self.callback_s: list[float] = []
         self.arrival_ns = time.time_ns()
         self.latency_ms: list[float] = []  # from a message's arrival to the publication of each pose it made
+        self.latency_since_start = LatencyHistogram()
         self.pending_params: dict = {}  # the first parameters of a group set together, held until it is complete
         self.callback_max_s = 0.0
 
@@ -499,6 +500,9 @@ class LocalizerNode(Node):
             p50, p99, top = np.percentile(self.latency_ms, (50, 99, 100), method="higher")
             values.update(poses_in_period=len(self.latency_ms), pose_latency_p50_ms=f"{p50:.3f}",
                           pose_latency_p99_ms=f"{p99:.3f}", pose_latency_max_ms=f"{top:.3f}")
+        if self.latency_since_start.total:
+            values.update(poses_since_start=self.latency_since_start.total,
+                          pose_latency_p99_ms_since_start=f"{self.latency_since_start.percentile(99):.3f}")
         est = loc.estimate
         if est is not None:
             values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * loc.last_update_s:.3f}", east=f"{est.east:.2f}",
@@ -580,6 +584,7 @@ class LocalizerNode(Node):
         made, self.made = self.made, {}
         for est in made.values():  # no input made these: no latency to count
             self._publish(est)
+        self.latency_since_start.add(self.latency_ms)
         level, message, values = self.diagnostics()
         hardware_id = self.get_parameter("hardware_id").value
         self.pub_diag.publish(build.diagnostic_array(self.T, self._now(), self.diag_name, level, message, values,
