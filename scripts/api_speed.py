@@ -1,12 +1,15 @@
 """What a user pays per measurement through the public API, beside the `particles` IBIS step in the same run.
 
-    python scripts/api_speed.py [--runs 10] [--scenario seed]
+    python scripts/api_speed.py [--runs 10] [--scenario seed] [--scheduling realtime]
 
 For each run of a public scenario: every `add_fix` and `add_bearing` call of the Localizer (default
 configuration, N = 100) is timed; a *measurement* is one observation point's worth of calls (the fixes and
 readings up to the call that closed the point). Reported: the median and mean of the time per measurement, the
 geodesy's share (LocalFrame calls, timed separately), and the IBIS sampler's median and mean step on the same
-points (docs/benchmarks.md has the figures). Nothing here is a test: speed targets live in benchmarks.
+points (docs/benchmarks.md has the figures). With `--scheduling realtime` the checks run in the worker process and,
+between calls (untimed, as a node's idle time), the run waits for the worker and makes the owed move sweeps
+(Localizer.settle, pay_owed): the calls' time is then what the thread that feeds the Localizer pays, and that idle
+work is reported beside it. Nothing here is a test: speed targets live in benchmarks.
 """
 from __future__ import annotations
 
@@ -58,10 +61,10 @@ class GeodesyClock:
             setattr(geodesy.LocalFrame, name, original)
 
 
-def one_run(scenario: str, r: int):
+def one_run(scenario: str, r: int, scheduling: str):
     data = simulate(scenario, r)
-    loc = Localizer(scenario_config(data, LocalizerConfig(seed=10000 + r)))
-    per_point, spent, points = [], 0.0, loc.points_used
+    loc = Localizer(scenario_config(data, LocalizerConfig(seed=10000 + r, scheduling=scheduling)))
+    per_point, spent, points, idle = [], 0.0, loc.points_used, 0.0
     with GeodesyClock() as geo:
         for kind, row in data.events():
             t0 = time.perf_counter()
@@ -70,37 +73,49 @@ def one_run(scenario: str, r: int):
             else:
                 loc.add_bearing(row[0], row[1], row[2])
             spent += time.perf_counter() - t0
+            if scheduling == "realtime":
+                loc.settle()
+                t1 = time.perf_counter()
+                while loc.pay_owed():
+                    pass
+                idle += time.perf_counter() - t1
             if loc.points_used > points:  # this call closed (and used) an observation point
                 per_point.append(spent / (loc.points_used - points))
                 spent, points = 0.0, loc.points_used
         geo_share = geo.seconds
+    loc.close()
     total = sum(per_point)
     pts = loc.recent_points()
     start = loc.start_cloud
     mean, cov = start.mean(axis=0), 2.0 * np.cov(start.T)
     _, ibis_steps = particles_peers.run_ibis(pts, mean, cov, 100, loc.cfg.outlier_prob, 10000 + r)
-    return per_point, geo_share / max(total, 1e-12), ibis_steps
+    return per_point, geo_share / max(total, 1e-12), ibis_steps, idle / max(len(per_point), 1)
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--scenario", choices=sorted(SCENARIOS), default="seed")
+    parser.add_argument("--scheduling", choices=("reproducible", "realtime"), default="reproducible",
+                        help="the Localizer's scheduling (reproducible: the Python API's default)")
     args = parser.parse_args(argv)
     if not particles_peers.AVAILABLE:
         print("the `particles` package is needed (pip install -e '.[bench]')", file=sys.stderr)
         return 2
-    ours, ibis, shares = [], [], []
+    ours, ibis, shares, idle = [], [], [], []
     for r in range(args.runs):
-        per_point, share, steps = one_run(args.scenario, r)
+        per_point, share, steps, idle_per_point = one_run(args.scenario, r, args.scheduling)
         ours += per_point
         ibis += steps
         shares.append(share)
+        idle.append(idle_per_point)
     o, i = 1e3 * np.array(ours), 1e3 * np.array(ibis)
-    print(f"{args.scenario}, {args.runs} runs, N = 100: per measurement through the API median {np.median(o):.3f} "
-          f"ms, mean {o.mean():.3f} ms (geodesy {100 * np.mean(shares):.1f} % of it); IBIS step median "
-          f"{np.median(i):.3f} ms, mean {i.mean():.3f} ms; ratio of medians {np.median(o) / np.median(i):.2f}, "
-          f"of means {o.mean() / i.mean():.2f}")
+    print(f"{args.scenario}, {args.runs} runs, N = 100, {args.scheduling}: per measurement through the API median "
+          f"{np.median(o):.3f} ms, mean {o.mean():.3f} ms (geodesy {100 * np.mean(shares):.1f} % of it); "
+          f"IBIS step median {np.median(i):.3f} ms, mean {i.mean():.3f} ms; "
+          f"ratio of medians {np.median(o) / np.median(i):.2f}, of means {o.mean() / i.mean():.2f}"
+          + (f"; idle work (owed sweeps) {1e3 * np.mean(idle):.3f} ms per measurement" if args.scheduling == "realtime"
+             else ""))
     return 0
 
 

@@ -420,8 +420,8 @@ class LocalizerConfig:
         "auto",
         ("auto", "realtime", "reproducible"),
         "`realtime`: the global checks' and start searches' noise fits and searches run in a worker process (their "
-        "result applied at the emitter's next point) and at most one move sweep is made per point (the rest at the "
-        "next points), so no step blocks for long; `reproducible`: all in the call that made the point, so a seed "
+        "result applied at the emitter's next point) and a resampling's move sweeps are owed, made between "
+        "messages (the node's idle time) or one per following point, so no step blocks for long; `reproducible`: all in the call that made the point, so a seed "
         "repeats a run exactly; `auto`: realtime in the node, reproducible offline and from Python",
         read_only=True,
     )

@@ -31,12 +31,15 @@ def scenario_config(data: ScenarioData, base: LocalizerConfig) -> LocalizerConfi
 
 def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
     """A scenario's fixes and bearings into `loc` in stamp order; on_result(what each call returned). Under
-    `scheduling: realtime` each call waits for the worker, as a receiver's pace would (Localizer.settle)."""
+    `scheduling: realtime` each call waits for the worker and then makes the owed move sweeps, as a node does in
+    the time a receiver's pace leaves between messages (Localizer.settle, pay_owed)."""
     for kind, row in data.events():
         on_result(
             loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2])
         )
         loc.settle()
+        while loc.pay_owed():
+            pass
 
 
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
