@@ -421,8 +421,9 @@ class LocalizerConfig:
         ("auto", "realtime", "reproducible"),
         "`realtime`: the global checks' and start searches' noise fits and searches run in a worker process (their "
         "result applied at the emitter's next point) and a resampling's move sweeps are owed, made between "
-        "messages (the node's idle time) or one per following point, so no step blocks for long; `reproducible`: all in the call that made the point, so a seed "
-        "repeats a run exactly; `auto`: realtime in the node, reproducible offline and from Python",
+        "messages (the node's idle time) or one per following point, so no step blocks for long; `reproducible`: "
+        "all in the call that made the point, so a seed repeats a run exactly; `auto`: realtime in the node, "
+        "reproducible offline and from Python",
         read_only=True,
     )
     health_window: int = param(
