@@ -192,7 +192,7 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
     assert loc.emitter.check is None and loc.emitter.events["recalibrated"] >= 2
     assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.rejected
     assert len(starts) == 1 and loc.worker.unusable == "cannot start a process"
-    said = [r.getMessage() for r in caplog.records if "could not start" in r.getMessage()]
+    said = [r.getMessage() for r in caplog.records if "check worker is given up" in r.getMessage()]
     assert len(said) == 1 and "__main__" in said[0]
 
 

@@ -275,7 +275,7 @@ class CheckWorker:
     def _give_up(self, reason: str):
         self.unusable = reason
         self._stop()
-        log.warning("the check worker could not start (%s): the checks run in the calls from now on, as with "
+        log.warning("the check worker is given up (%s): the checks run in the calls from now on, as with "
                     "scheduling: reproducible. A script that sets scheduling: realtime needs its main code under "
                     "`if __name__ == \"__main__\":` (the worker is a spawned process)", reason)
 
