@@ -312,7 +312,7 @@ def main(argv=None):
         "--scheduling",
         choices=("reproducible", "realtime"),
         default="reproducible",
-        help="the engine's scheduling (realtime: checks in the worker thread, paced as a receiver; default "
+        help="the engine's scheduling (realtime: checks in the worker process, paced as a receiver; default "
         "reproducible)",
     )
     parser.add_argument(

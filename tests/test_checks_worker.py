@@ -196,6 +196,22 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
     assert len(said) == 1 and "__main__" in said[0]
 
 
+def realtime_run_in_a_pool_worker(r: int) -> tuple[str, float]:
+    """A realtime Localizer inside a multiprocessing.Pool's (daemonic) worker: why its check worker was given up,
+    and the final error (a module function: the pool calls it by name)."""
+    data = simulate("seed", r)
+    loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
+    play(loc, data, paced=False)
+    return loc.worker.unusable, error_and_nees(loc, data)[0]
+
+
+def test_a_realtime_localizer_in_a_daemonic_process_runs_its_checks_inline():
+    """multiprocessing forbids a Pool's worker to have children: the check worker is given up, the work inline."""
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        why, err = pool.apply(realtime_run_in_a_pool_worker, (2,))
+    assert "daemonic" in why and err < 5.0
+
+
 def test_a_check_for_a_filter_since_replaced_is_dropped():
     """A check submitted for one filter is not applied to the filter that replaced it (divergence, re-start): its
     snapshot is of points the new filter never saw. Results are applied only at a point, so the job's timing

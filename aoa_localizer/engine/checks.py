@@ -266,8 +266,10 @@ class CheckWorker:
                     return future
                 except BrokenProcessPool:
                     self._stop()
-                except (RuntimeError, OSError) as exc:  # no processes allowed, or a script's unguarded main
-                    self._give_up(str(exc).strip().splitlines()[0])
+                # No processes allowed, a script's unguarded main, or a daemonic process (a multiprocessing.Pool's
+                # worker), which multiprocessing forbids to have children (an AssertionError)
+                except (RuntimeError, OSError, AssertionError) as exc:
+                    self._give_up(str(exc).strip().splitlines()[0] or type(exc).__name__)
                     return None
             self._give_up("the check worker died at its start twice")
             return None
