@@ -76,8 +76,7 @@ def one_run(scenario: str, r: int, scheduling: str):
             if scheduling == "realtime":
                 loc.settle()
                 t1 = time.perf_counter()
-                while loc.pay_owed():
-                    pass
+                loc.pay_all_owed()
                 idle += time.perf_counter() - t1
             if loc.points_used > points:  # this call closed (and used) an observation point
                 per_point.append(spent / (loc.points_used - points))

@@ -77,8 +77,7 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         at_points += max(0, owed - loc.emitter.owed)  # sweeps a point made (a resampling adds to `owed`)
         loc.settle()
-        while loc.pay_owed():
-            between += 1
+        between += loc.pay_all_owed()
     assert not loc.pay_owed() and loc.emitter.owed == 0  # nothing left owed
     assert between >= 20 and at_points <= between // 10
     loc.flush()

@@ -253,7 +253,7 @@ class CheckWorker:
             if self.unusable:
                 return None
             if self._breaks >= self.MAX_BREAKS:
-                self._give_up(f"its process died {self._breaks} times in a row")
+                self._give_up(f"its process died {self._breaks} times in a row", started=True)
                 return None
             for _ in range(2):
                 try:
@@ -274,12 +274,14 @@ class CheckWorker:
             self._give_up("the check worker died at its start twice")
             return None
 
-    def _give_up(self, reason: str):
+    def _give_up(self, reason: str, started: bool = False):
+        """No worker from now on; the warning names the `__main__` guard where the worker could not start."""
         self.unusable = reason
         self._stop()
+        hint = "" if started else (" A script that sets scheduling: realtime needs its main code under "
+                                   "`if __name__ == \"__main__\":` (the worker is a spawned process).")
         log.warning("the check worker is given up (%s): the checks run in the calls from now on, as with "
-                    "scheduling: reproducible. A script that sets scheduling: realtime needs its main code under "
-                    "`if __name__ == \"__main__\":` (the worker is a spawned process)", reason)
+                    "scheduling: reproducible.%s", reason, hint)
 
     def close(self):
         """Stop taking jobs; the one running finishes, the waiting ones are dropped."""

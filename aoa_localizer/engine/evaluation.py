@@ -38,8 +38,7 @@ def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
             loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2])
         )
         loc.settle()
-        while loc.pay_owed():
-            pass
+        loc.pay_all_owed()
 
 
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:

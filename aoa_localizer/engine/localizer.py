@@ -537,6 +537,13 @@ class Localizer:
             self._reject("internal_error")
             return False
 
+    def pay_all_owed(self) -> int:
+        """Make every owed sweep now (a replay between inputs, as the node's idle time would); returns how many."""
+        made = 0
+        while self.pay_owed():
+            made += 1
+        return made
+
     def settle(self):
         """Wait until the worker has finished the jobs submitted so far (`scheduling: realtime`; nothing otherwise):
         a replay calls it after each input to run at a receiver's pace, where a job ends before the next point,

@@ -173,7 +173,7 @@ class PointBuilder:
             if too_late or too_far:
                 closed.append(self._take())
         self.readings.append(r)
-        if len(self.readings) >= max(1.0, self.scale * cfg.obs_max_readings):
+        if len(self.readings) >= max(1.0, scale * cfg.obs_max_readings):
             closed.append(self._take())
         return closed
 
