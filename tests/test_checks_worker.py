@@ -71,15 +71,17 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
     almost none, every owed sweep is made, and the emitter is found with an ellipse that holds it."""
     data = simulate(scenario, 2)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling="realtime")))
-    between = at_points = 0
+    between = at_points = check_moves = 0
     for kind, row in data.events():
         owed = loc.emitter.owed
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         at_points += max(0, owed - loc.emitter.owed)  # sweeps a point made (a resampling adds to `owed`)
         loc.settle()
+        check_moves += loc.emitter.move_owed  # a worker's check applied: its move on the modes is owed too
         between += loc.pay_all_owed()
+        assert not loc.emitter.move_owed
     assert not loc.pay_owed() and loc.emitter.owed == 0  # nothing left owed
-    assert between >= 20 and at_points <= between // 10
+    assert between >= 20 and at_points <= between // 10 and check_moves >= 1  # one scheduled check in these runs
     loc.flush()
     loc.finish()
     err, nees = error_and_nees(loc, data)

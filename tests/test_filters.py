@@ -193,3 +193,21 @@ def test_realtime_sweeps_are_owed_and_made_between_or_at_the_next_points():
     assert f.pay_owed() and f.pay_owed() and len(made) == 2 and f.owed == 3  # between points, one per call
     made.clear()
     assert f.update(vague(1)) and len(made) == 1 and f.owed == 2  # the next point makes one of the rest
+
+
+def test_the_cloud_summary_is_made_once_per_cloud_and_follows_a_replaced_cloud():
+    """Weights, ESS, mean and covariance are made once per cloud (a step reads them several times) and are what a
+    fresh computation gives; a replaced cloud or new weights get a new summary; the cloud cannot be changed in
+    place behind its summary's back."""
+    f = _filter(algorithm="sir", n=4)
+    f.initialise(np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0]]), [1, 1], np.eye(2) * 1e6)
+    first = f.estimate()
+    assert f.estimate()[1] is first[1] and f.weights is f.weights
+    f.logw = np.log(np.array([0.7, 0.1, 0.1, 0.1]))
+    mean, cov = f.estimate()
+    assert mean == pytest.approx([0.4, 0.4]) and cov.ravel() == pytest.approx([0.64, 0.24, 0.24, 0.64])
+    assert f.ess() == pytest.approx(1.0 / (0.49 + 0.03))
+    f.x = f.x + 10.0
+    assert f.estimate()[0] == pytest.approx([10.4, 10.4])
+    with pytest.raises(ValueError):
+        f.x[0, 0] = 5.0

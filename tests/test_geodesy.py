@@ -104,3 +104,15 @@ def test_the_fast_local_frame_equals_pymap3d(lat0):
             assert frame.north_angle(float(ref_lat[k]), float(ref_lon[k])) == pytest.approx(
                 float(_pymap3d_north_angle(frame, ref_lat[k], ref_lon[k])), abs=1e-6)
     assert frame.north_angle(lat0, frame.lon0) == pytest.approx(math.pi / 2, abs=1e-12)
+
+
+def test_a_float_angle_is_wrapped_by_math_to_the_same_bit_as_numpy():
+    """The per-reading path wraps plain floats with math; it gives numpy's value exactly (both take the floor
+    modulo), at the edges too."""
+    rng = np.random.default_rng(1)
+    angles = np.r_[rng.uniform(-50, 50, 20000), [math.pi, -math.pi, 0.0, -0.0, 3 * math.pi, 1e-300, -1e-300]]
+    scalar = np.array([wrap_pi(float(a)) for a in angles])
+    assert isinstance(wrap_pi(1.0), float) and np.array_equal(scalar, wrap_pi(angles))
+    az, north = rng.uniform(-400, 400, 20000), rng.uniform(1.5, 1.6, 20000)
+    scalar = np.array([azimuth_to_enu(float(a), float(n)) for a, n in zip(az, north, strict=True)])
+    assert np.array_equal(scalar, azimuth_to_enu(az, north))

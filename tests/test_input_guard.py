@@ -233,3 +233,18 @@ def test_stamp_gaps_count_a_hole_in_a_regular_stream_and_nothing_else():
     gaps.add(10.0)  # a stamp from the past changes nothing
     gaps.add(15.95)  # within 5 intervals: no gap
     assert gaps.gaps == 1
+
+
+def test_the_closed_form_positive_definite_test_agrees_with_the_eigenvalues():
+    """The 2x2 test (low eigenvalue as det / high) against numpy's eigenvalues, over scales from 1e-6 to 1e6 and
+    near-singular clouds; non-finite and singular covariances are refused."""
+    from aoa_localizer.engine.localizer import _positive_definite
+
+    rng = np.random.default_rng(0)
+    for i in range(5000):
+        a = rng.standard_normal((2, 2)) * 10 ** rng.uniform(-6, 6)
+        cov = a @ a.T if i % 3 else np.outer(a[0], a[0]) + 10 ** rng.uniform(-14, -6) * (a[0] @ a[0]) * np.eye(2)
+        low, high = np.linalg.eigvalsh(cov)
+        assert _positive_definite(cov) == bool(high > 0 and low > 1e-9 * high)
+    assert not any(_positive_definite(np.array(c, float)) for c in ([[0, 0], [0, 0]], [[1, 0], [0, np.nan]],
+                                                                     [[1, 1], [1, 1]], [[np.inf, 0], [0, 1]]))

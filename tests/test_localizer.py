@@ -227,7 +227,7 @@ def test_a_diverged_filter_is_never_published_and_restarts():
     drive(loc, seconds=90, track=curved)
     assert loc.filter is not None
     published = loc.estimate
-    loc.filter.x[:] = np.inf  # what a run-away move step leaves behind
+    loc.filter.x = np.full_like(loc.filter.x, np.inf)  # what a run-away move step leaves behind
     est = drive(loc, seconds=100, track=lambda t: curved(t + 90), t0=1000.0)
     assert loc.rejected["filter_diverged"] == 1
     assert est is not None and np.isfinite(est.east) and est.stamp > published.stamp

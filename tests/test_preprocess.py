@@ -5,9 +5,13 @@ import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.preprocess import (
+    SMALL_POINT,
+    Group,
     PointBuilder,
+    columns,
     corrected_mean_coefficients,
     make_point,
+    make_point_arrays,
     point_coefficients,
     quality_weight,
     reading_sigma,
@@ -101,3 +105,48 @@ def test_point_builder_closes_on_time_distance_and_count():
     b.add(_reading(1, t=1.8, e=20.0))
     assert [len(g) for g in b.add(_reading(1, t=1.9, e=20.0))] == [3]  # full at 3 readings
     assert b.flush() is None
+
+
+def random_group(rng, n):
+    """n readings round a random bearing, a fifth of them wild, with random sigmas, qualities and positions."""
+    theta = rng.uniform(-math.pi, math.pi) + rng.normal(0.0, 0.05, n) + (rng.random(n) < 0.2) * rng.uniform(-3, 3, n)
+    return [Reading(100.0 + 0.1 * i, float(theta[i]), float(rng.uniform(40, 100)), float(rng.uniform(0.01, 0.1)),
+                    float(rng.normal(0, 100)), float(rng.normal(0, 100)), float(rng.uniform(0, 3))) for i in range(n)]
+
+
+def test_a_small_point_in_plain_floats_is_the_numpy_reference_to_rounding():
+    """Up to SMALL_POINT readings a point is made in plain floats; the numpy code (any size) is the reference:
+    the same mask and the same point to 1e-12, whatever the weighting, correlation, sigmas and wild readings. A
+    fields-only group (as the worker gets it) gives exactly the point its readings give."""
+    rng = np.random.default_rng(5)
+    for trial in range(1500):
+        n = int(rng.integers(1, SMALL_POINT + 1))
+        cfg = LocalizerConfig(df_correlation=float(rng.uniform(0.0, 0.9)),
+                              point_weighting=("inverse_variance", "equal")[trial % 2])
+        readings = random_group(rng, n)
+        sigma = None if trial % 3 == 0 else np.array([r.sigma for r in readings]) * rng.uniform(0.5, 2.0, n)
+        point, kept = make_point(readings, cfg, sigma)
+        ref, ref_kept = make_point_arrays(readings, cfg, sigma)
+        assert np.array_equal(kept, ref_kept) and point.n_readings == ref.n_readings
+        assert abs(math.remainder(point.theta - ref.theta, 2 * math.pi)) < 1e-12
+        for f in ("stamp", "east", "north", "sigma", "gps_sigma"):
+            assert getattr(point, f) == pytest.approx(getattr(ref, f), rel=1e-12, abs=1e-12), f
+        fields_only = Group()
+        fields_only.cols = columns(readings)
+        again, again_kept = make_point(fields_only, cfg, sigma)
+        assert again == point and np.array_equal(again_kept, kept)
+
+
+def test_an_even_count_has_two_central_readings_and_the_first_is_the_median_on_both_paths():
+    """Readings at 0, 10, 20, 30 mrad: the 10 and 20 mrad ones are equally central (spreads 40 mrad); the first
+    wins, so with a gate of 3 x 5 mrad the 30 mrad reading is the wild one (the 0 mrad one would be from 20)."""
+    cfg = LocalizerConfig(point_gate_sigma=3.0)
+    readings = [Reading(float(i), 0.01 * i, 80.0, 0.005, 0.0, 0.0) for i in range(4)]
+    assert make_point(readings, cfg)[1].tolist() == [True, True, True, False]
+    assert make_point_arrays(readings, cfg)[1].tolist() == [True, True, True, False]
+
+
+def test_more_readings_than_a_small_point_are_made_by_the_numpy_code():
+    readings = random_group(np.random.default_rng(1), SMALL_POINT + 5)
+    cfg = LocalizerConfig()
+    assert make_point(readings, cfg)[0] == make_point_arrays(readings, cfg)[0]

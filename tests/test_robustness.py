@@ -180,3 +180,12 @@ def test_the_gaussian_likelihood_stays_gaussian():
     assert res.localizer.filter.model.lik.outlier_prob == 0.0
     assert res.localizer.emitter.robust().outlier_prob == 0.0
     assert res.scores["error"] < 3 * res.scores["crlb"] + 1.0
+
+
+def test_a_points_noise_scales_in_plain_floats_are_numpys_interpolation_to_the_bit():
+    """NoiseModel.scales (per point) is NoiseModel.scale (numpy.interp between band centres) exactly: between,
+    on and beyond the centres, for unknown quality and infinities."""
+    model = NoiseModel(0.1)
+    model.k = np.random.default_rng(0).uniform(0.2, 3.0, model.k.size)
+    q = np.r_[np.random.default_rng(1).uniform(0, 120, 20000), np.arange(30.0, 101.0, 0.5), [np.nan, np.inf, -np.inf]]
+    assert np.array_equal(np.array(model.scales(q.tolist())), model.scale(q))

@@ -32,7 +32,7 @@ from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, refine, residuals
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
-from aoa_localizer.engine.preprocess import Columns, Group, columns, make_point
+from aoa_localizer.engine.preprocess import SMALL_POINT, Columns, Group, columns, field_lists, group_size, make_point
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -41,6 +41,9 @@ Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readi
 
 def sigmas(group: list[Reading], noise: NoiseModel | None) -> np.ndarray:
     """The readings' sigmas under `noise` (None: the configured ones)."""
+    if noise is not None and 0 < group_size(group) <= SMALL_POINT:  # a few readings: plain floats (per point)
+        _, _, quality, sigma = field_lists(group)[:4]
+        return np.array(sigma) * np.array(noise.scales(quality))
     cols = columns(group)
     return cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
 
@@ -107,7 +110,6 @@ class Snapshot:
     cfg: LocalizerConfig
     groups: list[list[Reading]]
     rows: np.ndarray
-    velocity: np.ndarray  # the vehicle's mean east/north velocity over each point's readings (K, 2), m/s
     noise: NoiseModel
     outlier_prob: float
     rob: Robust
@@ -131,6 +133,11 @@ class Snapshot:
             g.cols = Columns(*(block[:, i].copy() for i in range(block.shape[1])))
             groups.append(g)
         self.__dict__.update(state, groups=groups)
+
+    def velocity(self) -> np.ndarray:
+        """The vehicle's mean east/north velocity over each point's readings (K, 2), m/s (made where the check
+        runs: the worker, when there is one)."""
+        return np.array([[c.v_east.mean(), c.v_north.mean()] for c in map(columns, self.groups)]).reshape(-1, 2)
 
     def robust(self, outlier_prob: float) -> Robust:
         """The snapshot's robust posterior with another point outlier share (the likelihood's, as the track's)."""
@@ -185,7 +192,7 @@ def run_check(snap: Snapshot) -> CheckResult:
     modes = find_modes(pts, rob)
     hint = None
     if modes:
-        hint = best_shift(pts, snap.velocity, modes[0].mean, rob)
+        hint = best_shift(pts, snap.velocity(), modes[0].mean, rob)
     return cal.result(modes, hint)
 
 

@@ -20,7 +20,10 @@ _ECEF_ITERATIONS = 5  # ECEF -> latitude fixed point: converged to 1e-12 rad wit
 
 
 def _is_scalar(*values) -> bool:
-    return all(isinstance(v, float | int) for v in values)
+    for v in values:  # a loop, not all(...): this runs per reading
+        if not isinstance(v, float | int):
+            return False
+    return True
 
 
 def _ecef(lat_rad, lon_rad, alt):
@@ -69,7 +72,10 @@ def _geodetic_scalar(x: float, y: float, z: float) -> tuple[float, float, float]
 
 
 def wrap_pi(angle):
-    """Wrap radians into [-pi, pi): the residual convention for bearing errors."""
+    """Wrap radians into [-pi, pi): the residual convention for bearing errors. A float gives a float (math: the
+    per-reading path), the same value numpy gives."""
+    if _is_scalar(angle):
+        return (angle + math.pi) % TWO_PI - math.pi
     return (np.asarray(angle) + np.pi) % TWO_PI - np.pi
 
 
@@ -91,6 +97,8 @@ def azimuth_to_enu(azimuth_deg, north_angle=np.pi / 2):
     `north_angle` is the ENU angle of true north at the antenna (pi/2 at the datum; slightly
     different away from it, see LocalFrame.north_angle).
     """
+    if _is_scalar(azimuth_deg, north_angle):
+        return wrap_pi(north_angle - math.radians(azimuth_deg))
     return wrap_pi(north_angle - np.radians(azimuth_deg))
 
 

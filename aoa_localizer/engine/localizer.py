@@ -87,11 +87,11 @@ class Observer(Protocol):
 
 def _positive_definite(cov) -> bool:
     """Finite and full rank to working precision (a cloud of 2 particles, or all on one line, is not)."""
-    cov = np.asarray(cov, float)
-    if not np.all(np.isfinite(cov)):
+    (a, _), (b, c) = np.asarray(cov, float).tolist()  # 2x2 symmetric: its eigenvalues in closed form
+    if not all(map(math.isfinite, (a, b, c))):
         return False
-    low, high = np.linalg.eigvalsh(cov)[[0, -1]]
-    return bool(high > 0 and low > 1e-9 * high)
+    high = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
+    return high > 0 and (a * c - b * b) / high > 1e-9 * high  # the low eigenvalue as det / high
 
 
 def _as_float(value) -> float:

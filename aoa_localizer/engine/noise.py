@@ -12,6 +12,8 @@ while the config says constant, and one that reports no quality at all. EM start
 """
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
@@ -34,6 +36,24 @@ def band_of(quality: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(q), UNKNOWN, band)
 
 
+_CENTRE_LIST = _CENTRES.tolist()
+
+
+def _interp_band(q: float, k: list[float]) -> float:
+    """numpy.interp(q, band centres, k) for one quality, the same formula; the unknown band's k for NaN."""
+    if q != q:
+        return k[UNKNOWN]
+    c = _CENTRE_LIST
+    if q <= c[0]:
+        return k[0]
+    if q >= c[-1]:
+        return k[N_BANDS - 1]
+    j = bisect.bisect_right(c, q) - 1
+    if q == c[j]:
+        return k[j]
+    return (k[j + 1] - k[j]) / (c[j + 1] - c[j]) * (q - c[j]) + k[j]
+
+
 class NoiseModel:
     """Scale factors on the configured reading sigma, per quality band, and the reading outlier rate."""
 
@@ -46,8 +66,14 @@ class NoiseModel:
     def scale(self, quality: np.ndarray) -> np.ndarray:
         """k(Q): interpolated between band centres for known quality, the unknown band's for NaN."""
         q = np.asarray(quality, float)
-        known = np.interp(np.nan_to_num(q, nan=40.0), _CENTRES, self.k[:N_BANDS])
-        return np.where(np.isnan(q), self.k[UNKNOWN], known)
+        unknown = np.isnan(q)
+        known = np.interp(np.where(unknown, 40.0, q), _CENTRES, self.k[:N_BANDS])
+        return np.where(unknown, self.k[UNKNOWN], known)
+
+    def scales(self, quality: list[float]) -> list[float]:
+        """scale() for a few readings in plain floats (a point's, per point); scale() is the reference."""
+        k = self.k.tolist()
+        return [_interp_band(q, k) for q in quality]
 
     def fit(self, resid: np.ndarray, quality: np.ndarray, base_sigma: np.ndarray) -> float:
         """EM on reading residuals (rad) at a candidate emitter position. Returns the log likelihood of the

@@ -9,12 +9,13 @@ unless they are.
 from __future__ import annotations
 
 import math
+from operator import attrgetter
 from typing import NamedTuple
 
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.geodesy import circular_mean, wrap_pi
+from aoa_localizer.engine.geodesy import TWO_PI, circular_mean, wrap_pi
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 
@@ -77,12 +78,15 @@ def recursive_corrected_mean(gammas, weights) -> float:
     return cmean
 
 
+_TIE_RAD = 1e-9  # spreads this close are a tie (an even count has two central readings): the first one wins
+
+
 def point_outliers(theta: np.ndarray, sigma: np.ndarray, gate: float) -> np.ndarray:
     """Mask of readings farther than `gate` sigmas from the point's circular median (needs >= 3 readings)."""
     if gate <= 0 or theta.size < 3:
         return np.zeros(theta.size, dtype=bool)
     spread = np.abs(wrap_pi(theta[:, None] - theta[None, :])).sum(axis=1)
-    median = theta[np.argmin(spread)]
+    median = theta[np.flatnonzero(spread <= spread.min() + _TIE_RAD)[0]]
     return np.abs(wrap_pi(theta - median)) > gate * sigma
 
 
@@ -95,8 +99,19 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig,
     mean, positions and stamps with the same coefficients (the bearing is nearly linear in position over a few
     metres, so the corrected bearing belongs to the equally-weighted position). Variance: a^T C a with C the readings'
     covariance under `df_correlation`. `sigma`: the readings' sigmas when not their own (self-calibrated noise);
-    the gate uses the larger of the two.
+    the gate uses the larger of the two. Up to SMALL_POINT readings in plain floats, else (and as the reference)
+    make_point_arrays.
     """
+    if 0 < group_size(readings) <= SMALL_POINT and cfg.point_weighting != "paper":
+        made = _make_small_point(readings, cfg, sigma)
+        if made is not None:
+            return made
+    return make_point_arrays(readings, cfg, sigma)
+
+
+def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig,
+                      sigma: np.ndarray | None = None) -> tuple[ObservationPoint, np.ndarray]:
+    """make_point in numpy, for any number of readings: the reference the plain-float path is tested against."""
     cols = columns(readings)
     theta, own = cols.theta, cols.sigma
     sigma = own if sigma is None else np.asarray(sigma, float)
@@ -121,6 +136,74 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig,
     return point, keep
 
 
+SMALL_POINT = 16  # readings up to which a point is made in plain floats (numpy's per-call cost dominates below)
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % TWO_PI - math.pi
+
+
+def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
+                      sigma: np.ndarray | None) -> tuple[ObservationPoint, np.ndarray] | None:
+    """make_point for a few readings in plain floats, the same maths term by term (make_point's numpy code is the
+    reference the tests hold this to); None when a sigma is not positive and finite (the reference handles it)."""
+    stamp, theta, _, own, east, north, gps = field_lists(readings)[:7]
+    sig = own if sigma is None else sigma.tolist()
+    if not all(0.0 < s < math.inf for s in sig) or not all(0.0 < s < math.inf for s in own):
+        return None
+    n, gate = len(theta), cfg.point_gate_sigma
+    keep = [True] * n
+    if gate > 0 and n >= 3:
+        spread = [sum(abs(_wrap(t - u)) for u in theta) for t in theta]
+        least = min(spread) + _TIE_RAD
+        median = theta[next(i for i, v in enumerate(spread) if v <= least)]
+        keep = [not abs(_wrap(t - median)) > gate * max(s, o) for t, s, o in zip(theta, sig, own, strict=True)]
+    idx = [i for i in range(n) if keep[i]]
+    w = [1.0 / (sig[i] * sig[i]) for i in idx] if cfg.point_weighting == "inverse_variance" else [1.0] * len(idx)
+    total = sum(w)
+    a = [v / total for v in w]
+
+    def mean_of(values: list[float]) -> float:
+        return sum(ai * values[i] for ai, i in zip(a, idx, strict=True))
+
+    ref = math.atan2(sum(math.sin(theta[i]) for i in idx), sum(math.cos(theta[i]) for i in idx))
+    rho = cfg.df_correlation
+    # a^T C a with C = rho s s^T + (1 - rho) diag(s^2)
+    common = mean_of(sig)
+    variance = rho * common * common + (1.0 - rho) * sum((ai * sig[i]) ** 2 for ai, i in zip(a, idx, strict=True))
+    point = ObservationPoint(
+        stamp=mean_of(stamp),
+        east=mean_of(east),
+        north=mean_of(north),
+        theta=_wrap(ref + sum(ai * _wrap(theta[i] - ref) for ai, i in zip(a, idx, strict=True))),
+        sigma=math.sqrt(variance),
+        n_readings=len(idx),
+        gps_sigma=mean_of(gps),
+    )
+    return point, np.array(keep)
+
+
+def group_size(group: list[Reading]) -> int:
+    """How many readings a group holds (a fields-only Group, as the worker gets them, holds its columns only)."""
+    cols = getattr(group, "cols", None)
+    return len(group) if cols is None else cols.stamp.size
+
+
+def field_lists(group: list[Reading]) -> list[list[float]]:
+    """The readings' fields (Columns' order) as lists of floats, from the readings or a fields-only Group's
+    columns: the plain-float paths read the same values on both sides of the worker."""
+    lists = getattr(group, "lists", None)
+    if lists is None:
+        cols = getattr(group, "cols", None)
+        if cols is not None:
+            lists = [c.tolist() for c in cols]
+        else:
+            lists = [list(f) for f in zip(*map(_FIELDS, group), strict=True)]
+        if isinstance(group, Group):
+            group.lists = lists
+    return lists
+
+
 class Columns(NamedTuple):
     """The readings' fields as arrays, one each (separate allocations: the same sums, to the last bit, as arrays
     made field by field)."""
@@ -132,20 +215,27 @@ class Columns(NamedTuple):
     east: np.ndarray
     north: np.ndarray
     gps_sigma: np.ndarray
+    v_east: np.ndarray
+    v_north: np.ndarray
+
+
+_FIELDS = attrgetter(*Columns._fields)
 
 
 class Group(list):
-    """The readings of one observation point, with their fields as arrays made once (points are rebuilt from
-    their readings at every noise calibration)."""
+    """The readings of one observation point, with their fields as arrays and as lists made once (points are
+    rebuilt from their readings at every noise calibration)."""
 
     cols: Columns | None = None
+    lists: list[list[float]] | None = None  # the same fields as lists of floats (field_lists)
 
 
 def columns(readings: list[Reading]) -> Columns:
     """The readings' fields as arrays (made once for a Group)."""
     cols = getattr(readings, "cols", None)
     if cols is None:
-        cols = Columns(*(np.array([getattr(r, f) for r in readings], float) for f in Columns._fields))
+        block = np.array([_FIELDS(r) for r in readings], float).reshape(-1, len(Columns._fields))
+        cols = Columns(*(block[:, i].copy() for i in range(block.shape[1])))  # as the worker unpacks them
         if isinstance(readings, Group):
             readings.cols = cols
     return cols

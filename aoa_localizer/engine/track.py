@@ -111,6 +111,7 @@ class EmitterTrack:
         self.last_search_point = -1
         self.start_cloud: np.ndarray | None = None  # the particles of the latest start
         self.clock_hint: ClockHint | None = None  # a DF stamp shift the bearings prefer, from the last global check
+        self.move_owed = False  # realtime: the last check's move on the modes, not made yet
 
     # -- points -----------------------------------------------------------------------------------
     def sigmas(self, readings: list[Reading]) -> np.ndarray:
@@ -118,7 +119,8 @@ class EmitterTrack:
         return sigmas(readings, self.noise if self.cfg.calibrate_noise else None)
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
-        return make_point(readings, self.cfg, self.sigmas(readings))
+        """The point of `readings` under the calibrated noise model (the readings' own sigmas until calibrated)."""
+        return make_point(readings, self.cfg, self.sigmas(readings) if self.cfg.calibrate_noise else None)
 
     @property
     def running(self) -> ParticleFilter:
@@ -160,6 +162,7 @@ class EmitterTrack:
     def add(self, readings: list[Reading]) -> bool:
         """One closed group of readings; True when the filter took it (or started) and has a new estimate."""
         t0 = time.perf_counter()
+        owed_before = self.move_owed
         self._collect_check()  # a background check's findings first: they may change the noise the point is made with
         point, kept = self.make(readings)
         self.last_stamp = point.stamp
@@ -172,7 +175,7 @@ class EmitterTrack:
             self.window.append((readings, point, gated))
             took = self._try_start()
         else:
-            took = self._update(readings, point, gated)
+            took = self._update(readings, point, gated, owed_before)
         # What this point cost, searches and calibration included.
         self.last_update_s = time.perf_counter() - t0
         return took
@@ -284,7 +287,7 @@ class EmitterTrack:
         self.next_search = max(2 * len(self.window), self.cfg.init_bearings)
         log.info("filter %s started after %d observation points (%s)", self.cfg.algorithm, self.points_seen, how)
 
-    def _update(self, readings, point, gated) -> bool:
+    def _update(self, readings, point, gated, owed_before: bool = False) -> bool:
         f = self.running
         before = self.model.history.appended
         logw_before = f.logw.copy()
@@ -296,6 +299,8 @@ class EmitterTrack:
                     self.window.popleft()
             if ok and self._finite():
                 self._supervise(logw_before)
+                if owed_before:
+                    self._pay_move()  # owed before this point came and not made in idle time: now
             if self.filter is None:  # the emitter moved and the re-start waits for more points
                 return False
             f = self.running
@@ -397,18 +402,30 @@ class EmitterTrack:
         f = self.filter
         best = f.x[np.argmax(f.log_target(f.x))].copy() if f is not None and self.cfg.calibrate_noise else None
         groups, rows = [g for g, _, _ in self.window], rows_of([p for _, p, _ in self.window])
-        velocity = np.array([[np.mean([r.v_east for r in g]), np.mean([r.v_north for r in g])] for g in groups])
-        return Snapshot(self.cfg, groups, rows, velocity.reshape(-1, 2), self.noise.copy(), self.outlier_prob,
+        return Snapshot(self.cfg, groups, rows, self.noise.copy(), self.outlier_prob,
                         self.robust(), best, [m.mean.copy() for m in self.modes[:1]])
 
     def pay_owed(self) -> bool:
-        """One sweep the filter owes (`scheduling: realtime`), made between points; False if none is owed."""
+        """One move owed (`scheduling: realtime`: a global check's move on the modes, then the filter's sweeps),
+        made between points; False if none is owed."""
         f = self.filter
-        return isinstance(f, ResampleMove) and self._finite() and f.pay_owed()
+        if f is None or not self._finite():
+            return False
+        return self._pay_move() or (isinstance(f, ResampleMove) and f.pay_owed())
+
+    def _pay_move(self) -> bool:
+        """The owed move on the last check's modes, if any (an MH move: made late, it keeps the posterior)."""
+        if not self.move_owed:
+            return False
+        self.move_owed = False
+        if self.filter is None or self.proposal is None:
+            return False
+        self.filter.rejuvenate(1, self.proposal)
+        return True
 
     @property
     def owed(self) -> int:
-        return self.filter.owed if isinstance(self.filter, ResampleMove) else 0
+        return int(self.move_owed) + (self.filter.owed if isinstance(self.filter, ResampleMove) else 0)
 
     def collect(self) -> bool:
         """Apply the worker's result if it is ready (without waiting for the next point); True when applied."""
@@ -471,8 +488,10 @@ class EmitterTrack:
             f.replace_cloud(importance_sample(f.log_target, self.proposal, f.n, self.rng))
             f.rejuvenate(_START_SWEEPS, self.proposal)
             self.health.clear()
-        else:
+        elif self.worker is None:
             f.rejuvenate(1, self.proposal)
+        else:  # realtime: the modes' move is owed, made in idle time (or at the next point)
+            self.move_owed = True
 
     def _broad_sigma(self, centre: np.ndarray) -> float:
         pts = self.points()

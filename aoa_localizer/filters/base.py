@@ -52,6 +52,32 @@ class FilterSettings:
                    cfg.gfapf, cfg.upf, cfg.de, cfg.agapf)
 
 
+@dataclass(frozen=True)
+class CloudSummary:
+    """What a cloud's readers need, made once: normalised weights, ESS, weighted mean and covariance, with the
+    particle and log-weight arrays they were made from."""
+
+    x: np.ndarray
+    logw: np.ndarray
+    weights: np.ndarray
+    ess: float
+    mean: np.ndarray
+    cov: np.ndarray
+
+    @classmethod
+    def of(cls, x: np.ndarray, logw: np.ndarray) -> CloudSummary:
+        w = np.exp(logw - logw.max())
+        total = w.sum()
+        ess = float(total**2 / np.dot(w, w))  # (sum w)^2 / sum w^2, before normalising
+        w /= total
+        mean = w @ x
+        d = x - mean
+        cov = (w[:, None] * d).T @ d
+        for a in (x, logw, w, mean, cov):  # the cloud too: changed in place, it would no longer match its summary
+            a.flags.writeable = False
+        return cls(x, logw, w, ess, mean, cov)
+
+
 class ParticleFilter:
     """Bootstrap skeleton; subclasses change behaviour only through the hooks."""
 
@@ -73,6 +99,7 @@ class ParticleFilter:
         self.last_idx = np.arange(self.n)  # ancestors chosen by the last resampling
         self.resampled = False  # whether the last update resampled
         self.skipped = 0  # updates refused: unusable measurement, or no particle could explain it
+        self._summary: CloudSummary | None = None
 
     # -- set-up -------------------------------------------------------------------------------
     def initialise(self, particles: np.ndarray, prior_mean=None, prior_cov=None):
@@ -97,13 +124,21 @@ class ParticleFilter:
 
     @property
     def weights(self) -> np.ndarray:
-        w = np.exp(self.logw - self.logw.max())
-        return w / w.sum()
+        """Normalised weights (read-only: kept until the filter's particles or weights are replaced)."""
+        return self._cloud_summary().weights
 
     def ess(self) -> float:
-        """(sum w)^2 / sum w^2 of the unnormalised weights: 1/sum(w^2) without normalising first."""
-        w = np.exp(self.logw - self.logw.max())
-        return float(w.sum() ** 2 / np.dot(w, w))
+        """(sum w)^2 / sum w^2 of the weights: 1 / sum(w^2) of the normalised ones."""
+        return self._cloud_summary().ess
+
+    def _cloud_summary(self) -> CloudSummary:
+        """Weights, ESS, mean and covariance of the cloud, made once per cloud: a step reads them several times
+        (health, divergence test, estimate). The particles and weights are only ever replaced, never changed in
+        place, so the arrays' identity says whether the summary still holds; the summary keeps them alive."""
+        s = self._summary
+        if s is None or s.x is not self.x or s.logw is not self.logw:
+            s = self._summary = CloudSummary.of(self.x, self.logw)
+        return s
 
     def should_resample(self) -> bool:
         return self.ess() < self.cfg.ess_threshold * self.n
@@ -201,12 +236,9 @@ class ParticleFilter:
 
     # -- output ---------------------------------------------------------------------------------
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted mean (AFSA eq. 25) and weighted covariance of the cloud."""
-        w = self.weights
-        mean = w @ self.x
-        d = self.x - mean
-        cov = (w[:, None] * d).T @ d
-        return mean, cov
+        """Weighted mean (AFSA eq. 25) and weighted covariance of the cloud (read-only arrays)."""
+        s = self._cloud_summary()
+        return s.mean, s.cov
 
 
 class ReplacesResampling:
