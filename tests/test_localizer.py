@@ -6,6 +6,7 @@ import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.scenarios import simulate
 
 DATUM = (39.1, 117.2, 5.0)
 FRAME = LocalFrame(*DATUM)
@@ -253,3 +254,22 @@ def test_on_estimate_sees_every_estimate_whichever_input_made_it_and_estimate_is
     assert [e.stamp for e in seen] == sorted(e.stamp for e in seen)
     last = loc.finish()
     assert last is None or seen[-1] is last
+
+
+def test_an_estimates_arrays_are_the_users_own():
+    """The filter's cloud and its summary are read-only and shared; an Estimate hands out copies the user may
+    change without touching the filter."""
+    data = simulate("seed", 1)
+    loc = Localizer(LocalizerConfig(seed=3))
+    est = None
+    for kind, row in data.events():
+        est = (loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])) or est
+        if est is not None:
+            break
+    assert est is not None
+    cov_before = loc.filter.estimate()[1].copy()
+    est.cov[0, 0] += 1.0
+    est.weights[:] = 0.0
+    est.particles[:] = 0.0
+    assert np.array_equal(loc.filter.estimate()[1], cov_before) and loc.filter.weights.sum() == pytest.approx(1.0)
+    assert np.any(loc.filter.x != 0.0)

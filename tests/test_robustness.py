@@ -189,3 +189,20 @@ def test_a_points_noise_scales_in_plain_floats_are_numpys_interpolation_to_the_b
     model.k = np.random.default_rng(0).uniform(0.2, 3.0, model.k.size)
     q = np.r_[np.random.default_rng(1).uniform(0, 120, 20000), np.arange(30.0, 101.0, 0.5), [np.nan, np.inf, -np.inf]]
     assert np.array_equal(np.array(model.scales(q.tolist())), model.scale(q))
+
+
+def test_a_points_calibrated_sigmas_are_the_same_from_its_readings_and_from_the_workers_columns():
+    """The caller makes a point's sigmas from its readings, the worker from their packed columns: the same values
+    to the bit, and numpy's (the reference for more readings) to rounding."""
+    from aoa_localizer.engine.checks import sigmas
+    from aoa_localizer.engine.preprocess import Group, columns
+    from aoa_localizer.engine.types import Reading
+
+    model = NoiseModel(0.1)
+    model.k = np.random.default_rng(2).uniform(0.2, 3.0, model.k.size)
+    readings = [Reading(float(i), 0.0, q, 0.01 * (1 + i), 0.0, 0.0) for i, q in enumerate([45.0, np.nan, 99.0, 70.0])]
+    fields_only = Group()
+    fields_only.cols = columns(readings)
+    here, there = sigmas(readings, model), sigmas(fields_only, model)
+    assert np.array_equal(here, there)
+    assert here == pytest.approx(fields_only.cols.sigma * model.scale(fields_only.cols.quality), rel=1e-15)

@@ -32,7 +32,7 @@ from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, refine, residuals
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
-from aoa_localizer.engine.preprocess import SMALL_POINT, Columns, Group, columns, field_lists, group_size, make_point
+from aoa_localizer.engine.preprocess import SMALL_POINT, Columns, Group, columns, group_size, make_point
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -42,8 +42,10 @@ Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readi
 def sigmas(group: list[Reading], noise: NoiseModel | None) -> np.ndarray:
     """The readings' sigmas under `noise` (None: the configured ones)."""
     if noise is not None and 0 < group_size(group) <= SMALL_POINT:  # a few readings: plain floats (per point)
-        _, _, quality, sigma = field_lists(group)[:4]
-        return np.array(sigma) * np.array(noise.scales(quality))
+        cols = getattr(group, "cols", None)
+        if cols is not None:
+            return cols.sigma * np.array(noise.scales(cols.quality.tolist()))
+        return np.array([r.sigma for r in group], float) * np.array(noise.scales([r.quality for r in group]))
     cols = columns(group)
     return cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
 

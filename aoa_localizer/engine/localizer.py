@@ -673,9 +673,9 @@ class Localizer:
         emitter = channel.emitter
         f = emitter.running
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
-                        cov=cov, bearings_used=emitter.bearings_used, points_used=emitter.points_used,
-                        ess=f.ess(), algorithm=self.cfg.algorithm,
-                        particles=f.x.copy(), weights=f.weights,
+                        cov=np.array(cov), bearings_used=emitter.bearings_used, points_used=emitter.points_used,
+                        ess=f.ess(), algorithm=self.cfg.algorithm,  # the user's own copies of the filter's arrays:
+                        particles=f.x.copy(), weights=f.weights.copy(),
                         modes=emitter.mode_masses(),
                         noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,
                         channel=channel.id, frequency_hz=channel.frequency_hz)

@@ -192,16 +192,10 @@ def group_size(group: list[Reading]) -> int:
 def field_lists(group: list[Reading]) -> list[list[float]]:
     """The readings' fields (Columns' order) as lists of floats, from the readings or a fields-only Group's
     columns: the plain-float paths read the same values on both sides of the worker."""
-    lists = getattr(group, "lists", None)
-    if lists is None:
-        cols = getattr(group, "cols", None)
-        if cols is not None:
-            lists = [c.tolist() for c in cols]
-        else:
-            lists = [list(f) for f in zip(*map(_FIELDS, group), strict=True)]
-        if isinstance(group, Group):
-            group.lists = lists
-    return lists
+    cols = getattr(group, "cols", None)
+    if cols is not None:
+        return [c.tolist() for c in cols]
+    return [list(f) for f in zip(*map(_FIELDS, group), strict=True)]
 
 
 class Columns(NamedTuple):
@@ -223,11 +217,10 @@ _FIELDS = attrgetter(*Columns._fields)
 
 
 class Group(list):
-    """The readings of one observation point, with their fields as arrays and as lists made once (points are
-    rebuilt from their readings at every noise calibration)."""
+    """The readings of one observation point, with their fields as arrays made once (points are rebuilt from
+    their readings at every noise calibration)."""
 
     cols: Columns | None = None
-    lists: list[list[float]] | None = None  # the same fields as lists of floats (field_lists)
 
 
 def columns(readings: list[Reading]) -> Columns:
