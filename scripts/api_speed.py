@@ -4,7 +4,9 @@
 
 For each run of a public scenario: every `add_fix` and `add_bearing` call of the Localizer (default
 configuration, N = 100) is timed; a *measurement* is one observation point's worth of calls (the fixes and
-readings up to the call that closed the point). Reported: the median and mean of the time per measurement, the
+readings up to the call that closed the point; a call that used several points, such as the start with every
+buffered point, counts as that many measurements with an equal share each, so the mean is the total time over the
+points). Reported: the median and mean of the time per measurement, the
 geodesy's share (LocalFrame calls, timed separately), and the IBIS sampler's median and mean step on the same
 points (docs/benchmarks.md has the figures). With `--scheduling realtime` the checks run in the worker process and,
 between calls (untimed, as a node's idle time), the run waits for the worker and makes the owed move sweeps
@@ -78,9 +80,11 @@ def one_run(scenario: str, r: int, scheduling: str):
                 t1 = time.perf_counter()
                 loc.pay_all_owed()
                 idle += time.perf_counter() - t1
-            if loc.points_used > points:  # this call closed (and used) an observation point
-                per_point.append(spent / (loc.points_used - points))
+            if loc.points_used > points:  # this call closed (and used) observation points: each costs its share
+                used = loc.points_used - points
+                per_point += [spent / used] * used
                 spent, points = 0.0, loc.points_used
+            points = min(points, loc.points_used)  # a re-start (the emitter moved) counts its points afresh
         geo_share = geo.seconds
     loc.close()
     total = sum(per_point)
