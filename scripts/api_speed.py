@@ -117,7 +117,7 @@ def main(argv=None):
           f"{np.median(o):.3f} ms, mean {o.mean():.3f} ms (geodesy {100 * np.mean(shares):.1f} % of it); "
           f"IBIS step median {np.median(i):.3f} ms, mean {i.mean():.3f} ms; "
           f"ratio of medians {np.median(o) / np.median(i):.2f}, of means {o.mean() / i.mean():.2f}"
-          + (f"; idle work (owed sweeps) {1e3 * np.mean(idle):.3f} ms per measurement" if args.scheduling == "realtime"
+          + (f"; idle work (owed moves) {1e3 * np.mean(idle):.3f} ms per measurement" if args.scheduling == "realtime"
              else ""))
     return 0
 

@@ -75,8 +75,13 @@ def wrap_pi(angle):
     """Wrap radians into [-pi, pi): the residual convention for bearing errors. A float gives a float (math: the
     per-reading path), the same value numpy gives."""
     if _is_scalar(angle):
-        return (angle + math.pi) % TWO_PI - math.pi
+        return wrap_pi_float(angle)
     return (np.asarray(angle) + np.pi) % TWO_PI - np.pi
+
+
+def wrap_pi_float(angle: float) -> float:
+    """wrap_pi for a float, without the type test (the per-reading and per-point loops)."""
+    return (angle + math.pi) % TWO_PI - math.pi
 
 
 def wrap_360(deg):

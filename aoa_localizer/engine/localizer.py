@@ -525,8 +525,9 @@ class Localizer:
         return made
 
     def pay_owed(self) -> bool:
-        """Make one of the move sweeps a resampling owes (`scheduling: realtime`), for the channel that owes the most:
-        the node calls it when idle, so the points that follow carry no sweep. False when nothing is owed."""
+        """Make one of the moves owed (`scheduling: realtime`: a resampling's sweeps, a worker check's move on its
+        modes), for the channel that owes the most: the node calls it when idle, so the points that follow carry no
+        move. False when nothing is owed."""
         owing = max(self.channels.live.values(), key=lambda c: c.emitter.owed, default=None)
         if owing is None or not owing.emitter.owed:
             return False
@@ -538,7 +539,7 @@ class Localizer:
             return False
 
     def pay_all_owed(self) -> int:
-        """Make every owed sweep now (a replay between inputs, as the node's idle time would); returns how many."""
+        """Make every owed move now (a replay between inputs, as the node's idle time would); returns how many."""
         made = 0
         while self.pay_owed():
             made += 1
@@ -674,7 +675,8 @@ class Localizer:
         f = emitter.running
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
                         cov=np.array(cov), bearings_used=emitter.bearings_used, points_used=emitter.points_used,
-                        ess=f.ess(), algorithm=self.cfg.algorithm,  # the user's own copies of the filter's arrays:
+                        ess=f.ess(), algorithm=self.cfg.algorithm,
+                        # the user's own copies: the filter's arrays are read-only and shared
                         particles=f.x.copy(), weights=f.weights.copy(),
                         modes=emitter.mode_masses(),
                         noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,

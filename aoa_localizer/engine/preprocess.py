@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.geodesy import TWO_PI, circular_mean, wrap_pi
+from aoa_localizer.engine.geodesy import circular_mean, wrap_pi, wrap_pi_float
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 
@@ -139,10 +139,6 @@ def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig,
 SMALL_POINT = 16  # readings up to which a point is made in plain floats (numpy's per-call cost dominates below)
 
 
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % TWO_PI - math.pi
-
-
 def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
                       sigma: np.ndarray | None) -> tuple[ObservationPoint, np.ndarray] | None:
     """make_point for a few readings in plain floats, the same maths term by term (make_point's numpy code is the
@@ -154,10 +150,10 @@ def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
     n, gate = len(theta), cfg.point_gate_sigma
     keep = [True] * n
     if gate > 0 and n >= 3:
-        spread = [sum(abs(_wrap(t - u)) for u in theta) for t in theta]
+        spread = [sum(abs(wrap_pi_float(t - u)) for u in theta) for t in theta]
         least = min(spread) + _TIE_RAD
         median = theta[next(i for i, v in enumerate(spread) if v <= least)]
-        keep = [not abs(_wrap(t - median)) > gate * max(s, o) for t, s, o in zip(theta, sig, own, strict=True)]
+        keep = [not abs(wrap_pi_float(t - median)) > gate * max(s, o) for t, s, o in zip(theta, sig, own, strict=True)]
     idx = [i for i in range(n) if keep[i]]
     w = [1.0 / (sig[i] * sig[i]) for i in idx] if cfg.point_weighting == "inverse_variance" else [1.0] * len(idx)
     total = sum(w)
@@ -175,7 +171,7 @@ def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
         stamp=mean_of(stamp),
         east=mean_of(east),
         north=mean_of(north),
-        theta=_wrap(ref + sum(ai * _wrap(theta[i] - ref) for ai, i in zip(a, idx, strict=True))),
+        theta=wrap_pi_float(ref + sum(ai * wrap_pi_float(theta[i] - ref) for ai, i in zip(a, idx, strict=True))),
         sigma=math.sqrt(variance),
         n_readings=len(idx),
         gps_sigma=mean_of(gps),

@@ -571,9 +571,9 @@ class LocalizerNode(Node):
         return out
 
     def on_idle(self):
-        """Between messages: one move sweep a channel's last resampling owes (`scheduling: realtime`), so the point
-        that follows carries none and its pose is not held up; once a second, the objects that survived leave the
-        garbage collector's full passes (docs/ros.md, "Latency")."""
+        """Between messages: one move a channel owes (`scheduling: realtime`: a resampling's sweep, a worker check's
+        move), so the point that follows carries none and its pose is not held up; once a second, the objects that
+        survived leave the garbage collector's full passes (docs/ros.md, "Latency")."""
         self.loc.pay_owed()
         self.old_objects.tick()
 
