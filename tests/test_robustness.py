@@ -1,4 +1,5 @@
 """Never confidently wrong: rescue from a wrong lock, noise self-calibration, modes, a moved emitter, the start."""
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -9,6 +10,7 @@ from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.global_search import Points, Robust, find_modes
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.noise import NoiseModel
+from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, independence_sweep
 from aoa_localizer.engine.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
 
@@ -62,6 +64,25 @@ def test_self_calibrated_sigma_of_a_3_degree_receiver():
     noise = res.localizer.noise_summary()
     assert noise["sigma_deg"]["nan"] == pytest.approx(3.0, rel=0.10), noise
     assert res.scores["inside95"] and res.scores["error"] < 3 * res.scores["crlb"]
+
+
+def test_each_estimate_carries_the_noise_summary_of_its_moment():
+    """The summary an estimate carries is made again only when the noise model changed: along a run each one is
+    what the model says at that moment (calibrations included), and a user's changes to one do not reach the next."""
+    sc = replace(BASE, name="nan3", sigma_q_deg=None, sigma_rad=np.radians(3.0), quality_known=False, points=80)
+    loc = Localizer(LocalizerConfig(seed=4))
+    seen = []
+    for kind, row in simulate(sc, 2).events():
+        est = loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
+        if est is None:
+            continue
+        fresh = loc.emitter.noise.summary(lambda q: math.degrees(reading_sigma(q, loc.cfg)))
+        fresh["point_outlier_prob"] = round(loc.emitter.outlier_prob, 4)
+        assert est.noise == fresh
+        seen.append(repr(est.noise))
+        est.noise["sigma_deg"]["nan"] = -1.0
+        est.noise["fits"] = -1
+    assert loc.emitter.noise.fits >= 1 and len(set(seen)) >= 2  # calibrated during the run: the summary followed
 
 
 def test_calibration_learns_how_sigma_falls_with_quality():

@@ -122,17 +122,17 @@ class Snapshot:
         """For the worker process: the readings' fields as one array and the group sizes (a list of Reading
         objects pickles tens of times slower)."""
         state = dict(self.__dict__)
-        packed = [np.column_stack(columns(g)) for g in self.groups]
-        state["groups"] = (np.concatenate(packed) if packed else np.zeros((0, len(Columns._fields))),
-                           np.array([len(g) for g in self.groups]))
+        cols = [columns(g) for g in self.groups]  # made once per group: only the newest are made here
+        packed = np.array([np.concatenate(field) for field in zip(*cols, strict=True)]) if cols else None
+        state["groups"] = (packed, [group_size(g) for g in self.groups])
         return state
 
     def __setstate__(self, state: dict):
         packed, sizes = state["groups"]
         groups = []
-        for block in np.split(packed, np.cumsum(sizes)[:-1]) if len(sizes) else []:
+        for block in np.split(packed, np.cumsum(sizes)[:-1], axis=1) if sizes else []:
             g = Group()  # fields only: what make_point and the fits read
-            g.cols = Columns(*(block[:, i].copy() for i in range(block.shape[1])))
+            g.cols = Columns(*(row.copy() for row in block))
             groups.append(g)
         self.__dict__.update(state, groups=groups)
 

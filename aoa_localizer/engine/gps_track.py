@@ -59,8 +59,9 @@ class GpsTrack:
         if t1 - t0 > self.max_gap_s:
             return Where.GAP, None
         f = (stamp - t0) / (t1 - t0)
-        at = tuple(c[k - 1] + f * (c[k] - c[k - 1]) for c in (self.e, self.n, self.north, self.sigma))
-        return Where.OK, (*at, *self._velocity(k))
+        e, n, north, sigma, j = self.e, self.n, self.north, self.sigma, k - 1  # written out: runs per reading
+        return Where.OK, (e[j] + f * (e[k] - e[j]), n[j] + f * (n[k] - n[j]), north[j] + f * (north[k] - north[j]),
+                          sigma[j] + f * (sigma[k] - sigma[j]), *self._velocity(k))
 
     def fitted_velocity(self, t0: float, t1: float) -> tuple[float, float] | None:
         """East and north velocity (m/s): the least-squares slope of the fixes stamped in [t0, t1], None with fewer

@@ -230,10 +230,7 @@ class Localizer:
         """The self-calibrated noise of a channel (default: the main one): sigma (deg) per quality band with data,
         reading and point outlier rates."""
         cfg = self.cfg
-        emitter = (channel or self.main).emitter
-        summary = emitter.noise.summary(lambda q: math.degrees(reading_sigma(q, cfg)))
-        summary["point_outlier_prob"] = round(emitter.outlier_prob, 4)
-        return summary
+        return (channel or self.main).emitter.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
 
     def clock_hint_sentence(self) -> str | None:
         """Words for a DF clock offset the bearings point to (from the last global check), or None."""

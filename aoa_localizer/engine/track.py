@@ -112,11 +112,26 @@ class EmitterTrack:
         self.start_cloud: np.ndarray | None = None  # the particles of the latest start
         self.clock_hint: ClockHint | None = None  # a DF stamp shift the bearings prefer, from the last global check
         self.move_owed = False  # realtime: the last check's move on the modes, not made yet
+        self._noise_summary: tuple[tuple, dict] | None = None  # (what it was made from, the summary)
 
     # -- points -----------------------------------------------------------------------------------
     def sigmas(self, readings: list[Reading]) -> np.ndarray:
         """Each reading's sigma under the calibrated noise model (the configured one until calibrated)."""
         return sigmas(readings, self.noise if self.cfg.calibrate_noise else None)
+
+    def noise_summary(self, base_sigma_deg: Callable[[float], float]) -> dict:
+        """The calibrated noise's summary (NoiseModel.summary) with the point outlier share; every estimate carries
+        one, so it is made again only when the noise model or the share changed. The caller gets its own dicts."""
+        n = self.noise
+        made_from = (n, n.k, n.readings, n.reading_outlier_prob, n.fits, self.outlier_prob)
+        cached = self._noise_summary
+        if cached is None or not (all(a is b for a, b in zip(made_from[:3], cached[0][:3], strict=True))
+                                  and made_from[3:] == cached[0][3:]):
+            summary = n.summary(base_sigma_deg)
+            summary["point_outlier_prob"] = round(self.outlier_prob, 4)
+            cached = self._noise_summary = (made_from, summary)
+        summary = cached[1]
+        return {**summary, "sigma_deg": dict(summary["sigma_deg"])}
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         """The point of `readings` under the calibrated noise model (the readings' own sigmas until calibrated)."""
@@ -290,7 +305,7 @@ class EmitterTrack:
     def _update(self, readings, point, gated, owed_before: bool = False) -> bool:
         f = self.running
         before = self.model.history.appended
-        logw_before = f.logw.copy()
+        logw_before = f.logw  # replaced by the update, never changed in place
         try:
             ok = f.update(point)
             if ok and self.model.history.appended > before:
@@ -326,8 +341,7 @@ class EmitterTrack:
         self._reject("filter_diverged", 1)
 
     def _finite(self) -> bool:
-        mean, cov = self.running.estimate()
-        return bool(np.all(np.isfinite(self.running.x)) and np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)))
+        return self.running.finite()
 
     # -- the safety layer ---------------------------------------------------------------------------
     def _supervise(self, logw_before: np.ndarray):

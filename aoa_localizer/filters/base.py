@@ -10,6 +10,7 @@ The robustness layer's moves (log_target, rejuvenate, reweight, replace_cloud) n
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import cast
 
@@ -54,8 +55,8 @@ class FilterSettings:
 
 @dataclass(frozen=True)
 class CloudSummary:
-    """What a cloud's readers need, made once: normalised weights, ESS, weighted mean and covariance, with the
-    particle and log-weight arrays they were made from."""
+    """What a cloud's readers need, made once: normalised weights, ESS, weighted mean and covariance, whether all
+    of them and the particles are finite, with the particle and log-weight arrays they were made from."""
 
     x: np.ndarray
     logw: np.ndarray
@@ -63,6 +64,7 @@ class CloudSummary:
     ess: float
     mean: np.ndarray
     cov: np.ndarray
+    finite: bool
 
     @classmethod
     def of(cls, x: np.ndarray, logw: np.ndarray) -> CloudSummary:
@@ -75,7 +77,8 @@ class CloudSummary:
         cov = (w[:, None] * d).T @ d
         for a in (x, logw, w, mean, cov):  # the cloud too: changed in place, it would no longer match its summary
             a.flags.writeable = False
-        return cls(x, logw, w, ess, mean, cov)
+        finite = bool(np.isfinite(x).all()) and all(map(math.isfinite, (*mean.tolist(), *cov.ravel().tolist())))
+        return cls(x, logw, w, ess, mean, cov, finite)
 
 
 class ParticleFilter:
@@ -130,6 +133,10 @@ class ParticleFilter:
     def ess(self) -> float:
         """(sum w)^2 / sum w^2 of the weights: 1 / sum(w^2) of the normalised ones."""
         return self._cloud_summary().ess
+
+    def finite(self) -> bool:
+        """Whether the particles, their weighted mean and covariance are all finite (a diverged cloud is not)."""
+        return self._cloud_summary().finite
 
     def _cloud_summary(self) -> CloudSummary:
         """Weights, ESS, mean and covariance of the cloud, made once per cloud: a step reads them several times

@@ -73,8 +73,10 @@ class BearingLikelihood:
         The residual z - bearing(x) is the angle from the antenna->particle direction d to the
         measured direction u: atan2(d x u, d . u), already in (-pi, pi] without wrapping.
         """
+        if isinstance(theta, float) and isinstance(sigma, float) and isinstance(gps_sigma, (float, int)):
+            return self._one_point(particles, east, north, theta, sigma, gps_sigma)
         dx, dy = particles[..., 0] - east, particles[..., 1] - north
-        if np.ndim(theta) == 0:  # one point: scalar maths is several times cheaper than numpy's
+        if np.ndim(theta) == 0:
             c, s = math.cos(theta), math.sin(theta)
         else:
             c, s = np.cos(theta), np.sin(theta)
@@ -90,3 +92,36 @@ class BearingLikelihood:
                 d2 += var
                 var = d2
         return mixture_loglik_var(r, var, self.outlier_prob)
+
+    def _one_point(self, particles: np.ndarray, east, north, theta: float, sigma: float, gps_sigma) -> np.ndarray:
+        """log() for one point (a filter step's case): its numbers in plain floats and the fewest array steps,
+        in place on one array; log()'s general code is the reference the tests hold this to. The antenna's
+        position term is (gps sigma / range)^2 from the range by hypot, which cannot overflow."""
+        dx, dy = particles[..., 0] - east, particles[..., 1] - north
+        c, s = math.cos(theta), math.sin(theta)
+        r = np.arctan2(dx * s - dy * c, dx * c + dy * s)
+        gps_var = self.gps_var + gps_sigma * gps_sigma
+        eps = self.outlier_prob
+        shift = _LOG_SQRT_2PI - math.log1p(-eps)  # the mixture's (1 - e) folded into the constant
+        g = np.square(r, out=r)
+        if gps_var > 0:
+            var = np.hypot(dx, dy, out=dx)
+            np.maximum(var, 1.0, out=var)
+            np.divide(math.sqrt(gps_var), var, out=var)
+            np.square(var, out=var)
+            var += sigma * sigma
+            g /= var
+            g += np.log(var, out=var)
+            g *= -0.5
+            g -= shift
+        else:
+            var0 = sigma * sigma
+            g *= -0.5 / var0
+            g -= 0.5 * math.log(var0) + shift
+        if eps == 0:
+            return g
+        c = eps / TWO_PI
+        np.maximum(g, math.log(c) - _BELOW_FLOOR, out=g)
+        np.exp(g, out=g)
+        g += c
+        return np.log(g, out=g)
