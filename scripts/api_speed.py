@@ -2,7 +2,8 @@
 
     python scripts/api_speed.py [--runs 10] [--scenario seed] [--scheduling realtime]
 
-For each run of a public scenario: every `add_fix` and `add_bearing` call of the Localizer (default
+For each run of a scenario (a public one, a robustness cell, or `dense`: `urban`'s drive with a 20 Hz receiver
+and 10 Hz GPS, so 20 readings per point): every `add_fix` and `add_bearing` call of the Localizer (default
 configuration, N = 100) is timed; a *measurement* is one observation point's worth of calls (the fixes and
 readings up to the call that closed the point; a call that used several points, such as the start with every
 buffered point, counts as that many measurements with an equal share each, so the mean is the total time over the
@@ -19,6 +20,7 @@ import argparse
 import logging
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -31,9 +33,12 @@ import particles_peers  # noqa: E402
 from aoa_localizer import Localizer, LocalizerConfig  # noqa: E402
 from aoa_localizer.engine import geodesy  # noqa: E402
 from aoa_localizer.engine.evaluation import scenario_config  # noqa: E402
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate  # noqa: E402
+from aoa_localizer.engine.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
 
 logging.getLogger("aoa_localizer").setLevel(logging.ERROR)
+
+CASES = {**SCENARIOS, **robustness_cells(),
+         "dense": replace(SCENARIOS["urban"], name="dense", df_rate_hz=20.0, gps_rate_hz=10.0)}
 
 
 class GeodesyClock:
@@ -64,7 +69,7 @@ class GeodesyClock:
 
 
 def one_run(scenario: str, r: int, scheduling: str):
-    data = simulate(scenario, r)
+    data = simulate(CASES[scenario], r)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=10000 + r, scheduling=scheduling)))
     per_point, spent, points, idle = [], 0.0, loc.points_used, 0.0
     with GeodesyClock() as geo:
@@ -98,7 +103,7 @@ def one_run(scenario: str, r: int, scheduling: str):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=10)
-    parser.add_argument("--scenario", choices=sorted(SCENARIOS), default="seed")
+    parser.add_argument("--scenario", choices=sorted(CASES), default="seed")
     parser.add_argument("--scheduling", choices=("reproducible", "realtime"), default="reproducible",
                         help="the Localizer's scheduling (reproducible: the Python API's default)")
     args = parser.parse_args(argv)
