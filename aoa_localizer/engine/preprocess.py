@@ -85,9 +85,13 @@ def point_outliers(theta: np.ndarray, sigma: np.ndarray, gate: float) -> np.ndar
     """Mask of readings farther than `gate` sigmas from the point's circular median (needs >= 3 readings)."""
     if gate <= 0 or theta.size < 3:
         return np.zeros(theta.size, dtype=bool)
+    return np.abs(wrap_pi(theta - circular_median(theta))) > gate * sigma
+
+
+def circular_median(theta: np.ndarray) -> float:
+    """The reading with the least summed angular distance to the others (both ways of making a point use this)."""
     spread = np.abs(wrap_pi(theta[:, None] - theta[None, :])).sum(axis=1)
-    median = theta[np.flatnonzero(spread <= spread.min() + _TIE_RAD)[0]]
-    return np.abs(wrap_pi(theta - median)) > gate * sigma
+    return float(theta[np.flatnonzero(spread <= spread.min() + _TIE_RAD)[0]])
 
 
 def make_point(readings: list[Reading], cfg: LocalizerConfig,
@@ -136,7 +140,7 @@ def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig,
     return point, keep
 
 
-SMALL_POINT = 16  # readings up to which a point is made in plain floats (numpy's per-call cost dominates below)
+SMALL_POINT = 32  # readings up to which a point is made in plain floats (numpy's per-call cost dominates below)
 
 
 def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
@@ -150,9 +154,7 @@ def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
     n, gate = len(theta), cfg.point_gate_sigma
     keep = [True] * n
     if gate > 0 and n >= 3:
-        spread = [sum(abs(wrap_pi_float(t - u)) for u in theta) for t in theta]
-        least = min(spread) + _TIE_RAD
-        median = theta[next(i for i, v in enumerate(spread) if v <= least)]
+        median = circular_median(np.array(theta))  # the n^2 distances: numpy's per-call cost is the lesser here
         keep = [not abs(wrap_pi_float(t - median)) > gate * max(s, o) for t, s, o in zip(theta, sig, own, strict=True)]
     idx = [i for i in range(n) if keep[i]]
     w = [1.0 / (sig[i] * sig[i]) for i in idx] if cfg.point_weighting == "inverse_variance" else [1.0] * len(idx)
