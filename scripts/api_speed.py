@@ -12,7 +12,9 @@ geodesy's share (LocalFrame calls, timed separately), and the IBIS sampler's med
 points (docs/benchmarks.md has the figures). With `--scheduling realtime` the checks run in the worker process and,
 between calls (untimed, as a node's idle time), the run waits for the worker and makes the owed move sweeps
 (Localizer.settle, pay_owed): the calls' time is then what the thread that feeds the Localizer pays, and that idle
-work is reported beside it. Nothing here is a test: speed targets live in benchmarks.
+work is reported beside it. One run is made first and not timed, so neither side's first calls in the process
+(IBIS's first resample-move step takes about half a second) count. Nothing here is a test: speed targets live in
+benchmarks.
 """
 from __future__ import annotations
 
@@ -110,8 +112,8 @@ def main(argv=None):
     if not particles_peers.AVAILABLE:
         print("the `particles` package is needed (pip install -e '.[bench]')", file=sys.stderr)
         return 2
-    # One run first, untimed: the first IBIS step of a process takes hundreds of milliseconds (imports, first
-    # calls), as do our first worker's start and first calls; counted, they swamped the means.
+    # One run first, untimed: IBIS's first resample-move step in a process takes about half a second (first calls),
+    # and our worker's start and first calls cost too; counted, they swamped the means.
     one_run(args.scenario, args.runs, args.scheduling)
     ours, ibis, shares, idle = [], [], [], []
     for r in range(args.runs):
