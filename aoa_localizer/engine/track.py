@@ -112,7 +112,7 @@ class EmitterTrack:
         self.start_cloud: np.ndarray | None = None  # the particles of the latest start
         self.clock_hint: ClockHint | None = None  # a DF stamp shift the bearings prefer, from the last global check
         self.move_owed = False  # realtime: the last check's move on the modes, not made yet
-        self._noise_summary: tuple[tuple, dict] | None = None  # (what it was made from, the summary)
+        self._noise_summary: tuple[NoiseModel, int, float, dict] | None = None  # (model, fits, share, summary)
 
     # -- points -----------------------------------------------------------------------------------
     def sigmas(self, readings: list[Reading]) -> np.ndarray:
@@ -121,16 +121,14 @@ class EmitterTrack:
 
     def noise_summary(self, base_sigma_deg: Callable[[float], float]) -> dict:
         """The calibrated noise's summary (NoiseModel.summary) with the point outlier share; every estimate carries
-        one, so it is made again only when the noise model or the share changed. The caller gets its own dicts."""
-        n = self.noise
-        made_from = (n, n.k, n.readings, n.reading_outlier_prob, n.fits, self.outlier_prob)
-        cached = self._noise_summary
-        if cached is None or not (all(a is b for a, b in zip(made_from[:3], cached[0][:3], strict=True))
-                                  and made_from[3:] == cached[0][3:]):
+        one, so it is made again only for another model, a new fit (a model changes only by fit(), which counts
+        them) or another share. The caller gets its own dicts."""
+        n, cached = self.noise, self._noise_summary
+        if cached is None or cached[0] is not n or cached[1:3] != (n.fits, self.outlier_prob):
             summary = n.summary(base_sigma_deg)
             summary["point_outlier_prob"] = round(self.outlier_prob, 4)
-            cached = self._noise_summary = (made_from, summary)
-        summary = cached[1]
+            cached = self._noise_summary = (n, n.fits, self.outlier_prob, summary)
+        summary = cached[3]
         return {**summary, "sigma_deg": dict(summary["sigma_deg"])}
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:

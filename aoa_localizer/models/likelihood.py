@@ -47,8 +47,11 @@ def mixture_loglik_var(residual, var, outlier_prob: float):
 
 def _mixture_in_place(g: np.ndarray, outlier_prob: float) -> np.ndarray:
     g += math.log1p(-outlier_prob)
-    if outlier_prob == 0:
-        return g
+    return g if outlier_prob == 0 else _add_outlier_floor(g, outlier_prob)
+
+
+def _add_outlier_floor(g: np.ndarray, outlier_prob: float) -> np.ndarray:
+    """log(exp(g) + e / 2pi) in place, for g already holding log((1 - e) N)."""
     c = outlier_prob / TWO_PI
     np.maximum(g, math.log(c) - _BELOW_FLOOR, out=g)
     np.exp(g, out=g)
@@ -118,10 +121,4 @@ class BearingLikelihood:
             var0 = sigma * sigma
             g *= -0.5 / var0
             g -= 0.5 * math.log(var0) + shift
-        if eps == 0:
-            return g
-        c = eps / TWO_PI
-        np.maximum(g, math.log(c) - _BELOW_FLOOR, out=g)
-        np.exp(g, out=g)
-        g += c
-        return np.log(g, out=g)
+        return g if eps == 0 else _add_outlier_floor(g, eps)
