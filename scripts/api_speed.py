@@ -2,19 +2,18 @@
 
     python scripts/api_speed.py [--runs 10] [--scenario seed] [--scheduling realtime]
 
-For each run of a scenario (a public one, a robustness cell, or `dense`: `urban`'s drive with a 20 Hz receiver
-and 10 Hz GPS, so 20 readings per point, without `urban`'s receiver calibration): every `add_fix` and `add_bearing` call of the Localizer (default
-configuration, N = 100) is timed; a *measurement* is one observation point's worth of calls (the fixes and
-readings up to the call that closed the point; a call that used several points, such as the start with every
-buffered point, counts as that many measurements with an equal share each, so the mean is the total time over the
-points). Reported: the median and mean of the time per measurement, the
-geodesy's share (LocalFrame calls, timed separately), and the IBIS sampler's median and mean step on the same
-points (docs/benchmarks.md has the figures). With `--scheduling realtime` the checks run in the worker process and,
-between calls (untimed, as a node's idle time), the run waits for the worker and makes the owed move sweeps
-(Localizer.settle, pay_owed): the calls' time is then what the thread that feeds the Localizer pays, and that idle
-work is reported beside it. One run is made first and not timed, so neither side's first calls in the process
-(IBIS's first resample-move step takes about half a second) count. Nothing here is a test: speed targets live in
-benchmarks.
+For each run of a scenario (a public one, a robustness cell, or `dense`: `urban`'s drive with a 20 Hz receiver and
+10 Hz GPS, so 20 readings per point, without `urban`'s receiver calibration): every `add_fix` and `add_bearing` call
+of the Localizer (default configuration, N = 100) is timed; a *measurement* is one observation point's worth of
+calls (the fixes and readings up to the call that closed the point; a call that used several points, such as the
+start with every buffered point, counts as that many measurements with an equal share each, so the mean is the total
+time over the points). Reported: the median and mean of the time per measurement, the geodesy's share (LocalFrame
+calls, timed separately), and the IBIS sampler's median and mean step on the same points (docs/benchmarks.md has the
+figures). With `--scheduling realtime` the checks run in the worker process and, between calls (untimed, as a node's
+idle time), the run waits for the worker and makes the owed move sweeps (Localizer.settle, pay_owed): the calls'
+time is then what the thread that feeds the Localizer pays, and that idle work is reported beside it. One run is
+made first and not timed, so neither side's first calls in the process (IBIS's first resample-move step takes about
+half a second) count. Nothing here is a test: speed targets live in benchmarks.
 """
 from __future__ import annotations
 
