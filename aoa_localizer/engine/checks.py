@@ -22,7 +22,7 @@ import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -84,6 +84,7 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
         # checks could run in a worker (with concatenated arrays they changed with the heap's layout).
         return np.array([v for c in cols for v in getattr(c, name).tolist()])
 
+    rob = replace(rob, grid=None)  # each trial noise is taken as it is
     quality, base = joined("quality"), joined("sigma")
     at_readings = Points(joined("east"), joined("north"), joined("theta"), base)
     configured = points_of([p for p, _ in build(groups, cfg, None)])
@@ -141,10 +142,12 @@ class Snapshot:
         runs: the worker, when there is one)."""
         return np.array([[c.v_east.mean(), c.v_north.mean()] for c in map(columns, self.groups)]).reshape(-1, 2)
 
-    def robust(self, outlier_prob: float) -> Robust:
-        """The snapshot's robust posterior with another point outlier share (the likelihood's, as the track's)."""
+    def robust(self, outlier_prob: float, fitted: bool) -> Robust:
+        """The snapshot's robust posterior with another point outlier share (the likelihood's, as the track's);
+        `fitted`: after a noise fit, which ends the noise's latent hypotheses."""
         eps = outlier_prob if self.cfg.likelihood == "mixture" else 0.0
-        return Robust(eps, self.rob.gps_sigma_m, self.rob.prior_mean, self.rob.prior_prec)
+        return Robust(eps, self.rob.gps_sigma_m, self.rob.prior_mean, self.rob.prior_prec,
+                      None if fitted else self.rob.grid)
 
 
 @dataclass
@@ -158,8 +161,9 @@ class CheckResult:
     built: list[Built]
     modes: list[Mode]
     hint: ClockHint | None = None
-    why: str = ""  # a start search without a usable mode: why not
+    why: str = ""  # a start search without a usable mode, or a best mode not determined enough to start from: why
     searched: int = 0  # points in the snapshot
+    determined: bool = True  # a start search: the best mode is determined enough to start the filter from
 
 
 class _Calibrated:
@@ -180,8 +184,9 @@ class _Calibrated:
             self.pts = points_of([p for p, _ in self.built])
             self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.outlier)
 
-    def result(self, modes: list[Mode], hint: ClockHint | None = None, why: str = "") -> CheckResult:
-        return CheckResult(self.noise, self.at, self.built, modes, hint, why, len(self.snap.rows))
+    def result(self, modes: list[Mode], hint: ClockHint | None = None, why: str = "",
+               determined: bool = True) -> CheckResult:
+        return CheckResult(self.noise, self.at, self.built, modes, hint, why, len(self.snap.rows), determined)
 
 
 def run_check(snap: Snapshot) -> CheckResult:
@@ -190,7 +195,7 @@ def run_check(snap: Snapshot) -> CheckResult:
     if snap.cfg.calibrate_noise and snap.best_particle is not None:
         start = refined(snap.best_particle, cal.pts, snap.rob)
         cal.fit([start] + snap.mode_means, False)
-    pts, rob = cal.pts, snap.robust(cal.outlier)
+    pts, rob = cal.pts, snap.robust(cal.outlier, cal.noise is not None)
     modes = find_modes(pts, rob)
     hint = None
     if modes:
@@ -198,30 +203,34 @@ def run_check(snap: Snapshot) -> CheckResult:
     return cal.result(modes, hint)
 
 
-def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float) -> CheckResult:
+def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float, final: bool = False) -> CheckResult:
     """Modes of the robust posterior over the points waiting for a start (highest density first: under a flat
     prior a far, poorly determined mode gains Laplace mass from its size), after a noise fit when the best is
-    determined; no modes, and why, when the best is not determined well enough to start from."""
+    determined. No modes, and why, when the posterior is not proper yet (no two bearings cross steeply enough in
+    front of their antennas); the modes with `determined` False, and why, when it is proper but the best is not
+    determined well enough to start the filter from (too few points agree, or its ellipse is wide for its range).
+    `final`: the end of data, where nearly parallel bearings still give their (radio-range bounded) posterior."""
     cfg, cal = snap.cfg, _Calibrated(snap)
     modes = find_modes(cal.pts, snap.rob, by_density=True)
     if modes and modes[0].crossing_deg >= cfg.init_min_crossing_deg and cfg.calibrate_noise:
         cal.fit([m.mean for m in modes[:2]], True)
         if cal.noise is not None:
-            modes = find_modes(cal.pts, snap.robust(cal.outlier), by_density=True)
+            modes = find_modes(cal.pts, snap.robust(cal.outlier, True), by_density=True)
     if not modes:
         return cal.result([], why="no crossing of bearings in front of the antennas")
     best = modes[0]
-    if best.inliers < min_inliers:
-        return cal.result([], why=f"the best place explains only {best.inliers} points (needs {min_inliers})")
     if best.crossing_deg < cfg.init_min_crossing_deg:
-        return cal.result([], why=(f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < "
-                                   f"{cfg.init_min_crossing_deg:g} deg"))
+        why = f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < {cfg.init_min_crossing_deg:g} deg"
+        return cal.result(modes if final else [], why=why, determined=False)
+    if best.inliers < min_inliers:
+        return cal.result(modes, why=f"the best place explains only {best.inliers} points (needs {min_inliers})",
+                          determined=False)
     pts = cal.pts
     reach = max(1.0, float(np.min(np.hypot(pts.east - best.mean[0], pts.north - best.mean[1]))))
     size = math.sqrt(ELLIPSE_95 * float(np.linalg.eigvalsh(best.cov)[-1]))
     if size > max_ellipse_range_share * reach:
-        return cal.result([], why=f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m from the "
-                          "track")
+        return cal.result(modes, why=f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m from "
+                          "the track", determined=False)
     return cal.result(modes)
 
 

@@ -287,7 +287,8 @@ class LocalizerConfig:
         "`global`: start from the best mode of a "
         "global search of the robust posterior; `triangulation`: the paper's crossing pairs",
     )
-    init_bearings: int = param(10, "observation points before a start is tried", low=2, high=100_000)
+    init_bearings: int = param(3, "observation points before a start is tried (an estimate comes as soon as the "
+                               "bearings cross; the end of data tries with 2)", low=2, high=100_000)
     init_min_crossing_deg: float = param(
         10.0,
         "steepest crossing (deg) among the bearings the start mode explains",
@@ -410,6 +411,13 @@ class LocalizerConfig:
         True,
         "learn the receiver's sigma per quality band and the outlier rate from the "
         "data (the configured model is the starting guess)",
+    )
+    noise: str = choice(
+        "unknown",
+        ("unknown", "fixed"),
+        "`unknown`: the receiver's noise scale and wild share are latent (a weakly informative prior over 0.5-45 "
+        "deg centred on the configured sigma, marginalised with the position) until the readings calibrate them; "
+        "`fixed`: the configured sigma is taken as known (then calibrated when `calibrate_noise`)",
     )
     global_safety: bool = param(
         True,

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
+from aoa_localizer.engine.receiver import NoiseGrid, em_weights, marginal
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 # Grid: azimuth cells, log-range cells, and the range span relative to the track's extent.
@@ -67,12 +68,18 @@ class Points:
 
 @dataclass(frozen=True)
 class Robust:
-    """What the robust posterior needs besides the points: the outlier share, GPS noise and the prior."""
+    """What the robust posterior needs besides the points: the outlier share, GPS noise, the prior, and the latent
+    noise hypotheses while the receiver's noise is not known (then `outlier_prob` is not used: each hypothesis has
+    its own share)."""
 
     outlier_prob: float
     gps_sigma_m: float = 0.0
     prior_mean: np.ndarray | None = None
     prior_prec: np.ndarray | None = None
+    grid: NoiseGrid | None = None
+    # The emitter is within radio range of where its bearings were taken: a 2-D Student-t prior (one degree of
+    # freedom) at the antennas' centroid, (centre east, centre north, scale m); None: none
+    reach: tuple[float, float, float] | None = None
 
 
 @dataclass
@@ -118,25 +125,49 @@ def _terms(resid, var, eps: float):
     return ll, np.exp(g - ll)
 
 
+def _weights(resid, sigma2, extras: tuple, rob: Robust):
+    """EM precision weights (inlier / variance) and inlier weights of each point: under the fixed noise, or as
+    expectations over the latent noise's posterior at each place. `extras`: variances added to the points' own
+    (antenna position, smoothing), which the noise scale does not multiply."""
+    extra = sum(extras[1:], extras[0])
+    if rob.grid is not None:
+        _, prec, gamma = em_weights(resid, sigma2, extra, rob.grid)
+        return prec, gamma
+    var = sigma2
+    for e in extras:  # in this order: the fixed-noise sums stay the same to the last bit
+        var = var + e
+    gamma = _terms(resid, var, rob.outlier_prob)[1]
+    return gamma / var, gamma
+
+
 def inlier_share(x: np.ndarray, pts: Points, rob: Robust) -> float:
     """Share of the points whose EM inlier weight at the place x (2,) is above one half."""
     resid, _, _, r2 = _residuals(np.asarray(x, float), pts)
-    var = pts.sigma**2 + pts.gps_var(rob) / np.maximum(r2, 1.0)
-    return float(np.mean(_terms(resid, var, rob.outlier_prob)[1] > 0.5))
+    return float(np.mean(_weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0),), rob)[1] > 0.5))
+
+
+def reach_log_prior(x: np.ndarray, reach: tuple[float, float, float]) -> np.ndarray:
+    """log of the 2-D Student-t (nu = 1) density at x (..., 2) up to a constant: (1 + d^2 / scale^2)^(-3/2)."""
+    d2 = np.square(x[..., 0] - reach[0]) + np.square(x[..., 1] - reach[1])
+    return -1.5 * np.log1p(d2 / reach[2] ** 2)
 
 
 def _prior(x: np.ndarray, rob: Robust):
+    lp = 0.0 if rob.reach is None else reach_log_prior(x, rob.reach)
     if rob.prior_prec is None:
-        return 0.0
+        return lp
     d = x - rob.prior_mean
-    return -0.5 * np.einsum("...i,ij,...j->...", d, rob.prior_prec, d)
+    return lp - 0.5 * np.einsum("...i,ij,...j->...", d, rob.prior_prec, d)
 
 
 def log_posterior(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
     """Robust log posterior (up to a constant) at x (..., 2); `widen2` (..., K) adds to each bearing variance."""
     resid, _, _, r2 = _residuals(x, pts)
-    var = pts.sigma**2 + widen2
     gps_var = pts.gps_var(rob)
+    if rob.grid is not None:
+        extra = widen2 + gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else widen2
+        return marginal(resid, pts.sigma**2, extra, rob.grid) + _prior(x, rob)
+    var = pts.sigma**2 + widen2
     if np.any(gps_var):
         var = var + gps_var / np.maximum(r2, 1.0)
     ll, _ = _terms(resid, var, rob.outlier_prob)
@@ -186,9 +217,8 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
         for _ in range(_ITER_PER_STAGE if len(levels) > 1 else _POLISH_ITERATIONS):
             x, info, _ = _gn_step(x, pts, rob, level * widen, prec)
     resid, r2, grad = _geometry(x, pts)
-    var = pts.sigma**2 + pts.gps_var(rob) / np.maximum(r2, 1.0)
-    _, gamma = _terms(resid, var, rob.outlier_prob)
-    info = np.einsum("mk,mki,mkj->mij", gamma / var, grad, grad) + prec + 1e-12 * np.eye(2)
+    w, gamma = _weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0),), rob)
+    info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-12 * np.eye(2)
     return x, inverse_2x2(info), gamma
 
 
@@ -208,9 +238,8 @@ def inverse_2x2(a: np.ndarray) -> np.ndarray:
 def _gn_step(x, pts: Points, rob: Robust, widen_m, prec):
     """One damped Gauss-Newton step with the EM weights: keeps the best of a few step lengths (or none)."""
     resid, r2, grad = _geometry(x, pts)
-    var = pts.sigma**2 + pts.gps_var(rob) / np.maximum(r2, 1.0) + (widen_m[:, None] ** 2) / r2
-    _, gamma = _terms(resid, var, rob.outlier_prob)
-    w = gamma / var
+    w, gamma = _weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0), (widen_m[:, None] ** 2) / r2),
+                        rob)
     info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-9 * np.eye(2)
     info = np.where(np.isfinite(info), info, 0.0) + 1e-9 * np.eye(2)
     rhs = np.einsum("mk,mki->mi", w * resid, grad)

@@ -487,7 +487,7 @@ class Localizer:
         for channel in list(self.channels.live.values()):
             if not channel.emitter.finish():
                 continue
-            mean, cov = channel.emitter.running.estimate()
+            mean, cov = channel.emitter.estimate()
             if not _positive_definite(cov):
                 self._reject("covariance_degenerate")
                 continue
@@ -510,9 +510,9 @@ class Localizer:
         made = []
         for channel in list(self.channels.live.values()):
             emitter = channel.emitter
-            if not emitter.collect() or emitter.filter is None:
+            if not emitter.collect() or not emitter.estimating:
                 continue
-            mean, cov = emitter.running.estimate()
+            mean, cov = emitter.estimate()
             if not _positive_definite(cov):
                 self._reject("covariance_degenerate")
                 continue
@@ -646,7 +646,7 @@ class Localizer:
             if self.observer is not None:
                 self.observer.on_point(readings, emitter.last_kept)
             if took:
-                mean, cov = emitter.running.estimate()
+                mean, cov = emitter.estimate()
                 if not _positive_definite(cov):
                     self._reject("covariance_degenerate")
                     continue
@@ -669,7 +669,7 @@ class Localizer:
     def _make_estimate(self, channel: Channel, stamp: float, mean, cov) -> Estimate:
         lat, lon, _ = self.datum_frame().to_geodetic(mean[0], mean[1])
         emitter = channel.emitter
-        f = emitter.running
+        f = emitter.cloud
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
                         cov=np.array(cov), bearings_used=emitter.bearings_used, points_used=emitter.points_used,
                         ess=f.ess(), algorithm=self.cfg.algorithm,

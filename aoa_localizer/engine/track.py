@@ -42,6 +42,7 @@ from aoa_localizer.engine.checks import (
 )
 from aoa_localizer.engine.clock_check import ClockHint
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.global_search import (
     Mode,
     Points,
@@ -52,7 +53,8 @@ from aoa_localizer.engine.global_search import (
     residuals,
 )
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
-from aoa_localizer.engine.preprocess import make_point
+from aoa_localizer.engine.preprocess import make_point, reading_sigma
+from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
 from aoa_localizer.engine.triangulation import initial_particles
 from aoa_localizer.engine.types import ObservationPoint, Reading
@@ -67,6 +69,10 @@ log = logging.getLogger("aoa_localizer")
 # bearing-only posterior proper (a flat prior has infinite mass along the rays).
 _PRIOR_RANGE_FACTOR = 10.0
 _PRIOR_MIN_SIGMA_M = 100.0
+_PROVISIONAL_PARTICLES = 1000
+ELLIPSE_MASS = 0.95  # the share of the posterior a provisional estimate's ELLIPSE_95 ellipse holds
+# The radio-range prior's scale: this many times the antennas' spread, at least this many metres.
+_REACH_FACTOR, _REACH_MIN_M = 2.0, 100.0
 _START_SWEEPS = 3  # random-walk MH sweeps that spread the importance sample's duplicates
 _ALARM_SWEEPS = 2  # moves at every point while in alarm
 _SEARCH_GROWTH = 2.0  # scheduled global searches when the kept points have grown by this factor ...
@@ -92,10 +98,18 @@ class EmitterTrack:
         self.check: tuple[Future, ParticleFilter | None, list[list[Reading]]] | None = None
         self.noise = NoiseModel(cfg.outlier_prob)
         self.outlier_prob = cfg.outlier_prob  # point level, in the likelihood
+        # The receiver's noise as latent hypotheses, marginalised with the position until the readings calibrate it
+        # (None: known, or calibrated)
+        self.grid: NoiseGrid | None = None
+        if cfg.noise == "unknown" and cfg.likelihood == "mixture":
+            self.grid = NoiseGrid.weak(configured_sigma_deg(cfg))
         # (readings, point, readings gated out) per point: the points waiting for a start, then the filter's
         # history
         self.window: deque[tuple[list[Reading], ObservationPoint, int]] = deque()
         self.filter: ParticleFilter | None = None
+        # A sample of the posterior while it is proper but not determined enough to start the filter from: the
+        # estimate (state `poorly_determined`) until the filter starts
+        self.provisional: ParticleFilter | None = None
         self.health = HealthMonitor(cfg.health_window, cfg.health_p_value)
         self.modes: list[Mode] = []
         self.proposal: ModeProposal | None = None
@@ -143,6 +157,38 @@ class EmitterTrack:
         return self.filter
 
     @property
+    def cloud(self) -> ParticleFilter:
+        """The particles the estimate comes from: the running filter, or the provisional sample before it."""
+        if self.filter is not None:
+            return self.filter
+        if self.provisional is None:
+            raise RuntimeError("no estimate yet")  # an engine bug, never bad input
+        return self.provisional
+
+    def estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """The published mean and covariance: the filter's; or, for a provisional sample, the posterior's
+        highest-density place (the best mode: with few bearings the posterior's tails along the rays drag its mean
+        far out) with the cloud's second moment about it, scaled so the 95 % ellipse holds 95 % of the cloud."""
+        if self.filter is not None:
+            return self.filter.estimate()
+        f = self.cloud
+        centre = self.modes[0].mean.copy()
+        w, d = f.weights, f.x - centre
+        cov = (w[:, None] * d).T @ d
+        try:
+            d2 = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
+        except np.linalg.LinAlgError:
+            return centre, cov
+        order = np.argsort(d2)
+        at = min(int(np.searchsorted(np.cumsum(w[order]), ELLIPSE_MASS)), len(order) - 1)
+        return centre, cov * max(float(d2[order][at]), 1e-12) / ELLIPSE_95
+
+    @property
+    def estimating(self) -> bool:
+        """Whether there is an estimate: a running filter or a provisional sample."""
+        return self.filter is not None or self.provisional is not None
+
+    @property
     def model(self) -> EmitterModel:
         """The running filter's emitter model (the track always builds one)."""
         return cast(EmitterModel, self.running.model)
@@ -158,12 +204,24 @@ class EmitterTrack:
 
     def robust(self, prior: bool = True) -> Robust:
         if prior and self.filter is not None and self.model.prior_prec.any():
-            return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, self.model.prior_mean, self.model.prior_prec)
+            return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, self.model.prior_mean, self.model.prior_prec,
+                          self.grid, self.model.reach)
         cfg = self.cfg
         if prior and cfg.prior_east is not None and cfg.prior_north is not None and cfg.prior_sigma_m is not None:
             return Robust(self.lik_outlier_prob, cfg.gps_sigma_m, np.array([cfg.prior_east, cfg.prior_north]),
-                          np.eye(2) / cfg.prior_sigma_m**2)
-        return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m)
+                          np.eye(2) / cfg.prior_sigma_m**2, self.grid)
+        reach = self.reach() if self.filter is None and prior else None
+        return Robust(self.lik_outlier_prob, self.cfg.gps_sigma_m, grid=self.grid, reach=reach)
+
+    def reach(self) -> tuple[float, float, float] | None:
+        """The radio-range prior of the points held (global_search.Robust.reach): centred on their antennas, its
+        scale twice their spread (at least _REACH_MIN_M)."""
+        if not self.window:
+            return None
+        pos = np.array([[p.east, p.north] for _, p, _ in self.window])
+        centre = pos.mean(axis=0)
+        spread = float(np.max(np.hypot(*(pos - centre).T)))
+        return float(centre[0]), float(centre[1]), max(_REACH_MIN_M, _REACH_FACTOR * spread)
 
     @property
     def lik_outlier_prob(self) -> float:
@@ -193,23 +251,24 @@ class EmitterTrack:
         self.last_update_s = time.perf_counter() - t0
         return took
 
-    def _try_start(self, inline: bool = False):
-        """Start the filter once the points allow (`inline`: the start search here, even with a worker)."""
+    def _try_start(self, inline: bool = False, final: bool = False):
+        """Start the filter once the points allow (`inline`: the start search here, even with a worker; `final`: the
+        end of data, with whatever points there are)."""
         cfg = self.cfg
         if cfg.has_prior:
             return self._start_from_prior()
         if len(self.window) > cfg.init_max_points:
             _, _, gated = self.window.popleft()
             self._reject("init_buffer_full", 1)
-        if len(self.window) < cfg.init_bearings:
+        if len(self.window) < (min(2, cfg.init_bearings) if final else cfg.init_bearings):
             self.status = f"collecting bearings: {len(self.window)} of {cfg.init_bearings} points"
             return False
         if cfg.init_method == "triangulation":
             return self._start_triangulation()
-        if len(self.window) < self.next_start_try or self.check is not None:
+        if not final and (len(self.window) < self.next_start_try or self.check is not None):
             return False
         snap = self._snapshot()
-        job = partial(search_start, snap, _MIN_INLIERS, _MAX_ELLIPSE_RANGE_SHARE)
+        job = partial(search_start, snap, _MIN_INLIERS, _MAX_ELLIPSE_RANGE_SHARE, final)
         future = None if inline else self._submit(job)
         if future is None:
             return self._apply_start(job(), snap.groups)
@@ -228,31 +287,52 @@ class EmitterTrack:
         if res.noise is not None and res.at is not None:
             self._apply_calibration(res.noise, res.at, _by_group(groups, res.built))
         modes = res.modes
-        if not modes:
+        if not modes or not res.determined:
             self.status = f"waiting for geometry: {res.why}"
             # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later).
             self.next_start_try = res.searched + min(_START_RETRY_MAX, max(1, res.searched // 10))
-            return False
+            if not modes:
+                return False
+            # Proper but not determined: publish a sample of the posterior (wide, honest), not nothing.
+            self.provisional = self._sample_posterior(modes)
+            self.status = f"poorly determined: {res.why}"
+        else:
+            self.provisional = None
+            self.filter = self._sample_posterior(modes, start=True)
+            self._started(f"global search: best of {len(modes)} mode(s), {modes[0].inliers} of {len(self.window)} "
+                          "points agree")
+        self.modes = modes
+        self.points_used = len(self.window)  # (none before: a start, or a provisional sample, holds all)
+        self.bearings_used = sum(len(r) - g for r, _, g in self.window)
+        return True
+
+    def _sample_posterior(self, modes: list[Mode], start: bool = False) -> ParticleFilter:
+        """A filter holding every point waiting for a start and an importance sample of their posterior from the
+        modes (MH sweeps after it), with a broad Gaussian prior at the best mode that keeps the posterior proper.
+        `start`: the filter's start (its importance sample kept as `start_cloud`)."""
         best = modes[0]
         last = self.window[-1][1]
         sigma = max(
             _PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(best.mean[0] - last.east, best.mean[1] - last.north)
         )
-        self.filter = self._new_filter()
-        self.model.set_prior(best.mean, sigma**2 * np.eye(2))
-        self.model.lik.outlier_prob = self.lik_outlier_prob
+        f = self._new_filter()
+        model = cast(EmitterModel, f.model)
+        model.set_prior(best.mean, sigma**2 * np.eye(2))
+        model.reach = self.reach()
+        model.lik.outlier_prob = self.lik_outlier_prob
         for _, p, _ in self.window:
-            self.model.observe(p)
-        self.running.k = len(self.window)
-        self.modes, self.proposal = modes, ModeProposal(modes, self._broad_sigma(best.mean))
-        particles = importance_sample(self.running.log_target, self.proposal, cfg.num_particles, self.rng)
-        self.running.initialise(particles, best.mean, sigma**2 * np.eye(2))
-        self.start_cloud = self.running.x.copy()
-        self.running.rejuvenate(_START_SWEEPS, self.proposal)
-        self._started(f"global search: best of {len(modes)} mode(s), {best.inliers} of {len(self.window)} points agree")
-        self.points_used += len(self.window)
-        self.bearings_used += sum(len(r) - g for r, _, g in self.window)
-        return True
+            model.observe(p)
+        f.k = len(self.window)
+        self.proposal = ModeProposal(modes, self._broad_sigma(best.mean))
+        # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (few points: cheap)
+        n = self.cfg.num_particles if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES)
+        particles = importance_sample(f.log_target, self.proposal, n, self.rng)
+        f.n = n
+        f.initialise(particles, best.mean, sigma**2 * np.eye(2))
+        if start:
+            self.start_cloud = f.x.copy()
+        f.rejuvenate(_START_SWEEPS, self.proposal)
+        return f
 
     def _start_triangulation(self):
         """The paper's start (sec. 3.3): crossings of sorted pairs; then every buffered point updates the filter."""
@@ -289,7 +369,9 @@ class EmitterTrack:
         return result
 
     def _new_filter(self) -> ParticleFilter:
-        f = make_filter(self.cfg, self.rng, EmitterModel(self.cfg))
+        model = EmitterModel(self.cfg)
+        model.grid = self.grid
+        f = make_filter(self.cfg, self.rng, model)
         if self.worker is not None and isinstance(f, ResampleMove):  # realtime: a bounded step
             f.sweeps_per_point = 1
         return f
@@ -386,14 +468,15 @@ class EmitterTrack:
         changed = False
         while self.check is not None:  # a stale start search is run again, over all the points: wait for that too
             changed = self._collect_check(wait=True) or changed
-        if self.filter is None and self.worker is not None:
-            changed = self._try_start(inline=True) or changed
+        if self.filter is None:  # the end of data: the best estimate the points allow, never "collecting"
+            self.next_start_try = 0
+            changed = self._try_start(inline=True, final=True) or changed
         if self.filter is not None and self.cfg.global_safety and self.last_search_point != self.points_seen:
             self._global_check(inline=True)
             self._collect_check(wait=True)  # the start search of an emitter-moved re-start
             changed = True
         self.last_update_s = time.perf_counter() - t0
-        return changed and self.filter is not None
+        return changed and (self.filter is not None or self.provisional is not None)
 
     def _global_check(self, inline: bool = False):
         """Noise calibration, emitter-moved test, global search, MH move or re-start: inline, or its expensive part
@@ -540,9 +623,11 @@ class EmitterTrack:
         pts = self.points()
         self.outlier_prob = point_outlier_prob(residuals(at, pts), pts.sigma, self.outlier_prob)
         self.events["recalibrated"] += 1
+        self.grid = None  # the readings calibrated the noise: from now on it is taken as fitted
         if f is not None:
             self.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
             self.model.lik.outlier_prob = self.lik_outlier_prob
+            self.model.grid = None
             f.reweight(f.log_target(f.x) - old)  # old is set whenever f is
             if f.ess() < self.cfg.ess_threshold * f.n:
                 f.resample()
@@ -610,7 +695,7 @@ class EmitterTrack:
     # -- what the estimate reports -----------------------------------------------------------------------
     def mode_masses(self) -> list[tuple[float, float, float]]:
         """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first."""
-        f = self.running
+        f = self.cloud
         w = f.weights
         if len(self.modes) < 2:
             mean = w @ f.x
@@ -630,3 +715,10 @@ class EmitterTrack:
 def _by_group(groups: list[list[Reading]], built: list[Built]) -> dict[int, tuple[list[Reading], Built]]:
     """A check's points rebuilt with its noise, by their group's identity (empty when the check made none)."""
     return {id(g): (g, b) for g, b in zip(groups, built, strict=True)} if built else {}
+
+
+def configured_sigma_deg(cfg: LocalizerConfig) -> float:
+    """The configured reading sigma (deg) the latent noise's prior is centred on (the geometric middle of sigma(Q))."""
+    if cfg.sigma_model == "constant":
+        return cfg.bearing_sigma_deg
+    return math.degrees(math.sqrt(reading_sigma(40.0, cfg) * reading_sigma(100.0, cfg)))

@@ -6,6 +6,8 @@ import math
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.global_search import reach_log_prior
+from aoa_localizer.engine.receiver import NoiseGrid, marginal
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.models.base import StateSpaceModel
 from aoa_localizer.models.likelihood import BearingLikelihood
@@ -43,6 +45,10 @@ class EmitterModel(StateSpaceModel):
         self.history = PointHistory(cfg.history_points)
         self.prior_mean = np.zeros(2)
         self.prior_prec = np.zeros((2, 2))  # precision of the Gaussian prior; zero = flat
+        # The receiver's noise while it is not known: marginalised over these hypotheses (None: the points' sigmas
+        # and the likelihood's outlier share are taken as they are)
+        self.grid: NoiseGrid | None = None
+        self.reach: tuple[float, float, float] | None = None  # global_search.Robust.reach
 
     def set_prior(self, mean, cov):
         self.prior_mean = np.asarray(mean, float)
@@ -63,7 +69,25 @@ class EmitterModel(StateSpaceModel):
                 np.array([p.theta]))
 
     def loglik(self, x, p: ObservationPoint, k=None):
+        if self.grid is not None and len(self.history) and self.history.data[-1, 2] == p.theta:
+            # The noise is shared by all points: the new point's weight is the predictive ratio of the marginals
+            # with and without it (the filter observes a point before weighting it).
+            h = self.history.data
+            return self._marginal(x, h) - self._marginal(x, h[:-1])
         return self.lik.log(x, p.east, p.north, p.theta, p.sigma, p.gps_sigma)
+
+    def _marginal(self, x, h: np.ndarray) -> np.ndarray:
+        """log p(points h | x) with the noise marginalised over the grid."""
+        if not len(h):
+            return np.zeros(np.shape(x)[:-1])
+        assert self.grid is not None
+        x = np.asarray(x, float)[..., None, :]
+        dx, dy = x[..., 0] - h[:, 0], x[..., 1] - h[:, 1]
+        c, s = np.cos(h[:, 2]), np.sin(h[:, 2])
+        r = np.arctan2(dx * s - dy * c, dx * c + dy * s)
+        gps_var = self.lik.gps_var + np.square(h[:, 4])
+        extra = gps_var / np.maximum(dx * dx + dy * dy, 1.0) if np.any(gps_var) else np.zeros(1)
+        return marginal(r, np.square(h[:, 3]), extra, self.grid)
 
     def usable(self, p: ObservationPoint) -> bool:
         return math.isfinite(p.theta) and p.sigma > 0 and math.isfinite(p.east) and math.isfinite(p.north)
@@ -75,7 +99,11 @@ class EmitterModel(StateSpaceModel):
         """Log posterior of a static emitter over the kept history (up to a constant), for move steps."""
         d = x - self.prior_mean
         lp = -0.5 * np.einsum("...i,ij,...j->...", d, self.prior_prec, d)
+        if self.reach is not None:
+            lp = lp + reach_log_prior(x, self.reach)
         h = self.history.data
+        if len(h) and self.grid is not None:
+            return lp + self._marginal(x, h)
         if len(h):
             lp = lp + self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3], h[:, 4]).sum(axis=-1)
         return lp

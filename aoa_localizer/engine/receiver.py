@@ -1,0 +1,102 @@
+"""What is not known about the receiver, as part of the posterior: its noise scale and its wild share.
+
+Until the readings calibrate the noise (noise.py needs about 40 of them), the bearing noise is a latent
+parameter: a grid of hypotheses (a scale on every point's sigma, and a point outlier share) with a weakly
+informative prior, marginalised jointly with the position. The scale is shared by all points, so the
+marginal is a sum over hypotheses of products over points, not a product of per-point mixtures: three
+bearings that cross in a 30 deg triangle say "the noise is about 20 deg" and widen the ellipse accordingly,
+where a fixed 1.1 deg would call two of them wild and publish a tiny ellipse at one crossing.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from aoa_localizer.engine.geodesy import TWO_PI
+
+_LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
+SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers
+_N_SCALES = 12
+# log-normal around the configured sigma, wide enough that the span's far end is within two standard deviations
+_CENTRE_LOG_SD = 0.5 * math.log(SIGMA_SPAN_DEG[1] / SIGMA_SPAN_DEG[0])
+_OUTLIERS = (0.02, 0.1, 0.3)  # point outlier shares ...
+_OUTLIER_PRIOR = (0.5, 0.35, 0.15)  # ... and their prior weights
+
+
+@dataclass(frozen=True)
+class NoiseGrid:
+    """Hypotheses about the receiver's noise: a scale on each point's sigma and a point outlier share, with their
+    prior log weights (normalised)."""
+
+    scale: np.ndarray
+    outlier: np.ndarray
+    log_prior: np.ndarray
+
+    @classmethod
+    def weak(cls, configured_sigma_deg: float) -> NoiseGrid:
+        """The weakly informative prior: sigmas over SIGMA_SPAN_DEG (log-spaced), log-normal around the configured
+        sigma (wide: the whole span is plausible); three wild shares."""
+        sig = np.geomspace(*SIGMA_SPAN_DEG, _N_SCALES)
+        log_s = np.log(sig / configured_sigma_deg)
+        w_scale = np.exp(-0.5 * (log_s / _CENTRE_LOG_SD) ** 2)
+        w = np.outer(w_scale, _OUTLIER_PRIOR).ravel()
+        scale = np.repeat(np.exp(log_s), len(_OUTLIERS))
+        outlier = np.tile(np.array(_OUTLIERS), _N_SCALES)
+        return cls(scale, outlier, np.log(w / w.sum()))
+
+    def __len__(self) -> int:
+        return self.scale.size
+
+
+def _hypothesis_terms(resid2, var, extra_var, scale: float, outlier: float):
+    """Per-point log mixture density and its Gaussian part (for the EM weights) under one hypothesis."""
+    v = scale * scale * var + extra_var
+    g = -0.5 * resid2 / v - 0.5 * np.log(v) - _LOG_SQRT_2PI + math.log1p(-outlier)
+    return np.logaddexp(g, math.log(outlier / TWO_PI)), g, v
+
+
+def marginal(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
+    """log sum_h prior_h prod_k p(resid_k | h): resid, var (points' sigma^2), extra_var (antenna position and
+    smoothing terms, not scaled) broadcast to (..., K); returns (...)."""
+    return hypothesis_logs(resid, var, extra_var, grid)[0]
+
+
+def hypothesis_logs(resid, var, extra_var, grid: NoiseGrid):
+    """(marginal (...), per-hypothesis log joint (..., H)) over the K points on the last axis."""
+    resid2 = np.square(resid)
+    per_h = np.stack([_hypothesis_terms(resid2, var, extra_var, s, e)[0].sum(axis=-1) + lp
+                      for s, e, lp in zip(grid.scale.tolist(), grid.outlier.tolist(), grid.log_prior.tolist(),
+                                          strict=True)], axis=-1)
+    top = np.max(per_h, axis=-1, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    total = np.log(np.sum(np.exp(per_h - top), axis=-1)) + top[..., 0]
+    return total, per_h
+
+
+def em_weights(resid, var, extra_var, grid: NoiseGrid):
+    """The marginal's EM quantities at each place: (log marginal (...), precision weight (..., K) = E[inlier /
+    variance], inlier weight (..., K)), the expectations over the hypotheses' posterior at that place."""
+    resid2 = np.square(resid)
+    total, per_h = hypothesis_logs(resid, var, extra_var, grid)
+    post = np.exp(per_h - total[..., None])  # (..., H)
+    prec = np.zeros(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
+    inlier = np.zeros_like(prec)
+    for h, (s, e) in enumerate(zip(grid.scale.tolist(), grid.outlier.tolist(), strict=True)):
+        ll, g, v = _hypothesis_terms(resid2, var, extra_var, s, e)
+        gamma = np.exp(g - ll) * post[..., h:h + 1]
+        inlier += gamma
+        prec += gamma / v
+    return total, prec, inlier
+
+
+def posterior_sigma(resid, var, extra_var, grid: NoiseGrid, base_sigma_deg: float) -> tuple[float, float, float]:
+    """At one place: the posterior median sigma (deg, for a point of `base_sigma_deg`), its 95 % interval's ends."""
+    _, per_h = hypothesis_logs(resid, var, extra_var, grid)
+    post = np.exp(per_h - per_h.max())
+    sig = base_sigma_deg * grid.scale
+    order = np.argsort(sig)
+    cdf = np.cumsum(post[order]) / post.sum()
+    pick = [float(sig[order][min(np.searchsorted(cdf, q), len(cdf) - 1)]) for q in (0.5, 0.025, 0.975)]
+    return pick[0], pick[1], pick[2]
