@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import bisect
+import math
 from enum import Enum
 
 import numpy as np
@@ -9,6 +10,8 @@ import numpy as np
 # Fixes kept: enough to bracket any bearing still pending (bearings arrive within gps_max_gap_s).
 _KEEP_FIXES = 512
 _VELOCITY_SPAN = 3  # fix-to-fix segments a velocity is measured over
+_STILL_MPS = 0.5  # an antenna slower than this at an isolated fix stood still (its position may be held) ...
+_HELD_MAX_M = 2.0  # ... if it cannot have gone farther than this from it at its mean speed across the gap
 
 
 class Where(Enum):
@@ -57,11 +60,25 @@ class GpsTrack:
             return (Where.GAP if stamp - self.t[-1] > self.max_gap_s else Where.WAIT), None
         t0, t1 = self.t[k - 1], self.t[k]
         if t1 - t0 > self.max_gap_s:
-            return Where.GAP, None
+            return self._held(stamp, k)
         f = (stamp - t0) / (t1 - t0)
         e, n, north, sigma, j = self.e, self.n, self.north, self.sigma, k - 1  # written out: runs per reading
         return Where.OK, (e[j] + f * (e[k] - e[j]), n[j] + f * (n[k] - n[j]), north[j] + f * (north[k] - north[j]),
                           sigma[j] + f * (sigma[k] - sigma[j]), *self._velocity(k))
+
+    def _held(self, stamp: float, k: int) -> tuple[Where, tuple[float, ...] | None]:
+        """Across a gap: the nearer of fixes k - 1 and k if it is within max_gap_s of the stamp and the antenna stood
+        still there (no segment within the gap, or slower than _STILL_MPS: a surveyor's fix at each bearing, minutes
+        apart) and cannot have moved more than _HELD_MAX_M from it by the stamp; else a gap. A moving vehicle's fixes
+        around a drop-out are never held."""
+        j = k - 1 if stamp - self.t[k - 1] <= self.t[k] - stamp else k
+        v_e, v_n = self._velocity(j)
+        # how far the antenna can have gone from the held fix, at its mean speed across the gap
+        across = math.hypot(self.e[k] - self.e[k - 1], self.n[k] - self.n[k - 1]) / (self.t[k] - self.t[k - 1])
+        if (abs(stamp - self.t[j]) > self.max_gap_s or v_e * v_e + v_n * v_n > _STILL_MPS**2
+                or across * abs(stamp - self.t[j]) > _HELD_MAX_M):
+            return Where.GAP, None
+        return Where.OK, (self.e[j], self.n[j], self.north[j], self.sigma[j], 0.0, 0.0)
 
     def fitted_velocity(self, t0: float, t1: float) -> tuple[float, float] | None:
         """East and north velocity (m/s): the least-squares slope of the fixes stamped in [t0, t1], None with fewer

@@ -1,8 +1,9 @@
 """Input guards a single bad message must not get past: stamps off the stream's timeline, implausible fixes.
 
 * `StreamClock`: the timeline of one input stream (fixes, or DF readings). A stamp slightly older than the
-  newest is out of order (rejected, as always); a stamp far ahead (`max_stamp_jump_s`) is not adopted as the
-  new newest (one record stamped in 2038 used to make every later input "out of order"). When the stream
+  newest is out of order (rejected, as always); a stamp far ahead (`max_stamp_jump_s`) of a dense stream, or
+  of the wall clock, is not adopted as the new newest (one record stamped in 2038 used to make every later input
+  "out of order"); a sparse stream (a survey's bearings minutes or hours apart) takes long gaps. When the stream
   really moved to another timeline (a receiver clock stepped back, or forward), `confirm` consecutive
   stamps that agree with each other but not with the old timeline switch it over: `clock_jump`.
 * `implausible_fix`: what no vehicle's GPS reports: an altitude outside [-1000, 20000] m, a latitude within
@@ -12,6 +13,7 @@
 from __future__ import annotations
 
 import math
+import time
 from enum import Enum
 
 ALT_RANGE_M = (-1000.0, 20000.0)
@@ -19,6 +21,7 @@ POLE_MARGIN_DEG = 0.01
 _CONFIRM_DISTANCE_M = 100.0  # two fixes agree when closer than this ...
 _CONFIRM_SPEED_MPS = 150.0  # ... plus this speed times the time between them
 _EARTH_RADIUS_M = 6_371_000.0
+_SPARSE_WINDOW = 5  # intervals that tell a sparse stream
 
 
 class Verdict(Enum):
@@ -38,9 +41,14 @@ class StreamClock:
         self.max_jump_s, self.confirm = max_jump_s, confirm
         self.last: float | None = None
         self.candidates: list[float] = []  # consecutive stamps off the timeline that agree with each other
+        self.intervals: list[float] = []  # the latest intervals between adopted stamps
 
     def admit(self, stamp: float) -> Verdict:
-        if self.last is None or 0 < stamp - self.last <= self.max_jump_s:
+        if stamp > time.time() + self.max_jump_s:  # a measurement cannot come from the future
+            return Verdict.AHEAD
+        if self.last is None or 0 < stamp - self.last <= self.max_jump_s or (stamp > self.last and self._sparse()):
+            if self.last is not None and stamp > self.last:
+                self.intervals = (self.intervals + [stamp - self.last])[-_SPARSE_WINDOW:]
             self.last = stamp
             self.candidates.clear()
             return Verdict.OK
@@ -55,6 +63,13 @@ class StreamClock:
             self.candidates.clear()
             return Verdict.CLOCK_JUMP
         return Verdict.AHEAD if stamp > self.last else Verdict.OUT_OF_ORDER
+
+    def _sparse(self) -> bool:
+        """A sparse stream (bearings taken by hand minutes apart, their fixes): a long gap is its rhythm, not a clock
+        glitch. Sparse: its median recent interval is over a tenth of max_stamp_jump_s, or it has only one stamp."""
+        if not self.intervals:
+            return True
+        return sorted(self.intervals)[len(self.intervals) // 2] > self.max_jump_s / 10
 
 
 def implausible_fix(lat: float, lon: float, alt: float) -> str | None:

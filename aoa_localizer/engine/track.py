@@ -278,7 +278,6 @@ class EmitterTrack:
     def _apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
         """Start the filter from a start search's modes over the points held now (a background search's snapshot
         may have fewer): an importance sample of the posterior, then MH sweeps; or wait for more points."""
-        cfg = self.cfg
         if len(self.window) > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE):
             # Points came far faster than the worker searched (a bag replayed at full speed): a mode of the few
             # points searched is no start for the many held now. Search again, over all of them.
