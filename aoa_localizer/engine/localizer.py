@@ -670,12 +670,14 @@ class Localizer:
         lat, lon, _ = self.datum_frame().to_geodetic(mean[0], mean[1])
         emitter = channel.emitter
         f = emitter.cloud
+        modes = emitter.mode_masses()
+        state, warnings = emitter.assess(np.asarray(mean), np.asarray(cov), modes)
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
                         cov=np.array(cov), bearings_used=emitter.bearings_used, points_used=emitter.points_used,
                         ess=f.ess(), algorithm=self.cfg.algorithm,
                         # the user's own copies: the filter's arrays are read-only and shared
                         particles=f.x.copy(), weights=f.weights.copy(),
-                        modes=emitter.mode_masses(),
+                        modes=modes,
                         noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,
-                        channel=channel.id, frequency_hz=channel.frequency_hz)
+                        channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings)
 

@@ -82,6 +82,8 @@ _MIN_INLIERS = 3  # a start mode must explain at least this many points
 _MODE_MIN_MASS = 0.01  # modes reported
 _MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
 _START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
+_SUSPECT_WILD_SHARE = 0.4  # more bearings than this unexplained: the model does not fit (state `suspect`)
+_AMBIGUOUS_MASS = 0.2  # a second mode this heavy leaves the estimate poorly determined
 _MOVED_MAX_OLD_SHARE = 0.2  # most recent points that may still agree with the old place in a move
 _STALE_MIN, _STALE_SHARE = 2, 5  # a start search's result is stale once the points grew by more than max(2, 1/5)
 
@@ -692,6 +694,34 @@ class EmitterTrack:
         return modes[0] if modes else None
 
     # -- what the estimate reports -----------------------------------------------------------------------
+    def assess(self, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[str, list[str]]:
+        """The estimate's state and the warnings behind it (docs/interface.md, "Estimate states"): `suspect` when
+        the model does not fit the bearings, `poorly_determined` when the posterior is proper but wide or
+        multi-modal (or only a provisional sample), else `tracking`."""
+        warnings = []
+        if self.health.alarm_since is not None:
+            warnings.append(f"the estimate no longer explains the newest bearings ({sum(self.health.flags)} of the "
+                            f"last {len(self.health.flags)} points disagree): multipath, an emitter that moved, or a "
+                            "bearing reference or offset set wrong (bearing_reference, mount_offset_deg, "
+                            "magnetic_declination_deg)")
+        wild = max(self.outlier_prob if self.grid is None else 0.0,
+                   self.noise.reading_outlier_prob if self.noise.fits else 0.0)
+        if wild > _SUSPECT_WILD_SHARE:
+            warnings.append(f"{100 * wild:.0f} % of the bearings look wild: a bearing offset or reference set wrong "
+                            "(bearing_reference, mount_offset_deg, magnetic_declination_deg), or heavy multipath")
+        if warnings:
+            return "suspect", warnings
+        pts = self.points() if self.window else None
+        reach = float(np.min(np.hypot(pts.east - mean[0], pts.north - mean[1]))) if pts is not None else math.inf
+        size = math.sqrt(ELLIPSE_95 * max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
+        if self.filter is None:
+            return "poorly_determined", [f"few or poorly crossing bearings: {self.status}"]
+        if size > _MAX_ELLIPSE_RANGE_SHARE * max(reach, 1.0):
+            return "poorly_determined", [f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]
+        if len(modes) > 1 and modes[1][2] >= _AMBIGUOUS_MASS:
+            return "poorly_determined", [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
+        return "tracking", []
+
     def mode_masses(self) -> list[tuple[float, float, float]]:
         """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first."""
         f = self.cloud

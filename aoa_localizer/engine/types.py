@@ -57,6 +57,10 @@ class Estimate:
     end_of_data: bool = False  # made by Localizer.finish(), the offline end-of-data global check
     channel: str = "default"  # the emitter's channel id (docs/interface.md, "Channels")
     frequency_hz: float = float("nan")  # the channel's frequency (NaN: the default channel, no frequency)
+    # `tracking`, `poorly_determined` (proper but wide, multi-modal, or few bearings) or `suspect` (the model does
+    # not fit the bearings); `warnings`: plain sentences naming the likely cause and the setting to check
+    state: str = "tracking"
+    warnings: list = field(default_factory=list)
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of docs/interface.md (offline replay output)."""
@@ -76,4 +80,6 @@ class Estimate:
             "end_of_data": self.end_of_data,
             "channel": self.channel,
             "frequency_hz": self.frequency_hz if math.isfinite(self.frequency_hz) else None,
+            "state": self.state,
+            "warnings": list(self.warnings),
         }

@@ -139,6 +139,7 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
             f"used {bound:.2f} m; the truth is {'inside' if inside_ellipse(err, est.cov) else 'outside'} "
             "the 95 % ellipse"
         )
+    lines.append(f"* **State**: {est.state}" + "".join(f"; {w}" for w in est.warnings))
     if damage:
         lines.append(f"* **Input damaged**: {damage}; this report covers the data before the damage")
     if loc.cfg.calibrate_noise:

@@ -480,7 +480,12 @@ class LocalizerNode(Node):
             warnings.append(("restarting", *error))
         values.update({key: value for key, value, _ in warnings})
         checking = loc.emitter.health.alarm_since is not None  # the cloud no longer explains the newest points
-        level = 2 if error else 1 if loc.estimate is None or checking or warnings else 0
+        est = loc.estimate
+        if est is not None:
+            values["state"] = est.state
+            warnings += [(f"warning_{i}", text, text) for i, text in enumerate(est.warnings)]
+        suspect = est is not None and est.state == "suspect"
+        level = 2 if error else 1 if est is None or checking or warnings or suspect else 0
         return level, "; ".join([loc.status] + [words for _, _, words in warnings]), values
 
     def _state_values(self) -> dict[str, Any]:
