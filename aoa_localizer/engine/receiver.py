@@ -89,14 +89,3 @@ def em_weights(resid, var, extra_var, grid: NoiseGrid):
         inlier += gamma
         prec += gamma / v
     return total, prec, inlier
-
-
-def posterior_sigma(resid, var, extra_var, grid: NoiseGrid, base_sigma_deg: float) -> tuple[float, float, float]:
-    """At one place: the posterior median sigma (deg, for a point of `base_sigma_deg`), its 95 % interval's ends."""
-    _, per_h = hypothesis_logs(resid, var, extra_var, grid)
-    post = np.exp(per_h - per_h.max())
-    sig = base_sigma_deg * grid.scale
-    order = np.argsort(sig)
-    cdf = np.cumsum(post[order]) / post.sum()
-    pick = [float(sig[order][min(np.searchsorted(cdf, q), len(cdf) - 1)]) for q in (0.5, 0.025, 0.975)]
-    return pick[0], pick[1], pick[2]

@@ -1,0 +1,218 @@
+"""Locate emitters from bearings taken by hand or from fixed sites (wildlife telemetry, fox hunting, DF masts).
+
+The CSV has a header row. Columns: `time` (ISO 8601 with a UTC offset, or epoch seconds), `lat`, `lon` (WGS84;
+or projected `x`, `y` with --crs EPSG:NNNN), `azimuth_deg` (clockwise from true north, unless -p bearing_reference
+says otherwise); optional `quality` (0-100), `sigma_deg` (that bearing's own standard deviation), `station` (a
+name, for the messages) and `id` (one emitter per id; no id: one emitter). Each row is a bearing taken at its own
+place. A bad row is reported with its line number and skipped, never used.
+
+Output: one JSON line per id (--output), a table on stdout, and with --report DIR a map, KML and GeoJSON of every
+id. Exit codes: 0 every id located; 1 some id has no estimate (the reason is printed); 2 unreadable input or bad
+options.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import json
+import math
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from aoa_localizer.engine.config import ConfigError
+from aoa_localizer.engine.crlb import ellipse_axes
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.types import Estimate
+from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, config_from_args, setup_logging
+
+PROG = "python -m aoa_localizer.locate"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One bearing of the survey."""
+
+    line: int
+    stamp: float
+    lat: float
+    lon: float
+    azimuth_deg: float
+    quality: float
+    sigma_deg: float
+    station: str
+    id: str
+
+
+def _stamp(text: str) -> float:
+    """Epoch seconds from epoch seconds or ISO 8601 with an offset (a time without one is ambiguous: refused)."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    when = datetime.datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
+    if when.tzinfo is None:
+        raise ValueError(f"time {text!r} has no UTC offset (write e.g. {text}+00:00)")
+    return when.timestamp()
+
+
+def _number(row: dict, name: str, required: bool = True) -> float:
+    text = (row.get(name) or "").strip()
+    if not text:
+        if required:
+            raise ValueError(f"no {name}")
+        return float("nan")
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} is not a finite number ({text!r})")
+    return value
+
+
+def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
+    """The survey's good rows and one message per bad row (with its line number); raises OSError, ValueError."""
+    to_wgs84 = None
+    if crs:
+        try:
+            from pyproj import Transformer
+            from pyproj.exceptions import CRSError
+        except ImportError as exc:
+            raise ValueError("--crs needs pyproj: pip install 'aoa_localizer[survey]' (or pyproj)") from exc
+        try:
+            to_wgs84 = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+        except CRSError as exc:
+            raise ValueError(f"--crs {crs}: {exc}") from exc
+    rows, bad = [], []
+    with open(path, newline="", encoding="utf-8-sig") as fh:
+        reader = csv.DictReader(fh)
+        header = {name.strip() for name in reader.fieldnames or []}
+        position = ("x", "y") if to_wgs84 else ("lat", "lon")
+        missing = [c for c in ("time", *position, "azimuth_deg") if c not in header]
+        if missing:
+            raise ValueError(f"{path}: the header lacks column(s) {', '.join(missing)} "
+                             f"(has: {', '.join(sorted(header))})")
+        for record in reader:
+            line = reader.line_num
+            row = {k.strip(): v for k, v in record.items() if k is not None}
+            try:
+                stamp = _stamp(row.get("time") or "")
+                if to_wgs84:
+                    lon, lat = to_wgs84.transform(_number(row, "x"), _number(row, "y"))
+                else:
+                    lat, lon = _number(row, "lat"), _number(row, "lon")
+                if not (abs(lat) <= 90 and abs(lon) <= 180):
+                    raise ValueError(f"position {lat}, {lon} is not a latitude and longitude")
+                quality, sigma = _number(row, "quality", False), _number(row, "sigma_deg", False)
+                if not math.isnan(sigma) and sigma <= 0:
+                    raise ValueError(f"sigma_deg must be positive, got {sigma}")
+                rows.append(Row(line, stamp, lat, lon, _number(row, "azimuth_deg"), quality, sigma,
+                                (row.get("station") or "").strip(), (row.get("id") or "").strip()))
+            except ValueError as exc:
+                bad.append(f"{path}:{line}: {exc}; row skipped")
+    return rows, bad
+
+
+def locate(rows: list[Row], cfg, datum: tuple[float, float]) -> tuple[Estimate | None, Localizer]:
+    """The end-of-data estimate of one emitter's bearings (each row a fixed site of its own) and its Localizer."""
+    loc = Localizer(cfg.with_changes(datum_lat=datum[0], datum_lon=datum[1]))
+    for row in sorted(rows, key=lambda r: r.stamp):
+        site = f"{row.station or 'row'}@{row.line}"
+        loc.set_station_position(site, row.lat, row.lon)
+        if math.isnan(row.sigma_deg):
+            loc.add_bearing(row.stamp, row.azimuth_deg, row.quality, station=site)
+        else:
+            loc.add_bearing_enu(row.stamp, math.radians(90.0 - row.azimuth_deg), math.radians(row.sigma_deg) ** 2,
+                                station=site)
+    loc.flush()
+    est = loc.finish() or loc.estimate
+    loc.close()
+    return est, loc
+
+
+def record(ident: str, est: Estimate, rows: int) -> dict:
+    return {"id": ident, "lat": est.lat, "lon": est.lon, "east": est.east, "north": est.north,
+            "cov": [[float(v) for v in r] for r in est.cov], "state": est.state, "warnings": list(est.warnings),
+            "bearings_used": est.bearings_used, "bearings_given": rows, "modes": est.to_json_dict()["modes"]}
+
+
+def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):
+    """map.png (bearings, estimates, 95 % ellipses), emitter.kml and emitter.geojson of every id."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from aoa_localizer.engine.crlb import ellipse_points
+    from aoa_localizer.reporting.export import geojson, kml
+
+    out.mkdir(parents=True, exist_ok=True)
+    named = [replace(est, channel=ident or "default") for ident, (est, _) in found.items()]
+    (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}), indent=1))
+    (out / "emitter.kml").write_text(kml(frame, named, {}))
+    fig, ax = plt.subplots(figsize=(8, 8))
+    for (ident, (est, rows)), colour in zip(found.items(), plt.rcParams["axes.prop_cycle"].by_key()["color"] * 99,
+                                            strict=False):
+        ring = ellipse_points((est.east, est.north), est.cov)
+        ax.plot(ring[:, 0], ring[:, 1], color=colour, label=f"{ident or 'emitter'} ({est.state})")
+        ax.plot(est.east, est.north, "+", color=colour, ms=12)
+        reach = 1.5 * max(float(np.max(np.hypot(ring[:, 0] - est.east, ring[:, 1] - est.north))), 50.0)
+        for row in rows:
+            e, n = frame.to_enu(row.lat, row.lon)
+            th = math.radians(90.0 - row.azimuth_deg)
+            ax.plot([e, e + reach * math.cos(th)], [n, n + reach * math.sin(th)], color=colour, lw=0.8, alpha=0.6)
+            ax.plot(e, n, "^", color=colour)
+    ax.set_aspect("equal")
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.legend(loc="best")
+    ax.set_title("bearings, estimates and 95 % ellipses")
+    fig.savefig(out / "map.png", dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__, formatter_class=HelpFormatter)
+    parser.add_argument("csv", type=Path, help="the bearings (CSV with a header)")
+    parser.add_argument("--output", type=Path, metavar="OUT.jsonl", help="one JSON line per id")
+    parser.add_argument("--report", type=Path, metavar="DIR", help="map.png, emitter.kml, emitter.geojson")
+    parser.add_argument("--crs", metavar="EPSG:NNNN", help="the CRS of projected x, y columns (instead of lat, lon)")
+    add_engine_args(parser)
+    args = parser.parse_args(argv)
+    setup_logging(args.verbose)
+    try:
+        cfg = config_from_args(args)
+        rows, bad = read_rows(args.csv, args.crs)
+    except (ConfigError, OSError, ValueError, UnicodeDecodeError) as exc:
+        print(f"locate: {exc}", file=sys.stderr)
+        return 2
+    for message in bad:
+        print(f"locate: {message}", file=sys.stderr)
+    if not rows:
+        print(f"locate: {args.csv}: no usable row", file=sys.stderr)
+        return 2
+    datum = (rows[0].lat, rows[0].lon)
+    frame = LocalFrame(datum[0], datum[1], 0.0)
+    groups: dict[str, list[Row]] = {}
+    for row in rows:
+        groups.setdefault(row.id, []).append(row)
+    found: dict[str, tuple[Estimate, list[Row]]] = {}
+    lines, failed = [], 0
+    print(f"{'id':<12} {'lat':>11} {'lon':>12} {'95% semi-axes (m)':>18} {'bearings':>8}  state")
+    for ident, group in groups.items():
+        est, loc = locate(group, cfg, datum)
+        if est is None:
+            failed += 1
+            print(f"{ident or '-':<12} no estimate: {loc.status}")
+            continue
+        found[ident] = (est, group)
+        a, b, _ = ellipse_axes(est.cov)
+        print(f"{ident or '-':<12} {est.lat:11.6f} {est.lon:12.6f} {a:8.0f} x {b:<8.0f} {est.bearings_used:8d}  "
+              f"{est.state}" + "".join(f"\n{'':<12} {w}" for w in est.warnings))
+        lines.append(json.dumps(record(ident, est, len(group))))
+    if args.output:
+        args.output.write_text("".join(line + "\n" for line in lines))
+    if args.report and found:
+        write_report(args.report, frame, found)
+    return 1 if failed else 0
