@@ -73,7 +73,8 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
               candidates: list[np.ndarray], by_density: bool) -> tuple[NoiseModel, np.ndarray] | None:
     """Position and noise jointly: at each candidate place, and at the best mode under the configured noise, EM
     fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins (a wrong place
-    explained by a wide noise loses to the right place with the right noise). None when the readings are too few
+    explained by a wide noise loses to the right place with the right noise), unless its core is hollow (a place
+    between two sources, whose readings cluster either side of it). None when the readings are too few
     for a fit."""
     cols = [columns(g) for g in groups]
     if sum(c.theta.size for c in cols) < 2:
@@ -99,7 +100,8 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
             if not np.isfinite(ll):
                 return None
             x = refined(x, points_of([p for p, _ in build(groups, cfg, trial)]), rob)
-        if best is None or ll > best[0]:
+        # a fit whose core is hollow explains the readings by a noise they do not have: any other wins over it
+        if best is None or (not trial.hollow, ll) > (not best[1].hollow, best[0]):
             best = (ll, trial, x)
     return None if best is None else (best[1], best[2])
 

@@ -27,6 +27,8 @@ _MIN_READINGS = 40  # fewer readings: keep the current calibration
 _EM_ITERATIONS = 25
 _K_RANGE = (0.05, 50.0)
 OUTLIER_RANGE = (0.01, 0.6)
+_MIDDLE_HALF_Z = 0.6745  # half of a Gaussian lies within this many sigmas
+_HOLLOW_SHARE, _HOLLOW_MIN_WEIGHT = 0.25, 20.0  # a core with less than half its expected share is hollow
 
 
 def band_of(quality: np.ndarray) -> np.ndarray:
@@ -62,6 +64,9 @@ class NoiseModel:
         self.reading_outlier_prob = outlier_prob
         self.fits = 0  # calibrations made
         self.readings = np.zeros(N_BANDS + 1)  # EM inlier weight per band at the last fit
+        # The last fit's core is hollow: its inliers avoid the middle of their own Gaussian (a wide noise that
+        # swallows two clusters of bearings either side of a place between two sources)
+        self.hollow = False
 
     def scale(self, quality: np.ndarray) -> np.ndarray:
         """k(Q): interpolated between band centres for known quality, the unknown band's for NaN."""
@@ -83,7 +88,7 @@ class NoiseModel:
         if ok.sum() < _MIN_READINGS:
             return float("nan")
         resid, base_sigma, band = resid[ok], base_sigma[ok], band_of(np.asarray(quality, float)[ok])
-        ll, k2, eps, w = _em(resid, base_sigma, band, self._starts(resid / base_sigma))
+        ll, k2, eps, w, self.hollow = _em(resid, base_sigma, band, self._starts(resid / base_sigma))
         self.k = np.sqrt(k2)
         self.reading_outlier_prob = eps
         self.readings = w
@@ -92,7 +97,7 @@ class NoiseModel:
 
     def copy(self) -> NoiseModel:
         other = NoiseModel(self.reading_outlier_prob)
-        other.k, other.readings, other.fits = self.k.copy(), self.readings.copy(), self.fits
+        other.k, other.readings, other.fits, other.hollow = self.k.copy(), self.readings.copy(), self.fits, self.hollow
         return other
 
     def _starts(self, z: np.ndarray) -> np.ndarray:
@@ -116,7 +121,8 @@ class NoiseModel:
 
 def _em(resid: np.ndarray, base_sigma: np.ndarray, band: np.ndarray, k0: np.ndarray):
     """EM from each starting scale in k0 (S,), all at once. Returns the best run's (log likelihood, k^2 per band,
-    outlier rate, inlier weight per band)."""
+    outlier rate, inlier weight per band, whether its core is hollow); a run with a hollow core is the best only
+    when every run's is."""
     z2 = (resid / base_sigma) ** 2
     onehot = np.zeros((resid.size, N_BANDS + 1))
     onehot[np.arange(resid.size), band] = 1.0
@@ -130,8 +136,17 @@ def _em(resid: np.ndarray, base_sigma: np.ndarray, band: np.ndarray, k0: np.ndar
         eps = np.clip(1.0 - gamma.mean(axis=1, keepdims=True), *OUTLIER_RANGE)
     gamma, dens = _responsibilities(resid, base_sigma, k2[:, band], eps)
     ll = np.log(dens).sum(axis=1)
-    b = int(np.argmax(ll))
-    return float(ll[b]), k2[b], float(eps[b, 0]), gamma[b] @ onehot
+    hollow = _hollow(gamma, z2 / k2[:, band])
+    b = int(np.argmax(np.where(hollow & ~hollow.all(), -np.inf, ll)))
+    return float(ll[b]), k2[b], float(eps[b, 0]), gamma[b] @ onehot, bool(hollow[b])
+
+
+def _hollow(gamma: np.ndarray, z2: np.ndarray) -> np.ndarray:
+    """Per run (S,): whether the inliers avoid their Gaussian's middle half (|z| < 0.674 holds half of a Gaussian):
+    fewer than _HOLLOW_SHARE of the inlier weight there, with at least _HOLLOW_MIN_WEIGHT of it."""
+    weight = gamma.sum(axis=1)
+    core = (gamma * (z2 < _MIDDLE_HALF_Z**2)).sum(axis=1)
+    return (weight >= _HOLLOW_MIN_WEIGHT) & (core < _HOLLOW_SHARE * weight)
 
 
 def _responsibilities(resid, base_sigma, k2_per_reading, eps):

@@ -21,8 +21,8 @@ SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers
 _N_SCALES = 12
 # log-normal around the configured sigma, wide enough that the span's far end is within two standard deviations
 _CENTRE_LOG_SD = 0.5 * math.log(SIGMA_SPAN_DEG[1] / SIGMA_SPAN_DEG[0])
-_OUTLIERS = (0.02, 0.1, 0.3)  # point outlier shares ...
-_OUTLIER_PRIOR = (0.5, 0.35, 0.15)  # ... and their prior weights
+_OUTLIERS = (0.02, 0.1, 0.3, 0.5)  # point outlier shares (up to a ghost as strong as the emitter) ...
+_OUTLIER_PRIOR = (0.4, 0.3, 0.2, 0.1)  # ... and their prior weights
 
 
 @dataclass(frozen=True)
