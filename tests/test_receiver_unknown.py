@@ -2,14 +2,20 @@
 proper, sparse surveys, the estimate's state, and the survey program."""
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer.engine.checks import refined
 from aoa_localizer.engine.crlb import ELLIPSE_95, inside_ellipse, nees
+from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import TWO_PI, LocalFrame
+from aoa_localizer.engine.global_search import Points, Robust, log_posterior
+from aoa_localizer.engine.offset import joint_optimum
 from aoa_localizer.engine.receiver import NoiseGrid, em_weights, marginal
+from aoa_localizer.engine.scenarios import robustness_cells, simulate
 from aoa_localizer.engine.surveys import DATUM, Survey, hand_held, least_squares_fix, locate_survey
 from aoa_localizer.tools import locate
 
@@ -147,3 +153,32 @@ def test_locate_refuses_a_csv_without_its_columns(tmp_path, cli):
     path.write_text("time,lat,lon\n1,2,3\n")
     res = cli(locate.main, path)
     assert res.returncode == 2 and "azimuth_deg" in res.stderr
+
+
+def test_the_joint_optimum_finds_a_constant_offset_on_a_drive_with_a_turn():
+    """An L-shaped drive, bearings 1 deg noisy and all 20 deg off (ENU): the joint (place, offset) optimum finds
+    both; the place alone cannot explain them."""
+    rng = np.random.default_rng(5)
+    east = np.concatenate([np.linspace(0, 800, 20), np.full(20, 800.0)])
+    north = np.concatenate([np.zeros(20), np.linspace(0, 800, 20)])
+    truth = np.array([300.0, 500.0])
+    theta = np.arctan2(truth[1] - north, truth[0] - east) + math.radians(20) + math.radians(1) * rng.standard_normal(40)
+    pts = Points(east, north, theta, np.full(40, math.radians(1.0)))
+    rob = Robust(0.05)
+    b, x, lp = joint_optimum(pts, np.array([400.0, 400.0]), rob)
+    assert math.degrees(b) == pytest.approx(20.0, abs=1.0)
+    assert np.hypot(*(x - truth)) < 15.0
+    assert lp > float(log_posterior(refined(x, pts, rob), pts, rob)) + 100
+
+
+@pytest.mark.slow
+def test_a_mount_offset_left_at_0_is_learned_and_named_not_a_confident_wrong_answer():
+    """The robustness drive (turns), every azimuth 30 deg off, defaults: the final estimate holds the truth and is
+    `suspect` with a warning that names the settings to check."""
+    data = simulate(replace(robustness_cells()["wild0"], name="offset"), 3)
+    data.bearings[:, 1] = (data.bearings[:, 1] + 30.0) % 360.0
+    res = run(data, LocalizerConfig(seed=3))
+    est = res.estimates[-1]
+    assert res.scores["inside95"], res.scores
+    assert est.state == "suspect" and any("mount_offset_deg" in w for w in est.warnings), est.warnings
+    assert res.localizer.emitter.offset_deg == pytest.approx(-30.0, abs=1.5)

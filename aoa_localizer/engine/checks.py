@@ -29,9 +29,11 @@ import numpy as np
 from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.engine.geodesy import wrap_pi, wrap_pi_float
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, refine, residuals
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
+from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
 from aoa_localizer.engine.preprocess import SMALL_POINT, Columns, Group, columns, group_size, make_point
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
@@ -50,9 +52,18 @@ def sigmas(group: list[Reading], noise: NoiseModel | None) -> np.ndarray:
     return cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
 
 
-def build(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: NoiseModel | None) -> list[Built]:
-    """Each group's observation point under `noise` (None: the configured sigmas)."""
-    return [make_point(group, cfg, sigmas(group, noise)) for group in groups]
+def build(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: NoiseModel | None,
+          offset: float = 0.0) -> list[Built]:
+    """Each group's observation point under `noise` (None: the configured sigmas), `offset` (rad) taken off."""
+    return [offset_point(make_point(group, cfg, sigmas(group, noise)), offset) for group in groups]
+
+
+def offset_point(built: Built, offset: float) -> Built:
+    """A point with a learned bearing offset (rad, offset.py) taken off its bearing."""
+    if not offset:
+        return built
+    point, kept = built
+    return replace(point, theta=wrap_pi_float(point.theta - offset)), kept
 
 
 def rows_of(points: Sequence[ObservationPoint]) -> np.ndarray:
@@ -70,12 +81,14 @@ def refined(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
 
 
 def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: NoiseModel, rob: Robust,
-              candidates: list[np.ndarray], by_density: bool) -> tuple[NoiseModel, np.ndarray] | None:
+              candidates: list[np.ndarray], by_density: bool,
+              offset: float = 0.0) -> tuple[NoiseModel, np.ndarray, float] | None:
     """Position and noise jointly: at each candidate place, and at the best mode under the configured noise, EM
     fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins (a wrong place
     explained by a wide noise loses to the right place with the right noise), unless its core is hollow (a place
-    between two sources, whose readings cluster either side of it). None when the readings are too few
-    for a fit."""
+    between two sources, whose readings cluster either side of it). Then, with `learn_offset`, a constant bearing
+    offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
+    reference's prior log odds. Returns (noise, place, offset); None when the readings are too few for a fit."""
     cols = [columns(g) for g in groups]
     if sum(c.theta.size for c in cols) < 2:
         return None
@@ -87,23 +100,52 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
 
     rob = replace(rob, grid=None)  # each trial noise is taken as it is
     quality, base = joined("quality"), joined("sigma")
-    at_readings = Points(joined("east"), joined("north"), joined("theta"), base)
-    configured = points_of([p for p, _ in build(groups, cfg, None)])
+    at_readings = shifted(Points(joined("east"), joined("north"), joined("theta"), base), offset)
+    configured = points_of([p for p, _ in build(groups, cfg, None, offset)])
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
     narrow = find_modes(configured, Robust(eps, cfg.gps_sigma_m), by_density=by_density)
-    best = None
-    for x in list(candidates) + [m.mean for m in narrow[:1]]:
-        trial = noise.copy()
-        ll = float("nan")
-        for _ in range(2):  # alternate: noise at x, then x under that noise
-            ll = trial.fit(residuals(x, at_readings), quality, base)
+
+    def joint(x: np.ndarray, b: float) -> tuple[float, NoiseModel, np.ndarray] | None:
+        """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
+        trial, ll, readings = noise.copy(), float("nan"), shifted(at_readings, b - offset)
+        for _ in range(2):
+            ll = trial.fit(residuals(x, readings), quality, base)
             if not np.isfinite(ll):
                 return None
-            x = refined(x, points_of([p for p, _ in build(groups, cfg, trial)]), rob)
+            x = refined(x, points_of([p for p, _ in build(groups, cfg, trial, b)]), rob)
+        return ll, trial, x
+
+    best = None
+    for x in list(candidates) + [m.mean for m in narrow[:1]]:
+        fit = joint(x, offset)
+        if fit is None:
+            return None
         # a fit whose core is hollow explains the readings by a noise they do not have: any other wins over it
-        if best is None or (not trial.hollow, ll) > (not best[1].hollow, best[0]):
-            best = (ll, trial, x)
-    return None if best is None else (best[1], best[2])
+        if best is None or (not fit[1].hollow, fit[0]) > (not best[1].hollow, best[0]):
+            best = fit
+    if best is None:
+        return None
+    ll, trial, x = best
+    if cfg.learn_offset:
+        found = _offset_fit(points_of([p for p, _ in build(groups, cfg, trial, offset)]), x, rob, offset, joint)
+        # a first offset must beat the bearing reference's prior odds; one already learned is refined by any gain
+        needed = 0.0 if offset else PRIOR_LOG_ODDS[cfg.bearing_reference]
+        if found is not None and found[0] > ll + needed:
+            return found[1], found[2], found[3]
+    return trial, x, offset
+
+
+def _offset_fit(pts: Points, x: np.ndarray, rob: Robust, offset: float,
+                joint: Callable[[np.ndarray, float], tuple[float, NoiseModel, np.ndarray] | None]
+                ) -> tuple[float, NoiseModel, np.ndarray, float] | None:
+    """The joint (place, offset) optimum from x (offset.py) with the noise fitted again there: (log likelihood,
+    noise, place, offset); None when the optimum is the current offset, or its fit's core is hollow."""
+    b, x_b, _ = joint_optimum(pts, x, rob)
+    if not b:
+        return None
+    total = float(wrap_pi(offset + b))
+    fit = joint(x_b, total)
+    return None if fit is None or fit[1].hollow else (fit[0], fit[1], fit[2], total)
 
 
 @dataclass
@@ -120,6 +162,7 @@ class Snapshot:
     rob: Robust
     best_particle: np.ndarray | None = None  # None before the start
     mode_means: list[np.ndarray] = field(default_factory=list)
+    offset: float = 0.0  # the bearing offset learned so far (rad, offset.py)
 
     def __getstate__(self) -> dict:
         """For the worker process: the readings' fields as one array and the group sizes (a list of Reading
@@ -163,6 +206,7 @@ class CheckResult:
     built: list[Built]
     modes: list[Mode]
     hint: ClockHint | None = None
+    offset: float = 0.0  # the bearing offset the fit found (rad; the snapshot's when no fit was made)
     why: str = ""  # a start search without a usable mode, or a best mode not determined enough to start from: why
     searched: int = 0  # points in the snapshot
     determined: bool = True  # a start search: the best mode is determined enough to start the filter from
@@ -176,19 +220,21 @@ class _Calibrated:
         self.noise: NoiseModel | None = None
         self.at: np.ndarray | None = None
         self.built: list[Built] = []
+        self.offset = snap.offset
 
     def fit(self, candidates: list[np.ndarray], by_density: bool):
         snap = self.snap
-        fit = fit_noise(snap.groups, snap.cfg, snap.noise, snap.rob, candidates, by_density)
+        fit = fit_noise(snap.groups, snap.cfg, snap.noise, snap.rob, candidates, by_density, snap.offset)
         if fit is not None:
-            self.noise, self.at = fit
-            self.built = build(snap.groups, snap.cfg, self.noise)
+            self.noise, self.at, self.offset = fit
+            self.built = build(snap.groups, snap.cfg, self.noise, self.offset)
             self.pts = points_of([p for p, _ in self.built])
             self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.outlier)
 
     def result(self, modes: list[Mode], hint: ClockHint | None = None, why: str = "",
                determined: bool = True) -> CheckResult:
-        return CheckResult(self.noise, self.at, self.built, modes, hint, why, len(self.snap.rows), determined)
+        return CheckResult(self.noise, self.at, self.built, modes, hint, self.offset, why, len(self.snap.rows),
+                           determined)
 
 
 def run_check(snap: Snapshot) -> CheckResult:

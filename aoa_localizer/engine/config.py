@@ -419,6 +419,11 @@ class LocalizerConfig:
         "deg centred on the configured sigma, marginalised with the position) until the readings calibrate them; "
         "`fixed`: the configured sigma is taken as known (then calibrated when `calibrate_noise`)",
     )
+    learn_offset: bool = param(
+        True,
+        "learn a constant bearing offset (a mount offset, a forgotten declination) where the data determine it, "
+        "at the noise calibrations, and report it; the evidence needed follows `bearing_reference`",
+    )
     global_safety: bool = param(
         True,
         "health test, global searches, independence MH moves, re-starts and the "

@@ -33,6 +33,7 @@ from aoa_localizer.engine.checks import (
     CheckWorker,
     Snapshot,
     fit_noise,
+    offset_point,
     points_of,
     refined,
     rows_of,
@@ -103,6 +104,7 @@ class EmitterTrack:
         # The receiver's noise as latent hypotheses, marginalised with the position until the readings calibrate it
         # (None: known, or calibrated)
         self.grid: NoiseGrid | None = None
+        self.offset = 0.0  # a constant bearing offset the data determined (ENU rad, offset.py), taken off every point
         if cfg.noise == "unknown" and cfg.likelihood == "mixture":
             self.grid = NoiseGrid.weak(configured_sigma_deg(cfg))
         # (readings, point, readings gated out) per point: the points waiting for a start, then the filter's
@@ -149,7 +151,8 @@ class EmitterTrack:
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         """The point of `readings` under the calibrated noise model (the readings' own sigmas until calibrated)."""
-        return make_point(readings, self.cfg, self.sigmas(readings) if self.cfg.calibrate_noise else None)
+        made = make_point(readings, self.cfg, self.sigmas(readings) if self.cfg.calibrate_noise else None)
+        return offset_point(made, self.offset)
 
     @property
     def running(self) -> ParticleFilter:
@@ -286,7 +289,7 @@ class EmitterTrack:
             self.next_start_try = 0
             return self._try_start()
         if res.noise is not None and res.at is not None:
-            self._apply_calibration(res.noise, res.at, _by_group(groups, res.built))
+            self._apply_calibration(res.noise, res.at, _by_group(groups, res.built), res.offset)
         modes = res.modes
         if not modes or not res.determined:
             self.status = f"waiting for geometry: {res.why}"
@@ -499,7 +502,7 @@ class EmitterTrack:
         best = f.x[np.argmax(f.log_target(f.x))].copy() if f is not None and self.cfg.calibrate_noise else None
         groups, rows = [g for g, _, _ in self.window], rows_of([p for _, p, _ in self.window])
         return Snapshot(self.cfg, groups, rows, self.noise.copy(), self.outlier_prob,
-                        self.robust(), best, [m.mean.copy() for m in self.modes[:1]])
+                        self.robust(), best, [m.mean.copy() for m in self.modes[:1]], self.offset)
 
     def pay_owed(self) -> bool:
         """One move owed (`scheduling: realtime`: a global check's move on the modes, then the filter's sweeps),
@@ -559,7 +562,7 @@ class EmitterTrack:
         """The cheap part of a global check, on the current cloud and points: re-weight by the fitted noise,
         emitter-moved test (in alarm), then the modes' MH move or a re-start from a far better mode."""
         if res.noise is not None and res.at is not None:
-            self._apply_calibration(res.noise, res.at, _by_group(groups, res.built))
+            self._apply_calibration(res.noise, res.at, _by_group(groups, res.built), res.offset)
         if self.health.alarm_since is not None and self._emitter_moved():
             return
         modes = res.modes
@@ -600,14 +603,22 @@ class EmitterTrack:
         fit = fit_noise([g for g, _, _ in self.window], self.cfg, self.noise, self.robust(), candidates, by_density)
         if fit is None:
             return False
-        self._apply_calibration(*fit, {})
+        noise, at, offset = fit
+        self._apply_calibration(noise, at, {}, offset)
         return True
 
-    def _apply_calibration(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]]):
-        """Adopt `noise` (fitted at the place `at`): rebuild the kept points with it (`built`: points already made
-        with it, by their group's identity), re-estimate the point outlier share, re-weight the cloud by the change
-        of posterior."""
+    def _apply_calibration(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]],
+                           offset: float):
+        """Adopt `noise` and the bearing `offset` (fitted at the place `at`): rebuild the kept points with them
+        (`built`: points already made with them, by their group's identity), re-estimate the point outlier share,
+        re-weight the cloud by the change of posterior (a changed offset moves the posterior: the check's re-start
+        test that follows finds the new place)."""
         self.noise = noise
+        if offset != self.offset:
+            self.offset = offset
+            self.events["offset_learned"] += 1
+            log.warning("the bearings look %+.1f deg off the true bearings: learned, and taken off every bearing (%s)",
+                        self.offset_deg, self._offset_advice())
         f = self.filter  # None while waiting to start: only the points are rebuilt
         old = f.log_target(f.x) if f is not None else None
         rebuilt: deque = deque()
@@ -694,6 +705,20 @@ class EmitterTrack:
         return modes[0] if modes else None
 
     # -- what the estimate reports -----------------------------------------------------------------------
+    @property
+    def offset_deg(self) -> float:
+        """The learned offset as azimuth degrees: true azimuth = read azimuth + this."""
+        return math.degrees(self.offset)
+
+    def _offset_advice(self) -> str:
+        cfg = self.cfg
+        if cfg.bearing_reference == "vehicle":
+            return f"set mount_offset_deg to {cfg.mount_offset_deg + self.offset_deg:.1f}?"
+        if cfg.bearing_reference == "magnetic_north":
+            return f"set magnetic_declination_deg to {cfg.magnetic_declination_deg + self.offset_deg:.1f}?"
+        return ("a magnetic declination or mount offset not applied, or the DF's north reference set wrong "
+                "(bearing_reference, magnetic_declination_deg, mount_offset_deg)?")
+
     def assess(self, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[str, list[str]]:
         """The estimate's state and the warnings behind it (docs/interface.md, "Estimate states"): `suspect` when
         the model does not fit the bearings, `poorly_determined` when the posterior is proper but wide or
@@ -709,6 +734,9 @@ class EmitterTrack:
         if wild > _SUSPECT_WILD_SHARE:
             warnings.append(f"{100 * wild:.0f} % of the bearings look wild: a bearing offset or reference set wrong "
                             "(bearing_reference, mount_offset_deg, magnetic_declination_deg), or heavy multipath")
+        if self.offset:
+            warnings.append(f"the bearings look {self.offset_deg:+.1f} deg off the true bearings (true azimuth = read "
+                            f"azimuth {self.offset_deg:+.1f} deg), learned and corrected: {self._offset_advice()}")
         if warnings:
             return "suspect", warnings
         pts = self.points() if self.window else None
