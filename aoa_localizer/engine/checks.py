@@ -251,6 +251,13 @@ def run_check(snap: Snapshot) -> CheckResult:
     return cal.result(modes, hint)
 
 
+def ellipse_and_reach(mean: np.ndarray, cov: np.ndarray, east: np.ndarray, north: np.ndarray) -> tuple[float, float]:
+    """The 95 % ellipse's semi-major axis and the distance from `mean` to the nearest antenna (at least 1 m), m: a
+    place is determined when the first is small against the second."""
+    reach = max(1.0, float(np.min(np.hypot(east - mean[0], north - mean[1]))))
+    return math.sqrt(ELLIPSE_95 * max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)), reach
+
+
 def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float, final: bool = False) -> CheckResult:
     """Modes of the robust posterior over the points waiting for a start (highest density first: under a flat
     prior a far, poorly determined mode gains Laplace mass from its size), after a noise fit when the best is
@@ -273,9 +280,7 @@ def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: floa
     if best.inliers < min_inliers:
         return cal.result(modes, why=f"the best place explains only {best.inliers} points (needs {min_inliers})",
                           determined=False)
-    pts = cal.pts
-    reach = max(1.0, float(np.min(np.hypot(pts.east - best.mean[0], pts.north - best.mean[1]))))
-    size = math.sqrt(ELLIPSE_95 * float(np.linalg.eigvalsh(best.cov)[-1]))
+    size, reach = ellipse_and_reach(best.mean, best.cov, cal.pts.east, cal.pts.north)
     if size > max_ellipse_range_share * reach:
         return cal.result(modes, why=f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m from "
                           "the track", determined=False)

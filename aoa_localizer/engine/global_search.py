@@ -140,10 +140,18 @@ def _weights(resid, sigma2, extras: tuple, rob: Robust):
     return gamma / var, gamma
 
 
+def linearised(x: np.ndarray, pts: Points, rob: Robust):
+    """At places x (..., 2): the points' residuals (..., K), the bearings' gradients d bearing / d x (..., K, 2),
+    the EM precision weights and the EM inlier weights (..., K): what a Gauss-Newton step and a Laplace
+    approximation need."""
+    resid, r2, grad = _geometry(x, pts)
+    w, gamma = _weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0),), rob)
+    return resid, grad, w, gamma
+
+
 def inlier_share(x: np.ndarray, pts: Points, rob: Robust) -> float:
     """Share of the points whose EM inlier weight at the place x (2,) is above one half."""
-    resid, _, _, r2 = _residuals(np.asarray(x, float), pts)
-    return float(np.mean(_weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0),), rob)[1] > 0.5))
+    return float(np.mean(linearised(np.asarray(x, float), pts, rob)[3] > 0.5))
 
 
 def reach_log_prior(x: np.ndarray, reach: tuple[float, float, float]) -> np.ndarray:
@@ -216,8 +224,7 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
     for level in levels:
         for _ in range(_ITER_PER_STAGE if len(levels) > 1 else _POLISH_ITERATIONS):
             x, info, _ = _gn_step(x, pts, rob, level * widen, prec)
-    resid, r2, grad = _geometry(x, pts)
-    w, gamma = _weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0),), rob)
+    _, grad, w, gamma = linearised(x, pts, rob)
     info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-12 * np.eye(2)
     return x, inverse_2x2(info), gamma
 

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from aoa_localizer.engine.geodesy import wrap_pi
-from aoa_localizer.engine.global_search import Points, Robust, log_posterior, residuals
+from aoa_localizer.engine.global_search import Points, Robust, linearised, log_posterior
 
 _STARTS_DEG = np.arange(-90.0, 91.0, 15.0)  # offsets the joint search starts from, around the current one
 _ITERATIONS = 30
@@ -40,18 +40,11 @@ def joint_optimum(pts: Points, x0: np.ndarray, rob: Robust) -> tuple[float, np.n
 
 
 def _gauss_newton(pts: Points, x: np.ndarray, b: float, rob: Robust) -> tuple[float, np.ndarray, float]:
-    """(offset, place, log posterior) after damped Gauss-Newton steps from (x, b); the residual of point i is
-    theta_i - b - bearing_i(x), its derivatives (dy / r^2, -dx / r^2, -1)."""
+    """(offset, place, log posterior) after damped Gauss-Newton steps from (x, b) with the mixture's EM weights."""
     lp = float(log_posterior(x, shifted(pts, b), rob))
     for _ in range(_ITERATIONS):
-        moved = shifted(pts, b)
-        r = residuals(x, moved)
-        dx, dy = x[0] - pts.east, x[1] - pts.north
-        r2 = np.maximum(dx * dx + dy * dy, 1e-6)
-        var = pts.sigma**2 + pts.gps_var(rob) / np.maximum(r2, 1.0)
-        g = np.exp(-0.5 * r * r / var) / np.sqrt(2 * math.pi * var) * (1 - rob.outlier_prob)
-        w = g / (g + rob.outlier_prob / (2 * math.pi)) / var  # EM inlier weight over variance
-        jac = np.stack([dy / r2, -dx / r2, -np.ones_like(r)], axis=1)
+        r, grad, w, _ = linearised(x, shifted(pts, b), rob)
+        jac = np.column_stack([-grad, -np.ones_like(r)])  # of the residual theta - b - bearing(x)
         info = (jac * w[:, None]).T @ jac + 1e-9 * np.eye(3)
         try:
             delta = -np.linalg.solve(info, jac.T @ (w * r))

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import TWO_PI
+from aoa_localizer.engine.preprocess import reading_sigma
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers
@@ -46,8 +48,12 @@ class NoiseGrid:
         outlier = np.tile(np.array(_OUTLIERS), _N_SCALES)
         return cls(scale, outlier, np.log(w / w.sum()))
 
-    def __len__(self) -> int:
-        return self.scale.size
+    @classmethod
+    def for_config(cls, cfg: LocalizerConfig) -> NoiseGrid:
+        """weak() centred on the configured sigma: `bearing_sigma_deg`, or the geometric middle of sigma(Q)."""
+        if cfg.sigma_model == "constant":
+            return cls.weak(cfg.bearing_sigma_deg)
+        return cls.weak(math.degrees(math.sqrt(reading_sigma(40.0, cfg) * reading_sigma(100.0, cfg))))
 
 
 def _hypothesis_terms(resid2, var, extra_var, scale: float, outlier: float):
@@ -60,32 +66,34 @@ def _hypothesis_terms(resid2, var, extra_var, scale: float, outlier: float):
 def marginal(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
     """log sum_h prior_h prod_k p(resid_k | h): resid, var (points' sigma^2), extra_var (antenna position and
     smoothing terms, not scaled) broadcast to (..., K); returns (...)."""
-    return hypothesis_logs(resid, var, extra_var, grid)[0]
-
-
-def hypothesis_logs(resid, var, extra_var, grid: NoiseGrid):
-    """(marginal (...), per-hypothesis log joint (..., H)) over the K points on the last axis."""
-    resid2 = np.square(resid)
-    per_h = np.stack([_hypothesis_terms(resid2, var, extra_var, s, e)[0].sum(axis=-1) + lp
-                      for s, e, lp in zip(grid.scale.tolist(), grid.outlier.tolist(), grid.log_prior.tolist(),
-                                          strict=True)], axis=-1)
-    top = np.max(per_h, axis=-1, keepdims=True)
-    top = np.where(np.isfinite(top), top, 0.0)
-    total = np.log(np.sum(np.exp(per_h - top), axis=-1)) + top[..., 0]
-    return total, per_h
+    return _joint(_terms(resid, var, extra_var, grid), grid)[0]
 
 
 def em_weights(resid, var, extra_var, grid: NoiseGrid):
     """The marginal's EM quantities at each place: (log marginal (...), precision weight (..., K) = E[inlier /
     variance], inlier weight (..., K)), the expectations over the hypotheses' posterior at that place."""
-    resid2 = np.square(resid)
-    total, per_h = hypothesis_logs(resid, var, extra_var, grid)
+    terms = _terms(resid, var, extra_var, grid)
+    total, per_h = _joint(terms, grid)
     post = np.exp(per_h - total[..., None])  # (..., H)
-    prec = np.zeros(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
+    prec = np.zeros(np.shape(terms[0][0]))
     inlier = np.zeros_like(prec)
-    for h, (s, e) in enumerate(zip(grid.scale.tolist(), grid.outlier.tolist(), strict=True)):
-        ll, g, v = _hypothesis_terms(resid2, var, extra_var, s, e)
+    for h, (ll, g, v) in enumerate(terms):
         gamma = np.exp(g - ll) * post[..., h:h + 1]
         inlier += gamma
         prec += gamma / v
     return total, prec, inlier
+
+
+def _terms(resid, var, extra_var, grid: NoiseGrid) -> list:
+    """_hypothesis_terms of every hypothesis."""
+    resid2 = np.square(resid)
+    return [_hypothesis_terms(resid2, var, extra_var, s, e)
+            for s, e in zip(grid.scale.tolist(), grid.outlier.tolist(), strict=True)]
+
+
+def _joint(terms: list, grid: NoiseGrid):
+    """(log marginal (...), per-hypothesis log joint (..., H)) from the hypotheses' per-point terms (..., K)."""
+    per_h = np.stack([ll.sum(axis=-1) for ll, _, _ in terms], axis=-1) + grid.log_prior
+    top = np.max(per_h, axis=-1, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    return np.log(np.sum(np.exp(per_h - top), axis=-1)) + top[..., 0], per_h

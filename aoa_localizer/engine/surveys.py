@@ -14,6 +14,7 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_360
+from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.types import Estimate
 
 DATUM = (46.5, -84.3, 200.0)  # a western-hemisphere datum, away from the vehicle scenarios'
@@ -58,16 +59,42 @@ def least_squares_fix(stations: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarr
     return np.linalg.solve(a, n.T @ np.einsum("ki,ki->k", n, stations))
 
 
-def locate_survey(survey: Survey, cfg: LocalizerConfig | None = None) -> Estimate | None:
-    """Feed a survey to a Localizer as fixed stations (one per bearing) and return its end-of-data estimate."""
-    from aoa_localizer.engine.localizer import Localizer  # the engine's top; this module is below it
+@dataclass(frozen=True)
+class SiteBearing:
+    """One bearing taken at a site of its own (a surveyor's stop, a fixed mast): WGS84, azimuth from true north,
+    and optionally its quality or its own sigma (deg)."""
 
-    cfg = cfg or LocalizerConfig()
-    loc = Localizer(cfg.with_changes(datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
+    site: str
+    stamp: float
+    lat: float
+    lon: float
+    azimuth_deg: float
+    quality: float = math.nan
+    sigma_deg: float = math.nan
+
+
+def locate_bearings(bearings: list[SiteBearing], cfg: LocalizerConfig) -> tuple[Estimate | None, Localizer]:
+    """One emitter's bearings fed as fixed sites in stamp order; the end-of-data estimate and its Localizer."""
+    loc = Localizer(cfg)
+    for b in sorted(bearings, key=lambda b: b.stamp):
+        loc.set_station_position(b.site, b.lat, b.lon)
+        if math.isnan(b.sigma_deg):
+            loc.add_bearing(b.stamp, b.azimuth_deg, b.quality, station=b.site)
+        else:
+            loc.add_bearing_enu(b.stamp, math.radians(90.0 - b.azimuth_deg), math.radians(b.sigma_deg) ** 2,
+                                station=b.site)
+    loc.flush()
+    est = loc.finish() or loc.estimate
+    loc.close()
+    return est, loc
+
+
+def locate_survey(survey: Survey, cfg: LocalizerConfig | None = None) -> Estimate | None:
+    """A simulated survey's end-of-data estimate (datum DATUM)."""
     frame = LocalFrame(*DATUM)
+    bearings = []
     for i, ((e, n), az, t) in enumerate(zip(survey.stations, survey.azimuth_deg, survey.stamps, strict=True)):
         lat, lon, _ = frame.to_geodetic(e, n)
-        loc.set_station_position(f"s{i}", lat, lon)
-        loc.add_bearing(t, az, station=f"s{i}")
-    loc.flush()
-    return loc.finish() or loc.estimate
+        bearings.append(SiteBearing(f"s{i}", float(t), float(lat), float(lon), float(az)))
+    cfg = (cfg or LocalizerConfig()).with_changes(datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2])
+    return locate_bearings(bearings, cfg)[0]

@@ -32,6 +32,7 @@ from aoa_localizer.engine.checks import (
     CheckResult,
     CheckWorker,
     Snapshot,
+    ellipse_and_reach,
     fit_noise,
     offset_point,
     points_of,
@@ -54,7 +55,7 @@ from aoa_localizer.engine.global_search import (
     residuals,
 )
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
-from aoa_localizer.engine.preprocess import make_point, reading_sigma
+from aoa_localizer.engine.preprocess import make_point
 from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
 from aoa_localizer.engine.triangulation import initial_particles
@@ -71,7 +72,7 @@ log = logging.getLogger("aoa_localizer")
 _PRIOR_RANGE_FACTOR = 10.0
 _PRIOR_MIN_SIGMA_M = 100.0
 _PROVISIONAL_PARTICLES = 1000
-ELLIPSE_MASS = 0.95  # the share of the posterior a provisional estimate's ELLIPSE_95 ellipse holds
+_ELLIPSE_MASS = 0.95  # the share of the posterior a provisional estimate's ELLIPSE_95 ellipse holds
 # The radio-range prior's scale: this many times the antennas' spread, at least this many metres.
 _REACH_FACTOR, _REACH_MIN_M = 2.0, 100.0
 _START_SWEEPS = 3  # random-walk MH sweeps that spread the importance sample's duplicates
@@ -106,7 +107,7 @@ class EmitterTrack:
         self.grid: NoiseGrid | None = None
         self.offset = 0.0  # a constant bearing offset the data determined (ENU rad, offset.py), taken off every point
         if cfg.noise == "unknown" and cfg.likelihood == "mixture":
-            self.grid = NoiseGrid.weak(configured_sigma_deg(cfg))
+            self.grid = NoiseGrid.for_config(cfg)
         # (readings, point, readings gated out) per point: the points waiting for a start, then the filter's
         # history
         self.window: deque[tuple[list[Reading], ObservationPoint, int]] = deque()
@@ -185,7 +186,7 @@ class EmitterTrack:
         except np.linalg.LinAlgError:
             return centre, cov
         order = np.argsort(d2)
-        at = min(int(np.searchsorted(np.cumsum(w[order]), ELLIPSE_MASS)), len(order) - 1)
+        at = min(int(np.searchsorted(np.cumsum(w[order]), _ELLIPSE_MASS)), len(order) - 1)
         return centre, cov * max(float(d2[order][at]), 1e-12) / ELLIPSE_95
 
     @property
@@ -319,7 +320,8 @@ class EmitterTrack:
         sigma = max(
             _PRIOR_MIN_SIGMA_M, _PRIOR_RANGE_FACTOR * math.hypot(best.mean[0] - last.east, best.mean[1] - last.north)
         )
-        f = self._new_filter()
+        # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (few points: cheap)
+        f = self._new_filter(None if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES))
         model = cast(EmitterModel, f.model)
         model.set_prior(best.mean, sigma**2 * np.eye(2))
         model.reach = self.reach()
@@ -328,10 +330,7 @@ class EmitterTrack:
             model.observe(p)
         f.k = len(self.window)
         self.proposal = ModeProposal(modes, self._broad_sigma(best.mean))
-        # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (few points: cheap)
-        n = self.cfg.num_particles if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES)
-        particles = importance_sample(f.log_target, self.proposal, n, self.rng)
-        f.n = n
+        particles = importance_sample(f.log_target, self.proposal, f.n, self.rng)
         f.initialise(particles, best.mean, sigma**2 * np.eye(2))
         if start:
             self.start_cloud = f.x.copy()
@@ -372,10 +371,13 @@ class EmitterTrack:
             result = self._update(readings, point, gated) or result
         return result
 
-    def _new_filter(self) -> ParticleFilter:
+    def _new_filter(self, particles: int | None = None) -> ParticleFilter:
+        """A filter on a new emitter model (with the latent noise while it is latent); `particles`: N if not the
+        configured one."""
         model = EmitterModel(self.cfg)
         model.grid = self.grid
-        f = make_filter(self.cfg, self.rng, model)
+        cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
+        f = make_filter(cfg, self.rng, model)
         if self.worker is not None and isinstance(f, ResampleMove):  # realtime: a bounded step
             f.sweeps_per_point = 1
         return f
@@ -739,12 +741,11 @@ class EmitterTrack:
                             f"azimuth {self.offset_deg:+.1f} deg), learned and corrected: {self._offset_advice()}")
         if warnings:
             return "suspect", warnings
-        pts = self.points() if self.window else None
-        reach = float(np.min(np.hypot(pts.east - mean[0], pts.north - mean[1]))) if pts is not None else math.inf
-        size = math.sqrt(ELLIPSE_95 * max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
         if self.filter is None:
             return "poorly_determined", [f"few or poorly crossing bearings: {self.status}"]
-        if size > _MAX_ELLIPSE_RANGE_SHARE * max(reach, 1.0):
+        h = self.model.history.data
+        size, reach = ellipse_and_reach(mean, cov, h[:, 0], h[:, 1])
+        if size > _MAX_ELLIPSE_RANGE_SHARE * reach:
             return "poorly_determined", [f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]
         if len(modes) > 1 and modes[1][2] >= _AMBIGUOUS_MASS:
             return "poorly_determined", [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
@@ -773,9 +774,3 @@ def _by_group(groups: list[list[Reading]], built: list[Built]) -> dict[int, tupl
     """A check's points rebuilt with its noise, by their group's identity (empty when the check made none)."""
     return {id(g): (g, b) for g, b in zip(groups, built, strict=True)} if built else {}
 
-
-def configured_sigma_deg(cfg: LocalizerConfig) -> float:
-    """The configured reading sigma (deg) the latent noise's prior is centred on (the geometric middle of sigma(Q))."""
-    if cfg.sigma_model == "constant":
-        return cfg.bearing_sigma_deg
-    return math.degrees(math.sqrt(reading_sigma(40.0, cfg) * reading_sigma(100.0, cfg)))

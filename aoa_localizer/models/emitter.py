@@ -6,8 +6,8 @@ import math
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.global_search import reach_log_prior
-from aoa_localizer.engine.receiver import NoiseGrid, marginal
+from aoa_localizer.engine.global_search import Points, Robust, log_posterior, reach_log_prior
+from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.models.base import StateSpaceModel
 from aoa_localizer.models.likelihood import BearingLikelihood
@@ -70,24 +70,16 @@ class EmitterModel(StateSpaceModel):
 
     def loglik(self, x, p: ObservationPoint, k=None):
         if self.grid is not None and len(self.history) and self.history.data[-1, 2] == p.theta:
-            # The noise is shared by all points: the new point's weight is the predictive ratio of the marginals
-            # with and without it (the filter observes a point before weighting it).
+            # The noise is shared by all points: the newest point's weight is the predictive ratio of the posteriors
+            # with and without it (every filter weights a point after observing it).
             h = self.history.data
-            return self._marginal(x, h) - self._marginal(x, h[:-1])
+            return self._latent_posterior(x, h) - self._latent_posterior(x, h[:-1])
         return self.lik.log(x, p.east, p.north, p.theta, p.sigma, p.gps_sigma)
 
-    def _marginal(self, x, h: np.ndarray) -> np.ndarray:
-        """log p(points h | x) with the noise marginalised over the grid."""
-        if not len(h):
-            return np.zeros(np.shape(x)[:-1])
-        assert self.grid is not None
-        x = np.asarray(x, float)[..., None, :]
-        dx, dy = x[..., 0] - h[:, 0], x[..., 1] - h[:, 1]
-        c, s = np.cos(h[:, 2]), np.sin(h[:, 2])
-        r = np.arctan2(dx * s - dy * c, dx * c + dy * s)
-        gps_var = self.lik.gps_var + np.square(h[:, 4])
-        extra = gps_var / np.maximum(dx * dx + dy * dy, 1.0) if np.any(gps_var) else np.zeros(1)
-        return marginal(r, np.square(h[:, 3]), extra, self.grid)
+    def _latent_posterior(self, x, h: np.ndarray) -> np.ndarray:
+        """The log posterior over the points h with the noise marginalised over the grid: the global search's."""
+        rob = Robust(0.0, math.sqrt(self.lik.gps_var), self.prior_mean, self.prior_prec, self.grid, self.reach)
+        return log_posterior(np.asarray(x, float), Points.of(h), rob)
 
     def usable(self, p: ObservationPoint) -> bool:
         return math.isfinite(p.theta) and p.sigma > 0 and math.isfinite(p.east) and math.isfinite(p.north)
@@ -97,13 +89,13 @@ class EmitterModel(StateSpaceModel):
 
     def log_posterior(self, x: np.ndarray) -> np.ndarray:
         """Log posterior of a static emitter over the kept history (up to a constant), for move steps."""
+        h = self.history.data
+        if self.grid is not None:
+            return self._latent_posterior(x, h)
         d = x - self.prior_mean
         lp = -0.5 * np.einsum("...i,ij,...j->...", d, self.prior_prec, d)
         if self.reach is not None:
             lp = lp + reach_log_prior(x, self.reach)
-        h = self.history.data
-        if len(h) and self.grid is not None:
-            return lp + self._marginal(x, h)
         if len(h):
             lp = lp + self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3], h[:, 4]).sum(axis=-1)
         return lp

@@ -25,6 +25,7 @@ from aoa_localizer.engine.config import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.surveys import SiteBearing, locate_bearings
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, config_from_args, setup_logging
 
@@ -114,20 +115,10 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
 
 
 def locate(rows: list[Row], cfg, datum: tuple[float, float]) -> tuple[Estimate | None, Localizer]:
-    """The end-of-data estimate of one emitter's bearings (each row a fixed site of its own) and its Localizer."""
-    loc = Localizer(cfg.with_changes(datum_lat=datum[0], datum_lon=datum[1]))
-    for row in sorted(rows, key=lambda r: r.stamp):
-        site = f"{row.station or 'row'}@{row.line}"
-        loc.set_station_position(site, row.lat, row.lon)
-        if math.isnan(row.sigma_deg):
-            loc.add_bearing(row.stamp, row.azimuth_deg, row.quality, station=site)
-        else:
-            loc.add_bearing_enu(row.stamp, math.radians(90.0 - row.azimuth_deg), math.radians(row.sigma_deg) ** 2,
-                                station=site)
-    loc.flush()
-    est = loc.finish() or loc.estimate
-    loc.close()
-    return est, loc
+    """The end-of-data estimate of one emitter's bearings (each row a site of its own) and its Localizer."""
+    bearings = [SiteBearing(f"{row.station or 'row'}@{row.line}", row.stamp, row.lat, row.lon, row.azimuth_deg,
+                            row.quality, row.sigma_deg) for row in rows]
+    return locate_bearings(bearings, cfg.with_changes(datum_lat=datum[0], datum_lon=datum[1]))
 
 
 def record(ident: str, est: Estimate, rows: int) -> dict:
