@@ -2,7 +2,7 @@
 
 * `StreamClock`: the timeline of one input stream (fixes, or DF readings). A stamp slightly older than the
   newest is out of order (rejected, as always); a stamp far ahead (`max_stamp_jump_s`) of a dense stream, or
-  of the wall clock, is not adopted as the new newest (one record stamped in 2038 used to make every later input
+  more than a year ahead of the wall clock, is not adopted as the new newest (one record stamped in 2038 used to make every later input
   "out of order"); a sparse stream (a survey's bearings minutes or hours apart) takes long gaps. When the stream
   really moved to another timeline (a receiver clock stepped back, or forward), `confirm` consecutive
   stamps that agree with each other but not with the old timeline switch it over: `clock_jump`.
@@ -22,6 +22,9 @@ _CONFIRM_DISTANCE_M = 100.0  # two fixes agree when closer than this ...
 _CONFIRM_SPEED_MPS = 150.0  # ... plus this speed times the time between them
 _EARTH_RADIUS_M = 6_371_000.0
 _SPARSE_WINDOW = 5  # intervals that tell a sparse stream
+# A stamp this far ahead of the wall clock is from no receiver (a year: a computer whose clock lost days or months
+# to a missing RTC battery still takes its GPS-stamped inputs)
+_FUTURE_MARGIN_S = 366 * 86400.0
 
 
 class Verdict(Enum):
@@ -44,7 +47,7 @@ class StreamClock:
         self.intervals: list[float] = []  # the latest intervals between adopted stamps
 
     def admit(self, stamp: float) -> Verdict:
-        if stamp > time.time() + self.max_jump_s:  # a measurement cannot come from the future
+        if stamp > time.time() + _FUTURE_MARGIN_S:  # a measurement cannot come from the future
             return Verdict.AHEAD
         if self.last is None or 0 < stamp - self.last <= self.max_jump_s or (stamp > self.last and self._sparse()):
             if self.last is not None and stamp > self.last:
