@@ -742,7 +742,8 @@ class EmitterTrack:
         if warnings:
             return "suspect", warnings
         if self.filter is None:
-            return "poorly_determined", [f"few or poorly crossing bearings: {self.status}"]
+            why = self.status.removeprefix("poorly determined: ").removeprefix("waiting for geometry: ")
+            return "poorly_determined", [f"few or poorly crossing bearings: {why}"]
         h = self.model.history.data
         size, reach = ellipse_and_reach(mean, cov, h[:, 0], h[:, 1])
         if size > _MAX_ELLIPSE_RANGE_SHARE * reach:
