@@ -2,10 +2,10 @@
 
 * `StreamClock`: the timeline of one input stream (fixes, or DF readings). A stamp slightly older than the
   newest is out of order (rejected, as always); a stamp far ahead (`max_stamp_jump_s`) of a dense stream, or
-  more than a year ahead of the wall clock, is not adopted as the new newest (one record stamped in 2038 used to make every later input
-  "out of order"); a sparse stream (a survey's bearings minutes or hours apart) takes long gaps. When the stream
-  really moved to another timeline (a receiver clock stepped back, or forward), `confirm` consecutive
-  stamps that agree with each other but not with the old timeline switch it over: `clock_jump`.
+  more than a year ahead of the wall clock, is not adopted as the new newest (one record stamped in 2038 used to
+  make every later input "out of order"); a sparse stream (a survey's bearings minutes or hours apart) takes long
+  gaps. When the stream really moved to another timeline (a receiver clock stepped back, or forward), `confirm`
+  consecutive stamps that agree with each other but not with the old timeline switch it over: `clock_jump`.
 * `implausible_fix`: what no vehicle's GPS reports: an altitude outside [-1000, 20000] m, a latitude within
   0.01 deg of a pole (no local north), and (0, 0) exactly, the "null island" of receivers without a fix.
 * `confirms`: whether a second fix agrees with a first (the datum is never taken from a single fix).
