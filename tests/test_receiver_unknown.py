@@ -3,6 +3,7 @@ proper, sparse surveys, the estimate's state, and the survey program."""
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,3 +183,16 @@ def test_a_mount_offset_left_at_0_is_learned_and_named_not_a_confident_wrong_ans
     assert res.scores["inside95"], res.scores
     assert est.state == "suspect" and any("mount_offset_deg" in w for w in est.warnings), est.warnings
     assert res.localizer.emitter.offset_deg == pytest.approx(-30.0, abs=1.5)
+
+
+def test_lenths_fixed_stations_give_an_estimate_whose_ellipse_holds_the_target(tmp_path, cli):
+    """Lenth (1981), the seven readings in examples/ (docs/lenth1981.md): defaults, an estimate at once (the old
+    default waited for 10 points), the target (7.502, 2.198) km inside its 95 % ellipse."""
+    out = tmp_path / "lenth.jsonl"
+    res = cli(locate.main, Path(__file__).parent.parent / "examples" / "lenth1981.csv", "--output", out, "--seed", 1)
+    assert res.returncode == 0, res.stderr
+    got = json.loads(out.read_text())
+    e, n = LocalFrame(46.5, -84.3, 0.0).to_enu(got["lat"], got["lon"])
+    err = np.array([float(e), float(n)]) - [7502.0, 2198.0]
+    assert got["bearings_used"] == 7
+    assert inside_ellipse(err, np.array(got["cov"]))
