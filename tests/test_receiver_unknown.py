@@ -196,3 +196,18 @@ def test_lenths_fixed_stations_give_an_estimate_whose_ellipse_holds_the_target(t
     err = np.array([float(e), float(n)]) - [7502.0, 2198.0]
     assert got["bearings_used"] == 7
     assert inside_ellipse(err, np.array(got["cov"]))
+
+
+def test_the_launcher_never_calls_a_suspect_estimate_converged():
+    """The launcher's verdict reads the state from /diagnostics: a small ellipse the localizer calls suspect is not
+    "converged", and the reason quotes the warning."""
+    from aoa_localizer.ros.launch import verdict
+
+    warning = "the bearings look -30.0 deg off the true bearings (true azimuth = read azimuth -30.0 deg)"
+    state = {"east": 1.0, "north": 2.0, "cov": [[1.0, 0.0], [0.0, 1.0]],
+             "diag": {"state": "suspect", "warning_0": warning}}
+    ok, why, figures = verdict(state, 50.0)
+    assert not ok and warning in why and figures["state"] == "suspect"
+    state["diag"] = {"state": "tracking"}
+    ok, why, figures = verdict(state, 50.0)
+    assert ok and why == "converged" and figures["state"] == "tracking"

@@ -260,6 +260,12 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
         "lon": state.get("lon"),
         "cov": state["cov"],
     }
+    diag = state.get("diag", {})
+    if diag.get("state"):
+        figures["state"] = diag["state"]
+    if diag.get("state") == "suspect":  # the localizer says its model does not fit: never "converged"
+        said = "; ".join(v for k, v in sorted(diag.items()) if k.startswith("warning_"))
+        return False, f"the localizer calls its estimate suspect: {said or diag.get('message', '')}", figures
     if major > max_ellipse:
         return False, f"95 % ellipse {major:.1f} m is wider than --max-ellipse {max_ellipse:g} m", figures
     if "truth" in state:
@@ -466,6 +472,8 @@ def print_result(ok: bool, why: str, f: dict):
         )
         if "error_m" in f:
             print(f"error against the simulated truth: {f['error_m']:.2f} m")
+        if "state" in f:
+            print(f"state: {f['state']}")
     print(f"result: {why}")
 
 
