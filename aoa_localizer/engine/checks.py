@@ -30,7 +30,7 @@ from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.geodesy import wrap_pi, wrap_pi_float
-from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, refine, residuals
+from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, log_posterior, refine, residuals
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
@@ -227,9 +227,31 @@ class _Calibrated:
         fit = fit_noise(snap.groups, snap.cfg, snap.noise, snap.rob, candidates, by_density, snap.offset)
         if fit is not None:
             self.noise, self.at, self.offset = fit
-            self.built = build(snap.groups, snap.cfg, self.noise, self.offset)
-            self.pts = points_of([p for p, _ in self.built])
-            self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.outlier)
+            self._rebuild()
+            if self.offset != snap.offset and self._stamp_shift_explains_more():
+                self.offset = snap.offset
+                self._rebuild()
+
+    def _rebuild(self):
+        """The points and their outlier share under the fitted noise and offset."""
+        snap = self.snap
+        self.built = build(snap.groups, snap.cfg, self.noise, self.offset)
+        self.pts = points_of([p for p, _ in self.built])
+        self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.snap.outlier_prob)
+
+    def _stamp_shift_explains_more(self) -> bool:
+        """Whether a DF stamp shift (clock_check.py) explains the points at the previous offset at least as well as
+        the newly learned offset does: on a moving vehicle a late clock also bends every bearing, by an angle that
+        follows the geometry, and an offset must not take the blame for it."""
+        snap, at = self.snap, self.at
+        assert at is not None  # called after a fit
+        rob = snap.robust(self.outlier, True)
+        before = points_of([p for p, _ in build(snap.groups, snap.cfg, self.noise, snap.offset)])
+        hint = best_shift(before, snap.velocity(), at, rob)
+        if hint is None:
+            return False
+        shifted_best = float(log_posterior(refined(at, before, rob), before, rob)) + hint.gain
+        return shifted_best >= float(log_posterior(refined(at, self.pts, rob), self.pts, rob))
 
     def result(self, modes: list[Mode], hint: ClockHint | None = None, why: str = "",
                determined: bool = True) -> CheckResult:
