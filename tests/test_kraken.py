@@ -36,6 +36,8 @@ def test_a_kraken_app_line_by_hand():
     (kraken_line("abc", 1, 1, 1, 0, 0, 0), "timestamp is not a number"),
     (kraken_line(1, "nan", 1, 1, 0, 0, 0), "DoA is not finite"),
     (kraken_line(1, 1, 1, 1, 95.0, 0, 0), "out of range"),
+    (kraken_line(1, 1, 1, 1e300, 0, 0, 0), r"frequency 1e\+300 Hz out of range"),  # crashed the node (rc 1)
+    (kraken_line(1, 1, 1, -5, 0, 0, 0), "frequency -5 Hz out of range"),
 ])
 def test_malformed_lines_say_why(line, words):
     with pytest.raises(MalformedLine, match=words):
@@ -50,6 +52,15 @@ def test_quality_from_confidence_and_the_line_filter():
     other = parse_line(kraken_line(1000, 1, 1, 446e6, 0, 0, 0))  # another VFO, same stamp: its own sequence
     assert [f.fresh(x) for x in (a, a, b, a, other)] == [True, False, True, False, True]
     assert f.dropped == {"repeated": 1, "backwards": 1}
+
+
+def test_the_line_filter_remembers_a_bounded_number_of_frequencies():
+    """Reliability III, item 12: it grew 100 MB per million jittered frequencies."""
+    f = LineFilter()
+    for k in range(2000):
+        assert f.fresh(parse_line(kraken_line(1000 + k, 1, 1, 433e6 + k, 0, 0, 0)))
+    assert len(f.last) == 256
+    assert not f.fresh(parse_line(kraken_line(2999, 1, 1, 433e6 + 1999, 0, 0, 0)))  # the newest are kept
 
 
 # -- the bridge with the node, over a local HTTP server -----------------------------------------------------
@@ -170,3 +181,28 @@ def test_a_dead_server_is_retried_with_one_log_line_and_the_bridge_stops_cleanly
     log = open(bridge.log_path).read()
     assert log.count("cannot read") == 1 and "retrying every 1 s" in log and "Traceback" not in log, log
     assert "poll_failed" in log  # the count at exit: three or four failed polls, one a second
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize("path", ["/trickle_headers", "/endless", "/cut"])
+def test_a_hostile_server_neither_kills_the_bridge_nor_holds_its_sigterm(spawn, domain, path):
+    """Reliability III, items 3 and 4: a reply cut short ended the bridge with a traceback; an endless body grew
+    to 5.6 GB; a trickling one never finished and SIGTERM needed SIGKILL."""
+    import signal
+    import time
+
+    from hostile_http import HostileServer
+
+    with HostileServer() as server:
+        bridge = spawn(["aoa_localizer.kraken_bridge", "--url", server.url(path), "--timeout", "60"], domain)
+        time.sleep(4.0)
+        assert bridge.poll() is None, open(bridge.log_path).read()
+        start = time.monotonic()
+        bridge.send_signal(signal.SIGTERM)
+        assert bridge.wait(15) == 0
+        assert time.monotonic() - start < 2.0
+    log = open(bridge.log_path).read()
+    assert "Traceback" not in log, log
+    if path != "/trickle_headers":  # its one poll was still under way, 60 s allowed: stopped mid-poll
+        assert log.count("cannot read") == 1 and "poll_failed" in log, log

@@ -15,6 +15,12 @@ from aoa_localizer.engine.track import EmitterTrack
 from aoa_localizer.engine.types import Estimate
 
 DEFAULT = "default"  # the channel of records without a frequency
+# Carrier frequencies a DF receiver can report: above 0 and at most 1 THz (receivers stop near 50 GHz), so a
+# channel's id stays a short, valid ROS name token whatever the record says
+FREQUENCY_MAX_HZ = 1e12
+# Frequencies remembered with their channel: past this the memory starts again (a stream of distinct jittered
+# frequencies would otherwise grow it without bound; a forgotten one is matched by tolerance again)
+_HEARD_MAX = 4096
 
 
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # its multiples mod 1 fill [0, 1) evenly whatever their count
@@ -86,7 +92,7 @@ class Channels:
         f = frequency_hz
         if math.isnan(f) or f == 0:
             return self.live.get(DEFAULT) or self._open(DEFAULT, math.nan)
-        if not math.isfinite(f) or f < 0:
+        if not 0 < f <= FREQUENCY_MAX_HZ:  # False for inf
             return "bad_frequency"
         known = self._heard.get(f)  # a receiver reports a carrier's frequency the same way every time
         if known is not None:
@@ -100,6 +106,8 @@ class Channels:
             if sum(1 for c in self.live.values() if c.id != DEFAULT) >= self.cfg.max_channels:
                 return "channel_limit"
             best = self._open(channel_id(f), f)
+        if len(self._heard) >= _HEARD_MAX:
+            self._heard.clear()
         self._heard[f] = best
         return best
 

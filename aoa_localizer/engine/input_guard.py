@@ -49,7 +49,7 @@ class StreamClock:
     def admit(self, stamp: float) -> Verdict:
         if stamp > time.time() + _FUTURE_MARGIN_S:  # a measurement cannot come from the future
             return Verdict.AHEAD
-        if self.last is None or 0 < stamp - self.last <= self.max_jump_s or (stamp > self.last and self._sparse()):
+        if self.last is None or 0 < stamp - self.last <= self.max_jump_s or (stamp > self.last and self.sparse()):
             if self.last is not None and stamp > self.last:
                 self.intervals = (self.intervals + [stamp - self.last])[-_SPARSE_WINDOW:]
             self.last = stamp
@@ -67,7 +67,7 @@ class StreamClock:
             return Verdict.CLOCK_JUMP
         return Verdict.AHEAD if stamp > self.last else Verdict.OUT_OF_ORDER
 
-    def _sparse(self) -> bool:
+    def sparse(self) -> bool:
         """A sparse stream (bearings taken by hand minutes apart, their fixes): a long gap is its rhythm, not a clock
         glitch. Sparse: its median recent interval is over a tenth of max_stamp_jump_s, or it has only one stamp."""
         if not self.intervals:

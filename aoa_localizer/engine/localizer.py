@@ -24,7 +24,7 @@ from aoa_localizer.engine.heading import ImuHeading, TrackHeading
 from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.preprocess import PointBuilder, reading_sigma
-from aoa_localizer.engine.station import Pending, Station
+from aoa_localizer.engine.station import Pending, PendingQueue, Station
 from aoa_localizer.engine.track import EmitterTrack
 from aoa_localizer.engine.types import Estimate, ObservationPoint, Reading
 
@@ -69,7 +69,7 @@ REASONS = {
     "bad_heading": "heading stamp or yaw is not a finite number",
     "heading_out_of_order": "heading stamp not after the previous heading",
     "heading_ignored": "a heading given while bearing_reference is not `vehicle` or heading_source is not `imu`",
-    "bad_frequency": "frequency negative or infinite (0 or NaN: the default channel)",
+    "bad_frequency": "frequency negative, infinite or above 1 THz (0 or NaN: the default channel)",
     "channel_limit": "a new frequency while max_channels channels are tracked",
     "channel_retired": "a bearing still waiting for a fix when its channel was retired (channel_timeout_s)",
 }
@@ -154,7 +154,7 @@ class Localizer:
         return self.station.heading
 
     @property
-    def pending(self) -> deque[Pending]:
+    def pending(self) -> PendingQueue:
         """Bearings of the default station waiting for a fix after them."""
         return self.station.pending
 
@@ -433,21 +433,20 @@ class Localizer:
             self._reject(channel)
             return None
         st = self._station(station)
+        if channel.id not in st.df_clocks and st.ahead_of_timeline(stamp):
+            self._reject("bearing_stamp_jump")
+            return None
         verdict = self._admit(st.df_clock(channel.id), "bearing", "df_clock_jump", stamp)
         if verdict is None:
             return None
         if verdict is Verdict.CLOCK_JUMP:  # waiting on the old timeline: no fix will place them in order any more
-            kept = [p for p in st.pending if p.channel != channel.id]
-            self._reject_many("clock_jump", len(st.pending) - len(kept))
-            st.pending.clear()
-            st.pending.extend(kept)
-        st.df_admitted(stamp, verdict is Verdict.CLOCK_JUMP)
+            self._reject_many("clock_jump", st.pending.drop_channel(channel.id))
         if stamp < st.first_stamp:
             self._reject("before_first_fix")
             return None
         self._recent.append(None)
         channel.last_heard = stamp  # on its clock's timeline (a step back is followed)
-        st.pending.append(Pending(stamp, azimuth % 360.0, quality, sigma, channel.id))
+        st.pending.push(Pending(stamp, azimuth % 360.0, quality, sigma, channel.id))
         return self._retire_silent(stamp) or self._release_pending(st)
 
     def _retire_silent(self, now: float) -> Estimate | None:
@@ -575,15 +574,15 @@ class Localizer:
 
     def _release_pending(self, st: Station) -> Estimate | None:
         """Pair a station's held bearings with its track in stamp order; stop at the first one still waiting for
-        a fix."""
+        a fix (every later one waits too)."""
         estimate = None
-        newest = st.newest_df
         track = st.track
         while st.pending:
-            p = st.pending[0]
-            # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s behind the DF stream, no fix will come.
-            if newest - p.stamp > 2 * self.cfg.gps_max_gap_s or len(st.pending) > _MAX_PENDING:
-                st.pending.popleft()
+            p = st.pending.head()
+            # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s behind its channel's DF stream, no fix
+            # will come (each channel's own stream: a record stamped ahead on another one costs only itself)
+            if st.newest_df(p.channel) - p.stamp > 2 * self.cfg.gps_max_gap_s or len(st.pending) > _MAX_PENDING:
+                st.pending.pop()
                 self._reject("gps_gap" if len(track) else "before_first_fix")
                 continue
             if not len(track):
@@ -591,7 +590,7 @@ class Localizer:
             where, at = track.locate(p.stamp)
             if where is Where.WAIT:
                 break
-            st.pending.popleft()
+            st.pending.pop()
             if where is not Where.OK or at is None:
                 self._reject(where.value)
                 continue

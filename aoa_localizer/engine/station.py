@@ -2,8 +2,9 @@
 the bearings waiting for a fix after them. A Localizer keeps one per station; the default one is named ""."""
 from __future__ import annotations
 
+import heapq
+import itertools
 import math
-from collections import deque
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.gps_track import GpsTrack, Where
@@ -19,6 +20,41 @@ class Pending:
 
     def __init__(self, stamp: float, azimuth: float, quality: float, sigma: float, channel: str):
         self.stamp, self.azimuth, self.quality, self.sigma, self.channel = stamp, azimuth, quality, sigma, channel
+
+
+class PendingQueue:
+    """The bearings waiting for a fix, oldest stamp first (ties in arrival order): a bearing stamped far ahead waits
+    at the back, so it never holds up the others (one record on another channel used to stop them all)."""
+
+    def __init__(self):
+        self._heap: list[tuple[float, int, Pending]] = []
+        self._seq = itertools.count()
+
+    def __len__(self):
+        return len(self._heap)
+
+    def __iter__(self):
+        return (entry[2] for entry in sorted(self._heap))
+
+    def push(self, p: Pending):
+        heapq.heappush(self._heap, (p.stamp, next(self._seq), p))
+
+    def head(self) -> Pending:
+        return self._heap[0][2]
+
+    def pop(self) -> Pending:
+        return heapq.heappop(self._heap)[2]
+
+    def drop_channel(self, channel: str) -> int:
+        """Drop a channel's bearings (its clock moved to another timeline); returns how many."""
+        kept = [entry for entry in self._heap if entry[2].channel != channel]
+        dropped = len(self._heap) - len(kept)
+        heapq.heapify(kept)
+        self._heap = kept
+        return dropped
+
+    def clear(self):
+        self._heap.clear()
 
 
 class FixedPlace:
@@ -50,11 +86,15 @@ class Station:
         self.name, self.cfg, self.fixed = name, cfg, fixed
         self.track: GpsTrack | FixedPlace = GpsTrack(cfg.gps_max_gap_s)
         self.heading = new_heading(cfg)
-        self.pending: deque[Pending] = deque()
+        self.pending = PendingQueue()
         self.fix_clock = StreamClock(cfg.max_stamp_jump_s)
         self.df_clocks: dict[str, StreamClock] = {}  # per channel: VFOs of one receiver share their stamps
-        self.newest_df = -math.inf  # the newest DF stamp of any channel's stream, as its clock follows it
         self.datum_candidate: tuple[float, float, float, float, float] | None = None  # first fix, until confirmed
+
+    def newest_df(self, channel: str) -> float:
+        """The newest DF stamp a channel's clock adopted at this station (-inf before any)."""
+        clock = self.df_clocks.get(channel)
+        return clock.last if clock is not None and clock.last is not None else -math.inf
 
     def df_clock(self, channel: str) -> StreamClock:
         clock = self.df_clocks.get(channel)
@@ -62,13 +102,15 @@ class Station:
             clock = self.df_clocks[channel] = StreamClock(self.cfg.max_stamp_jump_s)
         return clock
 
-    def df_admitted(self, stamp: float, clock_jumped: bool):
-        """A DF stamp a channel's clock admitted: `newest_df` follows (recomputed over the channels' clocks when
-        one jumped, so a clock step back is followed)."""
-        if clock_jumped:
-            self.newest_df = max((c.last for c in self.df_clocks.values() if c.last is not None), default=stamp)
-        else:
-            self.newest_df = max(self.newest_df, stamp)
+    def ahead_of_timeline(self, stamp: float) -> bool:
+        """Whether a new channel's first stamp is far ahead (more than max_stamp_jump_s) of this station's dense
+        timeline (its fixes', or its other channels' newest stamp): a channel's clock takes any first stamp, so one
+        record stamped in 2038 on another frequency would otherwise set the station's newest DF stamp."""
+        clocks = [(c.last, c) for c in (self.fix_clock, *self.df_clocks.values()) if c.last is not None]
+        if not clocks:
+            return False
+        last, newest = max(clocks, key=lambda pair: pair[0])
+        return not newest.sparse() and stamp - last > self.cfg.max_stamp_jump_s
 
     def restart_track(self):
         """A GPS clock jump: the track and the courses start again on the new timeline."""

@@ -14,8 +14,11 @@ north and the node's default `bearing_reference: true_north` agrees; lines witho
 `bearing_reference:=vehicle` (and its `mount_offset_deg`, `heading_source`).
 
 Lines that repeat (the page holds a line until the next CPI), go backwards or are malformed are counted and
-skipped, never fatal; a dead or slow server is retried every second with one log line per outage. Exit 0 on
-Ctrl-C or SIGTERM, with the counts; 2 for bad options.
+skipped, never fatal. Each poll is bounded (`--timeout` for the whole answer, `--max-bytes` of page; a redirect is
+refused with its target): a dead, slow or hostile server is retried every second with one log line per outage.
+The lines of one CPI (one per VFO) share their GPS position, which goes out on `gps/fix` once. While every line is
+skipped for want of a GPS heading, a warning says so every 30 s. Exit 0 on Ctrl-C or SIGTERM (within a second,
+whatever the server does), with the counts; 2 for bad options.
 """
 from __future__ import annotations
 
@@ -23,8 +26,6 @@ import argparse
 import signal
 import sys
 import time
-import urllib.error
-import urllib.request
 from collections import Counter
 
 import rclpy
@@ -32,10 +33,13 @@ from rclpy.node import Node
 
 from aoa_localizer.engine.geodesy import wrap_360
 from aoa_localizer.ros.ros_main import run_node
+from aoa_localizer.tools.http_poll import DEFAULT_MAX_BYTES, PollFailed, http_get
 from aoa_localizer.tools.kraken_csv import KrakenLine, LineFilter, MalformedLine, parse_line, quality_from_confidence
 from msgs_adapters import build
 
 RETRY_S = 1.0
+TIMEOUT_MAX_S = 60.0
+SKIPPED_SAY_EVERY_S = 30.0  # while every line is skipped for want of a GPS heading, say so this often
 
 
 def parse_args(argv) -> argparse.Namespace:
@@ -51,12 +55,17 @@ def parse_args(argv) -> argparse.Namespace:
     parser.add_argument("--conf-low", type=float, default=1.0, help="confidence (dB) mapped to quality 40 (default 1)")
     parser.add_argument("--conf-high", type=float, default=10.0,
                         help="confidence (dB) mapped to quality 100 (default 10)")
-    parser.add_argument("--timeout", type=float, default=2.0, help="HTTP timeout per poll, s (default 2)")
+    parser.add_argument("--timeout", type=float, default=2.0,
+                        help=f"the longest a whole poll may take, s (default 2, at most {TIMEOUT_MAX_S:g})")
+    parser.add_argument("--max-bytes", type=int, default=DEFAULT_MAX_BYTES,
+                        help=f"the largest page taken, bytes (default {DEFAULT_MAX_BYTES}); a larger one is skipped")
     args = parser.parse_args(own)
     if not args.url.startswith(("http://", "https://")):
         parser.error(f"--url must be an http(s) address, got {args.url!r}")
-    if args.rate <= 0 or args.conf_high <= args.conf_low or args.timeout <= 0:
-        parser.error("--rate and --timeout must be > 0 and --conf-high > --conf-low")
+    if not (0 < args.rate <= 100 and 0 < args.timeout <= TIMEOUT_MAX_S and 1024 <= args.max_bytes <= 2**30):
+        parser.error(f"--rate must be in (0, 100], --timeout in (0, {TIMEOUT_MAX_S:g}], --max-bytes in [1024, 2^30]")
+    if not args.conf_high > args.conf_low:
+        parser.error("--conf-high must be > --conf-low")
     return args
 
 
@@ -72,6 +81,8 @@ class KrakenBridge(Node):
         self.filter = LineFilter()
         self.counts: Counter = Counter()
         self.down_since: float | None = None
+        self.last_fix_stamp = -float("inf")  # the lines of one CPI repeat its position: one fix each
+        self.skipped_said = time.monotonic()
         # Our own SIGINT/SIGTERM: rclpy's would invalidate the context under a publish (an RCLError traceback).
         self.stopped_by: str | None = None
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -88,9 +99,10 @@ class KrakenBridge(Node):
     def fetch(self) -> str | None:
         """The page's text, or None while the server is unreachable (one log line per outage)."""
         try:
-            with urllib.request.urlopen(self.args.url, timeout=self.args.timeout) as page:
-                text = page.read().decode("utf-8", errors="replace")
-        except (urllib.error.URLError, OSError, ValueError) as exc:
+            text = http_get(self.args.url, self.args.timeout, self.args.max_bytes, lambda: self.stopped_by is not None)
+        except PollFailed as exc:
+            if self.stopped_by is not None:
+                return None
             if self.down_since is None:
                 self.down_since = time.monotonic()
                 self.get_logger().warning(f"cannot read {self.args.url} ({exc}); retrying every {RETRY_S:g} s")
@@ -114,6 +126,22 @@ class KrakenBridge(Node):
                 continue
             if self.filter.fresh(r):
                 self.publish(r)
+        self._say_skipped()
+
+    def _say_skipped(self):
+        """Every line skipped for want of a GPS heading since the last word: say so (not only at exit)."""
+        now = time.monotonic()
+        if now - self.skipped_said < SKIPPED_SAY_EVERY_S:
+            return
+        skipped = self.counts["no_gps_heading"] - self.counts["no_gps_said"]
+        if skipped and self.counts["published"] == self.counts["published_said"]:
+            self.get_logger().warning(
+                f"{skipped} lines in the last {now - self.skipped_said:.0f} s skipped and none published: the "
+                "receiver has no GPS fix, so its lines carry no heading (--azimuth true); "
+                "give it GPS, or use --azimuth relative with the node's bearing_reference:=vehicle")
+        self.skipped_said = now
+        self.counts["no_gps_said"] = self.counts["no_gps_heading"]
+        self.counts["published_said"] = self.counts["published"]
 
     def publish(self, r: KrakenLine):
         if self.args.azimuth == "true" and not r.has_gps:
@@ -121,7 +149,8 @@ class KrakenBridge(Node):
             return
         azimuth = r.doa_deg + (r.heading_deg if self.args.azimuth == "true" else 0.0)
         quality = quality_from_confidence(r.confidence_db, self.args.conf_low, self.args.conf_high)
-        if self.pub_fix is not None and r.has_gps:
+        if self.pub_fix is not None and r.has_gps and r.stamp > self.last_fix_stamp:
+            self.last_fix_stamp = r.stamp
             self.pub_fix.publish(build.navsatfix(self.T, r.stamp, r.lat, r.lon, 0.0, frame_id="gps"))
         self.pub_df.publish(build.df_record(self.T, r.stamp, float(wrap_360(azimuth)), quality, r.frequency_hz,
                                             frame_id=r.station or "df_antenna"))
@@ -140,7 +169,8 @@ class KrakenBridge(Node):
                 rclpy.spin_once(self, timeout_sec=0.05)
 
     def destroy_node(self):
-        counts = dict(self.counts, **{k: v for k, v in self.filter.dropped.items() if v})
+        counts = {k: v for k, v in self.counts.items() if not k.endswith("_said")}
+        counts.update({k: v for k, v in self.filter.dropped.items() if v})
         print("kraken_bridge: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v), file=sys.stderr,
               flush=True)
         return super().destroy_node()

@@ -16,9 +16,13 @@ One line per VFO, as `_sdr/_signal_processing/kraken_sdr_signal_processor.py` wr
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
+from aoa_localizer.engine.channels import FREQUENCY_MAX_HZ
+
 FIELDS = 17  # the named fields before the spectrum
+_VFOS_KEPT = 256  # frequencies the line filter remembers (a Kraken has at most 16 VFOs); the oldest go first
 
 
 @dataclass(frozen=True)
@@ -67,12 +71,15 @@ def parse_line(line: str) -> KrakenLine:
     lat, lon = _number(fields, 8, "latitude"), _number(fields, 9, "longitude")
     if not (-90 <= lat <= 90 and -180 <= lon <= 180):
         raise MalformedLine(f"position {lat}, {lon} out of range")
+    frequency_hz = _number(fields, 4, "frequency")
+    if not 0 < frequency_hz <= FREQUENCY_MAX_HZ:
+        raise MalformedLine(f"frequency {frequency_hz:g} Hz out of range (0, {FREQUENCY_MAX_HZ:g}]")
     return KrakenLine(
         stamp=(timestamp_ms - 0.5 * max(latency_ms, 0.0)) / 1000.0,
         doa_deg=_number(fields, 1, "DoA") % 360.0,
         confidence_db=_number(fields, 2, "confidence"),
         power_db=_number(fields, 3, "power"),
-        frequency_hz=_number(fields, 4, "frequency"),
+        frequency_hz=frequency_hz,
         array=fields[5],
         latency_ms=latency_ms,
         station=fields[7],
@@ -92,10 +99,11 @@ def quality_from_confidence(confidence_db: float, low_db: float, high_db: float)
 
 class LineFilter:
     """Keeps, per VFO frequency, only lines newer than the last one: the served page repeats a line until the next
-    CPI, and a restarted receiver may step back. Counts what it drops."""
+    CPI, and a restarted receiver may step back. Counts what it drops. Remembers the latest _VFOS_KEPT frequencies
+    (a stream of distinct jittered frequencies would otherwise grow it without bound)."""
 
     def __init__(self):
-        self.last: dict[float, float] = {}
+        self.last: OrderedDict[float, float] = OrderedDict()
         self.dropped = {"repeated": 0, "backwards": 0}
 
     def fresh(self, r: KrakenLine) -> bool:
@@ -104,4 +112,7 @@ class LineFilter:
             self.dropped["repeated" if r.stamp == last else "backwards"] += 1
             return False
         self.last[r.frequency_hz] = r.stamp
+        self.last.move_to_end(r.frequency_hz)
+        if len(self.last) > _VFOS_KEPT:
+            self.last.popitem(last=False)
         return True

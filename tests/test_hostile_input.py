@@ -1,0 +1,71 @@
+"""Reliability III: a hostile record costs at most itself (a future stamp on another channel, an absurd
+frequency, a stream of distinct frequencies), each reproduced as the review did it, then passing."""
+import re
+
+import pytest
+
+from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer.engine.channels import FREQUENCY_MAX_HZ, channel_id
+from aoa_localizer.engine.scenarios import simulate
+
+
+def feed_with(extra, at_share=1 / 3):
+    """`seed` run 0 into a fresh Localizer, `extra(loc, t)` called once a third of the way in (t: that event's
+    stamp); the Localizer after flush()."""
+    data = simulate("seed", 0)
+    loc = Localizer(LocalizerConfig(seed=1))
+    events = list(data.events())
+    for i, (kind, row) in enumerate(events):
+        if i == int(len(events) * at_share):
+            extra(loc, row[0])
+        if kind == "fix":
+            loc.add_fix(row[0], *row[1:4])
+        else:
+            loc.add_bearing(row[0], *row[1:3])
+    loc.flush()
+    return loc
+
+
+@pytest.mark.parametrize(("ahead_s", "reason"), [(1e9, "bearing_stamp_jump"), (200.0, "gps_gap")])
+def test_one_future_record_on_another_channel_costs_only_itself(ahead_s, reason):
+    """Item 1: a record 1e9 s ahead at 1 MHz used to drop 201 of the 300 genuine bearings as gps_gap (the station's
+    newest DF stamp was the maximum over its channels, and a new channel takes any first stamp); 200 s ahead,
+    inside max_stamp_jump_s, dropped 141. Now the first is refused on arrival, the second waits for a fix."""
+    clean = feed_with(lambda loc, t: None)
+    loc = feed_with(lambda loc, t: loc.add_bearing(t + ahead_s, 10.0, 90.0, frequency_hz=1e6))
+    assert clean.bearings_used == 300 and not clean.rejected
+    assert loc.bearings_used == 300
+    assert dict(loc.rejected) == {reason: 1}
+
+
+def test_a_new_channel_of_a_sparse_station_may_start_after_a_long_gap():
+    """A survey's bearings are minutes apart: a new frequency an hour after the last record is not a clock glitch."""
+    loc = Localizer(LocalizerConfig(datum_lat=39.1, datum_lon=117.2))
+    for k in range(3):
+        loc.add_fix(600.0 * k, 39.1, 117.2 + 0.001 * k)
+        loc.add_bearing(600.0 * k + 0.5, 45.0 + 5 * k, 90.0, frequency_hz=433e6)
+    loc.add_bearing(5400.0, 45.0, 90.0, frequency_hz=446e6)
+    assert "bearing_stamp_jump" not in loc.rejected
+
+
+@pytest.mark.parametrize("frequency", [1e300, FREQUENCY_MAX_HZ * 1.01, -1.0, float("inf")])
+def test_a_frequency_no_receiver_reports_is_refused(frequency):
+    """Item 2: vector.z = 1e300 made a channel whose topic name ROS refuses (the node crashed, rc 1)."""
+    loc = Localizer(LocalizerConfig())
+    assert loc.add_bearing(1.0, 10.0, 90.0, frequency_hz=frequency) is None
+    assert dict(loc.rejected) == {"bad_frequency": 1}
+
+
+def test_every_channel_id_is_a_short_valid_ros_name_token():
+    for f in (1e-3, 1.0, 433.92e6, 2.4e9, FREQUENCY_MAX_HZ):
+        cid = channel_id(f)
+        assert re.fullmatch(r"f[0-9]{1,13}", cid), cid
+
+
+def test_memory_of_heard_frequencies_is_bounded():
+    """Item 12: +71 MB per million jittered frequencies (one dict entry each, for ever)."""
+    loc = Localizer(LocalizerConfig(channel_tolerance_hz=1e6))
+    for k in range(20_000):
+        loc.add_bearing(1.0 + k * 1e-3, 10.0, 90.0, frequency_hz=433e6 + k * 1e-3)
+    assert len(loc.channels._heard) <= 4096
+    assert len(loc.channels.live) == 2  # the default channel and 433 MHz: the jitter is within the tolerance
