@@ -69,3 +69,49 @@ def test_memory_of_heard_frequencies_is_bounded():
         loc.add_bearing(1.0 + k * 1e-3, 10.0, 90.0, frequency_hz=433e6 + k * 1e-3)
     assert len(loc.channels._heard) <= 4096
     assert len(loc.channels.live) == 2  # the default channel and 433 MHz: the jitter is within the tolerance
+
+
+@pytest.mark.parametrize(("name", "value"), [
+    ("afsa.try_number", 10**9),  # MemoryError, rc 1
+    ("afsa.max_iterations", 10**9),  # 100 % CPU, no diagnostics, SIGINT ignored
+    ("gfapf.iterations", 10**9),
+    ("de.generations", 10**9),
+    ("df_time_offset_s", -1e308),  # every bearing then refused as bearing_repeated
+    ("gps_max_gap_s", 1e308),
+    ("obs_max_duration_s", 1e-300),
+    ("init_max_points", 2**62),
+])
+def test_parameter_values_that_crashed_or_stalled_the_node_are_refused(name, value):
+    """Item 5: each passed validation before."""
+    from aoa_localizer.engine.config import ConfigError
+
+    with pytest.raises(ConfigError, match=name.replace(".", r"\.")):
+        LocalizerConfig().with_changes(**{name: value})
+
+
+def test_every_numeric_parameter_has_a_range_on_both_sides():
+    from aoa_localizer.engine.config import parameter_specs
+    from aoa_localizer.ros.node_params import NODE_PARAMS
+
+    open_ended = [p.name for p in parameter_specs() + list(NODE_PARAMS)
+                  if p.spec.kind in (int, float) and (p.spec.low is None or p.spec.high is None)]
+    assert open_ended == ["seed"]  # any non-negative integer seeds numpy's generator
+
+
+def test_a_filter_update_out_of_memory_skips_the_point_and_keeps_the_state(monkeypatch):
+    """Item 5: the update's except did not cover MemoryError (the node exited 1)."""
+    data = simulate("seed", 0)
+    loc = Localizer(LocalizerConfig(seed=1))
+    events = list(data.events())
+    half = len(events) // 2
+    for kind, row in events[:half]:
+        loc.add_fix(row[0], *row[1:4]) if kind == "fix" else loc.add_bearing(row[0], *row[1:3])
+    f = loc.emitter.running
+
+    def no_memory(point):
+        raise MemoryError
+
+    monkeypatch.setattr(f, "update", no_memory)
+    for kind, row in events[half:half + 40]:
+        loc.add_fix(row[0], *row[1:4]) if kind == "fix" else loc.add_bearing(row[0], *row[1:3])
+    assert loc.rejected["internal_error"] >= 1 and loc.estimate is not None

@@ -126,15 +126,16 @@ class AfsaConfig:
                           "posterior: prey as multiple-try Metropolis, swarm as a drift proposal) or `paper`: the "
                           "school as printed (docs/design.md)")
     visual: float = param(1.0, "visual range: metres (paper) or standard deviations of the school (mcmc)",
-                          low=0.0, low_open=True)
+                          low=0.0, low_open=True, high=1e4)
     step: float = param(0.3, "fish step: metres (paper), or the share of the way to the swarm's centre (mcmc)",
-                        low=0.0, low_open=True)
-    crowd: float = param(0.618, "crowd factor delta, paper variant", low=0.0, low_open=True)
-    try_number: int = param(50, "prey tries per fish and round (paper); mcmc uses at most `mcmc_tries`", low=1)
+                        low=0.0, low_open=True, high=1e4)
+    crowd: float = param(0.618, "crowd factor delta, paper variant", low=0.0, low_open=True, high=10.0)
+    try_number: int = param(50, "prey tries per fish and round (paper); mcmc uses at most `mcmc_tries`",
+                            low=1, high=200)
     mcmc_tries: int = param(5, "prey looks of the multiple-try move per fish and sweep (mcmc)", low=2, high=1000)
-    max_iterations: int = param(5, "school rounds (paper) or MCMC sweeps (mcmc)", low=1)
+    max_iterations: int = param(5, "school rounds (paper) or MCMC sweeps (mcmc)", low=1, high=50)
     tolerance: float = param(1e-3, "stop the paper school when the mean log-objective change is smaller",
-                             low=0.0, low_open=True)
+                             low=0.0, low_open=True, high=1e6)
 
 
 @dataclass(frozen=True)
@@ -143,7 +144,7 @@ class EspfConfig:
 
     variant: str = variant_choice("ESPF")
     sbx_lambda: float = param(2.0, "ESPF: distribution index of the simulated binary crossover (larger: children "
-                              "nearer their parents)", low=0.0)
+                              "nearer their parents)", low=0.0, high=100.0)
     selection: str = choice("draw", ("draw", "top"), "ESPF paper variant: `draw` N of the 2N pool by weight "
                             "(default), or `top`: the N largest weights (ties broken by position)")
 
@@ -155,11 +156,14 @@ class GfapfConfig:
     paper's 1-D models); `spread` in standard deviations of the cloud (the emitter problem, any scale)."""
 
     variant: str = variant_choice("GFA-PF")
-    attraction: float = param(0.0618, "GFA-PF: attraction weight M towards the central dust", low=0.0)
-    rotation_max: float = param(0.3, "GFA-PF: largest rotation factor f of the repulsion", low=0.0)
-    iterations: int = param(8, "GFA-PF: gravitation iterations D per measurement", low=0)
-    attract_min: float = param(0.5, "GFA-PF: no attraction closer than this to the centre (scale units)", low=0.0)
-    repel_max: float = param(0.2, "GFA-PF: no repulsion farther than this from the centre (scale units)", low=0.0)
+    attraction: float = param(0.0618, "GFA-PF: attraction weight M towards the central dust", low=0.0, high=10.0)
+    rotation_max: float = param(0.3, "GFA-PF: largest rotation factor f of the repulsion", low=0.0, high=10.0)
+    iterations: int = param(8, "GFA-PF: gravitation iterations D per measurement",
+                            low=0, high=100)
+    attract_min: float = param(0.5, "GFA-PF: no attraction closer than this to the centre (scale units)", low=0.0,
+                               high=1e4)
+    repel_max: float = param(0.2, "GFA-PF: no repulsion farther than this from the centre (scale units)", low=0.0,
+                             high=1e4)
     scale: str = choice("spread", ("spread", "absolute"), "GFA-PF: `spread` (standard deviations of the cloud) or "
                         "`absolute` (state units) for the two distances")
 
@@ -173,11 +177,12 @@ class DeConfig:
     fitness: str = choice("posterior", ("posterior", "ratio"), "UPF-DE/PF-DE paper variant: a trial's fitness, "
                           "`posterior` (L p: the path posterior, default) or `ratio` (L p / q, unbounded)")
     f1: float = param(
-        1.0, "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)", low=0.0, low_open=True
+        1.0, "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)", low=0.0, low_open=True,
+        high=10.0
     )
-    f2: float = param(0.9, "UPF-DE/PF-DE: scale F2 of the difference vector", low=0.0, low_open=True)
+    f2: float = param(0.9, "UPF-DE/PF-DE: scale F2 of the difference vector", low=0.0, low_open=True, high=10.0)
     cr: float = param(0.6, "UPF-DE/PF-DE: binomial crossover rate", low=0.0, high=1.0)
-    generations: int = param(20, "UPF-DE/PF-DE: DE generations G per measurement", low=0)
+    generations: int = param(20, "UPF-DE/PF-DE: DE generations G per measurement", low=0, high=200)
 
 
 @dataclass(frozen=True)
@@ -207,7 +212,7 @@ class AgapfConfig:
     pc2: float = param(0.5, "AGA-PF: crossover probability floor for the fittest", low=0.0, high=1.0)
     pm1: float = param(0.07, "AGA-PF: mutation probability below the average fitness", low=0.0, high=1.0)
     pm2: float = param(0.001, "AGA-PF: mutation probability floor for the fittest", low=0.0, high=1.0)
-    a: float = param(9.9034, "AGA-PF: steepness A of the adaptive curves", low=0.0, low_open=True)
+    a: float = param(9.9034, "AGA-PF: steepness A of the adaptive curves", low=0.0, low_open=True, high=1e3)
 
 
 @dataclass(frozen=True)
@@ -236,6 +241,7 @@ class LocalizerConfig:
         "reading sigma (deg; the paper's 3.801e-4 rad^2) for `sigma_model: constant`",
         low=0.0,
         low_open=True,
+        high=90.0,
     )
     sigma_model: str = choice(
         "constant",
@@ -243,10 +249,10 @@ class LocalizerConfig:
         "`constant`, or `quality`: sigma linear from `sigma_q40_deg` at Q = 40 to `sigma_q100_deg` at Q = 100",
     )
     sigma_q100_deg: float = param(
-        1.0, "reading sigma at quality 100 (deg), `sigma_model: quality`", low=0.0, low_open=True
+        1.0, "reading sigma at quality 100 (deg), `sigma_model: quality`", low=0.0, low_open=True, high=90.0
     )
     sigma_q40_deg: float = param(
-        8.0, "reading sigma at quality 40 (deg), `sigma_model: quality`", low=0.0, low_open=True
+        8.0, "reading sigma at quality 40 (deg), `sigma_model: quality`", low=0.0, low_open=True, high=90.0
     )
     likelihood: str = choice(
         "mixture",
@@ -261,7 +267,7 @@ class LocalizerConfig:
         high_open=True,
     )
     process_noise_m: float = param(
-        1.0, "random walk per step (m, paper eq. 17) for `sir` and `afsa.variant: paper`", low=0.0
+        1.0, "random walk per step (m, paper eq. 17) for `sir` and `afsa.variant: paper`", low=0.0, high=1e4
     )
     # Bearing pre-processing (paper sec. 3.2) and what one observation point is.
     quality_min: float = param(40.0, "readings with a lower DF quality are dropped", low=0.0, high=100.0)
@@ -271,14 +277,14 @@ class LocalizerConfig:
         "combination of a point's readings: `inverse_variance` (1/sigma^2, the best with "
         "calibrated sigmas), `paper` (eqs. 19-21) or `equal`",
     )
-    obs_max_duration_s: float = param(2.0, "longest span of one observation point (s)", low=0.0, low_open=True)
-    obs_max_distance_m: float = param(10.0, "longest distance covered by one observation point (m)", low=0.0)
+    obs_max_duration_s: float = param(2.0, "longest span of one observation point (s)", low=1e-3, high=3600.0)
+    obs_max_distance_m: float = param(10.0, "longest distance covered by one observation point (m)", low=0.0, high=1e5)
     obs_max_readings: int = param(50, "most readings in one observation point", low=1, high=100_000)
     df_correlation: float = param(
         0.0, "correlation of the readings at one point (1: ten readings count as one)", low=0.0, high=1.0
     )
     point_gate_sigma: float = param(
-        4.0, "wild-reading gate inside a point, in sigmas from its median (0: off)", low=0.0
+        4.0, "wild-reading gate inside a point, in sigmas from its median (0: off)", low=0.0, high=100.0
     )
     # Start: global search of the robust posterior (or the paper's triangulation), unless a prior is given.
     init_method: str = choice(
@@ -298,16 +304,19 @@ class LocalizerConfig:
         high_open=True,
     )
     init_min_support: float = param(
-        0.6, "`triangulation` only: share of points that must agree with a crossing", low=0.0, high=1.0
+        0.6, "`triangulation` only: share of points that must agree with a crossing",
+            low=0.0, high=1.0
     )
-    init_max_points: int = param(500, "points kept while waiting for geometry (at least `init_bearings`)", low=2)
+    init_max_points: int = param(500, "points kept while waiting for geometry (at least `init_bearings`)", low=2,
+                                 high=10_000)
     prior_east: float | None = param(
         None,
         "Gaussian prior mean east (m, map); set with `prior_north` and `prior_sigma_m`, it replaces the start search",
         kind=float,
+        low=-2e7, high=2e7,
     )
-    prior_north: float | None = param(None, "Gaussian prior mean north (m, map)", kind=float)
-    prior_sigma_m: float | None = param(None, "Gaussian prior sigma (m)", kind=float, low=0.0, low_open=True)
+    prior_north: float | None = param(None, "Gaussian prior mean north (m, map)", kind=float, low=-2e7, high=2e7)
+    prior_sigma_m: float | None = param(None, "Gaussian prior sigma (m)", kind=float, low=0.0, low_open=True, high=2e7)
     # Frames and GPS pairing.
     datum_lat: float | None = param(
         None,
@@ -319,26 +328,30 @@ class LocalizerConfig:
     datum_lon: float | None = param(
         None, "longitude of the map origin (deg), set with `datum_lat`", kind=float, low=-180.0, high=180.0
     )
-    datum_alt: float | None = param(None, "altitude of the map origin (m); unset: the first valid fix's", kind=float)
+    datum_alt: float | None = param(None, "altitude of the map origin (m); unset: the first valid fix's", kind=float,
+                                    low=-1000.0, high=20_000.0)
     gps_max_gap_s: float = param(
-        2.0, "longest fix gap a bearing may be interpolated across (s)", low=0.0, low_open=True
+        2.0, "longest fix gap a bearing may be interpolated across (s)", low=1e-3, low_open=True, high=86_400.0
     )
     max_stamp_jump_s: float = param(
         300.0,
         "a stamp this far ahead of its stream is refused, not adopted; a clock "
         "step is followed after 3 agreeing stamps (s)",
-        low=0.0,
+        low=1.0,
         low_open=True,
+        high=86_400.0,
     )
     df_time_offset_s: float = param(
         0.0,
         "added to every DF stamp to put it on the GPS clock (a receiver that "
         "stamps 0.5 s late: -0.5); /diagnostics suggests one when the bearings show it",
+        low=-3600.0, high=3600.0,
     )
     # Several emitters at once, keyed by the DF record's frequency (docs/design.md, "Channels").
     channel_tolerance_hz: float = param(
         5000.0, "a DF record within this of a channel's frequency belongs to it (Hz); records with frequency 0 or "
         "NaN share the default channel", low=0.0, low_open=True,
+        high=1e9,
     )
     max_channels: int = param(
         64, "most frequency channels tracked at once; a record that would open one more is refused "
@@ -347,6 +360,7 @@ class LocalizerConfig:
     channel_timeout_s: float = param(
         300.0, "a frequency channel silent this long (DF time) is retired, its last estimate kept (s; 0: never)",
         low=0.0,
+        high=1e6,
     )
     # What a DF azimuth is measured from (docs/design.md, "Bearing reference").
     bearing_reference: str = choice(
@@ -374,20 +388,24 @@ class LocalizerConfig:
     heading_min_speed_mps: float = param(
         1.0, "`heading_source: track`: slower than this the course is not trusted and the last good heading is "
         "held (m/s)", low=0.0, low_open=True,
+        high=100.0,
     )
     heading_hold_s: float = param(
         60.0, "longest a heading is held (stopped vehicle, IMU gap) before readings are refused as "
         "`heading_unknown` (s)", low=0.0,
+        high=86_400.0,
     )
     heading_window_s: float = param(
         3.0, "`heading_source: track`: span of fixes the course is fitted over, centred on the reading (s)",
-        low=0.0, low_open=True,
+        low=0.1, low_open=True,
+        high=600.0,
     )
     gps_sigma_m: float = param(
         0.0,
         "GPS position noise (m), added to each bearing's variance by range; 0: each "
         "fix's own position_covariance (when its type is not unknown)",
         low=0.0,
+        high=1e4,
     )
     bearing_encoding: str = choice(
         "df_record",
@@ -455,6 +473,7 @@ class LocalizerConfig:
         "re-start from a global mode whose log posterior beats the cloud's best particle by this many nats",
         low=0.0,
         low_open=True,
+        high=1e4,
     )
     moved_min_points: int = param(
         8, "disagreeing recent points needed before the emitter-moved test", low=3, high=100_000
@@ -464,6 +483,7 @@ class LocalizerConfig:
         "log likelihood ratio (nats) both old and recent points must show to declare the emitter moved",
         low=0.0,
         low_open=True,
+        high=1e4,
     )
     sir: SirConfig = field(default_factory=SirConfig)
     afsa: AfsaConfig = field(default_factory=AfsaConfig)

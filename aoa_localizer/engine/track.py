@@ -405,7 +405,7 @@ class EmitterTrack:
             if self.filter is None:  # the emitter moved and the re-start waits for more points
                 return False
             f = self.running
-        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError, MemoryError):
             log.exception("filter update failed; point skipped")
             self._reject("internal_error", 1)
             return False
