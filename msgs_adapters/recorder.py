@@ -49,7 +49,9 @@ def matching_qos(profiles) -> QoSProfile:
 
 
 class BagRecorder:
-    """Subscribes raw to each topic as it appears (call poll() now and then) and writes it to `path`."""
+    """Subscribes raw to each topic as it appears (call poll() now and then) and writes it to `path`. A write that
+    fails (a full disk, a vanished directory) stops the recording, not the run: `failed` says why, the bag keeps
+    what was written before (replay salvages it)."""
 
     def __init__(self, node, path: Path | str, exclude=("/parameter_events",)):
         self.node, self.exclude = node, set(exclude)
@@ -59,10 +61,31 @@ class BagRecorder:
         self.subs: dict = {}  # topic: subscription (None: not recordable)
         self.conns: dict = {}  # topic: rosbags connection
         self.count = 0
+        self.failed: str | None = None
         self._sealed_at = time.monotonic()
+
+    def _stop_on(self, exc: OSError, doing: str):
+        """A failed write: stop recording, keep the run."""
+        self.failed = f"{exc.strerror or exc} while {doing}, after {self.count} messages"
+        log.warning("recording stopped (%s); the run goes on, the bag keeps what was written before", self.failed)
+        self._unsubscribe()
+
+    def _unsubscribe(self):
+        for sub in self.subs.values():
+            if sub is not None:
+                self.node.destroy_subscription(sub)
+        self.subs = {topic: None for topic in self.subs}
 
     def poll(self):
         """Subscribe to topics that appeared since the last call; seal the open chunk when it is due."""
+        if self.failed:
+            return
+        try:
+            self._poll()
+        except OSError as exc:
+            self._stop_on(exc, "adding a topic or sealing a chunk")
+
+    def _poll(self):
         self._seal_if_due()
         for topic, types in self.node.get_topic_names_and_types():
             if topic in self.subs or topic in self.exclude:
@@ -83,9 +106,14 @@ class BagRecorder:
                 cls, topic, lambda data, t=topic: self._write(t, data), matching_qos(profiles), raw=True)
 
     def _write(self, topic: str, data: bytes):
-        self.writer.write(self.conns[topic], time.time_ns(), data)
-        self.count += 1
-        self._seal_if_due()
+        if self.failed:
+            return
+        try:
+            self.writer.write(self.conns[topic], time.time_ns(), data)
+            self.count += 1
+            self._seal_if_due()
+        except OSError as exc:
+            self._stop_on(exc, f"writing {topic}")
 
     def _seal_if_due(self):
         """Seal the open MCAP chunk (with its CRC) about once a second, so a recorder killed (SIGKILL, power)
@@ -96,8 +124,11 @@ class BagRecorder:
             seal_chunk(self.writer)
 
     def close(self):
-        for sub in self.subs.values():
-            if sub is not None:
-                self.node.destroy_subscription(sub)
-        seal_chunk(self.writer)
-        self.writer.close()
+        self._unsubscribe()
+        try:
+            seal_chunk(self.writer)
+            self.writer.close()
+        except OSError as exc:
+            if not self.failed:
+                self.failed = f"{exc.strerror or exc} while closing the bag, after {self.count} messages"
+            log.warning("the bag could not be closed (%s): it has no index; replay salvages it", exc)

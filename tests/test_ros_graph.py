@@ -717,3 +717,24 @@ def test_two_stations_and_two_emitters_each_get_their_topics_summary_and_status(
         assert "default" not in got  # nothing came without a frequency
         assert set(got["paths"]) == set(PAIR)
     assert node_p.poll() is None
+
+
+def test_a_full_disk_stops_the_recording_not_the_run(tmp_path, domain):
+    """Reliability III, item 10: a full disk ended `launch --record` with a chained OSError traceback and exit 1.
+    The disk fills here through the file size limit (writes past it fail with EFBIG, as with ENOSPC)."""
+    import resource
+
+    def small_files():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (150_000, 150_000))
+
+    bag = tmp_path / "full"
+    res = subprocess.run([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "seed", "--speedup", "40",
+                          "--seed", "2", "--domain-id", str(domain), "--record", str(bag)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=180, preexec_fn=small_files)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "recording stopped early (File too large while writing" in res.stdout, res.stdout
+    assert "Traceback" not in res.stdout + res.stderr
+    assert "error against the simulated truth" in res.stdout
+    replay = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", bag, "--offline", "--output",
+                             tmp_path / "o.jsonl"], cwd=ROOT, capture_output=True, text=True)
+    assert replay.returncode in (0, 1), replay.stderr  # what was written before is read

@@ -420,9 +420,13 @@ class Run:
         for child in reversed(self.children):
             child.stop()
         if self.monitor is not None:
-            if self.monitor.recorder:
-                print(f"recorded {self.monitor.recorder.count} messages into {self.args.record}")
+            recorder = self.monitor.recorder
             self.monitor.close()
+            if recorder and recorder.failed:
+                print(f"recording stopped early ({recorder.failed}); {self.args.record} keeps what was written "
+                      "before, and replay salvages it", flush=True)
+            elif recorder:
+                print(f"recorded {recorder.count} messages into {self.args.record}")
 
 
 def main(argv=None) -> int:
