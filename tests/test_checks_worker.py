@@ -259,3 +259,45 @@ def test_a_snapshot_crosses_to_the_worker_process_whole():
     for (a, keep_a), (b, keep_b) in zip(here.built, there.built, strict=True):  # to rounding (packed arrays)
         assert np.allclose([a.east, a.north, a.theta, a.sigma], [b.east, b.north, b.theta, b.sigma], rtol=1e-12)
         assert np.array_equal(keep_a, keep_b)
+
+
+def test_the_worker_and_the_resource_tracker_die_with_a_killed_parent(tmp_path):
+    """Reliability III, item 9: a node killed by SIGKILL (the OOM killer) left its check worker and
+    multiprocessing's resource tracker (~150 MB) running; a supervisor that respawned the node piled them up."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import math, multiprocessing.resource_tracker as rt, time\n"
+        "from aoa_localizer.engine.checks import CheckWorker\n"
+        "if __name__ == '__main__':\n"
+        "    w = CheckWorker()\n"
+        "    w.submit(math.pi.__float__).result(60)\n"
+        "    print(*w._pool._processes, rt._resource_tracker._pid, flush=True)\n"
+        "    time.sleep(120)\n")
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        children = [int(pid) for pid in parent.stdout.readline().split()]
+        assert len(children) == 2 and all(alive(pid) for pid in children)
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(10)
+        end = time.monotonic() + 10
+        while any(alive(pid) for pid in children) and time.monotonic() < end:
+            time.sleep(0.1)
+        assert not any(alive(pid) for pid in children)
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+
+
+def alive(pid: int) -> bool:
+    """A process that runs (a zombie waiting for its reaper counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(") ")[1][0] != "Z"
+    except FileNotFoundError:
+        return False

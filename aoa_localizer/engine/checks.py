@@ -34,6 +34,7 @@ from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes,
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
+from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.preprocess import SMALL_POINT, Columns, Group, columns, group_size, make_point
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
@@ -312,9 +313,12 @@ def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: floa
 WORKER_NICENESS = 10  # the checks yield the CPU to the node's callbacks (and to the rest of the vehicle's software)
 
 
-def _background():
+def _background(parent_pid: int):
     """In the worker process: a lower scheduling priority, so a check never delays the callbacks; Ctrl-C (sent to
-    the whole process group) is the parent's to handle: the pool stops the worker when the parent exits."""
+    the whole process group) is the parent's to handle: the pool stops the worker when the parent exits, and
+    SIGTERM does when the parent is killed (the worker, and with it multiprocessing's resource tracker, used to
+    stay behind)."""
+    die_with_parent(parent_pid)
     os.nice(WORKER_NICENESS)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     keep_freed_memory()
@@ -353,7 +357,8 @@ class CheckWorker:
                     if self._pool is None:
                         # spawn, not fork: the parent runs threads (rclpy's, the pool's own) that fork would copy
                         self._pool = ProcessPoolExecutor(
-                            max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_background)
+                            max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_background,
+                            initargs=(os.getpid(),))
                     future = self._pool.submit(job)
                     future.add_done_callback(self._done)
                     return future

@@ -12,7 +12,6 @@ No process is left behind: children run in their own process groups and are stop
 from __future__ import annotations
 
 import argparse
-import ctypes
 import json
 import math
 import os
@@ -32,12 +31,11 @@ from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 from aoa_localizer.engine.crlb import nees as crlb_nees
 from aoa_localizer.engine.fleet import FLEETS
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.scenarios import SCENARIOS
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
 from aoa_localizer.tools.cli import HelpFormatter, seed_value
-
-_PR_SET_PDEATHSIG = 1  # prctl option: a signal for this process when its parent dies
 
 CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by this
 
@@ -83,16 +81,6 @@ def parse_params(items, option: str = "-p") -> dict:
     return out
 
 
-def _die_with_parent():
-    """In the child before exec (Linux): SIGTERM when the launcher dies, even by SIGKILL, so no node or vehicle
-    is left running (elsewhere: nothing; the launcher's own cleanup still stops them on every other exit)."""
-    try:
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
-    except OSError:
-        pass
-
-
 class Child:
     """A child process in its own session, its output in a log file."""
 
@@ -101,7 +89,7 @@ class Child:
         self.log_path = logdir / f"{name}.log"
         self.log = open(self.log_path, "w")
         self.proc = subprocess.Popen(cmd, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True,
-                                     preexec_fn=_die_with_parent)
+                                     preexec_fn=die_with_parent)
 
     def running(self) -> bool:
         return self.proc.poll() is None
