@@ -78,3 +78,37 @@ def test_latency_percentiles_since_start_are_read_at_their_bins_upper_edge():
     assert 1.5 <= hist.percentile(50) <= 1.5 * 10 ** (1 / 40)  # never below the true value, at most a bin above
     hist.add([1e9])
     assert hist.percentile(100) == math.inf
+
+
+def test_overload_names_its_cause_and_the_refusals_it_made_and_holds_one_period():
+    """Reliability III, item 7: a stalled node dropped real bearings as gps_gap and stayed OK."""
+    from aoa_localizer.ros.node_health import Overload
+
+    o = Overload()
+    assert o.judge(None, Counter(low_quality=3), 0) is None  # kept up: nothing said, the counts noted
+    words = o.judge("the node was held up: this diagnostics period lasted 6.0 s (1 s configured)",
+                    Counter(low_quality=3, gps_gap=141), 20)
+    assert words.startswith("the node was held up") and "refused meanwhile: 141 as gps_gap" in words
+    assert "not a GPS fault" in words and "20 inputs never arrived" in words and "low_quality" not in words
+    after = o.judge(None, Counter(low_quality=3, gps_gap=150), 20)  # the backlog's refusals: still the stall's
+    assert after.startswith("just before: the node was held up") and "9 as gps_gap" in after
+    assert o.judge(None, Counter(low_quality=3, gps_gap=160), 20) is None  # a period later: its own cause
+    assert o.rejected == Counter(gps_gap=150) and o.lost == 20
+
+
+def test_stamp_gaps_count_random_losses_of_a_regular_stream():
+    """Item 8: the lost counts stayed 0 while 25 % and 43 % of the records never arrived (a KEEP_LAST history
+    drops at the publisher, where the middleware reports nothing)."""
+    import numpy as np
+
+    from aoa_localizer.engine.input_guard import StampGaps
+
+    rng = np.random.default_rng(0)
+    for share in (0.25, 0.43):
+        stamps = np.arange(4000) * 0.05 + rng.normal(0.0, 0.003, 4000)  # 20 Hz with jitter
+        kept = stamps[rng.random(4000) >= share]
+        gaps = StampGaps(factor=1.5)
+        for t in kept:
+            gaps.add(float(t))
+        truly = 4000 - len(kept)
+        assert abs(gaps.missing - truly) < 0.05 * truly, (share, gaps.missing, truly)

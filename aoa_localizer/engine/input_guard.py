@@ -100,8 +100,9 @@ def confirms(first: tuple[float, float, float], second: tuple[float, float, floa
 
 
 class StampGaps:
-    """Counts gaps in a stream's stamps longer than `factor` times its median interval (the last 50 intervals):
-    messages lost on the way, or a receiver that paused. Needs 10 intervals before it judges."""
+    """Counts gaps in a stream's stamps longer than `factor` times its typical interval, the lower quartile of the
+    last 50 (a median would itself be a gap once about half the messages are lost): messages lost on the way, or a
+    receiver that paused. Needs 10 intervals before it judges."""
 
     def __init__(self, factor: float = 5.0, window: int = 50):
         self.factor, self.window = factor, window
@@ -114,7 +115,7 @@ class StampGaps:
         if self.last is not None and stamp > self.last:
             dt = stamp - self.last
             if len(self.intervals) >= 10:
-                typical = sorted(self.intervals)[len(self.intervals) // 2]
+                typical = sorted(self.intervals)[len(self.intervals) // 4]
                 if typical > 0 and dt > self.factor * typical:
                     self.gaps += 1
                     self.missing += round(dt / typical) - 1

@@ -448,6 +448,8 @@ def progress_line(state: dict, elapsed: float) -> str:
         f"[{elapsed:5.1f} s] {d.get('status', 'waiting for the localizer')}; "
         f"bearings received {d.get('bearings_received', 0)}, used {d.get('bearings_used', 0)}"
     )
+    if d.get("overload"):  # the node could not keep up: what it lost is not the data's fault
+        line += f"; OVERLOAD: {d['overload']}"
     if "east" in state:
         line += f"; estimate E {state['east']:.1f} N {state['north']:.1f}"
         if "truth" in state:

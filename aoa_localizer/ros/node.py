@@ -17,6 +17,7 @@ import logging
 import math
 import sys
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from types import SimpleNamespace
 from typing import Any
@@ -40,7 +41,7 @@ from aoa_localizer.engine.localizer import REASONS, Localizer
 from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.ros.declare import declare, refuse_unknown
-from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth
+from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
 from aoa_localizer.ros.node_params import NODE_PARAMS, STATION_POSITION
 from aoa_localizer.ros.ros_main import run_node
 from aoa_localizer.ros.vehicle_path import VehiclePath
@@ -54,7 +55,10 @@ from msgs_adapters.fields import (
 
 NODE_NAME = "aoa_localizer"
 PAIRED = (("datum_lat", "datum_lon"), ("prior_east", "prior_north", "prior_sigma_m"))  # set together
-_MAX_LOAD = 0.8  # share of wall time in input callbacks above which /diagnostics warns
+_MAX_LOAD = 0.8  # share of wall time spent working (inputs, idle moves, diagnostics) above which it warns
+_STALL_PERIODS = 2.0  # a diagnostics period this many times longer than configured: the node was held up
+_GAP_FACTOR = 1.5  # a stamp gap this many median intervals long holds lost records (a regular receiver jitters less)
+_GAP_STREAMS = 256  # DF streams (station, frequency) whose stamp gaps are followed; past it the oldest is dropped
 DATUM_PARAMS = frozenset({"datum_lat", "datum_lon", "datum_alt"})  # the only parameters that move the map frame
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
@@ -145,8 +149,12 @@ class LocalizerNode(Node):
             "bearings_lost": 0,
         }
         self.lost_reported = 0  # fixes_lost + bearings_lost at the last diagnostics
-        self.df_gaps: dict[str, StampGaps] = {}  # per station (a receiver's channels share its stamps)
+        self.df_gaps: OrderedDict[tuple[str, float], StampGaps] = OrderedDict()  # per station and frequency
+        self.fix_gaps: dict[str, StampGaps] = {}  # per station
         self.callback_s: list[float] = []
+        self.other_s = 0.0  # work in the period outside the input callbacks: idle moves, the periodic work
+        self.period_start = time.perf_counter()
+        self.overload = Overload()
         self.arrival_ns = time.time_ns()
         self.latency_ms: list[float] = []  # from a message's arrival to the publication of each pose it made
         self.latency_since_start = LatencyHistogram()
@@ -232,10 +240,14 @@ class LocalizerNode(Node):
                 raise ConfigError(f"{name}.position {pos} is not a usable position: {REASONS[reason]}")
         return loc
 
-    def _gaps(self, station: str) -> StampGaps:
-        gaps = self.df_gaps.get(station)
+    def _gaps(self, station: str, frequency_hz: float) -> StampGaps:
+        """The stamp gaps of one DF stream: a station's records of one frequency (NaN: the default channel)."""
+        key = (station, frequency_hz if math.isfinite(frequency_hz) else 0.0)
+        gaps = self.df_gaps.get(key)
         if gaps is None:
-            gaps = self.df_gaps[station] = StampGaps()
+            gaps = self.df_gaps[key] = StampGaps(factor=_GAP_FACTOR)
+            if len(self.df_gaps) > _GAP_STREAMS:
+                self.df_gaps.popitem(last=False)
         return gaps
 
     def _made(self, est):
@@ -353,6 +365,8 @@ class LocalizerNode(Node):
         except (AttributeError, TypeError, ValueError):
             self.counts["adapter_errors"] += 1
             return
+        if math.isfinite(r.stamp):
+            self.fix_gaps.setdefault(station, StampGaps(factor=_GAP_FACTOR)).add(r.stamp)
         self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
         self._publish_made()
         self._publish_datum()
@@ -374,11 +388,13 @@ class LocalizerNode(Node):
         try:
             if self.cfg.bearing_encoding == "df_record":
                 r = df_from_vector3stamped(msg)
-                self._gaps(station).add(r.stamp)
+                if math.isfinite(r.stamp):
+                    self._gaps(station, r.frequency_hz).add(r.stamp)
                 self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz)
             else:
                 p = bearing_from_pose(msg)
-                self._gaps(station).add(p.stamp)
+                if math.isfinite(p.stamp):
+                    self._gaps(station, math.nan).add(p.stamp)
                 self.loc.add_bearing_enu(p.stamp, p.yaw_rad, p.variance_rad2, station=station)
         except (AttributeError, TypeError, ValueError):
             self.counts["adapter_errors"] += 1
@@ -471,7 +487,9 @@ class LocalizerNode(Node):
         if self.pending_params:
             values["parameters_held"] = ", ".join(sorted(self.pending_params)) + " (waiting for the rest of the group)"
         values.update(df_stamp_gaps=sum(g.gaps for g in self.df_gaps.values()),
-                      df_missing_by_stamp=sum(g.missing for g in self.df_gaps.values()))
+                      df_missing_by_stamp=sum(g.missing for g in self.df_gaps.values()),
+                      fix_stamp_gaps=sum(g.gaps for g in self.fix_gaps.values()),
+                      fixes_missing_by_stamp=sum(g.missing for g in self.fix_gaps.values()))
         now = self._now()
         self.health.count_restarts(now, loc.events + loc.rejected)
         warnings = self._warnings() + self.health.stale(now)
@@ -500,7 +518,9 @@ class LocalizerNode(Node):
         if self.callback_s:
             values.update(callback_mean_ms=f"{1e3 * sum(self.callback_s) / len(self.callback_s):.3f}",
                           callback_max_ms=f"{1e3 * self.callback_max_s:.3f}",
-                          callbacks_in_period=len(self.callback_s), load_pct=f"{100 * self._load():.0f}")
+                          callbacks_in_period=len(self.callback_s))
+        values.update(load_pct=f"{100 * self._load():.0f}", period_s=f"{time.perf_counter() - self.period_start:.3f}",
+                      rejected_while_overloaded=sum(self.overload.rejected.values()))
         if self.latency_ms:
             p50, p99, top = np.percentile(self.latency_ms, (50, 99, 100), method="higher")
             values.update(poses_in_period=len(self.latency_ms), pose_latency_p50_ms=f"{p50:.3f}",
@@ -516,8 +536,10 @@ class LocalizerNode(Node):
         return values
 
     def _load(self) -> float:
-        """Share of the last diagnostics period spent in input callbacks."""
-        return sum(self.callback_s) / self.get_parameter("diagnostics_period_s").value
+        """Share of the period since the last diagnostics spent working: input callbacks, idle moves and the
+        periodic work (a period the node was held up in lasts longer than configured: its wall time counts)."""
+        period = max(time.perf_counter() - self.period_start, self.get_parameter("diagnostics_period_s").value)
+        return (sum(self.callback_s) + self.other_s) / period
 
     def _warnings(self) -> list[tuple[str, str, str]]:
         """(key, value, words for the status message) of each warning that holds now."""
@@ -525,11 +547,9 @@ class LocalizerNode(Node):
         wrong = self._wrong_publishers()
         if wrong:
             out.append(("wrong_encoding", "; ".join(wrong), wrong[0]))
-        load = self._load()
-        if load > _MAX_LOAD:
-            out.append(("overload", f"input callbacks took {100 * load:.0f} % of the last period: the node cannot "
-                        "keep up (inputs queue, and past input_queue_depth are lost); fewer particles help",
-                        "the node cannot keep up with its inputs"))
+        overload = self._overload()
+        if overload:
+            out.append(("overload", overload, "the node cannot keep up with its inputs"))
         lost = self.counts["fixes_lost"] + self.counts["bearings_lost"]
         if lost > self.lost_reported:
             out.append(("messages_lost", f"{lost - self.lost_reported} input messages lost by the middleware in the "
@@ -540,6 +560,25 @@ class LocalizerNode(Node):
         if clock:
             out.append(("clock_offset", clock, "the DF stamps look offset from the GPS clock"))
         return out
+
+    def _overload(self) -> str | None:
+        """Why the node could not keep up in this period (its work over _MAX_LOAD of the wall time, or the period
+        held up), with the inputs refused meanwhile; the words hold one more period, since what a stall lost is
+        refused while its backlog is worked off. None when it kept up."""
+        period = self.get_parameter("diagnostics_period_s").value
+        wall = time.perf_counter() - self.period_start
+        load = self._load()
+        cause = None
+        if wall > _STALL_PERIODS * period:
+            cause = f"the node was held up: this diagnostics period lasted {wall:.1f} s ({period:g} s configured)"
+        elif load > _MAX_LOAD:
+            cause = f"the node worked {100 * load:.0f} % of the last period"
+        return self.overload.judge(cause, self.loc.rejected, self._missing())
+
+    def _missing(self) -> int:
+        """Inputs that never arrived, as far as anything can tell: the middleware's lost counts and stamp gaps."""
+        return (self.counts["fixes_lost"] + self.counts["bearings_lost"]
+                + sum(g.missing for g in self.df_gaps.values()) + sum(g.missing for g in self.fix_gaps.values()))
 
     def _robustness_values(self) -> dict:
         """Self-calibrated noise, modes, the health test and the robustness events, as diagnostic values."""
@@ -579,12 +618,15 @@ class LocalizerNode(Node):
         """Between messages: one move a channel owes (`scheduling: realtime`: a resampling's sweep, a worker check's
         move), so the point that follows carries none and its pose is not held up; once a second, the objects that
         survived leave the garbage collector's full passes (docs/ros.md, "Latency")."""
+        t0 = time.perf_counter()
         self.loc.pay_owed()
         self.old_objects.tick()
+        self.other_s += time.perf_counter() - t0
 
     def on_period(self):
         """Every diagnostics_period_s: the worker's finished results of channels whose data paused, /diagnostics,
         and vehicle/path if it grew."""
+        t0 = time.perf_counter()
         self.loc.poll()
         made, self.made = self.made, {}
         for est in made.values():  # no input made these: no latency to count
@@ -597,6 +639,8 @@ class LocalizerNode(Node):
         self.callback_s, self.callback_max_s, self.latency_ms = [], 0.0, []
         self._publish_path()
         self._publish_summary()
+        self.period_start = time.perf_counter()
+        self.other_s = self.period_start - t0  # this period's own work counts in the next one
 
     def channel_diagnostics(self) -> list[tuple[str, int, str, dict]]:
         """One status per frequency channel: WARN before its first estimate or while its check runs, OK tracking

@@ -1,8 +1,9 @@
-"""What the node's /diagnostics says beyond the engine's status, without rclpy: inputs gone stale (WARN) and a
-filter that keeps restarting (ERROR), in the node's clock (ROS time, so sim time works)."""
+"""What the node's /diagnostics says beyond the engine's status, without rclpy: inputs gone stale (WARN), a node
+that cannot keep up (WARN, with what it refused meanwhile) and a filter that keeps restarting (ERROR), in the
+node's clock (ROS time, so sim time works)."""
 from __future__ import annotations
 
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Mapping
 
 import numpy as np
@@ -10,6 +11,49 @@ import numpy as np
 RESTARTS_FOR_ERROR = 3  # restarts within RESTART_WINDOW_S that turn /diagnostics to ERROR
 RESTART_WINDOW_S = 60.0
 RESTART_KINDS = ("global_restart", "emitter_moved", "filter_diverged")  # events and rejections that restart
+
+
+class Overload:
+    """Whether the node keeps up, and what was refused or lost while it did not: a stall's lost inputs show up as
+    refusals while its backlog is worked off (fixes lost leave gaps, so bearings are refused as gps_gap), so the
+    words hold for HOLD more periods after the cause, and the refusals of those periods are named as its."""
+
+    HOLD = 1
+
+    def __init__(self):
+        self.rejected: Counter = Counter()  # refusals while overloaded, by reason, since start
+        self.lost = 0  # inputs lost (stamp gaps, middleware) while overloaded, since start
+        self._seen_rejected: Counter = Counter()
+        self._seen_missing = 0
+        self._hold = 0
+        self._cause = ""
+
+    def judge(self, cause: str | None, rejected: Mapping[str, int], missing: int) -> str | None:
+        """This period's verdict: `cause` (None: it kept up), the engine's refusals and the inputs missing so far;
+        the words for /diagnostics, or None."""
+        new = Counter(rejected)
+        new.subtract(self._seen_rejected)
+        new = +new  # the refusals of this period (a reset that cleared the counts gives none)
+        new_missing = max(missing - self._seen_missing, 0)
+        self._seen_rejected, self._seen_missing = Counter(rejected), missing
+        if cause:
+            self._hold, self._cause = self.HOLD + 1, cause
+        if not self._hold:
+            return None
+        self._hold -= 1
+        self.rejected.update(new)
+        self.lost += new_missing
+        words = [self._cause if cause is None else cause]
+        if not cause:
+            words[0] = f"just before: {words[0]}"
+        if new:
+            words.append("refused meanwhile: " + ", ".join(f"{n} as {k}" for k, n in new.most_common()))
+        if "gps_gap" in new:
+            words.append("those gps_gap refusals follow fixes lost for lack of time, not a GPS fault")
+        if new_missing:
+            words.append(f"{new_missing} inputs never arrived (stamp gaps, middleware)")
+        words.append("fewer particles or channels, or a faster machine, help")
+        return "; ".join(words)
 
 
 class NodeHealth:

@@ -7,8 +7,9 @@ NODE_PARAMS = [
                                                  low=1, high=100_000, read_only=True)),
     ParameterSpec("input_reliability", "best_effort", Spec(
         "QoS reliability of the gps/fix and df/bearing subscriptions: `best_effort` (sensor data: reliable and "
-        "best-effort publishers both connect, a message can be lost under load) or `reliable` (nothing lost, but "
-        "only reliable publishers connect)", str, choices=("best_effort", "reliable"), read_only=True)),
+        "best-effort publishers both connect, a message can be lost under load) or `reliable` (lost packets are "
+        "resent, but only reliable publishers connect, and a publisher's KEEP_LAST history still drops under load)",
+        str, choices=("best_effort", "reliable"), read_only=True)),
     ParameterSpec("map_frame", "map", Spec("frame_id of emitter/pose, emitter/particles, emitter/markers and "
                                            "vehicle/path: ENU metres at the datum (emitter/datum)", str,
                                            read_only=True)),
