@@ -26,9 +26,11 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from . import build
-from .bag_files import BagFiles, BagFilesError, TopicInfo, describe_topics
+from .bag_files import BadPayload, BagFiles, BagFilesError, TopicInfo, describe_topics
+from .db3_salvage import read_db3_salvaged
+from .decompress import oversized_chunks
 from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, heading_from_imu, stamp_seconds
-from .mcap_salvage import RawMessage, Salvage, read_salvaged
+from .mcap_salvage import MAGIC, RawMessage, Salvage, read_salvaged
 
 log = logging.getLogger("aoa_localizer.bag")
 
@@ -210,6 +212,10 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None,
                 count += 1
     except BagFilesError as exc:
         raise BagError(str(exc)) from exc
+    if files.not_compressed:
+        log.warning("%s: metadata.yaml says every message is compressed, but %d were stored plain; read as stored",
+                    path, files.not_compressed)
+    reader.damage += files.skipped_files
     if reader.damage:
         raise BagError(f"{path}: damaged after {count} messages ({'; '.join(reader.damage)}; "
                        f"{reader.lost} messages known lost, {reader.recovered} recovered from inside the damaged part)")
@@ -225,6 +231,7 @@ class RawReader:
         self.damage: list[str] = []
         self.lost = 0  # messages known to be lost (in chunks that failed their CRC check)
         self.recovered = 0  # messages read from the damaged part of a file
+        self._checked: dict[Path, list[str]] = {}  # each file's chunks past their limits, looked for once
 
     def topics(self) -> list[TopicInfo]:
         """The topics every file declares, with their message counts (a damaged file: as far as it can be read)."""
@@ -232,6 +239,8 @@ class RawReader:
         qos: dict[tuple[str, str], tuple] = {}
         for file in self.files.files:
             try:
+                if self._bombs(file):
+                    raise BagError("chunks past their limits")
                 with AnyReader([file], default_typestore=typestore()) as reader:
                     for c in reader.connections:
                         seen[(c.topic, c.msgtype)] = seen.get((c.topic, c.msgtype), 0) + c.msgcount
@@ -246,27 +255,57 @@ class RawReader:
         for file in self.files.files:
             yield from self._file(file, wanted)
 
+    def _bombs(self, file: Path) -> list[str]:
+        """Why rosbags must not read an MCAP file: chunks that would decompress past their limits (rosbags
+        decompresses a whole chunk at once, unbounded)."""
+        if file not in self._checked:
+            self._checked[file] = list(oversized_chunks(file)) if file.suffix == ".mcap" else []
+        return self._checked[file]
+
+    def _payload(self, msg: RawMessage) -> RawMessage | None:
+        """The message with its CDR bytes, or None (counted as damage) when they cannot be read within limits."""
+        try:
+            return RawMessage(msg.topic, msg.msgtype, msg.log_time, self.files.payload(msg.data))
+        except BadPayload as exc:
+            self.damage.append(f"{exc} on {msg.topic}")
+            self.lost += 1
+            return None
+
     def _file(self, file: Path, wanted: set[str]) -> Iterator[RawMessage]:
         done = 0
         try:
+            bombs = self._bombs(file)
+            if bombs:
+                raise BagError("; ".join(bombs))
             with AnyReader([file], default_typestore=typestore()) as reader:
                 conns = [c for c in reader.connections if c.topic in wanted]
                 if not conns:  # rosbags reads every connection when given none
                     return
                 for conn, log_time, raw in reader.messages(connections=conns):
-                    yield RawMessage(conn.topic, conn.msgtype, log_time, self.files.payload(raw))
+                    msg = self._payload(RawMessage(conn.topic, conn.msgtype, log_time, raw))
                     done += 1
+                    if msg is not None:
+                        yield msg
+            if file.suffix == ".mcap" and not _ends_with_magic(file):
+                self.damage.append(f"{file.name}: it ends without its footer (a recording that was cut); every "
+                                   "message before the cut was read")
             return
         except Exception as exc:  # noqa: BLE001 - rosbags refuses or stops: the record-by-record read decides
             failure = exc
-        if file.suffix != ".mcap":
+        yield from self._after_failure(file, wanted, done, failure)
+
+    def _after_failure(self, file: Path, wanted: set[str], done: int, failure: Exception) -> Iterator[RawMessage]:
+        """A file rosbags refused or stopped in, read record by record past the `done` messages it gave."""
+        if file.suffix not in (".db3", ".mcap"):
             self.damage.append(f"{file.name}: {type(failure).__name__}: {failure}")
             return
         report = Salvage()
-        for i, msg in enumerate(m for m in self._salvaged(file, report) if m.topic in wanted):
+        for i, raw_msg in enumerate(m for m in self._salvaged(file, report) if m.topic in wanted):
             if i >= done:
-                yield msg
-                self.recovered += 1
+                msg = self._payload(raw_msg)
+                if msg is not None:
+                    yield msg
+                    self.recovered += 1
         if report.damage:
             self.damage.append(f"{file.name}: {'; '.join(report.damage)}")
             self.lost += report.lost_messages
@@ -278,5 +317,17 @@ class RawReader:
             )
 
     def _salvaged(self, file: Path, report: Salvage) -> Iterator[RawMessage]:
-        for msg in read_salvaged(file.read_bytes(), report):
-            yield RawMessage(msg.topic, msg.msgtype, msg.log_time, self.files.payload(msg.data))
+        """An MCAP or sqlite3 file read record by record (payloads as stored)."""
+        if file.suffix == ".db3":
+            return read_db3_salvaged(file, report)
+        return read_salvaged(file.read_bytes(), report)
+
+
+def _ends_with_magic(file: Path) -> bool:
+    """Whether an MCAP file ends as a complete one does: its footer, then the magic again."""
+    with open(file, "rb") as f:
+        f.seek(0, 2)
+        if f.tell() < 2 * len(MAGIC):
+            return False
+        f.seek(-len(MAGIC), 2)
+        return f.read(len(MAGIC)) == MAGIC

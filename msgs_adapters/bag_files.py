@@ -13,12 +13,18 @@ from pathlib import Path
 
 import yaml
 
+from .decompress import MESSAGE_MAX_BYTES, ZSTD_MAGIC, file_limit, zstd_bounded, zstd_file_bounded
+
 log = logging.getLogger("aoa_localizer.bag")
 STORAGE_SUFFIXES = (".mcap", ".db3")
 
 
 class BagFilesError(RuntimeError):
     """The path is not a rosbag2 bag (nothing there, no storage file, an unreadable metadata.yaml)."""
+
+
+class BadPayload(ValueError):
+    """A message whose compressed bytes cannot be read within their limit: the message says why."""
 
 
 @dataclass(frozen=True)
@@ -39,6 +45,8 @@ class BagFiles:
         self.path = Path(path)
         self.message_compression = False  # every payload zstd-compressed on its own
         self.declared_messages: int | None = None  # metadata.yaml's message_count, when there is one
+        self.not_compressed = 0  # messages of a bag that claims message compression stored plain
+        self.skipped_files: list[str] = []  # compressed files that could not be read within their limit
         self._tmp: tempfile.TemporaryDirectory | None = None
         self.files = self._find()
 
@@ -47,7 +55,7 @@ class BagFiles:
         if not path.exists():
             raise BagFilesError(f"{path}: no such bag")
         if path.is_file():
-            return [self._plain(path)]
+            return self._plains([path])
         meta = path / "metadata.yaml"
         if meta.is_file():
             try:
@@ -61,15 +69,22 @@ class BagFiles:
             self.declared_messages = info.get("message_count")
             files = [path / n for n in names if (path / n).is_file()]
             if files:
-                return [self._plain(f) for f in files]
+                return self._plains(files)
         files = sorted(f for f in path.iterdir() if f.name.endswith(STORAGE_SUFFIXES)
                        or f.name.endswith(tuple(s + ".zstd" for s in STORAGE_SUFFIXES)))
         if not files:
             raise BagFilesError(f"{path}: not a rosbag2 bag (no .mcap or .db3 file)")
-        return [self._plain(f) for f in files]
+        return self._plains(files)
 
-    def _plain(self, file: Path) -> Path:
-        """The file itself, or its decompressed copy when ros2 bag compressed it whole (name.mcap.zstd)."""
+    def _plains(self, files: list[Path]) -> list[Path]:
+        out = [p for p in map(self._plain, files) if p is not None]
+        if not out:
+            raise BagFilesError(f"{self.path}: no storage file could be read ({'; '.join(self.skipped_files)})")
+        return out
+
+    def _plain(self, file: Path) -> Path | None:
+        """The file itself, or its decompressed copy when ros2 bag compressed it whole (name.mcap.zstd); None (said
+        in `skipped_files`) when that copy would pass its limit (decompress.file_limit) or is not zstd."""
         if not file.name.endswith(".zstd"):
             return file
         import zstandard
@@ -77,17 +92,33 @@ class BagFiles:
         if self._tmp is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="aoa_bag_")
         out = Path(self._tmp.name) / file.name[: -len(".zstd")]
-        with open(file, "rb") as src, open(out, "wb") as dst:
-            zstandard.ZstdDecompressor().copy_stream(src, dst)
+        limit = file_limit(file, Path(self._tmp.name))
+        try:
+            with open(file, "rb") as src, open(out, "wb") as dst:
+                zstd_file_bounded(src, dst, limit)
+        except (zstandard.ZstdError, ValueError, OSError) as exc:
+            out.unlink(missing_ok=True)
+            self.skipped_files.append(f"{file.name} not read: decompressed, it {exc}")
+            log.warning("%s: not read (decompressed, it %s)", file, exc)
+            return None
         return out
 
     def payload(self, raw: bytes) -> bytes:
-        """A message's CDR bytes (decompressed when the bag compresses each message)."""
+        """A message's CDR bytes (decompressed when the bag compresses each message); BadPayload when they cannot be
+        read within MESSAGE_MAX_BYTES. A bag whose metadata.yaml claims message compression for plain messages
+        (no zstd magic) gets them as stored, counted in `not_compressed`."""
         if not self.message_compression:
             return raw
         import zstandard
 
-        return zstandard.ZstdDecompressor().decompressobj().decompress(bytes(raw))  # frames may omit their size
+        raw = bytes(raw)
+        if not raw.startswith(ZSTD_MAGIC):
+            self.not_compressed += 1
+            return raw
+        try:
+            return zstd_bounded(raw, MESSAGE_MAX_BYTES)
+        except (zstandard.ZstdError, ValueError) as exc:
+            raise BadPayload(f"a compressed message that cannot be read ({type(exc).__name__}: {exc})") from None
 
     def close(self):
         if self._tmp is not None:

@@ -9,6 +9,8 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
+from .decompress import TooLarge, chunk_limit, zstd_bounded
+
 MAGIC = b"\x89MCAP0\r\n"
 _SCHEMA, _CHANNEL, _MESSAGE, _CHUNK, _FOOTER, _DATA_END = 0x03, 0x04, 0x05, 0x06, 0x02, 0x0F
 
@@ -104,6 +106,7 @@ class _Salvager:
             else:
                 yield from self.records(data[pos:pos + 9 + length], "")
             pos += 9 + length
+        self.report.damage.append(f"it ends at byte {pos} without its footer (a recording that was cut)")
 
     def cut(self, op: int, body: bytes, pos: int) -> Iterator[RawMessage]:
         """A record the file ends inside: an uncompressed chunk still gives up its complete records."""
@@ -117,7 +120,7 @@ class _Salvager:
 
     def chunk(self, body: bytes, offset: int) -> Iterator[RawMessage]:
         """A whole chunk: decompressed, checked against its CRC (skipped and counted on a mismatch), read."""
-        crc = _u32(body, 24)
+        crc, declared = _u32(body, 24), _u64(body, 16)
         compression, at = _string(body, 28)
         inner = body[at + 8:at + 8 + _u64(body, at)]
         if compression:
@@ -126,7 +129,12 @@ class _Salvager:
                 return
             import zstandard
 
-            inner = zstandard.ZstdDecompressor().decompressobj().decompress(inner)
+            try:
+                inner = zstd_bounded(inner, chunk_limit(declared))
+            except (TooLarge, zstandard.ZstdError) as exc:
+                self.report.damage.append(f"the chunk at byte {offset} cannot be read within its declared size and "
+                                          f"the limit ({exc}); skipped")
+                return
         if crc and zlib.crc32(inner) != crc:
             lost = sum(1 for op, _ in _records(inner) if op == _MESSAGE)
             self.report.damage.append(f"the chunk at byte {offset} failed its CRC check; its {lost} messages not used")
