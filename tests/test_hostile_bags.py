@@ -132,8 +132,8 @@ def test_a_compressed_file_that_expands_past_its_limit_is_skipped(tmp_path, data
 
 def test_a_sqlite3_bag_with_a_corrupt_page_gives_up_only_that_page(tmp_path, data):
     """A .db3 with one corrupt page was reported as "no topics at all" and nothing was salvaged."""
-    from test_bag_formats import _write
     from rosbags.rosbag2 import StoragePlugin
+    from test_bag_formats import _write
 
     _write(tmp_path / "bag", _messages(data), StoragePlugin.SQLITE3)
     db = next((tmp_path / "bag").glob("*.db3"))
