@@ -17,6 +17,8 @@ from .decompress import MESSAGE_MAX_BYTES, ZSTD_MAGIC, file_limit, zstd_bounded,
 
 log = logging.getLogger("aoa_localizer.bag")
 STORAGE_SUFFIXES = (".mcap", ".db3")
+# A split bag of thousands of files has a metadata.yaml of a few hundred KiB; a 6 MB one took 91 s and 2.2 GB
+METADATA_MAX_BYTES = 4 * 1024 * 1024
 
 
 class BagFilesError(RuntimeError):
@@ -57,7 +59,10 @@ class BagFiles:
         if path.is_file():
             return self._plains([path])
         meta = path / "metadata.yaml"
-        if meta.is_file():
+        if meta.is_file() and meta.stat().st_size > METADATA_MAX_BYTES:
+            log.warning("%s: %d bytes, more than any bag's metadata (%d): not read; reading the storage files", meta,
+                        meta.stat().st_size, METADATA_MAX_BYTES)
+        elif meta.is_file():
             try:
                 info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
                 names = [Path(p).name for p in info.get("relative_file_paths") or []]

@@ -47,3 +47,44 @@ def test_the_contract_and_the_readme_cover_every_parameter():
     for p in parameter_specs() + NODE_PARAMS:
         assert f"`{p.name}`" in readme, p.name
     assert "README.md#parameters" in INTERFACE
+
+
+def test_the_failure_behaviour_page_states_the_limits_the_code_has():
+    """docs/failure_behaviour.md stays true: each limit it states is the code's, and every rejection reason it names
+    in backticks is one the engine counts."""
+    import re
+
+    from aoa_localizer.engine import channels
+    from aoa_localizer.engine.localizer import REASONS
+    from aoa_localizer.ros import kraken_bridge, node
+    from aoa_localizer.tools import http_poll, kraken_csv
+    from msgs_adapters import bag_files, decompress
+
+    page = (ROOT / "docs" / "failure_behaviour.md").read_text()
+    mib = 1024 * 1024
+    stated = {
+        "above 1 THz": channels.FREQUENCY_MAX_HZ == 1e12,
+        "past 4,096 entries": channels._HEARD_MAX == 4096,
+        "remembers the latest 256": kraken_csv._VFOS_KEPT == 256,
+        "its declared `uncompressed_size` and 128 MiB": decompress.CHUNK_MAX_BYTES == 128 * mib,
+        "a message by 64 MiB": decompress.MESSAGE_MAX_BYTES == 64 * mib,
+        "200 times its size (at least 64 MiB)": (decompress.FILE_RATIO, decompress.FILE_MIN_BYTES) == (200, 64 * mib),
+        "less 1 GiB": decompress.DISK_MARGIN_BYTES == 1024 * mib,
+        "(default 2 s, at most 60)": kraken_bridge.TIMEOUT_MAX_S == 60,
+        "(default 4 MiB)": http_poll.DEFAULT_MAX_BYTES == 4 * mib,
+        "within 0.1 s": http_poll.WATCH_S == 0.1,
+        "a warning every 30 s": kraken_bridge.SKIPPED_SAY_EVERY_S == 30,
+        "more than 80 % of the period": node._MAX_LOAD == 0.8,
+        "over twice `diagnostics_period_s`": node._STALL_PERIODS == 2,
+        "of 1.5 typical intervals": node._GAP_FACTOR == 1.5,
+    }
+    missing = [words for words in stated if words not in page]
+    wrong = [words for words, true in stated.items() if not true]
+    assert not missing and not wrong, (missing, wrong)
+    assert bag_files.METADATA_MAX_BYTES == 4 * mib and "4 MiB" in page
+    named = set(re.findall(r"`([a-z_]+)`", page))
+    reasons_like = {n for n in named if n.startswith(("bearing_", "fix_", "bad_", "gps_", "channel_"))}
+    reasons_like -= {"gps_max_gap_s", "gps_sigma_m", "channel_tolerance_hz", "channel_timeout_s", "bearing_reference",
+                     "bearing_encoding", "bearing_sigma_deg", "fix_stamp_gaps", "fixes_missing_by_stamp",
+                     "channel_limit"} | {"bearings_lost", "fixes_lost"}
+    assert reasons_like <= set(REASONS), reasons_like - set(REASONS)

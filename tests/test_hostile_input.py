@@ -115,3 +115,13 @@ def test_a_filter_update_out_of_memory_skips_the_point_and_keeps_the_state(monke
     for kind, row in events[half:half + 40]:
         loc.add_fix(row[0], *row[1:4]) if kind == "fix" else loc.add_bearing(row[0], *row[1:3])
     assert loc.rejected["internal_error"] >= 1 and loc.estimate is not None
+
+
+def test_retired_channels_are_bounded_under_ever_new_frequencies():
+    """Item 12: every channel ever retired was kept, with its particles, for good."""
+    loc = Localizer(LocalizerConfig(max_channels=4, channel_timeout_s=5.0))
+    for k in range(60):  # a new frequency every 10 s: each retires while the next ones come
+        for j in range(3):
+            loc.add_bearing(10.0 * k + j, 10.0, 90.0, frequency_hz=100e6 + 1e6 * k)
+    assert len(loc.channels.retired) <= 4 and len(loc.channels.live) <= 5
+    assert len(loc.channels.all()) <= 9

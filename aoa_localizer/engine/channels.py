@@ -59,7 +59,8 @@ class Channels:
         """`worker`: the Localizer's background-check worker, shared by the channels (None: checks inline)."""
         self.cfg, self.rng, self._reject, self.worker = cfg, rng, reject, worker
         self.live: dict[str, Channel] = {}
-        self.retired: dict[str, Channel] = {}  # the last retired channel of each id, its final estimate kept
+        # the last retired channel of each id, its final estimate kept; the newest max_channels of them
+        self.retired: dict[str, Channel] = {}
         self._heard: dict[float, Channel] = {}  # frequency -> its channel, for frequencies heard before
         self._opened = 0  # frequency channels opened so far
         self.default = self._open(DEFAULT, math.nan)
@@ -123,7 +124,10 @@ class Channels:
         for c in gone:
             c.retired = True
             del self.live[c.id]
+            self.retired.pop(c.id, None)
             self.retired[c.id] = c
+        while len(self.retired) > self.cfg.max_channels:  # the oldest retired go: memory bounded over any stream
+            del self.retired[next(iter(self.retired))]
         return gone
 
     def all(self) -> list[Channel]:

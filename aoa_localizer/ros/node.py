@@ -639,8 +639,17 @@ class LocalizerNode(Node):
         self.callback_s, self.callback_max_s, self.latency_ms = [], 0.0, []
         self._publish_path()
         self._publish_summary()
+        self._drop_gone_publishers()
         self.period_start = time.perf_counter()
         self.other_s = self.period_start - t0  # this period's own work counts in the next one
+
+    def _drop_gone_publishers(self):
+        """The publishers of channels the engine no longer keeps (retired long ago): memory stays bounded under a
+        stream of ever new frequencies."""
+        kept = {c.id for c in self.loc.channels.all()} | {DEFAULT}
+        for cid in [cid for cid in self.channel_pubs if cid not in kept]:
+            for pub in vars(self.channel_pubs.pop(cid)).values():
+                self.destroy_publisher(pub)
 
     def channel_diagnostics(self) -> list[tuple[str, int, str, dict]]:
         """One status per frequency channel: WARN before its first estimate or while its check runs, OK tracking
