@@ -308,7 +308,7 @@ class LocalizerConfig:
             low=0.0, high=1.0
     )
     init_max_points: int = param(500, "points kept while waiting for geometry (at least `init_bearings`)", low=2,
-                                 high=10_000)
+                                 high=100_000)
     prior_east: float | None = param(
         None,
         "Gaussian prior mean east (m, map); set with `prior_north` and `prior_sigma_m`, it replaces the start search",

@@ -62,8 +62,8 @@ def parse_args(argv) -> argparse.Namespace:
     args = parser.parse_args(own)
     if not args.url.startswith(("http://", "https://")):
         parser.error(f"--url must be an http(s) address, got {args.url!r}")
-    if not (0 < args.rate <= 100 and 0 < args.timeout <= TIMEOUT_MAX_S and 1024 <= args.max_bytes <= 2**30):
-        parser.error(f"--rate must be in (0, 100], --timeout in (0, {TIMEOUT_MAX_S:g}], --max-bytes in [1024, 2^30]")
+    if not (0 < args.rate <= 1000 and 0 < args.timeout <= TIMEOUT_MAX_S and 1024 <= args.max_bytes <= 2**30):
+        parser.error(f"--rate must be in (0, 1000], --timeout in (0, {TIMEOUT_MAX_S:g}], --max-bytes in [1024, 2^30]")
     if not args.conf_high > args.conf_low:
         parser.error("--conf-high must be > --conf-low")
     return args
