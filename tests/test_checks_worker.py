@@ -261,6 +261,7 @@ def test_a_snapshot_crosses_to_the_worker_process_whole():
         assert np.array_equal(keep_a, keep_b)
 
 
+@pytest.mark.slow
 def test_the_worker_and_the_resource_tracker_die_with_a_killed_parent(tmp_path):
     """Reliability III, item 9: a node killed by SIGKILL (the OOM killer) left its check worker and
     multiprocessing's resource tracker (~150 MB) running; a supervisor that respawned the node piled them up."""

@@ -62,6 +62,7 @@ def _peak_rss_mb(code: str) -> float:
     return float(res.stdout.split()[-1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("declared", [1000, GIB])  # declared small (a lie), or declared huge
 def test_a_chunk_that_expands_to_a_gibibyte_is_skipped_and_the_rest_is_read(tmp_path, data, zeros_gib, declared):
     """A 56 KB bag whose zstd chunk expanded to 1 GiB took 3.3 GB of RSS."""
@@ -149,6 +150,7 @@ def test_a_sqlite3_bag_with_a_corrupt_page_gives_up_only_that_page(tmp_path, dat
     assert whole - 200 < got["fix"] + got["bearing"] < whole  # a 4 KiB page holds a few dozen messages
 
 
+@pytest.mark.slow
 def test_a_recording_cut_between_chunks_is_reported_as_damaged(tmp_path, data):
     """A recording killed mid-way (its chunks sealed, no footer) replayed with exit 0 or 3; the docs say 1."""
     write_bag(tmp_path / "bag", data.fixes, data.bearings)

@@ -26,8 +26,8 @@ def test_a_good_page_is_returned(server):
     ("/redirect", "redirected to 'http://127.0.0.1:1/elsewhere'"),
     ("/status_500", "HTTP 500"),
     ("/endless", "larger than 100000 bytes"),
-    ("/trickle_body", "within 1 s"),
-    ("/trickle_headers", "within 1 s"),
+    pytest.param("/trickle_body", "within 1 s", marks=pytest.mark.slow),  # a second each: the deadline
+    pytest.param("/trickle_headers", "within 1 s", marks=pytest.mark.slow),
 ])
 def test_each_hostile_reply_is_a_reason_within_the_deadline(server, path, words):
     start = time.monotonic()
