@@ -30,7 +30,7 @@ from .bag_files import BadPayload, BagFiles, BagFilesError, TopicInfo, describe_
 from .db3_salvage import read_db3_salvaged
 from .decompress import oversized_chunks
 from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, heading_from_imu, stamp_seconds
-from .mcap_salvage import MAGIC, RawMessage, Salvage, read_salvaged
+from .mcap_salvage import RawMessage, Salvage, read_salvaged
 
 log = logging.getLogger("aoa_localizer.bag")
 
@@ -286,9 +286,6 @@ class RawReader:
                     done += 1
                     if msg is not None:
                         yield msg
-            if file.suffix == ".mcap" and not _ends_with_magic(file):
-                self.damage.append(f"{file.name}: it ends without its footer (a recording that was cut); every "
-                                   "message before the cut was read")
             return
         except Exception as exc:  # noqa: BLE001 - rosbags refuses or stops: the record-by-record read decides
             failure = exc
@@ -322,12 +319,3 @@ class RawReader:
             return read_db3_salvaged(file, report)
         return read_salvaged(file.read_bytes(), report)
 
-
-def _ends_with_magic(file: Path) -> bool:
-    """Whether an MCAP file ends as a complete one does: its footer, then the magic again."""
-    with open(file, "rb") as f:
-        f.seek(0, 2)
-        if f.tell() < 2 * len(MAGIC):
-            return False
-        f.seek(-len(MAGIC), 2)
-        return f.read(len(MAGIC)) == MAGIC

@@ -33,9 +33,6 @@ class PendingQueue:
     def __len__(self):
         return len(self._heap)
 
-    def __iter__(self):
-        return (entry[2] for entry in sorted(self._heap))
-
     def push(self, p: Pending):
         heapq.heappush(self._heap, (p.stamp, next(self._seq), p))
 

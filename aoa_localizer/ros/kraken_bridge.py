@@ -83,6 +83,7 @@ class KrakenBridge(Node):
         self.down_since: float | None = None
         self.last_fix_stamp = -float("inf")  # the lines of one CPI repeat its position: one fix each
         self.skipped_said = time.monotonic()
+        self.counts_said = (0, 0)  # (no_gps_heading, published) when the skipped lines were last looked at
         # Our own SIGINT/SIGTERM: rclpy's would invalidate the context under a publish (an RCLError traceback).
         self.stopped_by: str | None = None
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -133,15 +134,14 @@ class KrakenBridge(Node):
         now = time.monotonic()
         if now - self.skipped_said < SKIPPED_SAY_EVERY_S:
             return
-        skipped = self.counts["no_gps_heading"] - self.counts["no_gps_said"]
-        if skipped and self.counts["published"] == self.counts["published_said"]:
+        no_gps, published = self.counts["no_gps_heading"], self.counts["published"]
+        skipped = no_gps - self.counts_said[0]
+        if skipped and published == self.counts_said[1]:
             self.get_logger().warning(
                 f"{skipped} lines in the last {now - self.skipped_said:.0f} s skipped and none published: the "
                 "receiver has no GPS fix, so its lines carry no heading (--azimuth true); "
                 "give it GPS, or use --azimuth relative with the node's bearing_reference:=vehicle")
-        self.skipped_said = now
-        self.counts["no_gps_said"] = self.counts["no_gps_heading"]
-        self.counts["published_said"] = self.counts["published"]
+        self.skipped_said, self.counts_said = now, (no_gps, published)
 
     def publish(self, r: KrakenLine):
         if self.args.azimuth == "true" and not r.has_gps:
@@ -169,8 +169,7 @@ class KrakenBridge(Node):
                 rclpy.spin_once(self, timeout_sec=0.05)
 
     def destroy_node(self):
-        counts = {k: v for k, v in self.counts.items() if not k.endswith("_said")}
-        counts.update({k: v for k, v in self.filter.dropped.items() if v})
+        counts = dict(self.counts, **{k: v for k, v in self.filter.dropped.items() if v})
         print("kraken_bridge: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v), file=sys.stderr,
               flush=True)
         return super().destroy_node()

@@ -57,8 +57,8 @@ NODE_NAME = "aoa_localizer"
 PAIRED = (("datum_lat", "datum_lon"), ("prior_east", "prior_north", "prior_sigma_m"))  # set together
 _MAX_LOAD = 0.8  # share of wall time spent working (inputs, idle moves, diagnostics) above which it warns
 _STALL_PERIODS = 2.0  # a diagnostics period this many times longer than configured: the node was held up
-_GAP_FACTOR = 1.5  # a stamp gap this many median intervals long holds lost records (a regular receiver jitters less)
-_GAP_STREAMS = 256  # DF streams (station, frequency) whose stamp gaps are followed; past it the oldest is dropped
+_GAP_FACTOR = 1.5  # a stamp gap this many typical intervals long holds lost records (a regular receiver jitters less)
+_GAP_STREAMS = 256  # input streams whose stamp gaps are followed; past it the one heard least recently is dropped
 DATUM_PARAMS = frozenset({"datum_lat", "datum_lon", "datum_alt"})  # the only parameters that move the map frame
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
@@ -150,7 +150,7 @@ class LocalizerNode(Node):
         }
         self.lost_reported = 0  # fixes_lost + bearings_lost at the last diagnostics
         self.df_gaps: OrderedDict[tuple[str, float], StampGaps] = OrderedDict()  # per station and frequency
-        self.fix_gaps: dict[str, StampGaps] = {}  # per station
+        self.fix_gaps: OrderedDict[tuple[str, float], StampGaps] = OrderedDict()  # per station
         self.callback_s: list[float] = []
         self.other_s = 0.0  # work in the period outside the input callbacks: idle moves, the periodic work
         self.period_start = time.perf_counter()
@@ -240,14 +240,18 @@ class LocalizerNode(Node):
                 raise ConfigError(f"{name}.position {pos} is not a usable position: {REASONS[reason]}")
         return loc
 
-    def _gaps(self, station: str, frequency_hz: float) -> StampGaps:
-        """The stamp gaps of one DF stream: a station's records of one frequency (NaN: the default channel)."""
+    @staticmethod
+    def _gaps(streams: OrderedDict, station: str, frequency_hz: float = math.nan) -> StampGaps:
+        """The stamp gaps of one input stream: a station's fixes, or its DF records of one frequency (NaN: the
+        default channel); the _GAP_STREAMS heard most recently are kept."""
         key = (station, frequency_hz if math.isfinite(frequency_hz) else 0.0)
-        gaps = self.df_gaps.get(key)
+        gaps = streams.get(key)
         if gaps is None:
-            gaps = self.df_gaps[key] = StampGaps(factor=_GAP_FACTOR)
-            if len(self.df_gaps) > _GAP_STREAMS:
-                self.df_gaps.popitem(last=False)
+            gaps = streams[key] = StampGaps(factor=_GAP_FACTOR)
+            if len(streams) > _GAP_STREAMS:
+                streams.popitem(last=False)
+        else:
+            streams.move_to_end(key)
         return gaps
 
     def _made(self, est):
@@ -366,7 +370,7 @@ class LocalizerNode(Node):
             self.counts["adapter_errors"] += 1
             return
         if math.isfinite(r.stamp):
-            self.fix_gaps.setdefault(station, StampGaps(factor=_GAP_FACTOR)).add(r.stamp)
+            self._gaps(self.fix_gaps, station).add(r.stamp)
         self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
         self._publish_made()
         self._publish_datum()
@@ -389,12 +393,12 @@ class LocalizerNode(Node):
             if self.cfg.bearing_encoding == "df_record":
                 r = df_from_vector3stamped(msg)
                 if math.isfinite(r.stamp):
-                    self._gaps(station, r.frequency_hz).add(r.stamp)
+                    self._gaps(self.df_gaps, station, r.frequency_hz).add(r.stamp)
                 self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz)
             else:
                 p = bearing_from_pose(msg)
                 if math.isfinite(p.stamp):
-                    self._gaps(station, math.nan).add(p.stamp)
+                    self._gaps(self.df_gaps, station).add(p.stamp)
                 self.loc.add_bearing_enu(p.stamp, p.yaw_rad, p.variance_rad2, station=station)
         except (AttributeError, TypeError, ValueError):
             self.counts["adapter_errors"] += 1

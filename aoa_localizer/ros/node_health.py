@@ -43,9 +43,7 @@ class Overload:
         self._hold -= 1
         self.rejected.update(new)
         self.lost += new_missing
-        words = [self._cause if cause is None else cause]
-        if not cause:
-            words[0] = f"just before: {words[0]}"
+        words = [cause or f"just before: {self._cause}"]
         if new:
             words.append("refused meanwhile: " + ", ".join(f"{n} as {k}" for k, n in new.most_common()))
         if "gps_gap" in new:
