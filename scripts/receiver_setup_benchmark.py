@@ -6,6 +6,9 @@ Q 100 to 8 deg at Q 40, while the configuration says a constant 1.1 deg):
 * `offset30`, `declination12`: every azimuth 30 deg (a mount offset left at 0) or 12 deg (a forgotten
   declination) off;
 * `relative`: azimuths relative to the vehicle's heading fed as true north.
+One cell on the public `straight` drive (one pass, no turns, so an offset cannot be told from a place):
+* `straight_compass`: `bearing_reference: magnetic_north` (declination right), and a compass whose residual error
+  is a constant drawn per run from N(0, 2 deg): the ellipse must carry the offset the drive cannot learn.
 Per cell: RMSE / CRLB, coverage of the 95 % ellipse, and how many runs end `suspect` with a warning naming a
 setting; an answer is "honest" when the truth is inside the ellipse or the state is `suspect` with such a warning.
 
@@ -21,7 +24,7 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.scenarios import SEED_TRACK, robustness_cells, simulate
+from aoa_localizer.engine.scenarios import SCENARIOS, SEED_TRACK, robustness_cells, simulate
 
 SETTINGS = ("bearing_reference", "mount_offset_deg", "magnetic_declination_deg")
 
@@ -38,6 +41,10 @@ def _heading_az(points: np.ndarray) -> np.ndarray:
 
 
 def cell_data(cell: str, seed: int):
+    if cell == "straight_compass":
+        data = simulate(SCENARIOS["straight"], seed)
+        data.bearings[:, 1] = (data.bearings[:, 1] + 2.0 * np.random.default_rng(seed).standard_normal()) % 360.0
+        return data
     base = robustness_cells()["wild0"]
     data = simulate(replace(base, name=cell, wild_share=0.25 if cell == "wild25" else 0.0), seed)
     shift = {"offset30": 30.0, "declination12": 12.0}.get(cell)
@@ -49,8 +56,9 @@ def cell_data(cell: str, seed: int):
 
 
 def task(args):
-    cell, seed = args
-    res = run(cell_data(cell, seed), LocalizerConfig(seed=seed))
+    cell, seed, changes = args
+    cfg = LocalizerConfig(seed=seed, bearing_reference="magnetic_north" if cell == "straight_compass" else "true_north")
+    res = run(cell_data(cell, seed), cfg.with_changes(**changes))
     s, est = res.scores, (res.estimates[-1] if res.estimates else None)
     named = est is not None and est.state == "suspect" and any(k in w for w in est.warnings for k in SETTINGS)
     return cell, {"converged": s["converged"], "error": s.get("error", math.inf), "crlb": s["crlb"],
@@ -62,9 +70,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=12)
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--cells", nargs="+", default=["wild25", "offset30", "declination12", "relative"])
+    parser.add_argument("--cells", nargs="+",
+                        default=["wild25", "offset30", "declination12", "relative", "straight_compass"])
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="a LocalizerConfig change for every cell (e.g. offset_sigma_deg=0), read as a float")
     args = parser.parse_args(argv)
-    tasks = [(c, r) for c in args.cells for r in range(args.runs)]
+    changes = {name: float(text) for name, _, text in (item.partition("=") for item in args.param)}
+    tasks = [(c, r, changes) for c in args.cells for r in range(args.runs)]
     with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
         out = pool.map(task, tasks)
     print("| cell | RMSE / CRLB | median error m | inside 95 % | suspect naming a setting | honest | states |")

@@ -379,6 +379,13 @@ class LocalizerConfig:
         0.0, "the DF array's zero, clockwise from the vehicle's forward axis (deg), `bearing_reference: vehicle`",
         low=-360.0, high=360.0,
     )
+    offset_sigma_deg: float = param(
+        -1.0, "how far the configured reference's zero may still be off (deg, one standard deviation), "
+        "marginalised into the estimate, so the ellipse carries it where the bearings cannot tell an offset from a "
+        "place (a straight drive); negative: by "
+        "`bearing_reference` (0 for true_north, 2 for magnetic_north, 3 for vehicle with `mount_offset_deg` set, "
+        "10 for vehicle without); 0: the offset is known exactly", low=-1.0, high=90.0,
+    )
     heading_source: str = choice(
         "track", ("track", "imu"),
         "the vehicle's heading for `bearing_reference: vehicle`: `track` (course over ground from the GPS fixes) "

@@ -2,6 +2,9 @@
 declination, a DF whose north is off. Every bearing then reads the same angle off; on a drive with turns no single
 place explains them all, and the joint optimum of (place, offset) stands out from the place alone.
 
+Where the data cannot tell an offset from a place (a straight drive, a few bearings from one side), the reference's
+residual misalignment stays unknown, and the published covariance carries it (`place_spread`).
+
 Offsets are ENU radians: the corrected bearing is the given one minus the offset, so a true azimuth is the read
 azimuth plus the offset in degrees (ENU angles run the other way round).
 """
@@ -11,6 +14,7 @@ import math
 
 import numpy as np
 
+from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.global_search import Points, Robust, linearised, log_posterior
 
@@ -20,6 +24,48 @@ _ITERATIONS = 30
 # offset must bring. True north from a DF is usually right; a magnetic reference often lacks its declination;
 # an array's mount offset is often never measured.
 PRIOR_LOG_ODDS = {"true_north": 20.0, "magnetic_north": 10.0, "vehicle": 5.0}
+# How far a configured reference's zero may still be off (deg, one standard deviation) when `offset_sigma_deg`
+# is left to the reference: a DF's own north is aligned to a degree or so; a compass carries the vehicle's own
+# magnetism and the declination model's error; an array's forward axis is a few degrees off once measured
+# (`mount_offset_deg` set), and anything when it never was.
+RESIDUAL_SD_DEG = {"true_north": 0.0, "magnetic_north": 2.0, "vehicle": 10.0}
+MEASURED_MOUNT_SD_DEG = 3.0
+
+
+def prior_sd(cfg: LocalizerConfig) -> float:
+    """The residual offset's prior standard deviation (rad): `offset_sigma_deg`, or by the bearing reference."""
+    if cfg.offset_sigma_deg >= 0.0:
+        return math.radians(cfg.offset_sigma_deg)
+    if cfg.bearing_reference == "vehicle" and cfg.mount_offset_deg != 0.0:
+        return math.radians(MEASURED_MOUNT_SD_DEG)
+    return math.radians(RESIDUAL_SD_DEG[cfg.bearing_reference])
+
+
+def marginalise(pts: Points, x: np.ndarray, rob: Robust, sd: float) -> tuple[np.ndarray, np.ndarray]:
+    """The shift (2,) and added covariance (2, 2) that take a place x estimated at the offset in use to the
+    posterior marginalised over a residual offset of prior N(0, sd^2) (rad; inf: flat, an offset already learned),
+    to first order: the points' Fisher information in (place, offset) says how far the place moves per radian of
+    offset (g = I_xx^-1 I_xb) and what the points leave of the offset's variance, 1 / (I_bb - I_bx g + 1 / sd^2);
+    the offset's mean is one Gauss-Newton step from the residuals. (0, 0) when sd is 0 or the points are
+    degenerate."""
+    none = (np.zeros(2), np.zeros((2, 2)))
+    if sd <= 0.0 or pts.east.size < 2:
+        return none
+    resid, grad, w, _ = linearised(np.asarray(x, float), pts, rob)
+    i_xx = (grad * w[:, None]).T @ grad
+    i_xb = grad.T @ w
+    try:
+        g = np.linalg.solve(i_xx, i_xb)
+    except np.linalg.LinAlgError:
+        return none
+    info = float(w.sum() - i_xb @ g) + 1.0 / sd**2
+    if not (np.all(np.isfinite(g)) and info > 0.0):
+        return none
+    wr = w * resid
+    mean = float(wr.sum() - g @ (grad.T @ wr)) / info
+    if not math.isfinite(mean):
+        return none
+    return -g * mean, np.outer(g, g) / info
 
 
 def shifted(pts: Points, offset: float) -> Points:

@@ -18,6 +18,14 @@ from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.types import Estimate
 
 DATUM = (46.5, -84.3, 200.0)  # a western-hemisphere datum, away from the vehicle scenarios'
+# A survey is a handful of bearings, so a larger cloud costs well under a second and takes the Monte Carlo
+# spread of the estimate (tens of metres at the default 100 on a kilometre-wide posterior) below the data's.
+SURVEY_PARTICLES = 2000
+
+
+def survey_config(**changes) -> LocalizerConfig:
+    """The survey program's defaults: the engine's, with SURVEY_PARTICLES particles."""
+    return LocalizerConfig(num_particles=SURVEY_PARTICLES).with_changes(**changes)
 
 
 @dataclass(frozen=True)
@@ -90,11 +98,11 @@ def locate_bearings(bearings: list[SiteBearing], cfg: LocalizerConfig) -> tuple[
 
 
 def locate_survey(survey: Survey, cfg: LocalizerConfig | None = None) -> Estimate | None:
-    """A simulated survey's end-of-data estimate (datum DATUM)."""
+    """A simulated survey's end-of-data estimate (datum DATUM; the survey program's defaults unless `cfg`)."""
     frame = LocalFrame(*DATUM)
     bearings = []
     for i, ((e, n), az, t) in enumerate(zip(survey.stations, survey.azimuth_deg, survey.stamps, strict=True)):
         lat, lon, _ = frame.to_geodetic(e, n)
         bearings.append(SiteBearing(f"s{i}", float(t), float(lat), float(lon), float(az)))
-    cfg = (cfg or LocalizerConfig()).with_changes(datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2])
+    cfg = (cfg or survey_config()).with_changes(datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2])
     return locate_bearings(bearings, cfg)[0]

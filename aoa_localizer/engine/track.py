@@ -55,6 +55,7 @@ from aoa_localizer.engine.global_search import (
     residuals,
 )
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
+from aoa_localizer.engine.offset import marginalise, prior_sd
 from aoa_localizer.engine.preprocess import make_point
 from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
@@ -172,9 +173,20 @@ class EmitterTrack:
         return self.provisional
 
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """The published mean and covariance: the filter's; or, for a provisional sample, the posterior's
-        highest-density place (the best mode: with few bearings the posterior's tails along the rays drag its mean
-        far out) with the cloud's second moment about it, scaled so the 95 % ellipse holds 95 % of the cloud."""
+        """The published mean and covariance: the cloud's (_cloud_estimate), marginalised over the residual bearing
+        offset the points cannot tell from a place (offset.marginalise)."""
+        mean, cov = self._cloud_estimate()
+        sd = math.inf if self.offset else prior_sd(self.cfg)
+        if sd == 0.0:
+            return mean, cov
+        pts = Points.of(self.model.history.data) if self.filter is not None else self.points()
+        shift, spread = marginalise(pts, mean, self.robust(), sd)
+        return mean + shift, cov + spread
+
+    def _cloud_estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """The filter's mean and covariance; or, for a provisional sample, the posterior's highest-density place (the
+        best mode: with few bearings the posterior's tails along the rays drag its mean far out) with the cloud's
+        second moment about it, scaled so the 95 % ellipse holds 95 % of the cloud."""
         if self.filter is not None:
             return self.filter.estimate()
         f = self.cloud

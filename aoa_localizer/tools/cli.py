@@ -72,9 +72,11 @@ def bag_topics(args) -> dict[str, str]:
     return {"fix": args.fix_topic, "bearing": args.bearing_topic, "heading": args.heading_topic}
 
 
-def add_engine_args(parser: argparse.ArgumentParser):
+def add_engine_args(parser: argparse.ArgumentParser, particles: int = 100):
+    """The engine's options; `particles` is the program's default number of particles (for the help)."""
     parser.add_argument("--algorithm", choices=ALGORITHMS, help="filter (unset: afsa, or the params file's)")
-    parser.add_argument("--particles", type=int, help="number of particles (unset: 100, or the params file's)")
+    parser.add_argument("--particles", type=int,
+                        help=f"number of particles (unset: {particles}, or the params file's)")
     parser.add_argument("--seed", type=seed_value, help="filter seed: the same seed reproduces a run")
     parser.add_argument(
         "--params-file",

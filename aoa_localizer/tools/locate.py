@@ -4,7 +4,8 @@ The CSV has a header row. Columns: `time` (ISO 8601 with a UTC offset, or epoch 
 or projected `x`, `y` with --crs EPSG:NNNN), `azimuth_deg` (clockwise from true north, unless -p bearing_reference
 says otherwise); optional `quality` (0-100), `sigma_deg` (that bearing's own standard deviation), `station` (a
 name, for the messages) and `id` (one emitter per id; no id: one emitter). Each row is a bearing taken at its own
-place. A bad row is reported with its line number and skipped, never used.
+place. A bad row is reported with its line number and skipped, never used. The engine runs its defaults with
+2000 particles (a survey's few bearings make that cheap; --particles to change).
 
 Output: one JSON line per id (--output), a table on stdout, and with --report DIR a map, KML and GeoJSON of every
 id. Exit codes: 0 every id located; 1 some id has no estimate (the reason is printed); 2 unreadable input or bad
@@ -25,7 +26,7 @@ from aoa_localizer.engine.config import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.surveys import SiteBearing, locate_bearings
+from aoa_localizer.engine.surveys import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, config_from_args, setup_logging
 
@@ -169,11 +170,11 @@ def main(argv=None) -> int:
     parser.add_argument("--output", type=Path, metavar="OUT.jsonl", help="one JSON line per id")
     parser.add_argument("--report", type=Path, metavar="DIR", help="map.png, emitter.kml, emitter.geojson")
     parser.add_argument("--crs", metavar="EPSG:NNNN", help="the CRS of projected x, y columns (instead of lat, lon)")
-    add_engine_args(parser)
+    add_engine_args(parser, SURVEY_PARTICLES)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
     try:
-        cfg = config_from_args(args)
+        cfg = config_from_args(args, survey_config())
         rows, bad = read_rows(args.csv, args.crs)
     except (ConfigError, OSError, ValueError, UnicodeDecodeError) as exc:
         print(f"locate: {exc}", file=sys.stderr)
