@@ -163,3 +163,36 @@ def test_channels_sharing_stamps_close_their_points_at_different_readings():
     assert len({s[0] for s in sizes.values()}) == 5 and all(set(s[1:]) == set(first) for s in sizes.values())
     starts = [stamp for got in closes.values() for stamp, _ in got[1:]]
     assert max(starts.count(s) for s in set(starts)) == 1  # no two channels close a point on the same reading
+
+
+def test_the_primary_channel_is_the_default_while_it_has_data_else_the_one_with_most_points():
+    """emitter/pose's channel: none before an estimate; with records only on frequencies, the channel with the most
+    points (one emitter heard on one frequency is the primary, as round 1's clients expect); the default channel
+    as soon as it has an estimate. Here 446 MHz goes quiet after 40 % of its records, and the same emitter's
+    last 40 % come without a frequency."""
+    loc = Localizer(LocalizerConfig(seed=1))
+    assert loc.channels.primary() is None
+    fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 0)
+    events = list(fleet.events())
+    quiet_records = sum(kind == "bearing" and row[3] == 446.0e6 for kind, _, row in events)
+    primaries, seen = [], 0
+    loc.on_estimate = lambda est: primaries.append((est.channel, loc.channels.primary().id))
+    for kind, station, row in events:
+        if kind == "fix":
+            loc.add_fix(*row[:4], station=station)
+        elif row[3] == 433.92e6:
+            loc.add_bearing(*row[:3], station=station, frequency_hz=row[3])
+        else:
+            seen += 1
+            if seen <= 0.4 * quiet_records:
+                loc.add_bearing(*row[:3], station=station, frequency_hz=row[3])
+            elif seen > 0.6 * quiet_records:
+                loc.add_bearing(*row[:3], station=station)
+    loc.flush()
+    loc.finish()
+    first_default = next(i for i, (channel, _) in enumerate(primaries) if channel == DEFAULT)
+    busy, quiet = loc.channels.live["f433920000"], loc.channels.live["f446000000"]
+    assert busy.emitter.points_used > quiet.emitter.points_used and quiet.estimate is not None
+    assert primaries[first_default - 1][1] == busy.id
+    assert all(primary == DEFAULT for _, primary in primaries[first_default:])
+    assert loc.channels.primary() is loc.channels.default

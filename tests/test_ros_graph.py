@@ -725,7 +725,11 @@ def test_two_stations_and_two_emitters_each_get_their_topics_summary_and_status(
             status = got["status"][f"aoa_localizer: localizer channel {cid}"]
             assert status.level == b"\x00" and diagnostics_values(T.DiagnosticArray(status=[status]))[
                 status.name]["frequency_hz"] == f"{f:.0f}"
-        assert "default" not in got  # nothing came without a frequency
+        # Nothing came without a frequency, so emitter/pose carries the channel with the most points
+        primary = max(ids, key=lambda cid: got["summary"]["channels"][cid]["points_used"])
+        entry = got["summary"]["channels"][primary]
+        top = got["default"].pose.pose.position
+        assert math.hypot(top.x - entry["east"], top.y - entry["north"]) < 0.5
         assert set(got["paths"]) == set(PAIR)
     assert node_p.poll() is None
 

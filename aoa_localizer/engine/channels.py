@@ -130,6 +130,14 @@ class Channels:
             del self.retired[next(iter(self.retired))]
         return gone
 
+    def primary(self) -> Channel | None:
+        """The channel a single-emitter consumer reads (the node's `emitter/pose`): the default channel while it has
+        an estimate, else the channel with an estimate from the most points (the first opened on a tie)."""
+        if self.default.estimate is not None:
+            return self.default
+        return max((c for c in self.all() if c.estimate is not None), key=lambda c: c.emitter.points_used,
+                   default=None)
+
     def all(self) -> list[Channel]:
         """Live channels, then retired ones not live again, in the order they were opened."""
         return list(self.live.values()) + [c for cid, c in self.retired.items() if cid not in self.live]

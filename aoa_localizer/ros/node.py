@@ -269,7 +269,7 @@ class LocalizerNode(Node):
             return self.create_publisher(kind, prefix + topic, qos, event_callbacks=events)
 
         return SimpleNamespace(pose=make(T.PoseWithCovarianceStamped, "pose", self.latched),
-                               fix=make(T.NavSatFix, "fix", 10), particles=make(T.PoseArray, "particles", 10),
+                               fix=make(T.NavSatFix, "fix", self.latched), particles=make(T.PoseArray, "particles", 10),
                                markers=make(T.MarkerArray, "markers", 10))
 
     def destroy_node(self):
@@ -423,11 +423,19 @@ class LocalizerNode(Node):
             self._publish_summary()
 
     def _publish(self, est):
-        T = self.T
-        frame = self.map_frame
+        """An estimate on its channel's topics, and on emitter/ too when its channel is the primary one."""
         pubs = self.channel_pubs.get(est.channel)
         if pubs is None:
             pubs = self.channel_pubs[est.channel] = self._channel_publishers(f"emitter/{est.channel}/")
+        self._publish_on(pubs, est)
+        primary = self.loc.channels.primary()
+        if est.channel != DEFAULT and primary is not None and primary.id == est.channel:
+            self._publish_on(self.channel_pubs[DEFAULT], est)  # emitter/ carries the primary channel
+
+    def _publish_on(self, pubs: SimpleNamespace, est):
+        """The estimate on one set of publishers (a channel's, or emitter/ for the primary channel)."""
+        T = self.T
+        frame = self.map_frame
         pubs.pose.publish(build.emitter_pose(T, est, frame))
         pubs.fix.publish(build.emitter_fix(T, est, self.loc.datum_frame().alt0, self.emitter_frame))
         # The cloud and the markers cost about 1 ms to build: only for someone listening.
