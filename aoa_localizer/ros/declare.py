@@ -3,7 +3,11 @@ read_only, and the values checked against it, for every node of the package."""
 from __future__ import annotations
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
-from rclpy.exceptions import InvalidParameterTypeException, ParameterUninitializedException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterUninitializedException,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -46,6 +50,11 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
         except InvalidParameterTypeException as exc:  # rclpy's words name the type only: say what is valid
             hint = " (YAML reads on/off/yes/no as booleans: quote them)" if "BOOL" in str(exc) else ""
             raise ConfigError(f"{p.name} must be {p.spec.describe()}{hint}; {exc}") from exc
+        except InvalidParameterValueException as exc:  # outside the descriptor's range: the declaration's words
+            given = getattr(node, "_parameter_overrides", {}).get(p.name)
+            if given is not None:
+                p.spec.check(p.name, given.value)
+            raise ConfigError(f"{p.name} must be {p.spec.describe()}; {exc}") from exc
         try:
             values[p.name] = node.get_parameter(p.name).value
         except ParameterUninitializedException:
