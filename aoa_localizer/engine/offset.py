@@ -3,7 +3,7 @@ declination, a DF whose north is off. Every bearing then reads the same angle of
 place explains them all, and the joint optimum of (place, offset) stands out from the place alone.
 
 Where the data cannot tell an offset from a place (a straight drive, a few bearings from one side), the reference's
-residual misalignment stays unknown, and the published covariance carries it (`place_spread`).
+residual misalignment stays unknown, and the published estimate is marginalised over it (`marginalise`).
 
 Offsets are ENU radians: the corrected bearing is the given one minus the offset, so a true azimuth is the read
 azimuth plus the offset in degrees (ENU angles run the other way round).
@@ -25,9 +25,9 @@ _ITERATIONS = 30
 # an array's mount offset is often never measured.
 PRIOR_LOG_ODDS = {"true_north": 20.0, "magnetic_north": 10.0, "vehicle": 5.0}
 # How far a configured reference's zero may still be off (deg, one standard deviation) when `offset_sigma_deg`
-# is left to the reference: a DF's own north is aligned to a degree or so; a compass carries the vehicle's own
-# magnetism and the declination model's error; an array's forward axis is a few degrees off once measured
-# (`mount_offset_deg` set), and anything when it never was.
+# is left to the reference: a DF that says true north is taken at its word (a gross error is the learned
+# offset's job); a compass carries the vehicle's own magnetism and the declination model's error; an array's
+# forward axis is a few degrees off once measured (`mount_offset_deg` set), and anything when it never was.
 RESIDUAL_SD_DEG = {"true_north": 0.0, "magnetic_north": 2.0, "vehicle": 10.0}
 MEASURED_MOUNT_SD_DEG = 3.0
 

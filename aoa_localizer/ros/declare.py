@@ -51,7 +51,7 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
             hint = " (YAML reads on/off/yes/no as booleans: quote them)" if "BOOL" in str(exc) else ""
             raise ConfigError(f"{p.name} must be {p.spec.describe()}{hint}; {exc}") from exc
         except InvalidParameterValueException as exc:  # outside the descriptor's range: the declaration's words
-            given = getattr(node, "_parameter_overrides", {}).get(p.name)
+            given = _overrides(node).get(p.name)
             if given is not None:
                 p.spec.check(p.name, given.value)
             raise ConfigError(f"{p.name} must be {p.spec.describe()}; {exc}") from exc
@@ -71,6 +71,11 @@ def refuse_unknown(node: Node):
     """After every declaration: ConfigError for an override (-p, --params-file) of a name not declared, with the
     nearest known name. rclpy silently ignores those and has no public accessor for them."""
     declared = set(node._parameters)
-    unknown = sorted(set(getattr(node, "_parameter_overrides", {})) - declared)
+    unknown = sorted(set(_overrides(node)) - declared)
     if unknown:
         raise ConfigError(unknown_names(unknown, sorted(declared)))
+
+
+def _overrides(node: Node) -> dict:
+    """The values given at start (-p, --params-file) by name: rclpy keeps them privately, with no accessor."""
+    return getattr(node, "_parameter_overrides", {})

@@ -428,8 +428,7 @@ class LocalizerNode(Node):
         if pubs is None:
             pubs = self.channel_pubs[est.channel] = self._channel_publishers(f"emitter/{est.channel}/")
         self._publish_on(pubs, est)
-        primary = self.loc.channels.primary()
-        if est.channel != DEFAULT and primary is not None and primary.id == est.channel:
+        if est.channel != DEFAULT and getattr(self.loc.channels.primary(), "id", None) == est.channel:
             self._publish_on(self.channel_pubs[DEFAULT], est)  # emitter/ carries the primary channel
 
     def _publish_on(self, pubs: SimpleNamespace, est):

@@ -72,7 +72,7 @@ def bag_topics(args) -> dict[str, str]:
     return {"fix": args.fix_topic, "bearing": args.bearing_topic, "heading": args.heading_topic}
 
 
-def add_engine_args(parser: argparse.ArgumentParser, particles: int = 100):
+def add_engine_args(parser: argparse.ArgumentParser, particles: int = LocalizerConfig().num_particles):
     """The engine's options; `particles` is the program's default number of particles (for the help)."""
     parser.add_argument("--algorithm", choices=ALGORITHMS, help="filter (unset: afsa, or the params file's)")
     parser.add_argument("--particles", type=int,
