@@ -26,6 +26,7 @@ def play(loc: Localizer, fleet, frequency=True):
     return estimates
 
 
+@pytest.mark.slow
 def test_three_emitters_heard_at_the_same_stamps_are_each_found():
     """A receiver's VFOs share one stamp: three records per stamp, one per carrier; each channel finds its
     emitter, every estimate names its channel and frequency, and nothing is refused as repeated."""
@@ -46,6 +47,7 @@ def test_three_emitters_heard_at_the_same_stamps_are_each_found():
     assert loc.channels.default.estimate is None  # no record came without a frequency
 
 
+@pytest.mark.slow
 def test_records_without_a_frequency_behave_exactly_as_before():
     """Frequency 0 and NaN go to the default channel: the same estimates, bit for bit, as add_bearing without one."""
     data = simulate("seed", 2)
@@ -93,6 +95,7 @@ def test_a_bad_frequency_is_refused_with_its_reason(freq):
     assert loc.rejected["bad_frequency"] == 1 and list(loc.channels.live) == [DEFAULT]
 
 
+@pytest.mark.slow
 def test_a_silent_channel_is_retired_with_its_last_estimate_and_a_new_one_starts_fresh():
     """Emitter 446 MHz stops after half the drive; channel_timeout_s later it is retired (its estimate kept);
     when it comes back it starts a new track under the same id."""
@@ -111,6 +114,7 @@ def test_a_silent_channel_is_retired_with_its_last_estimate_and_a_new_one_starts
     assert [c.id for c in loc.channels.all()].count("f446000000") == 1  # the live one; the retired kept aside
 
 
+@pytest.mark.slow
 def test_the_json_line_carries_channel_and_frequency():
     loc = Localizer(LocalizerConfig(seed=1))
     fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0)}, 0)
@@ -123,6 +127,7 @@ def test_the_json_line_carries_channel_and_frequency():
     assert line["channel"] == "default" and line["frequency_hz"] is None
 
 
+@pytest.mark.slow
 def test_each_channel_draws_from_its_own_generator():
     """A channel's run depends on the seed and its id only, not on the other channels heard with it."""
     both = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 0)
@@ -136,6 +141,7 @@ def test_each_channel_draws_from_its_own_generator():
     assert np.array_equal(runs[0].particles, runs[1].particles)
 
 
+@pytest.mark.slow
 def test_channels_sharing_stamps_close_their_points_at_different_readings():
     """Five carriers of one scan (shared stamps, 20 Hz, a vehicle at 15 m/s): each channel's first point is cut
     shorter by its own share, so their points close at different readings instead of all in one scan (a burst of
@@ -165,6 +171,7 @@ def test_channels_sharing_stamps_close_their_points_at_different_readings():
     assert max(starts.count(s) for s in set(starts)) == 1  # no two channels close a point on the same reading
 
 
+@pytest.mark.slow
 def test_the_primary_channel_is_the_default_while_it_has_data_else_the_one_with_most_points():
     """emitter/pose's channel: none before an estimate; with records only on frequencies, the channel with the most
     points (one emitter heard on one frequency is the primary, as round 1's clients expect); the default channel

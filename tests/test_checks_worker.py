@@ -45,6 +45,7 @@ def error_and_nees(loc: Localizer, data) -> tuple[float, float]:
     return float(np.hypot(*d)), float(d @ np.linalg.solve(est.cov, d))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["seed", "urban"])
 def test_realtime_scheduling_finds_the_emitter_as_reproducible_does(scenario):
     """The same data through both (realtime paced by settle(), as a receiver would): the worker's results are
@@ -65,6 +66,7 @@ def test_realtime_scheduling_finds_the_emitter_as_reproducible_does(scenario):
     assert worker_nees < 13.8  # inside the 99.9 % ellipse
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["seed", "urban"])
 def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_ellipse_honest(scenario):
     """The node's idle time (pay_owed between messages) makes the sweeps a resampling owes: the points then carry
@@ -90,6 +92,7 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
     assert not Localizer(LocalizerConfig(seed=3)).pay_owed()  # reproducible: nothing is ever owed
 
 
+@pytest.mark.slow
 def test_the_default_is_reproducible_from_python_and_realtime_in_the_node():
     assert Localizer(LocalizerConfig()).worker is None
     live = Localizer(LocalizerConfig(seed=3), live=True)
@@ -102,6 +105,7 @@ def test_the_default_is_reproducible_from_python_and_realtime_in_the_node():
         LocalizerConfig(scheduling="off")  # YAML would read an on/off choice as a boolean: not offered
 
 
+@pytest.mark.slow
 def test_finish_waits_for_the_worker_and_starts_if_it_lagged():
     """Data fed far faster than the worker runs (a script, not a receiver): finish() applies what is still running,
     tries the start the worker lagged behind, and the final global check runs: an estimate at end of data."""
@@ -129,6 +133,7 @@ def search_killing_the_worker(*args):
     return checks.search_start(*args)
 
 
+@pytest.mark.slow
 def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inline(monkeypatch, caplog):
     """Each dead worker costs its job (counted internal_error, the first logged with its traceback); after three in
     a row the worker is given up with one warning and the checks run in the calls: the emitter is still found."""
@@ -144,6 +149,7 @@ def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inl
     assert err < 5.0 and nees < 13.8
 
 
+@pytest.mark.slow
 def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():
     """Points arriving far faster than the start searches (a bag replayed at full speed, no finish: a live node):
     a search over a few points is no start for the many held by the time it ends, so it is run again; poll()
@@ -165,6 +171,7 @@ def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():
     loc.close()
 
 
+@pytest.mark.slow
 def test_a_failing_check_is_counted_and_the_track_goes_on(monkeypatch):
     monkeypatch.setattr(track_module, "run_check", check_failing_in_the_worker)
     data = simulate("seed", 2)
@@ -176,6 +183,7 @@ def test_a_failing_check_is_counted_and_the_track_goes_on(monkeypatch):
     loc.close()
 
 
+@pytest.mark.slow
 def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monkeypatch, caplog):
     """A worker process that cannot start (no processes allowed; a script's unguarded main under spawn): each job
     runs in the call, as reproducible, the worker is not tried again and one warning says why."""
@@ -206,6 +214,7 @@ def realtime_run_in_a_pool_worker(r: int) -> tuple[str, float]:
     return loc.worker.unusable, error_and_nees(loc, data)[0]
 
 
+@pytest.mark.slow
 def test_a_realtime_localizer_in_a_daemonic_process_runs_its_checks_inline():
     """multiprocessing forbids a Pool's worker to have children: the check worker is given up, the work inline."""
     with multiprocessing.get_context("spawn").Pool(1) as pool:
@@ -213,6 +222,7 @@ def test_a_realtime_localizer_in_a_daemonic_process_runs_its_checks_inline():
     assert "daemonic" in why and err < 5.0
 
 
+@pytest.mark.slow
 def test_a_check_for_a_filter_since_replaced_is_dropped():
     """A check submitted for one filter is not applied to the filter that replaced it (divergence, re-start): its
     snapshot is of points the new filter never saw. Results are applied only at a point, so the job's timing
@@ -244,6 +254,7 @@ def test_a_check_for_a_filter_since_replaced_is_dropped():
     loc.close()
 
 
+@pytest.mark.slow
 def test_a_snapshot_crosses_to_the_worker_process_whole():
     """Pickled (packed readings), a snapshot gives the worker the same points and the same check result."""
     data = simulate("seed", 2)

@@ -49,6 +49,7 @@ def test_the_safety_layer_rescues_the_bootstrap_filter_too():
     assert _straight_rmse(**BOOTSTRAP) < 0.5 * _straight_rmse(**BOOTSTRAP, global_safety=False)
 
 
+@pytest.mark.slow
 def test_paper_variant_runs_and_localises_roughly():
     cfg = LocalizerConfig(seed=10000).with_changes(**{"afsa.variant": "paper"})
     s = run(simulate("seed", 0), cfg).scores

@@ -102,6 +102,7 @@ def test_a_point_no_particle_can_explain_is_skipped_and_nothing_changes():
     assert f.skipped == 1 and np.array_equal(f.x, x0) and np.all(f.logw == 0)
 
 
+@pytest.mark.slow
 def test_mcmc_moves_keep_the_target_distribution():
     """With no bearings the posterior is the Gaussian prior: the fish moves must leave it invariant."""
     f = _filter(n=4000)
@@ -117,6 +118,7 @@ def test_mcmc_moves_keep_the_target_distribution():
     assert np.cov(f.x.T) == pytest.approx(cov, rel=0.12, abs=10)
 
 
+@pytest.mark.slow
 def test_mcmc_moves_pull_a_misplaced_school_towards_the_posterior():
     f = _filter(n=500)
     mean, cov = np.array([0.0, 0.0]), np.eye(2) * 25.0

@@ -26,6 +26,7 @@ def feed_with(extra, at_share=1 / 3):
     return loc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("ahead_s", "reason"), [(1e9, "bearing_stamp_jump"), (200.0, "gps_gap")])
 def test_one_future_record_on_another_channel_costs_only_itself(ahead_s, reason):
     """Item 1: a record 1e9 s ahead at 1 MHz used to drop 201 of the 300 genuine bearings as gps_gap (the station's
@@ -98,6 +99,7 @@ def test_every_numeric_parameter_has_a_range_on_both_sides():
     assert open_ended == ["seed"]  # any non-negative integer seeds numpy's generator
 
 
+@pytest.mark.slow
 def test_a_filter_update_out_of_memory_skips_the_point_and_keeps_the_state(monkeypatch):
     """Item 5: the update's except did not cover MemoryError (the node exited 1)."""
     data = simulate("seed", 0)

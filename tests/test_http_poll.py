@@ -36,6 +36,7 @@ def test_each_hostile_reply_is_a_reason_within_the_deadline(server, path, words)
     assert time.monotonic() - start < 1.0 + 3 * WATCH_S
 
 
+@pytest.mark.slow
 def test_a_stop_request_ends_a_poll_at_once(server):
     start = time.monotonic()
     with pytest.raises(PollFailed, match="stopped"):

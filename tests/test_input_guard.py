@@ -30,6 +30,7 @@ def final_error(loc, data) -> float:
     return float(math.hypot(e - data.emitter_enu[0], n - data.emitter_enu[1]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("first", [(45.0, 117.2, 1e190), (39.1, 117.2, -1e9), (90.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                                    (10.0, 10.0, 5.0)])
 def test_an_absurd_first_fix_neither_crashes_nor_becomes_the_datum(first):
@@ -61,6 +62,7 @@ def test_reset_can_drop_a_datum_that_was_not_configured():
     assert configured.frame.lat0 == 1.0  # a configured datum is never dropped
 
 
+@pytest.mark.slow
 def test_one_record_and_one_fix_from_2038_do_not_stop_a_whole_scenario():
     """Finding 2: they used to become the streams' "latest", then every good input was out of order (0 of 39
     estimates, status a calm "collecting bearings")."""

@@ -48,6 +48,7 @@ def loc():
     return Localizer(LocalizerConfig(seed=4, datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
 
 
+@pytest.mark.slow
 def test_localises_a_drive_past_the_emitter(loc):
     est = drive(loc, track=curved)
     assert est is not None and math.hypot(est.east - EMITTER[0], est.north - EMITTER[1]) < 30
@@ -154,6 +155,7 @@ def test_datum_comes_from_the_first_valid_fix_when_unset():
     assert (loc.frame.lat0, loc.frame.lon0, loc.frame.alt0) == (-33.9, -70.6, 520.0)
 
 
+@pytest.mark.slow
 def test_driving_straight_at_the_emitter_never_starts_from_a_garbage_fix(loc):
     est = drive(loc, seconds=60, track=lambda t: (10.0 * t * 0.832, 10.0 * t * 0.5547))  # along the emitter's bearing
     assert est is None and loc.filter is None
@@ -234,6 +236,7 @@ def test_a_diverged_filter_is_never_published_and_restarts():
     assert est is not None and np.isfinite(est.east) and est.stamp > published.stamp
 
 
+@pytest.mark.slow
 def test_on_estimate_sees_every_estimate_whichever_input_made_it_and_estimate_is_the_latest():
     """ROS-package issue: the README suggested estimates come back from add_bearing; with fixes and readings
     interleaved most come back from add_fix. The callback gets them all, in order, and `estimate` is the latest."""
@@ -256,6 +259,7 @@ def test_on_estimate_sees_every_estimate_whichever_input_made_it_and_estimate_is
     assert last is None or seen[-1] is last
 
 
+@pytest.mark.slow
 def test_an_estimates_arrays_are_the_users_own():
     """The filter's cloud and its summary are read-only and shared; an Estimate hands out copies the user may
     change without touching the filter."""

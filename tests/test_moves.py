@@ -59,6 +59,7 @@ MOVES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(MOVES))
 def test_the_move_keeps_its_target(name):
     x, acceptance = run(MOVES[name])

@@ -114,6 +114,7 @@ def random_group(rng, n):
                     float(rng.normal(0, 100)), float(rng.normal(0, 100)), float(rng.uniform(0, 3))) for i in range(n)]
 
 
+@pytest.mark.slow
 def test_a_small_point_in_plain_floats_is_the_numpy_reference_to_rounding():
     """Up to SMALL_POINT readings a point is made in plain floats; the numpy code (any size) is the reference:
     the same mask and the same point to 1e-12, whatever the weighting, correlation, sigmas and wild readings. A

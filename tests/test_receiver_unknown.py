@@ -185,6 +185,7 @@ def test_a_mount_offset_left_at_0_is_learned_and_named_not_a_confident_wrong_ans
     assert res.localizer.emitter.offset_deg == pytest.approx(-30.0, abs=1.5)
 
 
+@pytest.mark.slow
 def test_lenths_fixed_stations_give_an_estimate_whose_ellipse_holds_the_target(tmp_path, cli):
     """Lenth (1981), all eight readings (docs/lenth1981.md): the defaults give an estimate whose 95 % ellipse holds
     the target (7.502, 2.198) km, within 10 % of Andrews' published 0.373 km; reading 6 is wild, and the paper's

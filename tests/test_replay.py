@@ -153,6 +153,7 @@ def test_a_foreign_type_on_an_input_topic_is_counted_and_skipped(tmp_path):
     assert len((tmp_path / "o.jsonl").read_text().splitlines()) > 30
 
 
+@pytest.mark.slow
 def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
     """Finding 5: a bag in the `pose` encoding (what the launcher records with bearing_encoding=pose) could not
     be replayed offline at all."""
@@ -207,6 +208,7 @@ def test_salvage_keeps_an_intact_file_whole_and_refuses_a_foreign_one():
 PAIR_STATIONS = ["--station", "car1=/car1/gps/fix,/car1/df/bearing", "--station", "car2=/car2/gps/fix,/car2/df/bearing"]
 
 
+@pytest.mark.slow
 def test_the_two_station_sample_bag_is_fused_with_station_options(tmp_path, cli):
     """bags/pair: two cars on their own topics; with --station each car's bearings go on its own track and the
     emitter comes out of both (40 points), near the bag's truth. Without --station the bag's topics are listed."""
@@ -232,6 +234,7 @@ def test_bad_station_options_are_refused(tmp_path, cli, args, words):
     assert res.returncode == 2 and words in res.stderr, res.stderr
 
 
+@pytest.mark.slow
 def test_channels_in_a_bag_give_one_line_per_channel_and_json_lines_per_emitter(tmp_path, cli):
     """A DF record's frequency (vector.z) picks its channel offline too: the closing lines name each channel and
     every JSON line carries its channel and frequency."""

@@ -111,6 +111,7 @@ def test_report_from_estimates_and_their_bag(tmp_path):
     assert point["geometry"]["coordinates"] == pytest.approx([last["lon"], last["lat"]])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["garbage", "missing", "jsonl_without_bag", "bad_jsonl"])
 def test_broken_input_exits_non_zero_with_a_message(tmp_path, case, cli):
     if case == "garbage":
@@ -156,6 +157,7 @@ def test_estimates_carry_their_configuration_and_the_report_redraws_with_it(tmp_
     assert "seed unset (a random run)" in (tmp_path / "c/summary.md").read_text()
 
 
+@pytest.mark.slow
 def test_rmse_curves_give_every_series_its_own_style_and_clip_a_diverged_one(tmp_path):
     """ROS-package issue: the --plot chart reused colours across 12 series and one diverged filter stretched the
     axis to 1e7."""
@@ -171,6 +173,7 @@ def test_rmse_curves_give_every_series_its_own_style_and_clip_a_diverged_one(tmp
     assert (tmp_path / "c.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_a_report_of_two_stations_and_two_emitters_draws_and_exports_each(tmp_path):
     """Two cars hearing two carriers: one point and one ellipse per emitter (named by channel, with its frequency),
     one track per car, and the other emitter in the summary."""

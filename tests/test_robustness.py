@@ -66,6 +66,7 @@ def test_self_calibrated_sigma_of_a_3_degree_receiver():
     assert res.scores["inside95"] and res.scores["error"] < 3 * res.scores["crlb"]
 
 
+@pytest.mark.slow
 def test_each_estimate_carries_the_noise_summary_of_its_moment():
     """The summary an estimate carries is made again only when the noise model changed: along a run each one is
     what the model says at that moment (calibrations included), and a user's changes to one do not reach the next."""
@@ -195,6 +196,7 @@ def test_closed_form_2x2_inverse_equals_numpy():
     assert np.isnan(inverse_2x2(bad)).all()
 
 
+@pytest.mark.slow
 def test_the_gaussian_likelihood_stays_gaussian():
     """`likelihood: gaussian` (the paper's eq. 24) is not turned into a mixture by the calibrated outlier rate."""
     res = run(simulate("seed", 0), LocalizerConfig(seed=1, likelihood="gaussian"))

@@ -99,6 +99,7 @@ def test_benchmark_models_by_hand():
     assert xs.shape == (31, 1) and len(zs) == 30
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algorithm", ["espf", "gfapf"])
 def test_seed_filters_localise_the_emitter_too(algorithm):
     s = run(simulate("seed", 0), LocalizerConfig(algorithm=algorithm, seed=10000)).scores

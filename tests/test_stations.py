@@ -2,6 +2,7 @@
 import math
 
 import numpy as np
+import pytest
 from pymap3d import vincenty
 
 from aoa_localizer.engine.config import LocalizerConfig
@@ -32,6 +33,7 @@ def error(loc, fleet) -> float:
     return math.hypot(e - TRUTH[0], n - TRUTH[1])
 
 
+@pytest.mark.slow
 def test_two_vehicles_fix_the_emitter_better_than_either_alone():
     """Each car sees the emitter over a narrow span of directions; their bearings cross at wide angles."""
     fleet = simulate_fleet(PAIR, {0.0: TRUTH}, 0)
@@ -52,6 +54,7 @@ def site_bearings(frame: LocalFrame, site_enu, stamps, sigma_deg, rng) -> np.nda
     return float(az) + sigma_deg * rng.standard_normal(len(stamps))
 
 
+@pytest.mark.slow
 def test_a_fixed_site_gives_its_position_once_and_bearings_for_hours():
     """A site declared at a position sends a bearing a minute for three hours, never a fix: every one is used,
     and with one car's short drive the emitter is fixed far better than by the car alone."""
