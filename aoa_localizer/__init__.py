@@ -1,6 +1,8 @@
 """aoa_localizer: find a radio emitter from a moving direction-finding vehicle."""
-from aoa_localizer.engine.config import AfsaConfig, ConfigError, LocalizerConfig
+from aoa_localizer.core.spec import ConfigError
+from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.types import Estimate
+from aoa_localizer.filters.afsa import AfsaConfig
 
 __all__ = ["AfsaConfig", "ConfigError", "Estimate", "Localizer", "LocalizerConfig"]

@@ -35,29 +35,14 @@ import particles_peers  # noqa: E402
 from aoa_localizer import LocalizerConfig  # noqa: E402
 from aoa_localizer.engine.evaluation import LARGE_ERROR_M, run, run_batch_ml  # noqa: E402
 from aoa_localizer.engine.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
+from aoa_localizer.filters import REGISTRY  # noqa: E402
 
 logging.getLogger("aoa_localizer").setLevel(logging.ERROR)  # per-run first-rejection notes would flood the table
 
-FILTERS = {
-    "afsa": {"algorithm": "afsa"},
-    "afsa-gaussian": {"algorithm": "afsa", "likelihood": "gaussian"},
-    "afsa-paper": {"algorithm": "afsa", "afsa.variant": "paper"},
-    "sir": {"algorithm": "sir"},
-    "espf": {"algorithm": "espf"},
-    "gfapf": {"algorithm": "gfapf"},
-    "upfde": {"algorithm": "upfde"},
-    "upf": {"algorithm": "upf"},
-    "pfde": {"algorithm": "pfde"},
-    "agapf": {"algorithm": "agapf"},
-    # the papers' filters as printed (the default of each is its mcmc variant)
-    "sir-paper": {"algorithm": "sir", "sir.variant": "paper"},
-    "espf-paper": {"algorithm": "espf", "espf.variant": "paper"},
-    "gfapf-paper": {"algorithm": "gfapf", "gfapf.variant": "paper"},
-    "upfde-paper": {"algorithm": "upfde", "de.variant": "paper"},
-    "upf-paper": {"algorithm": "upf", "upf.variant": "paper"},
-    "pfde-paper": {"algorithm": "pfde", "de.variant": "paper"},
-    "agapf-paper": {"algorithm": "agapf", "agapf.variant": "paper"},
-}
+# Every registered algorithm in its default (mcmc) variant and as its paper printed it, and AFSA's likelihood variant
+FILTERS = {name: {"algorithm": name} for name in REGISTRY}
+FILTERS["afsa-gaussian"] = {"algorithm": "afsa", "likelihood": "gaussian"}
+FILTERS |= {f"{a.name}-paper": {"algorithm": a.name, f"{a.group}.variant": "paper"} for a in REGISTRY.values()}
 PEERS = ("particles-bootstrap", "particles-ibis")
 # AFSA paper, Table 1 (relative error x / y in %, seconds for 60 steps, "large errors" of 60 estimates).
 # The paper's PF is the bootstrap filter: our `sir-paper` (sir's default is resample-move).
@@ -206,7 +191,7 @@ def print_tables(results):
                 )
 
 
-ROBUST_FILTERS = ("afsa", "sir", "espf", "gfapf", "upfde", "upf", "pfde", "agapf", "batch-ml")
+ROBUST_FILTERS = (*REGISTRY, "batch-ml")
 GROSS_FACTOR = 10.0
 
 

@@ -10,10 +10,10 @@ import pytest
 import yaml
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
+from aoa_localizer.common.bag_run import run_bag
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import simulate
-from aoa_localizer.tools.bag_run import run_bag
 from msgs_adapters import build
 from msgs_adapters.bag import TOPICS, BagError, BagTopicsError, _qos, read_bag, typestore, write_bag
 

@@ -139,7 +139,7 @@ def test_an_imu_message_gives_its_yaw_and_an_unknown_orientation_is_nan():
 
 
 def test_offline_replay_feeds_a_bags_imu_headings_to_the_engine():
-    from aoa_localizer.tools.bag_run import feed
+    from aoa_localizer.common.bag_run import feed
     from msgs_adapters.bag import BagEvent
     from msgs_adapters.fields import HeadingRecord
 

@@ -8,9 +8,10 @@ from concurrent.futures import wait
 import numpy as np
 import pytest
 
+from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine import checks
 from aoa_localizer.engine import track as track_module
-from aoa_localizer.engine.config import ConfigError, LocalizerConfig
+from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.evaluation import scenario_config
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer

@@ -81,3 +81,11 @@ def test_every_parameter_is_declared_with_a_meaning_and_checked_by_its_declarati
     # init_min_crossing_deg < 90 used to be checked in Python only, num_particles' cap in ROS only
     with pytest.raises(ConfigError, match=r"init_min_crossing_deg must be a finite number in \(0, 90\)"):
         LocalizerConfig(init_min_crossing_deg=90.0)
+
+
+def test_a_whole_group_given_to_with_changes_replaces_the_groups_settings():
+    base = LocalizerConfig(seed=3)
+    as_settings = base.with_changes(afsa=AfsaConfig(variant="paper", step=0.5))
+    as_dict = base.with_changes(afsa={"variant": "paper"})
+    assert (as_settings.afsa.variant, as_settings.afsa.step, as_dict.afsa.variant) == ("paper", 0.5, "paper")
+    assert as_dict.afsa.step == base.afsa.step and as_settings.seed == 3

@@ -9,7 +9,7 @@ import pytest
 from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.evaluation import run, run_model
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
-from aoa_localizer.filters import FILTERS, filter_class
+from aoa_localizer.filters import REGISTRY, filter_class
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models import benchmarks as B
 
@@ -17,7 +17,7 @@ SMALL_SEED = dataclasses.replace(SCENARIOS["seed"], name="small", points=24, rea
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("algorithm", sorted(FILTERS))
+@pytest.mark.parametrize("algorithm", sorted(REGISTRY))
 def test_the_default_variant_localises_the_emitter_finitely_and_repeatably(algorithm):
     cfg = LocalizerConfig(algorithm=algorithm, seed=11)
     assert issubclass(filter_class(cfg), ResampleMove)  # the default keeps the posterior (the mcmc variant)
@@ -30,7 +30,7 @@ def test_the_default_variant_localises_the_emitter_finitely_and_repeatably(algor
     assert first.scores["error"] < 20.0 and first.scores["nees"] < 30.0  # found, and not confidently wrong
 
 
-@pytest.mark.parametrize("algorithm", sorted(FILTERS))
+@pytest.mark.parametrize("algorithm", sorted(REGISTRY))
 def test_the_paper_variant_runs_on_a_papers_model_finitely_and_repeatably(algorithm):
     model = B.upfde_model()
     changes = {"gfapf.scale": "absolute"}

@@ -4,15 +4,15 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.types import ObservationPoint
-from aoa_localizer.filters import FILTERS, make_filter
-from aoa_localizer.filters.afsa import AfsaMoves, uniform_disc
-from aoa_localizer.models.emitter import EmitterModel
-from aoa_localizer.models.likelihood import (
+from aoa_localizer.engine.emitter_model import EmitterModel
+from aoa_localizer.engine.likelihood import (
     BearingLikelihood,
     gaussian_loglik,
     mixture_loglik,
 )
+from aoa_localizer.engine.types import ObservationPoint
+from aoa_localizer.filters import REGISTRY, make_filter
+from aoa_localizer.filters.afsa import AfsaMoves, uniform_disc
 
 
 def test_gaussian_loglik_by_hand():
@@ -155,7 +155,7 @@ def test_a_filter_refuses_a_model_without_the_capability_it_needs():
     from aoa_localizer.filters import ModelMismatch
     from aoa_localizer.models.benchmarks import BearingsOnlyModel, GrowthModel
 
-    paper = {f"{FILTERS[a][0]}.variant": "paper" for a in FILTERS}
+    paper = {f"{a.group}.variant": "paper" for a in REGISTRY.values()}
     with pytest.raises(ModelMismatch, match=r"afsa \(afsa.variant paper\) needs a model with StaticPosterior"):
         make_filter(LocalizerConfig(algorithm="afsa").with_changes(**paper), np.random.default_rng(0), GrowthModel())
     for algorithm in ("upf", "upfde"):

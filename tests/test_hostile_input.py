@@ -84,7 +84,7 @@ def test_memory_of_heard_frequencies_is_bounded():
 ])
 def test_parameter_values_that_crashed_or_stalled_the_node_are_refused(name, value):
     """Item 5: each passed validation before."""
-    from aoa_localizer.engine.config import ConfigError
+    from aoa_localizer.core.spec import ConfigError
 
     with pytest.raises(ConfigError, match=name.replace(".", r"\.")):
         LocalizerConfig().with_changes(**{name: value})

@@ -5,7 +5,7 @@ import time
 import pytest
 from hostile_http import GOOD, HostileServer
 
-from aoa_localizer.tools.http_poll import WATCH_S, PollFailed, http_get
+from aoa_localizer.common.http_poll import WATCH_S, PollFailed, http_get
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from test_ros_graph import client, spin_until
 
+from aoa_localizer.common.kraken_csv import LineFilter, MalformedLine, parse_line, quality_from_confidence
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
-from aoa_localizer.tools.kraken_csv import LineFilter, MalformedLine, parse_line, quality_from_confidence
 
 SPECTRUM = ", ".join("0.00" for _ in range(360))
 

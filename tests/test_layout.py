@@ -1,9 +1,17 @@
 """The layout says which code may use ROS: the engine, filters, models, reporting and the offline tools import
 without rclpy; the public entry points stay where the README says."""
+import ast
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+
+import aoa_localizer
+
+# CONTRIBUTING's layers, bottom first: a package imports only packages below it (and itself); the modules at the
+# package's top (entry points, the public API) may import any.
+LAYERS = ["core", "models", "filters", "engine", "common", "reporting", "ros", "tools"]
 
 ROS_FREE = ["aoa_localizer", "aoa_localizer.engine.localizer", "aoa_localizer.engine.evaluation",
             "aoa_localizer.filters", "aoa_localizer.models", "aoa_localizer.reporting.report",
@@ -23,6 +31,34 @@ def test_the_engine_and_the_offline_tools_import_with_rclpy_made_unimportable():
             + "assert 'rclpy' not in sys.modules\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
+
+
+def project_imports(path: Path) -> set[str]:
+    """Every aoa_localizer module `path` imports, at the top or inside a function."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = [node.module] if isinstance(node, ast.ImportFrom) and node.module else []
+        names += [a.name for a in node.names] if isinstance(node, ast.Import) else []
+        found |= {n for n in names if n.startswith("aoa_localizer.")}
+    return found
+
+
+def test_each_package_imports_only_the_layers_below_it_even_inside_functions():
+    root = Path(aoa_localizer.__file__).parent
+    assert sorted(p.name for p in root.iterdir() if (p / "__init__.py").exists()) == sorted(LAYERS)
+    wrong = []
+    for path in root.rglob("*.py"):
+        parts = path.relative_to(root).parts
+        if len(parts) == 1:
+            continue
+        rank = LAYERS.index(parts[0])
+        for name in project_imports(path):
+            target = name.split(".")[1]
+            if target not in LAYERS or LAYERS.index(target) > rank:
+                wrong.append(f"{path.relative_to(root)} imports {name}")
+    assert not wrong, wrong
+    adapters = Path(aoa_localizer.__file__).parent.parent / "msgs_adapters"
+    assert not [p for p in adapters.rglob("*.py") if project_imports(p)]  # it does not import the engine
 
 
 def test_the_documented_program_modules_are_thin_entry_points():

@@ -4,7 +4,7 @@ from collections import Counter
 
 import pytest
 
-from aoa_localizer.engine.config import ConfigError
+from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.ros.node_health import RESTART_WINDOW_S, RESTARTS_FOR_ERROR, LatencyHistogram, NodeHealth
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.vehicle_path import VehiclePath

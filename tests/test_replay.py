@@ -157,7 +157,7 @@ def test_a_foreign_type_on_an_input_topic_is_counted_and_skipped(tmp_path):
 def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
     """Finding 5: a bag in the `pose` encoding (what the launcher records with bearing_encoding=pose) could not
     be replayed offline at all."""
-    from aoa_localizer.tools.bag_run import run_bag
+    from aoa_localizer.common.bag_run import run_bag
 
     bag = _bag_with(tmp_path, "pose", extra_string=False)
     loc = Localizer(LocalizerConfig(seed=1))
@@ -172,7 +172,7 @@ def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
 def test_a_bag_cut_inside_its_only_chunk_keeps_every_complete_message(tmp_path, share):
     """Reliability finding 4: a cut anywhere inside an MCAP chunk used to lose the whole chunk (bags/seed, one
     chunk, cut at 10-90 %: 0 of 39 estimates, "damaged after 0 messages"). Every complete record is used now."""
-    from aoa_localizer.tools.bag_run import run_bag
+    from aoa_localizer.common.bag_run import run_bag
 
     bag = tmp_path / "seed"
     bag.mkdir()

@@ -11,8 +11,9 @@ from aoa_localizer.engine.global_search import Points, Robust, find_modes
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.noise import NoiseModel
 from aoa_localizer.engine.preprocess import reading_sigma
-from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, independence_sweep
+from aoa_localizer.engine.safety import HealthMonitor, ModeProposal
 from aoa_localizer.engine.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
+from aoa_localizer.filters.moves import independence_from
 
 BASE = robustness_cells()["wild0"]
 
@@ -180,7 +181,7 @@ def test_independence_moves_keep_a_known_posterior():
     x = np.full((4000, 2), 100.0)
     target = log_target(x)
     for _ in range(30):
-        x, target, _ = independence_sweep(x, target, log_target, prop, rng)
+        x, target, _ = independence_from(x, target, log_target, rng, prop)
     assert x.mean(axis=0) == pytest.approx(mu, abs=0.15)
     assert np.cov(x.T) == pytest.approx(cov, abs=0.3)
 

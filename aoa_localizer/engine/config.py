@@ -8,225 +8,27 @@ YAML file and a Python notebook describe a run the same way.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import MISSING, asdict, dataclass, field, fields, replace
-from numbers import Integral, Real
+from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any
+
+from aoa_localizer.core.spec import ConfigError, ParameterSpec, choice, param, unknown_names
+from aoa_localizer.filters import REGISTRY
+from aoa_localizer.filters.registry import GroupAccess, default_groups, groups
 
 # sqrt(3.801e-4 rad^2), the AFSA paper's bearing noise, in degrees.
 PAPER_BEARING_SIGMA_DEG = math.degrees(math.sqrt(3.801e-4))
 
-ALGORITHMS = ("afsa", "sir", "espf", "gfapf", "upfde", "upf", "pfde", "agapf")
+ALGORITHMS = tuple(REGISTRY)
+GROUPS = groups()
 MAX_PARTICLES = 100_000
 
 
-class ConfigError(ValueError):
-    """A parameter value the engine refuses (never clamped silently)."""
-
-
 @dataclass(frozen=True)
-class Spec:
-    """One parameter's declaration beside its default: Python type, range (bounds open or closed) or choices,
-    whether unset (None) is allowed, whether it is fixed once the node runs, and its meaning."""
-
-    doc: str
-    kind: type
-    low: float | None = None
-    high: float | None = None
-    low_open: bool = False
-    high_open: bool = False
-    choices: tuple[str, ...] = ()
-    optional: bool = False
-    read_only: bool = False
-    items: type = float  # a list's elements: finite numbers, or (str) names
-
-    def check(self, name: str, value: Any):
-        """Raise ConfigError naming the parameter when `value` breaks this declaration."""
-        if value is None and self.optional:
-            return
-        if not self._typed(value) or not self._in_range(value):
-            raise ConfigError(f"{name} must be {self.describe()}, got {value!r}")
-
-    def _typed(self, value) -> bool:
-        if self.kind is bool:
-            return isinstance(value, bool)
-        if self.kind is int:
-            return isinstance(value, Integral) and not isinstance(value, bool)
-        if self.kind is float:
-            return _finite_number(value)
-        if self.kind is list:
-            element = _name if self.items is str else _finite_number
-            return isinstance(value, Sequence) and not isinstance(value, str) and all(map(element, value)) and (
-                self.low is None or self.low <= len(value)) and (self.high is None or len(value) <= self.high)
-        if not isinstance(value, str):
-            return False
-        return value in self.choices if self.choices else bool(value) and not any(c.isspace() for c in value)
-
-    def _in_range(self, value) -> bool:
-        if self.kind is list:  # bounds on its length, checked with the type
-            return True
-        if self.low is not None and (value <= self.low if self.low_open else value < self.low):
-            return False
-        return self.high is None or (value < self.high if self.high_open else value <= self.high)
-
-    def describe(self) -> str:
-        """What a valid value is, in words: 'one of a, b', 'an integer >= 2', 'a finite number in (0, 1)'."""
-        if self.kind is str:
-            return f"one of {', '.join(self.choices)}" if self.choices else "a name without spaces"
-        if self.kind is bool:
-            return "true or false"
-        if self.kind is list:
-            what = "names (letters, digits, _; not starting with a digit)" if self.items is str else "finite numbers"
-            if self.low is not None and self.high is not None:
-                return f"a list of {self.low:g} to {self.high:g} {what}"
-            return f"a list of {what}"
-        what = "an integer" if self.kind is int else "a finite number"
-        if self.low is not None and self.high is not None:
-            span = f"{'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}"
-            what += f" in {span}"
-        elif self.low is not None:
-            what += f" {'>' if self.low_open else '>='} {self.low:g}"
-        elif self.high is not None:
-            what += f" {'<' if self.high_open else '<='} {self.high:g}"
-        return what + (" or unset" if self.optional else "")
-
-
-def _name(value) -> bool:
-    """A ROS name token: it can name a topic namespace (a station's inputs)."""
-    return isinstance(value, str) and value.isidentifier() and value.isascii()
-
-
-def _finite_number(value) -> bool:
-    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def param(default, doc: str, kind: type | None = None, **constraints):
-    """A dataclass field with its declaration (`Spec`) in the field's metadata; the type follows the default
-    unless given (for defaults that are None)."""
-    kind = kind or (str if isinstance(default, str) else type(default))
-    spec = Spec(doc, kind, optional=default is None or constraints.pop("optional", False), **constraints)
-    return field(default=default, metadata={"spec": spec})
-
-
-def choice(default: str, choices: tuple[str, ...], doc: str, **constraints):
-    return param(default, doc, choices=choices, **constraints)
-
-
-def variant_choice(who: str):
-    """A filter group's `variant`: the default mcmc (moves that keep the posterior) or the paper as printed."""
-    return choice("mcmc", ("mcmc", "paper"), f"{who}: `mcmc` (default: the paper's operator as a move that keeps the "
-                  "posterior of all kept points, docs/design.md) or `paper` (as printed)")
-
-
-@dataclass(frozen=True)
-class AfsaConfig:
-    """Fish-school settings (AFSA paper sec. 2.2 and 5). `variant` picks the paper's greedy school or ours."""
-
-    variant: str = choice("mcmc", ("mcmc", "paper"), "`mcmc` (default: the school as moves that keep the "
-                          "posterior: prey as multiple-try Metropolis, swarm as a drift proposal) or `paper`: the "
-                          "school as printed (docs/design.md)")
-    visual: float = param(1.0, "visual range: metres (paper) or standard deviations of the school (mcmc)",
-                          low=0.0, low_open=True, high=1e4)
-    step: float = param(0.3, "fish step: metres (paper), or the share of the way to the swarm's centre (mcmc)",
-                        low=0.0, low_open=True, high=1e4)
-    crowd: float = param(0.618, "crowd factor delta, paper variant", low=0.0, low_open=True, high=10.0)
-    try_number: int = param(50, "prey tries per fish and round (paper); mcmc uses at most `mcmc_tries`",
-                            low=1, high=200)
-    mcmc_tries: int = param(5, "prey looks of the multiple-try move per fish and sweep (mcmc)", low=2, high=1000)
-    max_iterations: int = param(5, "school rounds (paper) or MCMC sweeps (mcmc)", low=1, high=50)
-    tolerance: float = param(1e-3, "stop the paper school when the mean log-objective change is smaller",
-                             low=0.0, low_open=True, high=1e6)
-
-
-@dataclass(frozen=True)
-class EspfConfig:
-    """ESPF settings: the SBX distribution index lambda (any non-negative real in the paper; docs/seed_tables.md)."""
-
-    variant: str = variant_choice("ESPF")
-    sbx_lambda: float = param(2.0, "ESPF: distribution index of the simulated binary crossover (larger: children "
-                              "nearer their parents)", low=0.0, high=100.0)
-    selection: str = choice("draw", ("draw", "top"), "ESPF paper variant: `draw` N of the 2N pool by weight "
-                            "(default), or `top`: the N largest weights (ties broken by position)")
-
-
-@dataclass(frozen=True)
-class GfapfConfig:
-    """GFA-PF settings (paper sec. 2): attraction M, rotation factor maximum, D iterations, the dead zone of the
-    attraction and the range of the repulsion. `scale`: `absolute` reads the two distances in state units (the
-    paper's 1-D models); `spread` in standard deviations of the cloud (the emitter problem, any scale)."""
-
-    variant: str = variant_choice("GFA-PF")
-    attraction: float = param(0.0618, "GFA-PF: attraction weight M towards the central dust", low=0.0, high=10.0)
-    rotation_max: float = param(0.3, "GFA-PF: largest rotation factor f of the repulsion", low=0.0, high=10.0)
-    iterations: int = param(8, "GFA-PF: gravitation iterations D per measurement",
-                            low=0, high=100)
-    attract_min: float = param(0.5, "GFA-PF: no attraction closer than this to the centre (scale units)", low=0.0,
-                               high=1e4)
-    repel_max: float = param(0.2, "GFA-PF: no repulsion farther than this from the centre (scale units)", low=0.0,
-                             high=1e4)
-    scale: str = choice("spread", ("spread", "absolute"), "GFA-PF: `spread` (standard deviations of the cloud) or "
-                        "`absolute` (state units) for the two distances")
-
-
-@dataclass(frozen=True)
-class DeConfig:
-    """Differential evolution of UPF-DE and PF-DE: V = F1 X_r1 + F2 (X_r2 - X_r3), binomial crossover Cr, G
-    generations."""
-
-    variant: str = variant_choice("UPF-DE/PF-DE")
-    fitness: str = choice("posterior", ("posterior", "ratio"), "UPF-DE/PF-DE paper variant: a trial's fitness, "
-                          "`posterior` (L p: the path posterior, default) or `ratio` (L p / q, unbounded)")
-    f1: float = param(
-        1.0, "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)", low=0.0, low_open=True,
-        high=10.0
-    )
-    f2: float = param(0.9, "UPF-DE/PF-DE: scale F2 of the difference vector", low=0.0, low_open=True, high=10.0)
-    cr: float = param(0.6, "UPF-DE/PF-DE: binomial crossover rate", low=0.0, high=1.0)
-    generations: int = param(20, "UPF-DE/PF-DE: DE generations G per measurement", low=0, high=200)
-
-
-@dataclass(frozen=True)
-class SirConfig:
-    """The bootstrap filter on the emitter: `mcmc` resample-move (Gaussian random-walk MH) or `paper` (the plain
-    bootstrap with the random-walk process noise: the papers' PF baseline)."""
-
-    variant: str = variant_choice("SIR")
-
-
-@dataclass(frozen=True)
-class UpfConfig:
-    """The unscented PF on the emitter: `mcmc` (the UKF's Gaussian as an independence MH proposal) or `paper`."""
-
-    variant: str = variant_choice("UPF")
-
-
-@dataclass(frozen=True)
-class AgapfConfig:
-    """AGA-PF's adaptive crossover and mutation probabilities (eqs. 18-19)."""
-
-    variant: str = variant_choice("AGA-PF")
-    curve: str = choice("kuang", ("kuang", "printed"), "AGA-PF: the adaptive curves of eqs. 18-19, `kuang` (with "
-                        "the - 1 of Kuang et al.'s sigmoid: pc1 at the average fitness, pc2 at the best) or "
-                        "`printed`")
-    pc1: float = param(0.95, "AGA-PF: crossover probability below the average fitness", low=0.0, high=1.0)
-    pc2: float = param(0.5, "AGA-PF: crossover probability floor for the fittest", low=0.0, high=1.0)
-    pm1: float = param(0.07, "AGA-PF: mutation probability below the average fitness", low=0.0, high=1.0)
-    pm2: float = param(0.001, "AGA-PF: mutation probability floor for the fittest", low=0.0, high=1.0)
-    a: float = param(9.9034, "AGA-PF: steepness A of the adaptive curves", low=0.0, low_open=True, high=1e3)
-
-
-@dataclass(frozen=True)
-class LocalizerConfig:
+class LocalizerConfig(GroupAccess):
     """All engine parameters. Defaults are the AFSA paper's where it gives one (see docs/design.md)."""
 
-    algorithm: str = choice(
-        "afsa",
-        ALGORITHMS,
-        "`afsa` (AFSA-PF), `sir` (bootstrap), `espf` (evolution sampling), "
-        "`gfapf` (gravitation field), `upfde` (UKF proposal + differential evolution), `upf` "
-        "(unscented PF), `pfde` (PF + differential evolution), `agapf` (adaptive genetic); "
-        "docs/benchmarks.md says how each does on the emitter",
-    )
+    algorithm: str = choice("afsa", ALGORITHMS, ", ".join(f"`{a.name}` ({a.label})" for a in REGISTRY.values())
+                            + "; docs/benchmarks.md says how each does on the emitter")
     num_particles: int = param(
         100,
         "number of particles N (at 100,000 about 2.7 s per update on a 2-core machine; "
@@ -492,13 +294,8 @@ class LocalizerConfig:
         low_open=True,
         high=1e4,
     )
-    sir: SirConfig = field(default_factory=SirConfig)
-    afsa: AfsaConfig = field(default_factory=AfsaConfig)
-    espf: EspfConfig = field(default_factory=EspfConfig)
-    upf: UpfConfig = field(default_factory=UpfConfig)
-    gfapf: GfapfConfig = field(default_factory=GfapfConfig)
-    de: DeConfig = field(default_factory=DeConfig)
-    agapf: AgapfConfig = field(default_factory=AgapfConfig)
+    # Each algorithm's settings group, (name, settings) in GROUPS order, read as `cfg.<name>` (filters/registry.py)
+    groups: tuple[tuple[str, Any], ...] = field(default_factory=default_groups)
 
     def __post_init__(self):
         _validate(self)
@@ -512,33 +309,44 @@ class LocalizerConfig:
         return self.datum_lat is not None
 
     def with_changes(self, **changes) -> LocalizerConfig:
-        """A copy with some fields changed (flat `afsa.x` keys allowed), validated again."""
+        """A copy with some fields changed (flat `afsa.x` keys, or a whole group as a dict or its settings), validated
+        again."""
+        for group in GROUPS:
+            if group in changes:
+                changes.update({f"{group}.{k}": v for k, v in _as_dict(changes.pop(group)).items()})
         return LocalizerConfig.from_dict({**self.to_dict(), **changes})
 
     def to_dict(self) -> dict:
         """Flat dict with `group.<name>` keys (afsa., espf., gfapf.): the node's parameter names."""
         d = asdict(self)
-        for group in GROUPS:
-            d.update({f"{group}.{k}": v for k, v in d.pop(group).items()})
+        for group, values in d.pop("groups"):
+            d.update({f"{group}.{k}": v for k, v in values.items()})
         return d
 
     @classmethod
     def from_dict(cls, values: dict) -> LocalizerConfig:
-        """Build from a flat or nested dict; unknown keys are refused with their names."""
+        """Build from a flat or nested dict (a group as a dict or its settings); unknown keys are refused with their
+        names."""
         values = dict(values)
         groups, unknown = {}, []
         for group, group_cls in GROUPS.items():
-            given = dict(values.pop(group, None) or {})
+            nested = values.pop(group, None) or {}
+            given = _as_dict(nested)
             for key in [k for k in values if k.startswith(f"{group}.")]:
                 given[key[len(group) + 1 :]] = values.pop(key)
             known = {f.name for f in fields(group_cls)}
             unknown += [f"{group}.{k}" for k in sorted(set(given) - known)]
             groups[group] = {k: v for k, v in given.items() if k in known}
-        unknown = sorted(set(values) - {f.name for f in fields(cls)}) + unknown
+        unknown = sorted(set(values) - {f.name for f in fields(cls) if f.name != "groups"}) + unknown
         if unknown:
             raise ConfigError(unknown_names(unknown, [p.name for p in parameter_specs()]))
-        built = {group: replace(GROUPS[group](), **given) for group, given in groups.items()}
-        return cls(**values, **built)
+        built = tuple((group, replace(GROUPS[group](), **given)) for group, given in groups.items())
+        return cls(**values, groups=built)
+
+
+def _as_dict(group) -> dict:
+    """A settings group given as a dict or as its settings dataclass, as a dict."""
+    return asdict(group) if is_dataclass(group) and not isinstance(group, type) else dict(group)
 
 
 def _check(ok: bool, message: str):
@@ -549,13 +357,13 @@ def _check(ok: bool, message: str):
 def _validate(cfg: LocalizerConfig):
     """Every declared constraint, then what ties parameters together."""
     for f in fields(cfg):
-        if f.name in GROUPS:
-            group = getattr(cfg, f.name)
-            _check(isinstance(group, GROUPS[f.name]), f"{f.name} must be a {GROUPS[f.name].__name__}")
-            for g in fields(group):
-                g.metadata["spec"].check(f"{f.name}.{g.name}", getattr(group, g.name))
-        else:
+        if f.name != "groups":
             f.metadata["spec"].check(f.name, getattr(cfg, f.name))
+    _check([name for name, _ in cfg.groups] == list(GROUPS), f"groups must be {', '.join(GROUPS)}, in that order")
+    for name, group in cfg.groups:
+        _check(isinstance(group, GROUPS[name]), f"{name} must be a {GROUPS[name].__name__}")
+        for g in fields(group):
+            g.metadata["spec"].check(f"{name}.{g.name}", getattr(group, g.name))
     _check(
         cfg.init_max_points >= cfg.init_bearings,
         f"init_max_points must be >= init_bearings ({cfg.init_bearings}), got {cfg.init_max_points!r}",
@@ -571,36 +379,12 @@ def _validate(cfg: LocalizerConfig):
     )
 
 
-def unknown_names(names, known) -> str:
-    """'num_particle: unknown; did you mean num_particles?' for each name, the nearest known one suggested."""
-    import difflib
-
-    parts = []
-    for name in names:
-        near = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
-        parts.append(f"{name}: unknown parameter" + (f"; did you mean {near[0]}?" if near else ""))
-    return "; ".join(parts)
-
-
-GROUPS = {"sir": SirConfig, "afsa": AfsaConfig, "espf": EspfConfig, "gfapf": GfapfConfig, "upf": UpfConfig,
-          "de": DeConfig, "agapf": AgapfConfig}
-
-
-@dataclass(frozen=True)
-class ParameterSpec:
-    """A declared parameter by its flat name (`afsa.visual`), with its default."""
-
-    name: str
-    default: Any
-    spec: Spec
-
-
 def parameter_specs() -> list[ParameterSpec]:
     """Every engine parameter in declaration order (group settings last, as `<group>.<name>`)."""
     out = []
     for f in fields(LocalizerConfig):
-        if f.name in GROUPS:
-            out += [ParameterSpec(f"{f.name}.{g.name}", g.default, g.metadata["spec"]) for g in fields(GROUPS[f.name])]
-        else:
+        if f.name != "groups":
             out.append(ParameterSpec(f.name, None if f.default is MISSING else f.default, f.metadata["spec"]))
+    for name, cls in GROUPS.items():
+        out += [ParameterSpec(f"{name}.{g.name}", g.default, g.metadata["spec"]) for g in fields(cls)]
     return out

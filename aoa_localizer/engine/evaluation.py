@@ -11,6 +11,7 @@ from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, inside_ellipse, ne
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import ScenarioData
 from aoa_localizer.engine.types import Estimate
+from aoa_localizer.filters import REGISTRY, make_filter
 
 LARGE_ERROR_M = 15.0  # the AFSA paper's "large error"
 
@@ -144,10 +145,8 @@ def run_model(
     same data. The filter runs in its `paper` variant (the papers' models are where the printed filters
     belong) unless `changes` say otherwise; `changes` are LocalizerConfig fields (flat `group.name` keys).
     """
-    from aoa_localizer.filters import FILTERS, make_filter
-
     x_true, zs = model.simulate(steps, np.random.default_rng(data_seed), jump)
-    paper = {f"{FILTERS[algorithm][0]}.variant": "paper"}
+    paper = {f"{REGISTRY[algorithm].group}.variant": "paper"}
     cfg = LocalizerConfig(algorithm=algorithm, num_particles=n, seed=filter_seed).with_changes(**paper, **changes)
     rng = np.random.default_rng(filter_seed)
     f = make_filter(cfg, rng, model)

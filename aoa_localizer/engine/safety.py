@@ -7,7 +7,6 @@ that can cross kilometres of low posterior while leaving p(x | all kept points) 
   covariance, widened) plus a broad defensive component. Its density is exact, so an independence
   Metropolis-Hastings move from it has the correct Hastings ratio, and importance sampling from it gives
   a weighted sample of the posterior (the start, and a restart from a far better global hypothesis).
-* `random_walk_sweep`, `independence_sweep`: the two MH kernels, vectorised over particles.
 """
 from __future__ import annotations
 
@@ -20,7 +19,7 @@ from scipy.stats import binom
 
 from aoa_localizer.engine.global_search import Mode
 from aoa_localizer.filters import moves
-from aoa_localizer.filters.moves import RW_SCALE
+from aoa_localizer.filters.resampling import systematic
 
 _T_DOF = 3.0  # heavy tails: the ratio posterior / proposal stays bounded in the mode's tails
 _WIDEN = 1.5  # the Laplace covariance underestimates a bearing posterior's banana tails
@@ -107,26 +106,9 @@ class ModeProposal:
         return np.logaddexp.reduce(parts, axis=0)
 
 
-def random_walk_sweep(x: np.ndarray, target: np.ndarray, log_target, cov: np.ndarray, rng: np.random.Generator):
-    """One Gaussian random-walk MH move per particle, scaled by the cloud's covariance; returns (x, target,
-    accepted)."""
-    return moves.random_walk(x, target, log_target, rng, RW_SCALE * np.linalg.cholesky(cov + 1e-4 * np.eye(2)))
-
-
-def independence_sweep(x: np.ndarray, target: np.ndarray, log_target, proposal: ModeProposal, rng: np.random.Generator):
-    """One independence MH move per particle from `proposal`: accept with pi(y) q(x) / (pi(x) q(y))."""
-    prop = proposal.sample(x.shape[0], rng)
-    prop_target = log_target(prop)
-    log_ratio = (prop_target - proposal.logpdf(prop)) - (target - proposal.logpdf(x))
-    take = np.log(rng.random(x.shape[0])) < log_ratio
-    return np.where(take[:, None], prop, x), np.where(take, prop_target, target), int(take.sum())
-
-
 def importance_sample(log_target, proposal: ModeProposal, n: int, rng: np.random.Generator, draws_per_particle=8):
     """N particles drawn from q and resampled by pi / q (systematic): a sample of the posterior, modes in
     proportion to their mass. Duplicates are left for the MH sweeps that follow to spread."""
-    from aoa_localizer.filters.resampling import systematic
-
     y = proposal.sample(draws_per_particle * n, rng)
     lw = log_target(y) - proposal.logpdf(y)
     lw = np.where(np.isfinite(lw), lw, -np.inf)

@@ -45,6 +45,7 @@ from aoa_localizer.engine.checks import (
 from aoa_localizer.engine.clock_check import ClockHint
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import (
     Mode,
     Points,
@@ -64,7 +65,6 @@ from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
-from aoa_localizer.models.emitter import EmitterModel
 
 log = logging.getLogger("aoa_localizer")
 

@@ -21,14 +21,36 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from aoa_localizer.engine.types import ObservationPoint
+from aoa_localizer.core.spec import choice, param
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models.base import StaticPosterior
+
+
+@dataclass(frozen=True)
+class AfsaConfig:
+    """Fish-school settings (AFSA paper sec. 2.2 and 5). `variant` picks the paper's greedy school or ours."""
+
+    variant: str = choice("mcmc", ("mcmc", "paper"), "`mcmc` (default: the school as moves that keep the "
+                          "posterior: prey as multiple-try Metropolis, swarm as a drift proposal) or `paper`: the "
+                          "school as printed (docs/design.md)")
+    visual: float = param(1.0, "visual range: metres (paper) or standard deviations of the school (mcmc)",
+                          low=0.0, low_open=True, high=1e4)
+    step: float = param(0.3, "fish step: metres (paper), or the share of the way to the swarm's centre (mcmc)",
+                        low=0.0, low_open=True, high=1e4)
+    crowd: float = param(0.618, "crowd factor delta, paper variant", low=0.0, low_open=True, high=10.0)
+    try_number: int = param(50, "prey tries per fish and round (paper); mcmc uses at most `mcmc_tries`",
+                            low=1, high=200)
+    mcmc_tries: int = param(5, "prey looks of the multiple-try move per fish and sweep (mcmc)", low=2, high=1000)
+    max_iterations: int = param(5, "school rounds (paper) or MCMC sweeps (mcmc)", low=1, high=50)
+    tolerance: float = param(1e-3, "stop the paper school when the mean log-objective change is smaller",
+                             low=0.0, low_open=True, high=1e6)
 
 SWARM_NOISE = 0.5  # the swarm proposal's spread around its drift, in visual ranges
 SWARM_PEERS = 200  # fish of the other half a swarm looks at, at most (a random subset: O(N) not O(N^2))
@@ -57,7 +79,7 @@ class AfsaFilter(ParticleFilter):
         super().__init__(settings, rng, model)
         self.school_rounds = 0  # rounds the school swam at the last step
 
-    def after_weight(self, p: ObservationPoint):
+    def after_weight(self, p):
         self.x = self.swim(self.x, p)
         ll = self.loglik(self.x, p)
         new = self.prev_logw + ll
@@ -66,7 +88,7 @@ class AfsaFilter(ParticleFilter):
     def should_resample(self) -> bool:
         return True
 
-    def swim(self, x: np.ndarray, p: ObservationPoint) -> np.ndarray:
+    def swim(self, x: np.ndarray, p) -> np.ndarray:
         """Swarm and prey behaviours (eqs. 8-9, 13-15) for all fish and all tries at once."""
         a = self.cfg.afsa
         rng, n = self.rng, int(x.shape[0])
@@ -126,3 +148,6 @@ class AfsaMoves(ResampleMove):
 
         x, target, swarm = moves.drift(x, target, self.log_target, rng, towards_centre, SWARM_NOISE * look)
         return x, target, prey + swarm, 2 * n
+
+
+register("afsa", "AFSA-PF", "afsa", AfsaConfig, paper=AfsaFilter, mcmc=AfsaMoves)

@@ -22,12 +22,31 @@ f_avg and f_max fixed per sweep) and carrying them in the ratio; equal weights a
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.moves import RW_SCALE
+from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
+
+
+@dataclass(frozen=True)
+class AgapfConfig:
+    """AGA-PF's adaptive crossover and mutation probabilities (eqs. 18-19)."""
+
+    variant: str = variant_choice("AGA-PF")
+    curve: str = choice("kuang", ("kuang", "printed"), "AGA-PF: the adaptive curves of eqs. 18-19, `kuang` (with "
+                        "the - 1 of Kuang et al.'s sigmoid: pc1 at the average fitness, pc2 at the best) or "
+                        "`printed`")
+    pc1: float = param(0.95, "AGA-PF: crossover probability below the average fitness", low=0.0, high=1.0)
+    pc2: float = param(0.5, "AGA-PF: crossover probability floor for the fittest", low=0.0, high=1.0)
+    pm1: float = param(0.07, "AGA-PF: mutation probability below the average fitness", low=0.0, high=1.0)
+    pm2: float = param(0.001, "AGA-PF: mutation probability floor for the fittest", low=0.0, high=1.0)
+    a: float = param(9.9034, "AGA-PF: steepness A of the adaptive curves", low=0.0, low_open=True, high=1e3)
 
 
 def kuang(f, f_avg: float, f_max: float, p1: float, p2: float, a: float):
@@ -127,3 +146,6 @@ class AgaPfMoves(ResampleMove):
         x, target, mutated = moves.random_walk(x, target, self.log_target, rng, self.chol(RW_SCALE),
                                                log_attempt=log_pm)
         return x, target, crossed + mutated, 2 * self.n
+
+
+register("agapf", "adaptive genetic", "agapf", AgapfConfig, paper=AgaPfFilter, mcmc=AgaPfMoves)

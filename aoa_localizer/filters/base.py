@@ -12,45 +12,31 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
-from aoa_localizer.engine.config import (
-    AfsaConfig,
-    AgapfConfig,
-    DeConfig,
-    EspfConfig,
-    GfapfConfig,
-    LocalizerConfig,
-    SirConfig,
-    UpfConfig,
-)
+from aoa_localizer.filters import moves
+from aoa_localizer.filters.registry import GroupAccess, default_groups
 from aoa_localizer.filters.resampling import SCHEMES
 from aoa_localizer.models.base import StateSpaceModel, StaticPosterior
 
 
 @dataclass(frozen=True)
-class FilterSettings:
-    """What a filter reads of the configuration: the skeleton's settings and each algorithm's own group (a filter
-    reads only its group), so a benchmark model needs no emitter settings."""
+class FilterSettings(GroupAccess):
+    """What a filter reads of the configuration: the skeleton's settings and the algorithms' settings groups (a
+    filter reads only its own, as `self.cfg.<group>`), so a benchmark model needs no emitter settings."""
 
     num_particles: int = 100
     resampling: str = "systematic"
     ess_threshold: float = 0.5
     move_sweeps: int = 3
-    sir: SirConfig = field(default_factory=SirConfig)
-    afsa: AfsaConfig = field(default_factory=AfsaConfig)
-    espf: EspfConfig = field(default_factory=EspfConfig)
-    gfapf: GfapfConfig = field(default_factory=GfapfConfig)
-    upf: UpfConfig = field(default_factory=UpfConfig)
-    de: DeConfig = field(default_factory=DeConfig)
-    agapf: AgapfConfig = field(default_factory=AgapfConfig)
+    groups: tuple[tuple[str, Any], ...] = field(default_factory=default_groups)
 
     @classmethod
-    def of(cls, cfg: LocalizerConfig) -> FilterSettings:
-        return cls(cfg.num_particles, cfg.resampling, cfg.ess_threshold, cfg.move_sweeps, cfg.sir, cfg.afsa, cfg.espf,
-                   cfg.gfapf, cfg.upf, cfg.de, cfg.agapf)
+    def of(cls, cfg: Any) -> FilterSettings:
+        """The settings filters read from a LocalizerConfig (any object with these fields)."""
+        return cls(cfg.num_particles, cfg.resampling, cfg.ess_threshold, cfg.move_sweeps, cfg.groups)
 
 
 @dataclass(frozen=True)
@@ -199,16 +185,14 @@ class ParticleFilter:
         """`sweeps` random-walk MH moves scaled by the cloud, then one independence MH move from `proposal`
         (a ModeProposal) if given. Each leaves the posterior invariant, so the weighted cloud stays a sample of
         it; the weights are untouched. Returns the share of accepted moves."""
-        from aoa_localizer.engine.safety import independence_sweep, random_walk_sweep
-
         target = self.log_target(self.x)
         accepted, tried = 0, 0
-        cov = self.estimate()[1]
+        chol = moves.RW_SCALE * np.linalg.cholesky(self.estimate()[1] + 1e-4 * np.eye(2))
         for _ in range(sweeps):
-            self.x, target, a = random_walk_sweep(self.x, target, self.log_target, cov, self.rng)
+            self.x, target, a = moves.random_walk(self.x, target, self.log_target, self.rng, chol)
             accepted, tried = accepted + a, tried + self.n
         if proposal is not None:
-            self.x, target, a = independence_sweep(self.x, target, self.log_target, proposal, self.rng)
+            self.x, target, a = moves.independence_from(self.x, target, self.log_target, self.rng, proposal)
             accepted, tried = accepted + a, tried + self.n
         self.targets_known(target)
         return accepted / max(tried, 1)

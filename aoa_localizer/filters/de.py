@@ -2,7 +2,28 @@
 binomial crossover with one forced dimension, greedy selection by fitness. Vectorised over particles."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+from aoa_localizer.core.spec import choice, param, variant_choice
+
+
+@dataclass(frozen=True)
+class DeConfig:
+    """Differential evolution of UPF-DE and PF-DE: V = F1 X_r1 + F2 (X_r2 - X_r3), binomial crossover Cr, G
+    generations."""
+
+    variant: str = variant_choice("UPF-DE/PF-DE")
+    fitness: str = choice("posterior", ("posterior", "ratio"), "UPF-DE/PF-DE paper variant: a trial's fitness, "
+                          "`posterior` (L p: the path posterior, default) or `ratio` (L p / q, unbounded)")
+    f1: float = param(
+        1.0, "UPF-DE/PF-DE: scale F1 of the base vector in V = F1 X_r1 + F2 (X_r2 - X_r3)", low=0.0, low_open=True,
+        high=10.0
+    )
+    f2: float = param(0.9, "UPF-DE/PF-DE: scale F2 of the difference vector", low=0.0, low_open=True, high=10.0)
+    cr: float = param(0.6, "UPF-DE/PF-DE: binomial crossover rate", low=0.0, high=1.0)
+    generations: int = param(20, "UPF-DE/PF-DE: DE generations G per measurement", low=0, high=200)
 
 
 def distinct_indices(n: int, rng: np.random.Generator) -> np.ndarray:

@@ -16,11 +16,26 @@ pair's midpoint, so alone it cannot spread duplicates).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
+
+
+@dataclass(frozen=True)
+class EspfConfig:
+    """ESPF settings: the SBX distribution index lambda (any non-negative real in the paper; docs/seed_tables.md)."""
+
+    variant: str = variant_choice("ESPF")
+    sbx_lambda: float = param(2.0, "ESPF: distribution index of the simulated binary crossover (larger: children "
+                              "nearer their parents)", low=0.0, high=100.0)
+    selection: str = choice("draw", ("draw", "top"), "ESPF paper variant: `draw` N of the 2N pool by weight "
+                            "(default), or `top`: the N largest weights (ties broken by position)")
 
 SMALL_STEP = 0.5  # the small random-walk step after the pair move, in standard deviations of the cloud
 
@@ -93,3 +108,6 @@ class EspfMoves(ResampleMove):
         x, target, crossed = moves.pair_scale(self.x, target, self.log_target, rng, lambda m: sbx_scale(rng, m, lam))
         x, target, walked = moves.random_walk(x, target, self.log_target, rng, self.chol(SMALL_STEP))
         return x, target, crossed + walked, 2 * self.n
+
+
+register("espf", "evolution sampling", "espf", EspfConfig, paper=EspfFilter, mcmc=EspfMoves)

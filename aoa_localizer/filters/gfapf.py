@@ -21,11 +21,34 @@ through the reverse move's mean (moves.drift); `iterations` sweeps.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
+
+
+@dataclass(frozen=True)
+class GfapfConfig:
+    """GFA-PF settings (paper sec. 2): attraction M, rotation factor maximum, D iterations, the dead zone of the
+    attraction and the range of the repulsion. `scale`: `absolute` reads the two distances in state units (the
+    paper's 1-D models); `spread` in standard deviations of the cloud (the emitter problem, any scale)."""
+
+    variant: str = variant_choice("GFA-PF")
+    attraction: float = param(0.0618, "GFA-PF: attraction weight M towards the central dust", low=0.0, high=10.0)
+    rotation_max: float = param(0.3, "GFA-PF: largest rotation factor f of the repulsion", low=0.0, high=10.0)
+    iterations: int = param(8, "GFA-PF: gravitation iterations D per measurement",
+                            low=0, high=100)
+    attract_min: float = param(0.5, "GFA-PF: no attraction closer than this to the centre (scale units)", low=0.0,
+                               high=1e4)
+    repel_max: float = param(0.2, "GFA-PF: no repulsion farther than this from the centre (scale units)", low=0.0,
+                             high=1e4)
+    scale: str = choice("spread", ("spread", "absolute"), "GFA-PF: `spread` (standard deviations of the cloud) or "
+                        "`absolute` (state units) for the two distances")
 
 NOISE_SCALE = 0.5  # the proposal's spread around the gravitation move, in standard deviations of the cloud
 
@@ -88,3 +111,6 @@ class GfapfMoves(ResampleMove):
 
         x, target, accepted = moves.drift(self.x, target, self.log_target, self.rng, pulled, self.chol(NOISE_SCALE))
         return x, target, accepted, self.n
+
+
+register("gfapf", "gravitation field", "gfapf", GfapfConfig, paper=GfapfFilter, mcmc=GfapfMoves)

@@ -9,6 +9,7 @@ pi (the red-black scheme of ensemble samplers). Every function returns (x, targe
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -62,6 +63,23 @@ def independence(x, target, log_target: LogTarget, rng: np.random.Generator, mea
     prop_target = log_target(prop)
     log_ratio = prop_target - target + gauss_log_kernel(x, mean, chol) - gauss_log_kernel(prop, mean, chol)
     return accept(x, target, prop, prop_target, log_ratio, rng)
+
+
+class Proposal(Protocol):
+    """A proposal with an exact density (the safety layer's mode mixture): draws and their log density."""
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray: ...
+
+    def logpdf(self, x: np.ndarray) -> np.ndarray: ...
+
+
+def independence_from(x, target, log_target: LogTarget, rng: np.random.Generator, proposal: Proposal):
+    """An independence move from `proposal`: accept with pi(y) q(x) / (pi(x) q(y))."""
+    prop = proposal.sample(x.shape[0], rng)
+    prop_target = log_target(prop)
+    log_ratio = (prop_target - proposal.logpdf(prop)) - (target - proposal.logpdf(x))
+    take = np.log(rng.random(x.shape[0])) < log_ratio
+    return np.where(take[:, None], prop, x), np.where(take, prop_target, target), int(take.sum())
 
 
 def de_mc(x, target, log_target: LogTarget, rng: np.random.Generator, gamma: float, cr: float, jitter: np.ndarray):

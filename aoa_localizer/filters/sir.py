@@ -1,9 +1,21 @@
 """The bootstrap SIR filter: the skeleton as it is (prior proposal, resampling when ESS falls), and its emitter
 variant, resample-move with Gaussian random-walk Metropolis moves (the IBIS sampler's kernel)."""
+from dataclasses import dataclass
+
+from aoa_localizer.core.spec import variant_choice
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.moves import RW_SCALE
+from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
+
+
+@dataclass(frozen=True)
+class SirConfig:
+    """The bootstrap filter on the emitter: `mcmc` resample-move (Gaussian random-walk MH) or `paper` (the plain
+    bootstrap with the random-walk process noise: the papers' PF baseline)."""
+
+    variant: str = variant_choice("SIR")
 
 
 class SirFilter(ParticleFilter):
@@ -21,3 +33,6 @@ class SirMoves(ResampleMove):
     def sweep(self, target, z):
         x, target, accepted = moves.random_walk(self.x, target, self.log_target, self.rng, self.chol(RW_SCALE))
         return x, target, accepted, self.n
+
+
+register("sir", "bootstrap", "sir", SirConfig, paper=SirFilter, mcmc=SirMoves)

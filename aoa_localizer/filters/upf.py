@@ -19,15 +19,26 @@ jitter, Metropolis acceptance) and the same independence move; `pfde` DE-MC alon
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from aoa_localizer.core.spec import variant_choice
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
-from aoa_localizer.filters.de import evolve
+from aoa_localizer.filters.de import DeConfig, evolve
 from aoa_localizer.filters.moves import RW_SCALE
+from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import MIN_SPREAD_M2, ResampleMove
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
 from aoa_localizer.models.base import StaticPosterior, TransitionDensity, UnscentedForm
+
+
+@dataclass(frozen=True)
+class UpfConfig:
+    """The unscented PF on the emitter: `mcmc` (the UKF's Gaussian as an independence MH proposal) or `paper`."""
+
+    variant: str = variant_choice("UPF")
 
 WIDEN = 1.5  # the UKF's Gaussian is widened before it proposes: a bearing posterior has heavier tails
 JITTER = 0.01  # DE-MC's jitter, in standard deviations of the cloud
@@ -157,3 +168,8 @@ class PfDeMoves(ResampleMove):
         de = self.cfg.de
         x, target, accepted = moves.de_mc(self.x, target, self.log_target, self.rng, de.f2, de.cr, self.chol(JITTER))
         return x, target, accepted, self.n
+
+
+register("upfde", "UKF proposal + differential evolution", "de", DeConfig, paper=UpfDeFilter, mcmc=UpfDeMoves)
+register("upf", "unscented PF", "upf", UpfConfig, paper=UpfFilter, mcmc=UpfMoves)
+register("pfde", "PF + differential evolution", "de", DeConfig, paper=PfDeFilter, mcmc=PfDeMoves)

@@ -19,15 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from aoa_localizer.engine.config import ConfigError, LocalizerConfig
-from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
-from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.localizer import REASONS, Localizer
-from aoa_localizer.engine.noise import sentence as noise_sentence
-from aoa_localizer.engine.types import Estimate
-from aoa_localizer.reporting import export, plots
-from aoa_localizer.tools.bag_run import run_bag
-from aoa_localizer.tools.cli import (
+from aoa_localizer.common.bag_run import run_bag
+from aoa_localizer.common.cli import (
     HelpFormatter,
     add_engine_args,
     add_topic_args,
@@ -36,6 +29,14 @@ from aoa_localizer.tools.cli import (
     config_from_args,
     setup_logging,
 )
+from aoa_localizer.core.spec import ConfigError
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.localizer import REASONS, Localizer
+from aoa_localizer.engine.noise import sentence as noise_sentence
+from aoa_localizer.engine.types import Estimate
+from aoa_localizer.reporting import export, plots
 from msgs_adapters.bag import BagError
 
 

@@ -11,7 +11,7 @@ from rclpy.exceptions import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from aoa_localizer.engine.config import ConfigError, ParameterSpec, unknown_names
+from aoa_localizer.core.spec import ConfigError, ParameterSpec, unknown_names
 
 
 def descriptor(p: ParameterSpec) -> ParameterDescriptor:

@@ -31,10 +31,10 @@ from collections import Counter
 import rclpy
 from rclpy.node import Node
 
+from aoa_localizer.common.http_poll import DEFAULT_MAX_BYTES, PollFailed, http_get
+from aoa_localizer.common.kraken_csv import KrakenLine, LineFilter, MalformedLine, parse_line, quality_from_confidence
 from aoa_localizer.engine.geodesy import wrap_360
 from aoa_localizer.ros.ros_main import run_node
-from aoa_localizer.tools.http_poll import DEFAULT_MAX_BYTES, PollFailed, http_get
-from aoa_localizer.tools.kraken_csv import KrakenLine, LineFilter, MalformedLine, parse_line, quality_from_confidence
 from msgs_adapters import build
 
 RETRY_S = 1.0

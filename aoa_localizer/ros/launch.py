@@ -26,7 +26,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from aoa_localizer.engine.config import ConfigError, parameter_specs, unknown_names
+from aoa_localizer.common.cli import HelpFormatter, seed_value
+from aoa_localizer.core.spec import ConfigError, unknown_names
+from aoa_localizer.engine.config import parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 from aoa_localizer.engine.crlb import nees as crlb_nees
 from aoa_localizer.engine.fleet import FLEETS
@@ -35,7 +37,6 @@ from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.scenarios import SCENARIOS
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
-from aoa_localizer.tools.cli import HelpFormatter, seed_value
 
 CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by this
 

@@ -33,8 +33,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
+from aoa_localizer.core.spec import ConfigError, ParameterSpec
 from aoa_localizer.engine.channels import DEFAULT
-from aoa_localizer.engine.config import ConfigError, LocalizerConfig, ParameterSpec, parameter_specs
+from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
 from aoa_localizer.engine.input_guard import StampGaps
 from aoa_localizer.engine.localizer import REASONS, Localizer

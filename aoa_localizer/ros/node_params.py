@@ -1,6 +1,6 @@
 """The node's own parameters (the ROS shell's, not engine settings), declared like the engine's; no rclpy here, so
 the README's tables can be written without ROS."""
-from aoa_localizer.engine.config import ParameterSpec, Spec
+from aoa_localizer.core.spec import ParameterSpec, Spec
 
 NODE_PARAMS = [
     ParameterSpec("input_queue_depth", 200, Spec("subscription queue depth for gps/fix and df/bearing", int,

@@ -23,7 +23,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from aoa_localizer.engine.config import ConfigError, ParameterSpec, Spec
+from aoa_localizer.core.spec import ConfigError, ParameterSpec, Spec
 from aoa_localizer.engine.fleet import FLEETS, simulate_fleet
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
 from aoa_localizer.ros.declare import declare, refuse_unknown

@@ -22,13 +22,13 @@ import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from aoa_localizer.engine.config import ConfigError
+from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, setup_logging
+from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.surveys import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
 from aoa_localizer.engine.types import Estimate
-from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, config_from_args, setup_logging
 
 PROG = "python -m aoa_localizer.locate"
 

@@ -17,11 +17,8 @@ import json
 import sys
 from pathlib import Path
 
-from aoa_localizer.engine.config import ConfigError, LocalizerConfig
-from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.memory import keep_freed_memory
-from aoa_localizer.tools.bag_run import run_bag, summary
-from aoa_localizer.tools.cli import (
+from aoa_localizer.common.bag_run import run_bag, summary
+from aoa_localizer.common.cli import (
     HelpFormatter,
     add_engine_args,
     add_topic_args,
@@ -30,6 +27,10 @@ from aoa_localizer.tools.cli import (
     config_from_args,
     setup_logging,
 )
+from aoa_localizer.core.spec import ConfigError
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.memory import keep_freed_memory
 from msgs_adapters.bag import BagError
 
 

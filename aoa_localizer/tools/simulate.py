@@ -11,11 +11,11 @@ import sys
 
 import numpy as np
 
-from aoa_localizer.engine.config import ConfigError
+from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, seed_value, setup_logging
+from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.evaluation import run, scenario_config
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
-from aoa_localizer.tools.cli import HelpFormatter, add_engine_args, config_from_args, seed_value, setup_logging
 
 
 def main(argv=None) -> int:

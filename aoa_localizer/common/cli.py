@@ -7,7 +7,8 @@ import logging
 
 import yaml
 
-from aoa_localizer.engine.config import ALGORITHMS, ConfigError, LocalizerConfig
+from aoa_localizer.core.spec import ConfigError
+from aoa_localizer.engine.config import ALGORITHMS, LocalizerConfig
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):

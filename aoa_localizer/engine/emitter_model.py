@@ -7,10 +7,10 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.global_search import Points, Robust, log_posterior, reach_log_prior
+from aoa_localizer.engine.likelihood import BearingLikelihood
 from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.models.base import StateSpaceModel
-from aoa_localizer.models.likelihood import BearingLikelihood
 
 
 class PointHistory:
