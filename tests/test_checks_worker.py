@@ -10,7 +10,8 @@ import pytest
 
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine import checks
-from aoa_localizer.engine import track as track_module
+from aoa_localizer.engine import initiator as initiator_module
+from aoa_localizer.engine import supervisor as supervisor_module
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.evaluation import scenario_config
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -21,9 +22,9 @@ from aoa_localizer.engine.scenarios import simulate
 
 def settle_starts(loc: Localizer):
     """Wait for a start search (not for a global check)."""
-    check = loc.emitter.check
-    if check is not None and check[1] is None:
-        wait([check[0]], timeout=60)
+    job = loc.emitter.job
+    if job is not None and job.is_start:
+        wait([job.future], timeout=60)
 
 
 def play(loc: Localizer, data, paced=True):
@@ -80,9 +81,9 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         at_points += max(0, owed - loc.emitter.owed)  # sweeps a point made (a resampling adds to `owed`)
         loc.settle()
-        check_moves += loc.emitter.move_owed  # a worker's check applied: its move on the modes is owed too
+        check_moves += loc.emitter.supervisor.move_owed  # a worker's check applied: its move on the modes is owed too
         between += loc.pay_all_owed()
-        assert not loc.emitter.move_owed
+        assert not loc.emitter.supervisor.move_owed
     assert not loc.pay_owed() and loc.emitter.owed == 0  # nothing left owed
     assert between >= 20 and at_points <= between // 10 and check_moves >= 1  # one scheduled check in these runs
     loc.flush()
@@ -116,7 +117,7 @@ def test_finish_waits_for_the_worker_and_starts_if_it_lagged():
     assert final is not None and final.end_of_data
     err, nees = error_and_nees(loc, data)
     assert err < 5.0 and nees < 13.8
-    assert loc.emitter.check is None
+    assert loc.emitter.job is None
     loc.close()
 
 
@@ -138,7 +139,7 @@ def search_killing_the_worker(*args):
 def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inline(monkeypatch, caplog):
     """Each dead worker costs its job (counted internal_error, the first logged with its traceback); after three in
     a row the worker is given up with one warning and the checks run in the calls: the emitter is still found."""
-    monkeypatch.setattr(track_module, "search_start", search_killing_the_worker)
+    monkeypatch.setattr(initiator_module, "search_start", search_killing_the_worker)
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data)
@@ -163,7 +164,7 @@ def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():
     for _ in range(20):  # the data has ended: each poll applies a finished search or starts a new one
         loc.settle()
         made += loc.poll()
-        if loc.emitter.filter is not None and loc.emitter.check is None:
+        if loc.emitter.filter is not None and loc.emitter.job is None:
             break
     assert made and loc.estimate is made[-1]
     err, nees = error_and_nees(loc, data)
@@ -174,7 +175,7 @@ def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():
 
 @pytest.mark.slow
 def test_a_failing_check_is_counted_and_the_track_goes_on(monkeypatch):
-    monkeypatch.setattr(track_module, "run_check", check_failing_in_the_worker)
+    monkeypatch.setattr(supervisor_module, "run_check", check_failing_in_the_worker)
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data)
@@ -199,7 +200,7 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)
     err, nees = error_and_nees(loc, data)
-    assert loc.emitter.check is None and loc.emitter.events["recalibrated"] >= 2
+    assert loc.emitter.job is None and loc.emitter.events["recalibrated"] >= 2
     assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.rejected
     assert len(starts) == 1 and loc.worker.unusable == "cannot start a process"
     said = [r.getMessage() for r in caplog.records if "check worker is given up" in r.getMessage()]
@@ -232,21 +233,21 @@ def test_a_check_for_a_filter_since_replaced_is_dropped():
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     events = list(data.events())
     i = 0
-    while loc.emitter.check is None or loc.emitter.check[1] is None:  # until a global check is running
+    while loc.emitter.job is None or loc.emitter.job.is_start:  # until a global check is running
         kind, row = events[i]
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         settle_starts(loc)
         i += 1
     track = loc.emitter
     track._diverged()  # what a non-finite cloud does: the filter is dropped, the track re-starts from new bearings
-    wait([track.check[0]], timeout=60)
+    wait([track.job.future], timeout=60)
     calibrations = track.events["recalibrated"]
     points = track.points_seen
     while track.points_seen == points:  # to the next point, where a result would be applied
         kind, row = events[i]
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         i += 1
-    assert track.check is None and track.events["recalibrated"] == calibrations  # dropped
+    assert track.job is None and track.events["recalibrated"] == calibrations  # dropped
     for kind, row in events[i:]:
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         loc.settle()
@@ -261,7 +262,7 @@ def test_a_snapshot_crosses_to_the_worker_process_whole():
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3))
     play(loc, data)
-    snap = loc.emitter._snapshot()
+    snap = loc.emitter.snapshot()
     copy = pickle.loads(pickle.dumps(snap))
     assert len(copy.groups) == len(snap.groups) == 60
     for g, h in zip(snap.groups, copy.groups, strict=True):

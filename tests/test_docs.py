@@ -54,10 +54,10 @@ def test_the_failure_behaviour_page_states_the_limits_the_code_has():
     in backticks is one the engine counts."""
     import re
 
+    from aoa_localizer.common import http_poll, kraken_csv
     from aoa_localizer.engine import channels
     from aoa_localizer.engine.localizer import REASONS
     from aoa_localizer.ros import kraken_bridge, node
-    from aoa_localizer.common import http_poll, kraken_csv
     from msgs_adapters import bag_files, decompress
 
     page = (ROOT / "docs" / "failure_behaviour.md").read_text()

@@ -90,7 +90,7 @@ def test_a_clock_that_steps_back_and_stays_back_is_followed():
     loc.flush()
     assert loc.events["df_clock_jump"] == 1
     assert loc.rejected["bearing_out_of_order"] <= 2  # the readings it took to recognise the step
-    before = sum(1 for _, p, _ in run(data, LocalizerConfig(seed=1)).localizer.emitter.window if p.stamp <= half)
+    before = sum(1 for e in run(data, LocalizerConfig(seed=1)).localizer.emitter.window if e.point.stamp <= half)
     assert before < 35
     assert loc.points_used >= before + 10, (loc.points_used, before)  # was: nothing after the step
 
@@ -213,7 +213,7 @@ def test_stamps_that_a_clock_offset_explains_are_pointed_out(late_s):
     play(loc, data)
     loc.flush()
     loc.finish()
-    hint = loc.emitter.clock_hint
+    hint = loc.emitter.supervisor.clock_hint
     if late_s == 0.0:
         assert hint is None and loc.clock_hint_sentence() is None
     else:

@@ -182,7 +182,7 @@ def test_a_mount_offset_left_at_0_is_learned_and_named_not_a_confident_wrong_ans
     est = res.estimates[-1]
     assert res.scores["inside95"], res.scores
     assert est.state == "suspect" and any("mount_offset_deg" in w for w in est.warnings), est.warnings
-    assert res.localizer.emitter.offset_deg == pytest.approx(-30.0, abs=1.5)
+    assert res.localizer.emitter.calibration.offset_deg == pytest.approx(-30.0, abs=1.5)
 
 
 @pytest.mark.slow

@@ -78,13 +78,13 @@ def test_each_estimate_carries_the_noise_summary_of_its_moment():
         est = loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         if est is None:
             continue
-        fresh = loc.emitter.noise.summary(lambda q: math.degrees(reading_sigma(q, loc.cfg)))
-        fresh["point_outlier_prob"] = round(loc.emitter.outlier_prob, 4)
+        fresh = loc.emitter.calibration.noise.summary(lambda q: math.degrees(reading_sigma(q, loc.cfg)))
+        fresh["point_outlier_prob"] = round(loc.emitter.calibration.outlier_prob, 4)
         assert est.noise == fresh
         seen.append(repr(est.noise))
         est.noise["sigma_deg"]["nan"] = -1.0
         est.noise["fits"] = -1
-    assert loc.emitter.noise.fits >= 1 and len(set(seen)) >= 2  # calibrated during the run: the summary followed
+    assert loc.emitter.calibration.noise.fits >= 1 and len(set(seen)) >= 2  # calibrated during the run: the summary too
 
 
 def test_calibration_learns_how_sigma_falls_with_quality():

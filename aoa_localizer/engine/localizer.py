@@ -26,6 +26,7 @@ from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.preprocess import PointBuilder, reading_sigma
 from aoa_localizer.engine.station import Pending, PendingQueue, Station
 from aoa_localizer.engine.track import EmitterTrack
+from aoa_localizer.engine.track_report import assess, mode_masses
 from aoa_localizer.engine.types import Estimate, ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -193,7 +194,7 @@ class Localizer:
     @property
     def init_points(self) -> list[ObservationPoint]:
         """Observation points buffered while waiting to start."""
-        return [p for _, p, _ in self.emitter.window] if self.emitter.filter is None else []
+        return [e.point for e in self.emitter.window] if self.emitter.filter is None else []
 
     def recent_points(self, n: int | None = None, channel: str | None = None) -> np.ndarray:
         """The latest `n` (all: None) observation points the filter of `channel` (None: the main one) uses, oldest
@@ -206,7 +207,7 @@ class Localizer:
     @property
     def start_cloud(self) -> np.ndarray | None:
         """The particles the filter started from (after the latest start or re-start), or None before it."""
-        return self.emitter.start_cloud
+        return self.emitter.initiator.start_cloud
 
     @property
     def bearings_used(self) -> int:
@@ -230,11 +231,11 @@ class Localizer:
         """The self-calibrated noise of a channel (default: the main one): sigma (deg) per quality band with data,
         reading and point outlier rates."""
         cfg = self.cfg
-        return (channel or self.main).emitter.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
+        return (channel or self.main).emitter.calibration.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
 
     def clock_hint_sentence(self) -> str | None:
         """Words for a DF clock offset the bearings point to (from the last global check), or None."""
-        hint = self.emitter.clock_hint
+        hint = self.emitter.supervisor.clock_hint
         if hint is None:
             return None
         return (f"the bearings fit the track far better with the DF stamps shifted by {hint.shift_s:+.2f} s "
@@ -546,9 +547,9 @@ class Localizer:
         a replay calls it after each input to run at a receiver's pace, where a job ends before the next point,
         however fast the data is fed. The results are applied at each channel's next point, as live."""
         for channel in self.channels.live.values():
-            check = channel.emitter.check
-            if check is not None:
-                wait([check[0]])
+            job = channel.emitter.job
+            if job is not None:
+                wait([job.future])
 
     def close(self):
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""
@@ -669,8 +670,8 @@ class Localizer:
         lat, lon, _ = self.datum_frame().to_geodetic(mean[0], mean[1])
         emitter = channel.emitter
         f = emitter.cloud
-        modes = emitter.mode_masses()
-        state, warnings = emitter.assess(np.asarray(mean), np.asarray(cov), modes)
+        modes = mode_masses(emitter)
+        state, warnings = assess(emitter, np.asarray(mean), np.asarray(cov), modes)
         return Estimate(stamp=stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat), lon=float(lon),
                         cov=np.array(cov), bearings_used=emitter.bearings_used, points_used=emitter.points_used,
                         ess=f.ess(), algorithm=self.cfg.algorithm,

@@ -509,7 +509,7 @@ class LocalizerNode(Node):
         if error:
             warnings.append(("restarting", *error))
         values.update({key: value for key, value, _ in warnings})
-        checking = loc.emitter.health.alarm_since is not None  # the cloud no longer explains the newest points
+        checking = loc.emitter.supervisor.alarm  # the cloud no longer explains the newest points
         est = loc.estimate
         if est is not None:
             values["state"] = est.state
@@ -606,7 +606,7 @@ class LocalizerNode(Node):
                     "noise.point_outlier_prob": noise["point_outlier_prob"],
                 }
             )
-        values["health.recent_outlier_share"] = f"{loc.emitter.health.share:.2f}"
+        values["health.recent_outlier_share"] = f"{loc.emitter.supervisor.health.share:.2f}"
         est = loc.estimate
         if est is not None:
             values["modes"] = len(est.modes)
@@ -677,7 +677,7 @@ class LocalizerNode(Node):
             if est is not None:
                 values.update(east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}",
                               lon=f"{est.lon:.7f}", ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
-            checking = emitter.health.alarm_since is not None
+            checking = emitter.supervisor.alarm
             level = 0 if channel.retired else 1 if est is None or checking else 0
             message = f"retired (silent for channel_timeout_s); {emitter.status}" if channel.retired else emitter.status
             out.append((f"{self.diag_name} channel {channel.id}", level, message, values))

@@ -1,0 +1,182 @@
+"""How a track's filter starts: from the global search's modes over every buffered point (an importance sample of
+the robust posterior, every mode in proportion to its mass), from crossings of the bearings (the paper's start), or
+from the configured prior; or a provisional sample while the posterior is proper but not determined enough."""
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from functools import partial
+from typing import TYPE_CHECKING, cast
+
+import numpy as np
+
+from aoa_localizer.engine.checks import CheckResult, search_start
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.emitter_model import EmitterModel
+from aoa_localizer.engine.global_search import Mode
+from aoa_localizer.engine.safety import ModeProposal, importance_sample
+from aoa_localizer.engine.track_state import PendingJob
+from aoa_localizer.engine.triangulation import initial_particles
+from aoa_localizer.engine.types import ObservationPoint, Reading
+from aoa_localizer.filters import make_filter
+from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.resample_move import ResampleMove
+
+if TYPE_CHECKING:
+    from aoa_localizer.engine.track import EmitterTrack
+
+log = logging.getLogger("aoa_localizer")
+
+# Broad Gaussian prior after a data-driven start, in multiples of the range to the start: it only keeps the
+# bearing-only posterior proper (a flat prior has infinite mass along the rays).
+PRIOR_RANGE_FACTOR = 10.0
+PRIOR_MIN_SIGMA_M = 100.0
+START_SWEEPS = 3  # random-walk MH sweeps that spread the importance sample's duplicates
+MIN_INLIERS = 3  # a start mode must explain at least this many points
+MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
+_PROVISIONAL_PARTICLES = 1000
+_START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
+_STALE_MIN, _STALE_SHARE = 2, 5  # a start search's result is stale once the points grew by more than max(2, 1/5)
+
+
+class Initiator:
+    """Starts one track's filter once its points allow (`try_start`), and makes the filters the track runs."""
+
+    def __init__(self, track: EmitterTrack, cfg: LocalizerConfig):
+        self.track, self.cfg = track, cfg
+        self.next_start_try = 0  # points the window must hold before the next start search
+        self.start_cloud: np.ndarray | None = None  # the particles of the latest start
+
+    def try_start(self, inline: bool = False, final: bool = False) -> bool:
+        """Start the filter once the points allow (`inline`: the start search here, even with a worker; `final`: the
+        end of data, with whatever points there are)."""
+        t, cfg = self.track, self.cfg
+        if cfg.has_prior:
+            return self._from_prior()
+        if len(t.window) > cfg.init_max_points:
+            t.window.popleft()
+            t.reject("init_buffer_full", 1)
+        if len(t.window) < (min(2, cfg.init_bearings) if final else cfg.init_bearings):
+            t.status = f"collecting bearings: {len(t.window)} of {cfg.init_bearings} points"
+            return False
+        if cfg.init_method == "triangulation":
+            return self._from_triangulation()
+        if not final and (len(t.window) < self.next_start_try or t.job is not None):
+            return False
+        snap = t.snapshot()
+        job = partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
+        future = None if inline else t.submit(job)
+        if future is None:
+            return self.apply_start(job(), snap.groups)
+        t.job = PendingJob(future, None, snap.groups)
+        return False
+
+    def apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
+        """Start the filter from a start search's modes over the points held now (a background search's snapshot
+        may have fewer): an importance sample of the posterior, then MH sweeps; or wait for more points."""
+        t = self.track
+        if len(t.window) > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE):
+            # Points came far faster than the worker searched (a bag replayed at full speed): a mode of the few
+            # points searched is no start for the many held now. Search again, over all of them.
+            self.next_start_try = 0
+            return self.try_start()
+        t.apply_fit(res, groups)
+        modes = res.modes
+        if not modes or not res.determined:
+            t.status = f"waiting for geometry: {res.why}"
+            # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later).
+            self.next_start_try = res.searched + min(_START_RETRY_MAX, max(1, res.searched // 10))
+            if not modes:
+                return False
+            # Proper but not determined: publish a sample of the posterior (wide, honest), not nothing.
+            t.provisional = self._sample_posterior(modes)
+            t.status = f"poorly determined: {res.why}"
+        else:
+            t.provisional = None
+            t.filter = self._sample_posterior(modes, start=True)
+            self._started(f"global search: best of {len(modes)} mode(s), {modes[0].inliers} of {len(t.window)} "
+                          "points agree")
+        t.modes = modes
+        t.points_used = len(t.window)  # (none before: a start, or a provisional sample, holds all)
+        t.bearings_used = sum(e.used for e in t.window)
+        return True
+
+    def _sample_posterior(self, modes: list[Mode], start: bool = False) -> ParticleFilter:
+        """A filter holding every point waiting for a start and an importance sample of their posterior from the
+        modes (MH sweeps after it), with a broad Gaussian prior at the best mode that keeps the posterior proper.
+        `start`: the filter's start (its importance sample kept as `start_cloud`)."""
+        t, best = self.track, modes[0]
+        sigma = _prior_sigma(best.mean, t.window[-1].point)
+        # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (few points: cheap)
+        f = self.new_filter(None if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES))
+        model = cast(EmitterModel, f.model)
+        model.set_prior(best.mean, sigma**2 * np.eye(2))
+        model.reach = t.reach()
+        model.lik.outlier_prob = t.calibration.lik_outlier_prob
+        for e in t.window:
+            model.observe(e.point)
+        f.k = len(t.window)
+        t.proposal = ModeProposal(modes, t.broad_sigma(best.mean))
+        particles = importance_sample(f.log_target, t.proposal, f.n, t.rng)
+        f.initialise(particles, best.mean, sigma**2 * np.eye(2))
+        if start:
+            self.start_cloud = f.x.copy()
+        f.rejuvenate(START_SWEEPS, t.proposal)
+        return f
+
+    def _from_triangulation(self) -> bool:
+        """The paper's start (sec. 3.3): crossings of sorted pairs; then every buffered point updates the filter."""
+        t, cfg = self.track, self.cfg
+        pts = [e.point for e in t.window]
+        particles, why = initial_particles(pts, cfg.num_particles, cfg.init_min_crossing_deg, cfg.init_min_support,
+                                           t.rng)
+        if particles is None:
+            t.status = f"waiting for geometry: {why}"
+            return False
+        mean = particles.mean(axis=0)
+        sigma = _prior_sigma(mean, pts[-1])
+        return self._start_then_replay(particles, mean, sigma**2 * np.eye(2), "triangulation")
+
+    def _from_prior(self) -> bool:
+        cfg = self.cfg
+        mean = np.array([cfg.prior_east, cfg.prior_north])
+        sigma = cast(float, cfg.prior_sigma_m)  # set, as has_prior says
+        particles = mean + sigma * self.track.rng.standard_normal((cfg.num_particles, 2))
+        return self._start_then_replay(particles, mean, sigma**2 * np.eye(2), "prior")
+
+    def _start_then_replay(self, particles, mean, cov, how: str) -> bool:
+        t = self.track
+        f = t.filter = self.new_filter()
+        t.model.lik.outlier_prob = t.calibration.lik_outlier_prob
+        f.initialise(particles, mean, cov)
+        self.start_cloud = f.x.copy()
+        waiting, t.window = list(t.window), deque()
+        self._started(how)
+        result = False
+        for entry in waiting:
+            result = t.update(entry) or result
+        return result
+
+    def new_filter(self, particles: int | None = None) -> ParticleFilter:
+        """A filter on a new emitter model (with the latent noise while it is latent); `particles`: N if not the
+        configured one."""
+        t = self.track
+        model = EmitterModel(self.cfg)
+        model.grid = t.calibration.grid
+        cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
+        f = make_filter(cfg, t.rng, model)
+        if t.worker is not None and isinstance(f, ResampleMove):  # realtime: a bounded step
+            f.sweeps_per_point = 1
+        return f
+
+    def _started(self, how: str):
+        t = self.track
+        t.status = "tracking"
+        t.supervisor.started(len(t.window))
+        log.info("filter %s started after %d observation points (%s)", self.cfg.algorithm, t.points_seen, how)
+
+
+def _prior_sigma(start: np.ndarray, last: ObservationPoint) -> float:
+    """The broad prior's sigma at a data-driven start: PRIOR_RANGE_FACTOR times the range from the newest point."""
+    return max(PRIOR_MIN_SIGMA_M, PRIOR_RANGE_FACTOR * math.hypot(start[0] - last.east, start[1] - last.north))

@@ -1,0 +1,88 @@
+"""What a track's estimate reports beside its mean: a provisional sample's mean and ellipse, the posterior's modes
+and their masses, and the estimate's state with the warnings behind it (docs/interface.md, "Estimate states")."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from aoa_localizer.engine.checks import ellipse_and_reach
+from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.engine.global_search import Mode
+from aoa_localizer.engine.initiator import MAX_ELLIPSE_RANGE_SHARE
+from aoa_localizer.filters.base import ParticleFilter
+
+if TYPE_CHECKING:
+    from aoa_localizer.engine.track import EmitterTrack
+
+_ELLIPSE_MASS = 0.95  # the share of the posterior a provisional estimate's ELLIPSE_95 ellipse holds
+_MODE_MIN_MASS = 0.01  # modes reported
+_SUSPECT_WILD_SHARE = 0.4  # more bearings than this unexplained: the model does not fit (state `suspect`)
+_AMBIGUOUS_MASS = 0.2  # a second mode this heavy leaves the estimate poorly determined
+
+
+def cloud_estimate(f: ParticleFilter, best: Mode) -> tuple[np.ndarray, np.ndarray]:
+    """A provisional sample's estimate: the posterior's highest-density place (the best mode: with few bearings the
+    posterior's tails along the rays drag its mean far out) with the cloud's second moment about it, scaled so the
+    95 % ellipse holds 95 % of the cloud."""
+    centre = best.mean.copy()
+    w, d = f.weights, f.x - centre
+    cov = (w[:, None] * d).T @ d
+    try:
+        d2 = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
+    except np.linalg.LinAlgError:
+        return centre, cov
+    order = np.argsort(d2)
+    at = min(int(np.searchsorted(np.cumsum(w[order]), _ELLIPSE_MASS)), len(order) - 1)
+    return centre, cov * max(float(d2[order][at]), 1e-12) / ELLIPSE_95
+
+
+def mode_masses(track: EmitterTrack) -> list[tuple[float, float, float]]:
+    """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first."""
+    f, modes = track.cloud, track.modes
+    w = f.weights
+    if len(modes) < 2:
+        mean = w @ f.x
+        return [(float(mean[0]), float(mean[1]), 1.0)]
+    d2 = np.stack([np.einsum("ni,ij,nj->n", f.x - m.mean, np.linalg.inv(m.cov), f.x - m.mean) for m in modes])
+    nearest = np.argmin(d2, axis=0)
+    out = []
+    for j in range(len(modes)):
+        sel = nearest == j
+        mass = float(w[sel].sum())
+        if mass >= _MODE_MIN_MASS:
+            c = (w[sel] @ f.x[sel]) / mass
+            out.append((float(c[0]), float(c[1]), mass))
+    return sorted(out, key=lambda t: -t[2])
+
+
+def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[str, list[str]]:
+    """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings,
+    `poorly_determined` when the posterior is proper but wide or multi-modal (or only a provisional sample), else
+    `tracking`."""
+    warnings = []
+    health, c = track.supervisor.health, track.calibration
+    if track.supervisor.alarm:
+        warnings.append(f"the estimate no longer explains the newest bearings ({sum(health.flags)} of the "
+                        f"last {len(health.flags)} points disagree): multipath, an emitter that moved, or a "
+                        "bearing reference or offset set wrong (bearing_reference, mount_offset_deg, "
+                        "magnetic_declination_deg)")
+    wild = max(c.outlier_prob if c.grid is None else 0.0, c.noise.reading_outlier_prob if c.noise.fits else 0.0)
+    if wild > _SUSPECT_WILD_SHARE:
+        warnings.append(f"{100 * wild:.0f} % of the bearings look wild: a bearing offset or reference set wrong "
+                        "(bearing_reference, mount_offset_deg, magnetic_declination_deg), or heavy multipath")
+    if c.offset:
+        warnings.append(f"the bearings look {c.offset_deg:+.1f} deg off the true bearings (true azimuth = read "
+                        f"azimuth {c.offset_deg:+.1f} deg), learned and corrected: {c.offset_advice()}")
+    if warnings:
+        return "suspect", warnings
+    if track.filter is None:
+        why = track.status.removeprefix("poorly determined: ").removeprefix("waiting for geometry: ")
+        return "poorly_determined", [f"few or poorly crossing bearings: {why}"]
+    h = track.model.history.data
+    size, reach = ellipse_and_reach(mean, cov, h[:, 0], h[:, 1])
+    if size > MAX_ELLIPSE_RANGE_SHARE * reach:
+        return "poorly_determined", [f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]
+    if len(modes) > 1 and modes[1][2] >= _AMBIGUOUS_MASS:
+        return "poorly_determined", [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
+    return "tracking", []

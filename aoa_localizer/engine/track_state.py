@@ -1,0 +1,47 @@
+"""What an emitter track holds between its parts: the state it is in, its points and the job it has handed to the
+check worker."""
+from __future__ import annotations
+
+from concurrent.futures import Future
+from dataclasses import dataclass
+from enum import Enum
+
+from aoa_localizer.engine.types import ObservationPoint, Reading
+from aoa_localizer.filters.base import ParticleFilter
+
+
+class TrackState(Enum):
+    """Where a track is: no estimate yet; a provisional sample of a proper but undetermined posterior (published as
+    `poorly_determined`); a running filter."""
+
+    COLLECTING = "collecting"
+    PROVISIONAL = "provisional"
+    TRACKING = "tracking"
+
+
+@dataclass
+class WindowEntry:
+    """One observation point the track keeps: its readings, the point made of them, how many readings it gated out."""
+
+    readings: list[Reading]
+    point: ObservationPoint
+    gated: int
+
+    @property
+    def used(self) -> int:
+        """The readings the point used."""
+        return len(self.readings) - self.gated
+
+
+@dataclass
+class PendingJob:
+    """A job running in the check worker: a start search (`filter` None) or a global check for `filter`, with the
+    reading groups of its snapshot (the originals: the worker's copies come back as points in their order)."""
+
+    future: Future
+    filter: ParticleFilter | None
+    groups: list[list[Reading]]
+
+    @property
+    def is_start(self) -> bool:
+        return self.filter is None
