@@ -3,6 +3,7 @@ import math
 import pytest
 
 from aoa_localizer import AfsaConfig, ConfigError, LocalizerConfig
+from aoa_localizer.core.spec import IncompleteGroup
 
 
 def test_defaults_are_the_papers():
@@ -89,3 +90,12 @@ def test_a_whole_group_given_to_with_changes_replaces_the_groups_settings():
     as_dict = base.with_changes(afsa={"variant": "paper"})
     assert (as_settings.afsa.variant, as_settings.afsa.step, as_dict.afsa.variant) == ("paper", 0.5, "paper")
     assert as_dict.afsa.step == base.afsa.step and as_settings.seed == 3
+
+
+def test_a_group_set_only_in_part_is_refused_with_what_is_missing():
+    with pytest.raises(IncompleteGroup, match="prior_east, prior_north and prior_sigma_m are set together") as err:
+        LocalizerConfig(prior_east=1.0, prior_sigma_m=50.0)
+    assert err.value.group == ("prior_east", "prior_north", "prior_sigma_m") and err.value.missing == ["prior_north"]
+    with pytest.raises(IncompleteGroup, match=r"datum_lat and datum_lon are set together \(finite\)") as err:
+        LocalizerConfig(datum_lon=10.0)
+    assert err.value.missing == ["datum_lat"]

@@ -15,6 +15,15 @@ class ConfigError(ValueError):
     """A parameter value the engine refuses (never clamped silently)."""
 
 
+class IncompleteGroup(ConfigError):
+    """Some of a group of parameters that are set together (or not at all) are set, the others (`missing`) not."""
+
+    def __init__(self, group: tuple[str, ...], missing: list[str]):
+        self.group, self.missing = group, missing
+        finite = "all finite" if len(group) > 2 else "finite"
+        super().__init__(f"{', '.join(group[:-1])} and {group[-1]} are set together ({finite}) or not at all")
+
+
 @dataclass(frozen=True)
 class Spec:
     """One parameter's declaration beside its default: Python type, range (bounds open or closed) or choices,

@@ -11,7 +11,7 @@ import math
 from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
-from aoa_localizer.core.spec import ConfigError, ParameterSpec, choice, param, unknown_names
+from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec, choice, param, unknown_names
 from aoa_localizer.filters import REGISTRY
 from aoa_localizer.filters.registry import GroupAccess, default_groups, groups
 
@@ -20,6 +20,8 @@ PAPER_BEARING_SIGMA_DEG = math.degrees(math.sqrt(3.801e-4))
 
 ALGORITHMS = tuple(REGISTRY)
 GROUPS = groups()
+# Parameters set together or not at all (a place needs both coordinates, a prior its place and its spread)
+SET_TOGETHER = (("prior_east", "prior_north", "prior_sigma_m"), ("datum_lat", "datum_lon"))
 MAX_PARTICLES = 100_000
 
 
@@ -368,15 +370,10 @@ def _validate(cfg: LocalizerConfig):
         cfg.init_max_points >= cfg.init_bearings,
         f"init_max_points must be >= init_bearings ({cfg.init_bearings}), got {cfg.init_max_points!r}",
     )
-    prior = (cfg.prior_east, cfg.prior_north, cfg.prior_sigma_m)
-    _check(
-        all(p is None for p in prior) or all(p is not None for p in prior),
-        "prior_east, prior_north and prior_sigma_m are set together (all finite) or not at all",
-    )
-    _check(
-        (cfg.datum_lat is None) == (cfg.datum_lon is None),
-        "datum_lat and datum_lon are set together (finite) or not at all",
-    )
+    for group in SET_TOGETHER:
+        unset = [name for name in group if getattr(cfg, name) is None]
+        if 0 < len(unset) < len(group):
+            raise IncompleteGroup(group, unset)
 
 
 def parameter_specs() -> list[ParameterSpec]:

@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
-from aoa_localizer.core.spec import ConfigError, ParameterSpec
+from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec
 from aoa_localizer.engine.channels import DEFAULT
 from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
@@ -55,7 +55,6 @@ from msgs_adapters.fields import (
 )
 
 NODE_NAME = "aoa_localizer"
-PAIRED = (("datum_lat", "datum_lon"), ("prior_east", "prior_north", "prior_sigma_m"))  # set together
 _MAX_LOAD = 0.8  # share of wall time spent working (inputs, idle moves, diagnostics) above which it warns
 _STALL_PERIODS = 2.0  # a diagnostics period this many times longer than configured: the node was held up
 _GAP_FACTOR = 1.5  # a stamp gap this many typical intervals long holds lost records (a regular receiver jitters less)
@@ -304,7 +303,7 @@ class LocalizerNode(Node):
         try:
             cfg = self._config_from(changes)
         except ConfigError as exc:
-            waiting = self._incomplete_pair(changes, str(exc))
+            waiting = self._incomplete_group(changes, exc)
             if not waiting:
                 return SetParametersResult(successful=False, reason=str(exc))
             # The standard set_parameters service sets a request's parameters one at a time: the first of a
@@ -328,16 +327,13 @@ class LocalizerNode(Node):
         self.get_logger().info(f"parameters changed ({', '.join(sorted(changes))}): track restarted")
         return SetParametersResult(successful=True)
 
-    def _incomplete_pair(self, changes: dict, error: str) -> list[str]:
+    def _incomplete_group(self, changes: dict, error: ConfigError) -> list[str]:
         """The names still missing when every change belongs to one group of parameters set together and the
         only fault is that the group is incomplete ([] otherwise: a real error)."""
-        if "set together" not in error:
+        if not isinstance(error, IncompleteGroup) or not set(changes) <= set(error.group):
             return []
-        for group in PAIRED:
-            if set(changes) <= set(group):
-                given = set(changes) | set(self.pending_params)
-                return [name for name in group if name not in given]
-        return []
+        given = set(changes) | set(self.pending_params)
+        return [name for name in error.group if name not in given]
 
     # -- inputs -------------------------------------------------------------------------------------
     def _lost_counter(self, key: str) -> SubscriptionEventCallbacks:
