@@ -7,6 +7,7 @@ import pytest
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.engine.track_state import TrackState
 
 DATUM = (39.1, 117.2, 5.0)
 FRAME = LocalFrame(*DATUM)
@@ -56,6 +57,9 @@ def test_localises_a_drive_past_the_emitter(loc):
     assert est.lat == pytest.approx(lat, abs=1e-7) and est.lon == pytest.approx(lon, abs=1e-7)
     assert est.cov.shape == (2, 2) and np.all(np.linalg.eigvalsh(est.cov) > 0)
     assert sum(loc.rejected.values()) == 0
+    status = loc.track_status()
+    assert status.state is TrackState.TRACKING and not status.alarm and status.outlier_share == 0.0
+    assert (status.text, status.points_used, status.bearings_used) == ("tracking", est.points_used, est.bearings_used)
 
 
 def test_bearing_between_fixes_uses_the_interpolated_position(loc):

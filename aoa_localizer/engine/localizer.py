@@ -27,6 +27,7 @@ from aoa_localizer.engine.preprocess import PointBuilder, reading_sigma
 from aoa_localizer.engine.station import Pending, PendingQueue, Station
 from aoa_localizer.engine.track import EmitterTrack
 from aoa_localizer.engine.track_report import assess, mode_masses
+from aoa_localizer.engine.track_state import TrackStatus
 from aoa_localizer.engine.types import Estimate, ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -195,6 +196,10 @@ class Localizer:
     def init_points(self) -> list[ObservationPoint]:
         """Observation points buffered while waiting to start."""
         return [e.point for e in self.emitter.window] if self.emitter.filter is None else []
+
+    def track_status(self, channel: Channel | None = None) -> TrackStatus:
+        """The state of `channel`'s track (None: the main one)."""
+        return (channel or self.main).emitter.summary()
 
     def recent_points(self, n: int | None = None, channel: str | None = None) -> np.ndarray:
         """The latest `n` (all: None) observation points the filter of `channel` (None: the main one) uses, oldest

@@ -33,7 +33,7 @@ from aoa_localizer.engine.offset import marginalise, prior_sd
 from aoa_localizer.engine.safety import ModeProposal
 from aoa_localizer.engine.supervisor import Supervisor
 from aoa_localizer.engine.track_report import cloud_estimate
-from aoa_localizer.engine.track_state import PendingJob, TrackState, WindowEntry
+from aoa_localizer.engine.track_state import PendingJob, TrackState, TrackStatus, WindowEntry
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
@@ -77,6 +77,10 @@ class EmitterTrack:
         if self.filter is not None:
             return TrackState.TRACKING
         return TrackState.COLLECTING if self.provisional is None else TrackState.PROVISIONAL
+
+    def summary(self) -> TrackStatus:
+        sup = self.supervisor
+        return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used)
 
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:

@@ -19,6 +19,20 @@ class TrackState(Enum):
     TRACKING = "tracking"
 
 
+@dataclass(frozen=True)
+class TrackStatus:
+    """A track as programs read it (the node's /diagnostics): its state, the one-line status, whether the cloud no
+    longer explains the newest points (the estimate is being checked), the share of recent points it explains only
+    as outliers, and the points and bearings its estimate uses."""
+
+    state: TrackState
+    text: str
+    alarm: bool
+    outlier_share: float
+    points_used: int
+    bearings_used: int
+
+
 @dataclass
 class WindowEntry:
     """One observation point the track keeps: its readings, the point made of them, how many readings it gated out."""

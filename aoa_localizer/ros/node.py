@@ -505,7 +505,7 @@ class LocalizerNode(Node):
         if error:
             warnings.append(("restarting", *error))
         values.update({key: value for key, value, _ in warnings})
-        checking = loc.emitter.supervisor.alarm  # the cloud no longer explains the newest points
+        checking = loc.track_status().alarm  # the cloud no longer explains the newest points
         est = loc.estimate
         if est is not None:
             values["state"] = est.state
@@ -602,7 +602,7 @@ class LocalizerNode(Node):
                     "noise.point_outlier_prob": noise["point_outlier_prob"],
                 }
             )
-        values["health.recent_outlier_share"] = f"{loc.emitter.supervisor.health.share:.2f}"
+        values["health.recent_outlier_share"] = f"{loc.track_status().outlier_share:.2f}"
         est = loc.estimate
         if est is not None:
             values["modes"] = len(est.modes)
@@ -666,16 +666,15 @@ class LocalizerNode(Node):
         for channel in self.loc.channels.all():
             if channel.id == DEFAULT:
                 continue
-            emitter, est = channel.emitter, channel.estimate
-            values: dict[str, Any] = {"frequency_hz": f"{channel.frequency_hz:.0f}", "status": emitter.status,
-                                      "bearings_used": emitter.bearings_used, "points_used": emitter.points_used,
+            track, est = self.loc.track_status(channel), channel.estimate
+            values: dict[str, Any] = {"frequency_hz": f"{channel.frequency_hz:.0f}", "status": track.text,
+                                      "bearings_used": track.bearings_used, "points_used": track.points_used,
                                       "topics": f"emitter/{channel.id}/"}
             if est is not None:
                 values.update(east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}",
                               lon=f"{est.lon:.7f}", ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
-            checking = emitter.supervisor.alarm
-            level = 0 if channel.retired else 1 if est is None or checking else 0
-            message = f"retired (silent for channel_timeout_s); {emitter.status}" if channel.retired else emitter.status
+            level = 0 if channel.retired else 1 if est is None or track.alarm else 0
+            message = f"retired (silent for channel_timeout_s); {track.text}" if channel.retired else track.text
             out.append((f"{self.diag_name} channel {channel.id}", level, message, values))
         return out
 
