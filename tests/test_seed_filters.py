@@ -109,13 +109,13 @@ def test_seed_filters_localise_the_emitter_too(algorithm):
 def test_drawing_from_the_pool_gives_equal_weights_equal_shares_wherever_they_sit():
     """ESPF's round-1 bug: the N largest of the 2N pool, ties broken by position, culled the tail of the resampled
     block (all at 1/N) at every step. Drawn by weight, the head and the tail of the block fare the same."""
-    from aoa_localizer.filters.espf import draw_n
+    from aoa_localizer.filters.resampling import systematic
 
     n = 200
     rng = np.random.default_rng(0)
     children = rng.random(n) ** 4
     pool = np.concatenate([np.full(n, 1.0 / n), children / children.sum()])
-    kept = draw_n(pool, n, rng)
+    kept = systematic(pool / pool.sum(), rng, n)
     head, tail = np.sum(kept < n // 2), np.sum((kept >= n // 2) & (kept < n))
     assert abs(int(head) - int(tail)) <= 1 and head + tail == pytest.approx(n / 2, abs=2)
     top = top_n(pool, n)

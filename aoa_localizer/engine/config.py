@@ -33,7 +33,7 @@ class LocalizerConfig(GroupAccess):
                             + "; docs/benchmarks.md says how each does on the emitter")
     num_particles: int = param(
         100,
-        "number of particles N (at 100,000 about 2.7 s per update on a 2-core machine; "
+        "number of particles N (the cost per update grows with N: docs/benchmarks.md; "
         "live, /diagnostics warns when the callbacks no longer fit the input rate)",
         low=2,
         high=MAX_PARTICLES,

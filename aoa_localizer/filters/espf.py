@@ -8,7 +8,7 @@ resampling"), and the N children with their normalised likelihoods form a pool o
 with equal weights. `espf.selection: draw` (default) draws the N from the pool in proportion to the weights
 (systematic); `top` keeps the N largest. The paper says "select N"; `top` with every resampled particle at
 1/N breaks the ties by position, and as the resampled block sits in ancestor order that culled the tail of
-the block at every step (about 97 of 200 on Model 3): the bug behind 25-30 % of ESPF's error there.
+the block at every step (CHANGELOG, round 1).
 
 `espf.variant: mcmc` (default, the emitter): resample-move with SBX as a pair move accepted with
 beta^d pi(c1) pi(c2) / (pi(x_i) pi(x_j)) (moves.pair_scale) plus a small random-walk MH step (SBX keeps each
@@ -25,6 +25,7 @@ from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resampling import systematic
 
 
 @dataclass(frozen=True)
@@ -65,13 +66,6 @@ def top_n(weights: np.ndarray, n: int) -> np.ndarray:
     return np.argsort(-weights, kind="stable")[:n]
 
 
-def draw_n(weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """n indices drawn in proportion to the weights, systematically (one uniform, n evenly spaced points on the
-    cumulative weights): equal weights get equal shares, whatever their position."""
-    u = (rng.random() + np.arange(n)) / n
-    return np.minimum(np.searchsorted(np.cumsum(weights / weights.sum()), u), len(weights) - 1)
-
-
 class EspfFilter(ParticleFilter):
     name = "espf"
 
@@ -93,7 +87,7 @@ class EspfFilter(ParticleFilter):
         cand_w = cand_w / cand_w.sum() if cand_w.sum() > 0 else cand_w
         pool = np.concatenate([self.x, children])
         pool_w = np.concatenate([np.full(n, 1.0 / n), cand_w])
-        keep = top_n(pool_w, n) if self.cfg.espf.selection == "top" else draw_n(pool_w, n, rng)
+        keep = top_n(pool_w, n) if self.cfg.espf.selection == "top" else systematic(pool_w / pool_w.sum(), rng, n)
         self.x = pool[keep]
         self.logw = np.zeros(n)
 

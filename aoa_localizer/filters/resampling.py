@@ -10,9 +10,10 @@ def _search(weights: np.ndarray, positions: np.ndarray) -> np.ndarray:
     return np.searchsorted(cumulative, positions, side="right")
 
 
-def systematic(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """One uniform offset, N evenly spaced pointers (the AFSA paper's choice)."""
-    n = weights.size
+def systematic(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
+    """One uniform offset, N evenly spaced pointers (the AFSA paper's choice); `n` pointers if given (ESPF draws N
+    of its 2N pool)."""
+    n = weights.size if n is None else n
     return _search(weights, (np.arange(n) + rng.random()) / n)
 
 
