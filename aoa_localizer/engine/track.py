@@ -79,6 +79,7 @@ class EmitterTrack:
         return TrackState.COLLECTING if self.provisional is None else TrackState.PROVISIONAL
 
     def summary(self) -> TrackStatus:
+        """The track as programs read it (Localizer.track_status)."""
         sup = self.supervisor
         return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used)
 

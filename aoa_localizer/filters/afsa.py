@@ -32,6 +32,9 @@ from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models.base import StaticPosterior
 
+SWARM_NOISE = 0.5  # the swarm proposal's spread around its drift, in visual ranges
+SWARM_PEERS = 200  # fish of the other half a swarm looks at, at most (a random subset: O(N) not O(N^2))
+
 
 @dataclass(frozen=True)
 class AfsaConfig:
@@ -51,9 +54,6 @@ class AfsaConfig:
     max_iterations: int = param(5, "school rounds (paper) or MCMC sweeps (mcmc)", low=1, high=50)
     tolerance: float = param(1e-3, "stop the paper school when the mean log-objective change is smaller",
                              low=0.0, low_open=True, high=1e6)
-
-SWARM_NOISE = 0.5  # the swarm proposal's spread around its drift, in visual ranges
-SWARM_PEERS = 200  # fish of the other half a swarm looks at, at most (a random subset: O(N) not O(N^2))
 
 
 def uniform_disc(rng: np.random.Generator, shape) -> np.ndarray:

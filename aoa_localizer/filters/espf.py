@@ -27,6 +27,8 @@ from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.filters.resampling import systematic
 
+SMALL_STEP = 0.5  # the small random-walk step after the pair move, in standard deviations of the cloud
+
 
 @dataclass(frozen=True)
 class EspfConfig:
@@ -37,8 +39,6 @@ class EspfConfig:
                               "nearer their parents)", low=0.0, high=100.0)
     selection: str = choice("draw", ("draw", "top"), "ESPF paper variant: `draw` N of the 2N pool by weight "
                             "(default), or `top`: the N largest weights (ties broken by position)")
-
-SMALL_STEP = 0.5  # the small random-walk step after the pair move, in standard deviations of the cloud
 
 
 def sbx_beta(u: np.ndarray, lam: float) -> np.ndarray:

@@ -31,6 +31,8 @@ from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import ResampleMove
 
+NOISE_SCALE = 0.5  # the proposal's spread around the gravitation move, in standard deviations of the cloud
+
 
 @dataclass(frozen=True)
 class GfapfConfig:
@@ -49,8 +51,6 @@ class GfapfConfig:
                              high=1e4)
     scale: str = choice("spread", ("spread", "absolute"), "GFA-PF: `spread` (standard deviations of the cloud) or "
                         "`absolute` (state units) for the two distances")
-
-NOISE_SCALE = 0.5  # the proposal's spread around the gravitation move, in standard deviations of the cloud
 
 
 def gravitation_step(x: np.ndarray, centre: int, scale: float, attraction: float, attract_min: float,

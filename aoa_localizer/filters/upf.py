@@ -33,15 +33,15 @@ from aoa_localizer.filters.resample_move import MIN_SPREAD_M2, ResampleMove
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
 from aoa_localizer.models.base import StaticPosterior, TransitionDensity, UnscentedForm
 
+WIDEN = 1.5  # the UKF's Gaussian is widened before it proposes: a bearing posterior has heavier tails
+JITTER = 0.01  # DE-MC's jitter, in standard deviations of the cloud
+
 
 @dataclass(frozen=True)
 class UpfConfig:
     """The unscented PF on the emitter: `mcmc` (the UKF's Gaussian as an independence MH proposal) or `paper`."""
 
     variant: str = variant_choice("UPF")
-
-WIDEN = 1.5  # the UKF's Gaussian is widened before it proposes: a bearing posterior has heavier tails
-JITTER = 0.01  # DE-MC's jitter, in standard deviations of the cloud
 
 
 class UkfProposalFilter(ParticleFilter):
