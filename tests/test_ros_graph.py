@@ -727,11 +727,13 @@ def test_two_stations_and_two_emitters_each_get_their_topics_summary_and_status(
             status = got["status"][f"aoa_localizer: localizer channel {cid}"]
             assert status.level == b"\x00" and diagnostics_values(T.DiagnosticArray(status=[status]))[
                 status.name]["frequency_hz"] == f"{f:.0f}"
-        # Nothing came without a frequency, so emitter/pose carries the channel with the most points
-        primary = max(ids, key=lambda cid: got["summary"]["channels"][cid]["points_used"])
-        entry = got["summary"]["channels"][primary]
+        # Nothing came without a frequency, so emitter/pose carries a channel with the most points (the two cars
+        # hear both emitters at the same stamps: a tie is usual, and the engine then keeps the first opened)
+        channels = got["summary"]["channels"]
+        most = max(channels[cid]["points_used"] for cid in ids)
         top = got["default"].pose.pose.position
-        assert math.hypot(top.x - entry["east"], top.y - entry["north"]) < 0.5
+        assert any(math.hypot(top.x - channels[cid]["east"], top.y - channels[cid]["north"]) < 0.5
+                   for cid in ids if channels[cid]["points_used"] == most), (top, channels)
         assert set(got["paths"]) == set(PAIR)
     assert node_p.poll() is None
 
