@@ -10,7 +10,7 @@ start with every buffered point, counts as that many measurements with an equal 
 time over the points). Reported: the median and mean of the time per measurement, the geodesy's share (LocalFrame
 calls, timed separately), and the IBIS sampler's median and mean step on the same points (docs/benchmarks.md has the
 figures). With `--scheduling realtime` the checks run in the worker process and, between calls (untimed, as a node's
-idle time), the run waits for the worker and makes the owed move sweeps (Localizer.settle, pay_owed): the calls'
+idle time), the run waits for the worker and makes the owed move sweeps (Localizer.catch_up): the calls'
 time is then what the thread that feeds the Localizer pays, and that idle work is reported beside it. One run is
 made first and not timed, so neither side's first calls in the process (IBIS's first resample-move step takes about
 half a second) count. Nothing here is a test: speed targets live in benchmarks.
@@ -73,7 +73,7 @@ class GeodesyClock:
 def one_run(scenario: str, r: int, scheduling: str):
     data = simulate(CASES[scenario], r)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=10000 + r, scheduling=scheduling)))
-    per_point, spent, points, idle = [], 0.0, loc.points_used, 0.0
+    per_point, spent, points, idle = [], 0.0, 0, 0.0
     with GeodesyClock() as geo:
         for kind, row in data.events():
             t0 = time.perf_counter()
@@ -83,15 +83,15 @@ def one_run(scenario: str, r: int, scheduling: str):
                 loc.add_bearing(row[0], row[1], row[2])
             spent += time.perf_counter() - t0
             if scheduling == "realtime":
-                loc.settle()
+                loc.scheduler.wait(c.track for c in loc.channels.live.values())  # not idle work: the worker's
                 t1 = time.perf_counter()
-                loc.pay_all_owed()
+                loc.catch_up()
                 idle += time.perf_counter() - t1
-            if loc.points_used > points:  # this call closed (and used) observation points: each costs its share
-                used = loc.points_used - points
-                per_point += [spent / used] * used
-                spent, points = 0.0, loc.points_used
-            points = min(points, loc.points_used)  # a re-start (the emitter moved) counts its points afresh
+            now = loc.track_status().points_used
+            if now > points:  # this call closed (and used) observation points: each costs its share
+                per_point += [spent / (now - points)] * (now - points)
+                spent, points = 0.0, now
+            points = min(points, now)  # a re-start (the emitter moved) counts its points afresh
         geo_share = geo.seconds
     loc.close()
     total = sum(per_point)

@@ -75,6 +75,17 @@ def frame():
     return LocalFrame(*DATUM)
 
 
+def track_of(loc, channel=None):
+    """A channel's emitter track (None: the latest estimate's channel), for the tests that check the engine's
+    internals."""
+    return (channel or loc.latest).track
+
+
+def open_point(loc, station=""):
+    """The readings of the default channel's open observation point at `station`."""
+    return loc.channels.default.builder(station).readings
+
+
 def azimuth_from(frame, east, north, target):
     """Plane azimuth (deg from north) from (east, north) to target: exact enough near the datum."""
     return float(np.degrees(np.arctan2(target[0] - east, target[1] - north)) % 360)

@@ -146,4 +146,4 @@ def test_offline_replay_feeds_a_bags_imu_headings_to_the_engine():
     loc = Localizer(_cfg(bearing_reference="vehicle", heading_source="imu"))
     assert feed(loc, BagEvent("heading", 0, HeadingRecord(1.0, 0.3))) is None
     assert feed(loc, BagEvent("heading", 0, HeadingRecord(0.5, 0.3))) is None
-    assert loc.heading.samples.t == [1.0] and loc.rejected["heading_out_of_order"] == 1
+    assert loc.stations[""].heading.samples.t == [1.0] and loc.rejected["heading_out_of_order"] == 1

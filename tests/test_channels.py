@@ -110,7 +110,7 @@ def test_a_silent_channel_is_retired_with_its_last_estimate_and_a_new_one_starts
     retired = loc.channels.retired["f446000000"]
     assert retired.retired and retired.estimate is not None and retired.estimate.points_used >= 10
     back = loc.channels.live["f446000000"]
-    assert back is not retired and back.emitter.points_seen < 60 - retired.emitter.points_seen
+    assert back is not retired and back.track.points_seen < 60 - retired.track.points_seen
     assert [c.id for c in loc.channels.all()].count("f446000000") == 1  # the live one; the retired kept aside
 
 
@@ -161,7 +161,7 @@ def test_channels_sharing_stamps_close_their_points_at_different_readings():
         if step == 0:
             for channel in [c for c in loc.channels.live.values() if c.id != DEFAULT]:
                 got = closes[channel.id] = []
-                channel.emitter.add = lambda readings, real=channel.emitter.add, got=got: (
+                channel.track.add = lambda readings, real=channel.track.add, got=got: (
                     got.append((readings[0].stamp, len(readings))) or real(readings))
     sizes = {cid: [n for _, n in got] for cid, got in closes.items()}
     first = sizes[channel_id(freqs[0])]
@@ -199,7 +199,7 @@ def test_the_primary_channel_is_the_default_while_it_has_data_else_the_one_with_
     loc.finish()
     first_default = next(i for i, (channel, _) in enumerate(primaries) if channel == DEFAULT)
     busy, quiet = loc.channels.live["f433920000"], loc.channels.live["f446000000"]
-    assert busy.emitter.points_used > quiet.emitter.points_used and quiet.estimate is not None
+    assert busy.track.points_used > quiet.track.points_used and quiet.estimate is not None
     assert primaries[first_default - 1][1] == busy.id
     assert all(primary == DEFAULT for _, primary in primaries[first_default:])
     assert loc.channels.primary() is loc.channels.default

@@ -7,6 +7,7 @@ from concurrent.futures import wait
 
 import numpy as np
 import pytest
+from conftest import track_of
 
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine import checks
@@ -22,7 +23,7 @@ from aoa_localizer.engine.scenarios import simulate
 
 def settle_starts(loc: Localizer):
     """Wait for a start search (not for a global check)."""
-    job = loc.emitter.job
+    job = track_of(loc).job
     if job is not None and job.is_start:
         wait([job.future], timeout=60)
 
@@ -34,7 +35,7 @@ def play(loc: Localizer, data, paced=True):
         else:
             loc.add_bearing(*row[:3])
         if paced:
-            loc.settle()
+            loc.catch_up()
     loc.flush()
     return loc.finish()
 
@@ -50,7 +51,7 @@ def error_and_nees(loc: Localizer, data) -> tuple[float, float]:
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["seed", "urban"])
 def test_realtime_scheduling_finds_the_emitter_as_reproducible_does(scenario):
-    """The same data through both (realtime paced by settle(), as a receiver would): the worker's results are
+    """The same data through both (realtime paced by catch_up(), as a receiver would): the worker's results are
     applied one point later and the move sweeps spread, so the runs differ, but both find the emitter (urban: 15 %
     wild bearings) with an ellipse that holds it, the start and the calibrations happen, and nothing is refused
     as an internal error."""
@@ -59,7 +60,7 @@ def test_realtime_scheduling_finds_the_emitter_as_reproducible_does(scenario):
     for mode in ("reproducible", "realtime"):
         loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling=mode)))
         play(loc, data)
-        assert loc.estimate is not None and loc.emitter.events["recalibrated"] >= 2, mode
+        assert loc.estimate is not None and track_of(loc).events["recalibrated"] >= 2, mode
         assert "internal_error" not in loc.rejected
         results[mode] = error_and_nees(loc, data)
         loc.close()
@@ -71,38 +72,37 @@ def test_realtime_scheduling_finds_the_emitter_as_reproducible_does(scenario):
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["seed", "urban"])
 def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_ellipse_honest(scenario):
-    """The node's idle time (pay_owed between messages) makes the sweeps a resampling owes: the points then carry
+    """The node's idle time (catch_up between messages) makes the sweeps a resampling owes: the points then carry
     almost none, every owed sweep is made, and the emitter is found with an ellipse that holds it."""
     data = simulate(scenario, 2)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling="realtime")))
     between = at_points = check_moves = 0
     for kind, row in data.events():
-        owed = loc.emitter.owed
+        owed = track_of(loc).owed
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
-        at_points += max(0, owed - loc.emitter.owed)  # sweeps a point made (a resampling adds to `owed`)
-        loc.settle()
-        check_moves += loc.emitter.supervisor.move_owed  # a worker's check applied: its move on the modes is owed too
-        between += loc.pay_all_owed()
-        assert not loc.emitter.supervisor.move_owed
-    assert not loc.pay_owed() and loc.emitter.owed == 0  # nothing left owed
+        at_points += max(0, owed - track_of(loc).owed)  # sweeps a point made (a resampling adds to `owed`)
+        check_moves += track_of(loc).supervisor.move_owed  # a worker's check applied: its move on the modes is owed too
+        between += loc.catch_up()
+        assert not track_of(loc).supervisor.move_owed
+    assert loc.catch_up() == 0 and track_of(loc).owed == 0  # nothing left owed
     assert between >= 20 and at_points <= between // 10 and check_moves >= 1  # one scheduled check in these runs
     loc.flush()
     loc.finish()
     err, nees = error_and_nees(loc, data)
     assert err < 15.0 and nees < 13.8 and "internal_error" not in loc.rejected
     loc.close()
-    assert not Localizer(LocalizerConfig(seed=3)).pay_owed()  # reproducible: nothing is ever owed
+    assert Localizer(LocalizerConfig(seed=3)).catch_up() == 0  # reproducible: nothing is ever owed
 
 
 @pytest.mark.slow
 def test_the_default_is_reproducible_from_python_and_realtime_in_the_node():
-    assert Localizer(LocalizerConfig()).worker is None
+    assert not Localizer(LocalizerConfig()).scheduler.realtime
     live = Localizer(LocalizerConfig(seed=3), live=True)
-    assert live.worker is not None
+    assert live.scheduler.realtime
     play(live, simulate("seed", 2))
-    assert live.emitter.running.sweeps_per_point == 1
+    assert track_of(live).running.sweeps_per_point == 1
     live.close()
-    assert Localizer(LocalizerConfig(scheduling="reproducible"), live=True).worker is None
+    assert not Localizer(LocalizerConfig(scheduling="reproducible"), live=True).scheduler.realtime
     with pytest.raises(ConfigError, match="scheduling"):
         LocalizerConfig(scheduling="off")  # YAML would read an on/off choice as a boolean: not offered
 
@@ -117,7 +117,7 @@ def test_finish_waits_for_the_worker_and_starts_if_it_lagged():
     assert final is not None and final.end_of_data
     err, nees = error_and_nees(loc, data)
     assert err < 5.0 and nees < 13.8
-    assert loc.emitter.job is None
+    assert track_of(loc).job is None
     loc.close()
 
 
@@ -143,8 +143,8 @@ def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inl
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data)
-    assert loc.worker.unusable == "its process died 3 times in a row"
-    assert loc.rejected["internal_error"] == 3 and loc.emitter.filter is not None  # started inline
+    assert loc.scheduler.worker.unusable == "its process died 3 times in a row"
+    assert loc.rejected["internal_error"] == 3 and track_of(loc).filter is not None  # started inline
     said = [r for r in caplog.records if r.exc_info]
     assert len(said) == 1  # one traceback, not one per job
     err, nees = error_and_nees(loc, data)
@@ -154,17 +154,17 @@ def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inl
 @pytest.mark.slow
 def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():
     """Points arriving far faster than the start searches (a bag replayed at full speed, no finish: a live node):
-    a search over a few points is no start for the many held by the time it ends, so it is run again; poll()
+    a search over a few points is no start for the many held by the time it ends, so it is run again; idle()
     applies the last one once the data pauses. The start is honest: the ellipse holds the emitter."""
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     for kind, row in data.events():
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
     made = []
-    for _ in range(20):  # the data has ended: each poll applies a finished search or starts a new one
-        loc.settle()
-        made += loc.poll()
-        if loc.emitter.filter is not None and loc.emitter.job is None:
+    for _ in range(20):  # the data has ended: each idle() applies a finished search or starts a new one
+        loc.catch_up()
+        made += loc.idle()
+        if track_of(loc).filter is not None and track_of(loc).job is None:
             break
     assert made and loc.estimate is made[-1]
     err, nees = error_and_nees(loc, data)
@@ -181,7 +181,7 @@ def test_a_failing_check_is_counted_and_the_track_goes_on(monkeypatch):
     play(loc, data)
     assert loc.rejected["internal_error"] >= 1
     err, _ = error_and_nees(loc, data)
-    assert loc.emitter.points_used == 60 and err < 5.0  # every point still used, the emitter still found
+    assert track_of(loc).points_used == 60 and err < 5.0  # every point still used, the emitter still found
     loc.close()
 
 
@@ -200,9 +200,9 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)
     err, nees = error_and_nees(loc, data)
-    assert loc.emitter.job is None and loc.emitter.events["recalibrated"] >= 2
+    assert track_of(loc).job is None and track_of(loc).events["recalibrated"] >= 2
     assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.rejected
-    assert len(starts) == 1 and loc.worker.unusable == "cannot start a process"
+    assert len(starts) == 1 and loc.scheduler.worker.unusable == "cannot start a process"
     said = [r.getMessage() for r in caplog.records if "check worker is given up" in r.getMessage()]
     assert len(said) == 1 and "__main__" in said[0]
 
@@ -213,7 +213,7 @@ def realtime_run_in_a_pool_worker(r: int) -> tuple[str, float]:
     data = simulate("seed", r)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)
-    return loc.worker.unusable, error_and_nees(loc, data)[0]
+    return loc.scheduler.worker.unusable, error_and_nees(loc, data)[0]
 
 
 @pytest.mark.slow
@@ -233,12 +233,12 @@ def test_a_check_for_a_filter_since_replaced_is_dropped():
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     events = list(data.events())
     i = 0
-    while loc.emitter.job is None or loc.emitter.job.is_start:  # until a global check is running
+    while track_of(loc).job is None or track_of(loc).job.is_start:  # until a global check is running
         kind, row = events[i]
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         settle_starts(loc)
         i += 1
-    track = loc.emitter
+    track = track_of(loc)
     track._diverged()  # what a non-finite cloud does: the filter is dropped, the track re-starts from new bearings
     wait([track.job.future], timeout=60)
     calibrations = track.events["recalibrated"]
@@ -250,7 +250,7 @@ def test_a_check_for_a_filter_since_replaced_is_dropped():
     assert track.job is None and track.events["recalibrated"] == calibrations  # dropped
     for kind, row in events[i:]:
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
-        loc.settle()
+        loc.catch_up()
     assert loc.rejected["filter_diverged"] == 1 and "internal_error" not in loc.rejected
     assert track.filter is not None and len(track.window) < track.points_seen  # re-started after the drop
     loc.close()
@@ -262,7 +262,7 @@ def test_a_snapshot_crosses_to_the_worker_process_whole():
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3))
     play(loc, data)
-    snap = loc.emitter.snapshot()
+    snap = track_of(loc).snapshot()
     copy = pickle.loads(pickle.dumps(snap))
     assert len(copy.groups) == len(snap.groups) == 60
     for g, h in zip(snap.groups, copy.groups, strict=True):

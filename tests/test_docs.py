@@ -33,9 +33,10 @@ def test_nothing_cites_documents_outside_the_repository():
 
 
 def test_the_contract_names_every_topic_the_programs_use():
-    sources = "".join((ROOT / "aoa_localizer" / "ros" / f).read_text() for f in ("node.py", "sim_vehicle.py"))
+    sources = "".join((ROOT / "aoa_localizer" / "ros" / f).read_text()
+                      for f in ("node.py", "node_outputs.py", "sim_vehicle.py"))
     topics = set(re.findall(r'create_(?:publisher|subscription)\(\s*[\w.]+,\s*"([^"]+)"', sources))
-    topics |= set(re.findall(r'prefix \+ "([^"]+)"', sources))  # a station's inputs and path
+    topics |= set(re.findall(r'\+ "([a-z_]+/[a-z_/]+)"', sources))  # a station's inputs and path
     topics |= {"emitter/" + t for t in re.findall(r'make\(T\.\w+, "([^"]+)"', sources)}  # each channel's
     assert {"gps/fix", "df/bearing", "emitter/pose", "emitter/datum", "vehicle/path", "sim/truth"} <= topics
     for topic in topics:
@@ -56,8 +57,8 @@ def test_the_failure_behaviour_page_states_the_limits_the_code_has():
 
     from aoa_localizer.common import http_poll, kraken_csv
     from aoa_localizer.engine import channels
-    from aoa_localizer.engine.localizer import REASONS
-    from aoa_localizer.ros import kraken_bridge, node
+    from aoa_localizer.engine.rejections import REASONS
+    from aoa_localizer.ros import kraken_bridge, node_monitor
     from msgs_adapters import bag_files, decompress
 
     page = (ROOT / "docs" / "failure_behaviour.md").read_text()
@@ -74,9 +75,9 @@ def test_the_failure_behaviour_page_states_the_limits_the_code_has():
         "(default 4 MiB)": http_poll.DEFAULT_MAX_BYTES == 4 * mib,
         "within 0.1 s": http_poll.WATCH_S == 0.1,
         "a warning every 30 s": kraken_bridge.SKIPPED_SAY_EVERY_S == 30,
-        "more than 80 % of the period": node._MAX_LOAD == 0.8,
-        "over twice `diagnostics_period_s`": node._STALL_PERIODS == 2,
-        "of 1.5 typical intervals": node._GAP_FACTOR == 1.5,
+        "more than 80 % of the period": node_monitor._MAX_LOAD == 0.8,
+        "over twice `diagnostics_period_s`": node_monitor._STALL_PERIODS == 2,
+        "of 1.5 typical intervals": node_monitor._GAP_FACTOR == 1.5,
     }
     missing = [words for words in stated if words not in page]
     wrong = [words for words, true in stated.items() if not true]

@@ -3,6 +3,7 @@ frequency, a stream of distinct frequencies), each reproduced as the review did 
 import re
 
 import pytest
+from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.channels import FREQUENCY_MAX_HZ, channel_id
@@ -34,8 +35,8 @@ def test_one_future_record_on_another_channel_costs_only_itself(ahead_s, reason)
     inside max_stamp_jump_s, dropped 141. Now the first is refused on arrival, the second waits for a fix."""
     clean = feed_with(lambda loc, t: None)
     loc = feed_with(lambda loc, t: loc.add_bearing(t + ahead_s, 10.0, 90.0, frequency_hz=1e6))
-    assert clean.bearings_used == 300 and not clean.rejected
-    assert loc.bearings_used == 300
+    assert clean.track_status().bearings_used == 300 and not clean.rejected
+    assert loc.track_status().bearings_used == 300
     assert dict(loc.rejected) == {reason: 1}
 
 
@@ -108,7 +109,7 @@ def test_a_filter_update_out_of_memory_skips_the_point_and_keeps_the_state(monke
     half = len(events) // 2
     for kind, row in events[:half]:
         loc.add_fix(row[0], *row[1:4]) if kind == "fix" else loc.add_bearing(row[0], *row[1:3])
-    f = loc.emitter.running
+    f = track_of(loc).running
 
     def no_memory(point):
         raise MemoryError

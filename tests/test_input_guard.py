@@ -5,6 +5,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.evaluation import run
@@ -90,9 +91,10 @@ def test_a_clock_that_steps_back_and_stays_back_is_followed():
     loc.flush()
     assert loc.events["df_clock_jump"] == 1
     assert loc.rejected["bearing_out_of_order"] <= 2  # the readings it took to recognise the step
-    before = sum(1 for e in run(data, LocalizerConfig(seed=1)).localizer.emitter.window if e.point.stamp <= half)
+    before = sum(1 for e in track_of(run(data, LocalizerConfig(seed=1)).localizer).window if e.point.stamp <= half)
     assert before < 35
-    assert loc.points_used >= before + 10, (loc.points_used, before)  # was: nothing after the step
+    used = loc.track_status().points_used
+    assert used >= before + 10, (used, before)  # was: nothing after the step
 
 
 def test_a_single_stamp_far_ahead_is_refused_not_adopted():
@@ -121,8 +123,8 @@ def test_bearings_waiting_for_a_fix_age_out_when_the_gps_stops():
     loc.add_fix(0.0, 39.1, 117.2, 5.0)
     for k in range(20_000):  # 100 s at 200 Hz, no fix
         loc.add_bearing(0.5 + k / 200.0, 45.0, 90.0)
-    assert len(loc.pending) <= 2 * loc.cfg.gps_max_gap_s * 200 + 1
-    assert loc.rejected["gps_gap"] >= 20_000 - len(loc.pending)
+    assert len(loc.stations[""].pending) <= 2 * loc.cfg.gps_max_gap_s * 200 + 1
+    assert loc.rejected["gps_gap"] >= 20_000 - len(loc.stations[""].pending)
 
 
 def test_most_inputs_refused_is_said_in_the_status():
@@ -213,7 +215,7 @@ def test_stamps_that_a_clock_offset_explains_are_pointed_out(late_s):
     play(loc, data)
     loc.flush()
     loc.finish()
-    hint = loc.emitter.supervisor.clock_hint
+    hint = track_of(loc).supervisor.clock_hint
     if late_s == 0.0:
         assert hint is None and loc.clock_hint_sentence() is None
     else:

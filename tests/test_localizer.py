@@ -3,6 +3,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import open_point, track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -66,7 +67,7 @@ def test_bearing_between_fixes_uses_the_interpolated_position(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(1.0, *fix_at(10.0, 0.0))
     loc.add_bearing(0.5, 45.0, 90.0)
-    (reading,) = loc.builder.readings
+    (reading,) = open_point(loc)
     assert reading.east == pytest.approx(5.0, abs=1e-3) and reading.north == pytest.approx(0.0, abs=1e-3)
     assert reading.theta == pytest.approx(math.radians(45.0), abs=1e-6)
 
@@ -74,9 +75,9 @@ def test_bearing_between_fixes_uses_the_interpolated_position(loc):
 def test_bearing_after_the_newest_fix_waits_for_the_next_one(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_bearing(0.5, 45.0, 90.0)
-    assert len(loc.pending) == 1 and not loc.builder.readings
+    assert len(loc.stations[""].pending) == 1 and not open_point(loc)
     loc.add_fix(1.0, *fix_at(10.0, 0.0))
-    assert not loc.pending and loc.builder.readings[0].east == pytest.approx(5.0, abs=1e-3)
+    assert not loc.stations[""].pending and open_point(loc)[0].east == pytest.approx(5.0, abs=1e-3)
 
 
 def test_bearing_in_a_gps_gap_is_dropped_not_paired_with_a_stale_fix(loc):
@@ -85,7 +86,7 @@ def test_bearing_in_a_gps_gap_is_dropped_not_paired_with_a_stale_fix(loc):
     loc.add_fix(10.0, *fix_at(100.0, 0.0))  # 10 s later: gap > gps_max_gap_s
     assert loc.rejected["gps_gap"] == 1
     loc.add_bearing(13.0, 45.0, 90.0)  # 3 s after the newest fix: no fix can bracket it within 2 s
-    assert loc.rejected["gps_gap"] == 2 and not loc.builder.readings
+    assert loc.rejected["gps_gap"] == 2 and not open_point(loc)
 
 
 def test_bearings_before_any_fix_and_left_waiting_at_the_end_are_counted(loc):
@@ -111,14 +112,14 @@ def test_bad_bearings_are_rejected_with_a_reason(loc, args, reason):
     loc.add_fix(2.0, *fix_at(0.0, 0.0))
     assert loc.add_bearing(*args) is None
     assert loc.rejected == {reason: 1}
-    assert not loc.pending and not loc.builder.readings
+    assert not loc.stations[""].pending and not open_point(loc)
 
 
 def test_unknown_quality_is_used_but_counted(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(2.0, *fix_at(0.0, 0.0))
     loc.add_bearing(1.0, 10.0, float("nan"))
-    assert loc.unknown_quality == 1 and len(loc.builder.readings) == 1
+    assert loc.unknown_quality == 1 and len(open_point(loc)) == 1
 
 
 def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):
@@ -138,7 +139,7 @@ def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):
 ])
 def test_bad_fixes_are_rejected(loc, args, reason):
     loc.add_fix(*args)
-    assert loc.rejected == {reason: 1} and len(loc.track) == 0
+    assert loc.rejected == {reason: 1} and not loc.stations
 
 
 def test_fix_without_a_fix_and_fixes_out_of_order_are_rejected(loc):
@@ -147,7 +148,7 @@ def test_fix_without_a_fix_and_fixes_out_of_order_are_rejected(loc):
     loc.add_fix(5.0, 39.1, 117.2)
     loc.add_fix(4.0, 39.1, 117.2)
     assert loc.rejected == {"fix_no_fix": 1, "fix_repeated": 1, "fix_out_of_order": 1}
-    assert len(loc.track) == 1
+    assert len(loc.stations[""].gps) == 1
 
 
 def test_datum_comes_from_the_first_valid_fix_when_unset():
@@ -162,7 +163,7 @@ def test_datum_comes_from_the_first_valid_fix_when_unset():
 @pytest.mark.slow
 def test_driving_straight_at_the_emitter_never_starts_from_a_garbage_fix(loc):
     est = drive(loc, seconds=60, track=lambda t: (10.0 * t * 0.832, 10.0 * t * 0.5547))  # along the emitter's bearing
-    assert est is None and loc.filter is None
+    assert est is None and track_of(loc).filter is None
     assert "waiting for geometry" in loc.status and "parallel" in loc.status
 
 
@@ -182,7 +183,7 @@ def test_reset_drops_the_track_but_keeps_datum_and_counters(loc):
     loc.add_bearing(-5.0, 10.0, 10.0)
     frame = loc.frame
     loc.reset()
-    assert loc.filter is None and len(loc.track) == 0 and loc.estimate is None
+    assert track_of(loc).filter is None and not loc.stations and loc.estimate is None
     assert loc.frame == frame and loc.rejected["low_quality"] == 1
     assert drive(loc, seconds=90, track=curved) is not None
 
@@ -207,7 +208,7 @@ def test_pose_encoding_bearing_is_a_yaw_from_east_with_its_own_variance(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(1.0, *fix_at(0.0, 0.0))
     loc.add_bearing_enu(0.5, math.radians(30.0), math.radians(2.0) ** 2)
-    (reading,) = loc.builder.readings
+    (reading,) = open_point(loc)
     assert reading.theta == pytest.approx(math.radians(30.0), abs=1e-6)
     assert reading.sigma == pytest.approx(math.radians(2.0))
     assert loc.unknown_quality == 1
@@ -232,9 +233,9 @@ def test_a_later_fix_closes_the_open_point_so_a_stopped_vehicle_gets_its_estimat
 def test_a_diverged_filter_is_never_published_and_restarts():
     loc = Localizer(LocalizerConfig(seed=3, datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
     drive(loc, seconds=90, track=curved)
-    assert loc.filter is not None
+    assert track_of(loc).filter is not None
     published = loc.estimate
-    loc.filter.x = np.full_like(loc.filter.x, np.inf)  # what a run-away move step leaves behind
+    track_of(loc).filter.x = np.full_like(track_of(loc).filter.x, np.inf)  # what a run-away move step leaves behind
     est = drive(loc, seconds=100, track=lambda t: curved(t + 90), t0=1000.0)
     assert loc.rejected["filter_diverged"] == 1
     assert est is not None and np.isfinite(est.east) and est.stamp > published.stamp
@@ -275,9 +276,10 @@ def test_an_estimates_arrays_are_the_users_own():
         if est is not None:
             break
     assert est is not None
-    cov_before = loc.filter.estimate()[1].copy()
+    cov_before = track_of(loc).filter.estimate()[1].copy()
     est.cov[0, 0] += 1.0
     est.weights[:] = 0.0
     est.particles[:] = 0.0
-    assert np.array_equal(loc.filter.estimate()[1], cov_before) and loc.filter.weights.sum() == pytest.approx(1.0)
-    assert np.any(loc.filter.x != 0.0)
+    f = track_of(loc).filter
+    assert np.array_equal(f.estimate()[1], cov_before) and f.weights.sum() == pytest.approx(1.0)
+    assert np.any(f.x != 0.0)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.checks import refined
@@ -182,7 +183,7 @@ def test_a_mount_offset_left_at_0_is_learned_and_named_not_a_confident_wrong_ans
     est = res.estimates[-1]
     assert res.scores["inside95"], res.scores
     assert est.state == "suspect" and any("mount_offset_deg" in w for w in est.warnings), est.warnings
-    assert res.localizer.emitter.calibration.offset_deg == pytest.approx(-30.0, abs=1.5)
+    assert track_of(res.localizer).calibration.offset_deg == pytest.approx(-30.0, abs=1.5)
 
 
 @pytest.mark.slow

@@ -4,6 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import track_of
 
 from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.evaluation import run
@@ -46,7 +47,8 @@ def test_a_cloud_locked_1_km_off_under_the_outlier_floor(safety):
     truth = truth_in_engine(loc, data)
     assert np.hypot(*(np.array([loc.estimate.east, loc.estimate.north]) - truth)) < 30
     wrong = truth + np.array([-800.0, -600.0])
-    loc.filter.replace_cloud(wrong + 3.0 * np.random.default_rng(0).standard_normal((loc.cfg.num_particles, 2)))
+    jitter = 3.0 * np.random.default_rng(0).standard_normal((loc.cfg.num_particles, 2))
+    track_of(loc).filter.replace_cloud(wrong + jitter)
     estimates = feed(loc, data, after_s=half)
     errors = [np.hypot(e.east - truth[0], e.north - truth[1]) for e in estimates]
     if safety:
@@ -78,13 +80,14 @@ def test_each_estimate_carries_the_noise_summary_of_its_moment():
         est = loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         if est is None:
             continue
-        fresh = loc.emitter.calibration.noise.summary(lambda q: math.degrees(reading_sigma(q, loc.cfg)))
-        fresh["point_outlier_prob"] = round(loc.emitter.calibration.outlier_prob, 4)
+        fresh = track_of(loc).calibration.noise.summary(lambda q: math.degrees(reading_sigma(q, loc.cfg)))
+        fresh["point_outlier_prob"] = round(track_of(loc).calibration.outlier_prob, 4)
         assert est.noise == fresh
         seen.append(repr(est.noise))
         est.noise["sigma_deg"]["nan"] = -1.0
         est.noise["fits"] = -1
-    assert loc.emitter.calibration.noise.fits >= 1 and len(set(seen)) >= 2  # calibrated during the run: the summary too
+    calibrated = track_of(loc).calibration.noise.fits
+    assert calibrated >= 1 and len(set(seen)) >= 2  # calibrated during the run: the summary too
 
 
 def test_calibration_learns_how_sigma_falls_with_quality():
@@ -201,8 +204,8 @@ def test_closed_form_2x2_inverse_equals_numpy():
 def test_the_gaussian_likelihood_stays_gaussian():
     """`likelihood: gaussian` (the paper's eq. 24) is not turned into a mixture by the calibrated outlier rate."""
     res = run(simulate("seed", 0), LocalizerConfig(seed=1, likelihood="gaussian"))
-    assert res.localizer.filter.model.lik.outlier_prob == 0.0
-    assert res.localizer.emitter.robust().outlier_prob == 0.0
+    assert track_of(res.localizer).filter.model.lik.outlier_prob == 0.0
+    assert track_of(res.localizer).robust().outlier_prob == 0.0
     assert res.scores["error"] < 3 * res.scores["crlb"] + 1.0
 
 

@@ -504,17 +504,18 @@ def test_an_overloaded_node_says_so_in_its_diagnostics(domain):
     try:
         node = LocalizerNode()
         period = node.get_parameter("diagnostics_period_s").value
-        node.period_start = time.perf_counter()
-        node.callback_s, node.other_s = [0.2 * period] * 3, 0.3 * period  # an idle move's work counts too
+        mon = node.monitor
+        mon.period_start = time.perf_counter()
+        mon.callback_s, mon.other_s = [0.2 * period] * 3, 0.3 * period  # an idle move's work counts too
         level, message, values = node.diagnostics()
         assert level == 1 and "cannot keep up" in message and values["load_pct"] == "90"
         assert values["overload"].startswith("the node worked 90 % of the last period")
-        node.callback_s, node.other_s = [0.01 * period] * 3, 0.0
+        mon.callback_s, mon.other_s = [0.01 * period] * 3, 0.0
         level, message, values = node.diagnostics()
         assert values["overload"].startswith("just before: the node worked")
         level, message, values = node.diagnostics()
         assert "overload" not in values and "cannot keep up" not in message
-        node.period_start = time.perf_counter() - 3.0 * period  # a period that lasted three: held up
+        mon.period_start = time.perf_counter() - 3.0 * period  # a period that lasted three: held up
         level, message, values = node.diagnostics()
         assert level == 1 and values["overload"].startswith("the node was held up")
         node.destroy_node()
@@ -533,7 +534,7 @@ def test_messages_the_middleware_lost_make_a_warning_for_one_period(domain):
     try:
         node = LocalizerNode()
         assert node.subs and all(sub.event_handlers for sub, _ in node.subs)  # the events are subscribed
-        node._lost_counter("bearings_lost").message_lost(SimpleNamespace(total_count_change=7))
+        node.monitor.lost_counter("bearings_lost").message_lost(SimpleNamespace(total_count_change=7))
         level, message, values = node.diagnostics()
         assert level == 1 and "being lost" in message and values["bearings_lost"] == 7
         assert values["messages_lost"].startswith("7 input messages lost")

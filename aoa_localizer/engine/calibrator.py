@@ -17,6 +17,7 @@ from aoa_localizer.engine.global_search import residuals
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.preprocess import make_point
 from aoa_localizer.engine.receiver import NoiseGrid
+from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.track_state import WindowEntry
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
@@ -104,7 +105,7 @@ class Calibrator:
             delta += now - entry.gated
             rebuilt.append(WindowEntry(entry.readings, point, now))
         if delta:
-            t.reject("point_outlier", delta)
+            t.reject(Reason.POINT_OUTLIER, delta)
         t.window = rebuilt
         pts = t.points()
         self.outlier_prob = point_outlier_prob(residuals(at, pts), pts.sigma, self.outlier_prob)

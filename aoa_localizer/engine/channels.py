@@ -8,9 +8,10 @@ import zlib
 
 import numpy as np
 
-from aoa_localizer.engine.checks import CheckWorker
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.preprocess import PointBuilder
+from aoa_localizer.engine.rejections import Reason
+from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.track import EmitterTrack
 from aoa_localizer.engine.types import Estimate
 
@@ -36,10 +37,10 @@ class Channel:
     """One emitter: its frequency (NaN for the default channel), track, builders per station and latest estimate."""
 
     def __init__(self, cid: str, frequency_hz: float, cfg: LocalizerConfig, rng: np.random.Generator, reject,
-                 worker: CheckWorker | None = None, first_point: float = 1.0):
+                 scheduler: Scheduler, first_point: float = 1.0):
         """`first_point`: the share of the observation-point limits its builders give their first point."""
         self.id, self.frequency_hz, self.cfg, self.first_point = cid, frequency_hz, cfg, first_point
-        self.emitter = EmitterTrack(cfg, rng, reject, worker)
+        self.track = EmitterTrack(cfg, rng, reject, scheduler)
         self.builders: dict[str, PointBuilder] = {}
         self.estimate: Estimate | None = None
         self.last_heard = -math.inf  # the newest DF stamp admitted on this channel (GPS clock)
@@ -55,9 +56,9 @@ class Channel:
 class Channels:
     """The live channels, the retired ones, and the rule that maps a frequency to a channel."""
 
-    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject, worker: CheckWorker | None = None):
-        """`worker`: the Localizer's background-check worker, shared by the channels (None: checks inline)."""
-        self.cfg, self.rng, self._reject, self.worker = cfg, rng, reject, worker
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject, scheduler: Scheduler):
+        """`scheduler`: the Localizer's, shared by the channels' tracks."""
+        self.cfg, self.rng, self._reject, self.scheduler = cfg, rng, reject, scheduler
         self.live: dict[str, Channel] = {}
         # the last retired channel of each id, its final estimate kept; the newest max_channels of them
         self.retired: dict[str, Channel] = {}
@@ -74,7 +75,7 @@ class Channels:
             rng = np.random.default_rng()
         else:
             rng = np.random.default_rng([self.cfg.seed, zlib.crc32(cid.encode())])
-        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.worker, self._first_point(cid))
+        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.scheduler, self._first_point(cid))
         self.live[cid] = channel
         return channel
 
@@ -88,13 +89,13 @@ class Channels:
         k, self._opened = self._opened, self._opened + 1
         return 1.0 - 0.9 * ((k * GOLDEN) % 1.0)
 
-    def for_frequency(self, frequency_hz: float) -> Channel | str:
+    def for_frequency(self, frequency_hz: float) -> Channel | Reason:
         """The channel of a record's frequency (a new one if none is near), or the reason it has none."""
         f = frequency_hz
         if math.isnan(f) or f == 0:
             return self.live.get(DEFAULT) or self._open(DEFAULT, math.nan)
         if not 0 < f <= FREQUENCY_MAX_HZ:  # False for inf
-            return "bad_frequency"
+            return Reason.BAD_FREQUENCY
         known = self._heard.get(f)  # a receiver reports a carrier's frequency the same way every time
         if known is not None:
             return known
@@ -105,7 +106,7 @@ class Channels:
                 best, gap = ch, d
         if best is None:
             if sum(1 for c in self.live.values() if c.id != DEFAULT) >= self.cfg.max_channels:
-                return "channel_limit"
+                return Reason.CHANNEL_LIMIT
             best = self._open(channel_id(f), f)
         if len(self._heard) >= _HEARD_MAX:
             self._heard.clear()
@@ -135,7 +136,7 @@ class Channels:
         an estimate, else the channel with an estimate from the most points (the first opened on a tie)."""
         if self.default.estimate is not None:
             return self.default
-        return max((c for c in self.all() if c.estimate is not None), key=lambda c: c.emitter.points_used,
+        return max((c for c in self.all() if c.estimate is not None), key=lambda c: c.track.points_used,
                    default=None)
 
     def all(self) -> list[Channel]:

@@ -33,13 +33,12 @@ def scenario_config(data: ScenarioData, base: LocalizerConfig) -> LocalizerConfi
 def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
     """A scenario's fixes and bearings into `loc` in stamp order; on_result(what each call returned). Under
     `scheduling: realtime` each call waits for the worker and then makes the owed move sweeps, as a node does in
-    the time a receiver's pace leaves between messages (Localizer.settle, pay_owed)."""
+    the time a receiver's pace leaves between messages (Localizer.catch_up)."""
     for kind, row in data.events():
         on_result(
             loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2])
         )
-        loc.settle()
-        loc.pay_all_owed()
+        loc.catch_up()
 
 
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
@@ -50,7 +49,7 @@ def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
     def keep(est):
         if est is not None:
             estimates.append(est)
-            step_s.append(loc.last_update_s)
+            step_s.append(loc.track_status().update_s)
 
     t0 = time.perf_counter()
     feed(loc, data, keep)
@@ -70,7 +69,7 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
     t0 = time.perf_counter()
     feed(loc, data, lambda est: None)
     loc.flush()  # no finish(): no filter runs; the batch estimate is the end-of-data search
-    mode = loc.emitter.batch_estimate()
+    mode = loc.latest.track.batch_estimate()
     wall = time.perf_counter() - t0
     truth = data.emitter_enu
     bound = crlb_rmse(truth, data.sensor_enu[~data.wild], data.sigma[~data.wild])

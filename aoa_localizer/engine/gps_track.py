@@ -7,6 +7,8 @@ from enum import Enum
 
 import numpy as np
 
+from aoa_localizer.engine.rejections import Reason
+
 # Fixes kept: enough to bracket any bearing still pending (bearings arrive within gps_max_gap_s).
 _KEEP_FIXES = 512
 _VELOCITY_SPAN = 3  # fix-to-fix segments a velocity is measured over
@@ -19,8 +21,8 @@ class Where(Enum):
 
     OK = "ok"  # bracketed by two fixes close enough in time (or on a fix)
     WAIT = "wait"  # after the newest fix but within the gap: a later fix may still bracket it
-    GAP = "gps_gap"  # the fixes around it are farther apart than gps_max_gap_s
-    BEFORE = "before_first_fix"  # older than every fix kept
+    GAP = Reason.GPS_GAP.value  # the fixes around it are farther apart than gps_max_gap_s
+    BEFORE = Reason.BEFORE_FIRST_FIX.value  # older than every fix kept
 
 
 class GpsTrack:
@@ -37,10 +39,10 @@ class GpsTrack:
     def __len__(self):
         return len(self.t)
 
-    def add(self, stamp: float, east: float, north: float, north_angle: float, sigma: float = 0.0) -> str | None:
+    def add(self, stamp: float, east: float, north: float, north_angle: float, sigma: float = 0.0) -> Reason | None:
         """Append a fix; returns a rejection reason if its stamp is not after the newest one."""
         if self.t and stamp <= self.t[-1]:
-            return "fix_repeated" if stamp == self.t[-1] else "fix_out_of_order"
+            return Reason.FIX_REPEATED if stamp == self.t[-1] else Reason.FIX_OUT_OF_ORDER
         for column, value in ((self.t, stamp), (self.e, east), (self.n, north), (self.north, north_angle),
                               (self.sigma, sigma)):
             column.append(value)

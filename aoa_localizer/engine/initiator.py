@@ -15,6 +15,7 @@ from aoa_localizer.engine.checks import CheckResult, search_start
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode
+from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.track_state import PendingJob
 from aoa_localizer.engine.triangulation import initial_particles
@@ -56,7 +57,7 @@ class Initiator:
             return self._from_prior()
         if len(t.window) > cfg.init_max_points:
             t.window.popleft()
-            t.reject("init_buffer_full", 1)
+            t.reject(Reason.INIT_BUFFER_FULL, 1)
         if len(t.window) < (min(2, cfg.init_bearings) if final else cfg.init_bearings):
             t.status = f"collecting bearings: {len(t.window)} of {cfg.init_bearings} points"
             return False
@@ -66,7 +67,7 @@ class Initiator:
             return False
         snap = t.snapshot()
         job = partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
-        future = None if inline else t.submit(job)
+        future = None if inline else t.scheduler.submit(job)
         if future is None:
             return self.apply_start(job(), snap.groups)
         t.job = PendingJob(future, None, snap.groups)
@@ -166,7 +167,7 @@ class Initiator:
         model.grid = t.calibration.grid
         cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
         f = make_filter(cfg, t.rng, model)
-        if t.worker is not None and isinstance(f, ResampleMove):  # realtime: a bounded step
+        if t.scheduler.realtime and isinstance(f, ResampleMove):  # realtime: a bounded step
             f.sweeps_per_point = 1
         return f
 

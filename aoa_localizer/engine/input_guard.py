@@ -16,6 +16,8 @@ import math
 import time
 from enum import Enum
 
+from aoa_localizer.engine.rejections import Reason
+
 ALT_RANGE_M = (-1000.0, 20000.0)
 POLE_MARGIN_DEG = 0.01
 _CONFIRM_DISTANCE_M = 100.0  # two fixes agree when closer than this ...
@@ -75,14 +77,14 @@ class StreamClock:
         return sorted(self.intervals)[len(self.intervals) // 2] > self.max_jump_s / 10
 
 
-def implausible_fix(lat: float, lon: float, alt: float) -> str | None:
+def implausible_fix(lat: float, lon: float, alt: float) -> Reason | None:
     """Why a finite, in-range fix cannot be a vehicle's position, or None."""
     if math.isfinite(alt) and not ALT_RANGE_M[0] <= alt <= ALT_RANGE_M[1]:
-        return "fix_bad_altitude"
+        return Reason.FIX_BAD_ALTITUDE
     if abs(lat) > 90.0 - POLE_MARGIN_DEG:
-        return "fix_near_pole"
+        return Reason.FIX_NEAR_POLE
     if lat == 0.0 and lon == 0.0:
-        return "fix_null_island"
+        return Reason.FIX_NULL_ISLAND
     return None
 
 

@@ -81,7 +81,7 @@ class Station:
 
     def __init__(self, name: str, cfg: LocalizerConfig, fixed: bool = False):
         self.name, self.cfg, self.fixed = name, cfg, fixed
-        self.track: GpsTrack | FixedPlace = GpsTrack(cfg.gps_max_gap_s)
+        self.gps: GpsTrack | FixedPlace = GpsTrack(cfg.gps_max_gap_s)
         self.heading = new_heading(cfg)
         self.pending = PendingQueue()
         self.fix_clock = StreamClock(cfg.max_stamp_jump_s)
@@ -109,20 +109,20 @@ class Station:
         last, newest = max(clocks, key=lambda pair: pair[0])
         return not newest.sparse() and stamp - last > self.cfg.max_stamp_jump_s
 
-    def restart_track(self):
+    def restart_gps(self):
         """A GPS clock jump: the track and the courses start again on the new timeline."""
         if not self.fixed:
-            self.track = GpsTrack(self.cfg.gps_max_gap_s)
+            self.gps = GpsTrack(self.cfg.gps_max_gap_s)
         self.heading = new_heading(self.cfg)
         self.datum_candidate = None
 
     def fix_at(self, east: float, north: float, north_angle: float, sigma: float):
         """A fixed station's position (a configured one, or its newest fix)."""
-        self.track = FixedPlace(east, north, north_angle, sigma)
+        self.gps = FixedPlace(east, north, north_angle, sigma)
 
     @property
     def first_stamp(self) -> float:
         """The stamp before which no bearing of this station can be placed (inf before any fix)."""
-        if len(self.track):
-            return self.track.t[0]
+        if len(self.gps):
+            return self.gps.t[0]
         return self.datum_candidate[0] if self.datum_candidate is not None else math.inf

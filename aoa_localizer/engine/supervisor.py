@@ -16,6 +16,7 @@ from aoa_localizer.engine.clock_check import ClockHint
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.global_search import Robust, find_modes, inlier_share, log_posterior
 from aoa_localizer.engine.initiator import MIN_INLIERS, START_SWEEPS
+from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
 from aoa_localizer.engine.track_state import PendingJob
 from aoa_localizer.engine.types import Reading
@@ -93,7 +94,7 @@ class Supervisor:
         t = self.track
         self.last_search_point = t.points_seen
         snap = t.snapshot()
-        future = None if inline else t.submit(partial(run_check, snap))
+        future = None if inline else t.scheduler.submit(partial(run_check, snap))
         if future is None:
             self.apply_check(run_check(snap), snap.groups)
         else:
@@ -124,7 +125,7 @@ class Supervisor:
             f.replace_cloud(importance_sample(f.log_target, t.proposal, f.n, t.rng))
             f.rejuvenate(START_SWEEPS, t.proposal)
             self.health.clear()
-        elif t.worker is None:
+        elif not t.scheduler.realtime:
             f.rejuvenate(1, t.proposal)
         else:  # realtime: the modes' move is owed, made in idle time (or at the next point)
             self.move_owed = True
@@ -169,7 +170,7 @@ class Supervisor:
         if min(lr_recent, lr_old) < cfg.moved_log_odds:
             return False
         dropped = [t.window.popleft() for _ in range(k - m)]
-        t.reject("emitter_moved", sum(e.used for e in dropped))
+        t.reject(Reason.EMITTER_MOVED, sum(e.used for e in dropped))
         t.events["emitter_moved"] += 1
         log.warning("the emitter moved: the last %d points agree on E %.1f N %.1f, which the older %d contradict "
                     "(log odds %.1f); re-starting from the recent points", m, x_new[0], x_new[1], k - m,

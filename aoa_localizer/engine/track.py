@@ -18,19 +18,20 @@ import math
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterable
-from concurrent.futures import Future
 from typing import cast
 
 import numpy as np
 
 from aoa_localizer.engine.calibrator import Calibrator
-from aoa_localizer.engine.checks import Built, CheckResult, CheckWorker, Snapshot, points_of, rows_of
+from aoa_localizer.engine.checks import Built, CheckResult, Snapshot, points_of, rows_of
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes
 from aoa_localizer.engine.initiator import PRIOR_MIN_SIGMA_M, Initiator
 from aoa_localizer.engine.offset import marginalise, prior_sd
+from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import ModeProposal
+from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.supervisor import Supervisor
 from aoa_localizer.engine.track_report import cloud_estimate
 from aoa_localizer.engine.track_state import PendingJob, TrackState, TrackStatus, WindowEntry
@@ -48,9 +49,9 @@ class EmitterTrack:
     """Points, filter and robustness state of one emitter. `reject(reason, count)` counts unused inputs."""
 
     def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject: Callable[[str, int], None],
-                 worker: CheckWorker | None = None):
-        """`worker`: runs the global checks' expensive part beside the filter (None: inline)."""
-        self.cfg, self.rng, self.reject, self.worker = cfg, rng, reject, worker
+                 scheduler: Scheduler):
+        """`scheduler`: where the start searches and global checks run (inline, or beside the filter)."""
+        self.cfg, self.rng, self.reject, self.scheduler = cfg, rng, reject, scheduler
         self.calibration = Calibrator(self, cfg)
         self.initiator = Initiator(self, cfg)
         self.supervisor = Supervisor(self, cfg)
@@ -81,7 +82,8 @@ class EmitterTrack:
     def summary(self) -> TrackStatus:
         """The track as programs read it (Localizer.track_status)."""
         sup = self.supervisor
-        return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used)
+        return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used,
+                           self.last_update_s)
 
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:
@@ -93,7 +95,7 @@ class EmitterTrack:
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
         if entry.gated:
-            self.reject("point_outlier", entry.gated)
+            self.reject(Reason.POINT_OUTLIER, entry.gated)
         self.points_seen += 1
         if self.filter is None:
             self.window.append(entry)
@@ -123,13 +125,13 @@ class EmitterTrack:
             f = self.running
         except (ArithmeticError, ValueError, np.linalg.LinAlgError, MemoryError):
             log.exception("filter update failed; point skipped")
-            self.reject("internal_error", 1)
+            self.reject(Reason.INTERNAL_ERROR, 1)
             return False
         if not f.finite():
             self._diverged()
             return False
         if not ok:
-            self.reject("weights_degenerate", 1)
+            self.reject(Reason.WEIGHTS_DEGENERATE, 1)
             return False
         self.points_used += 1
         self.bearings_used += entry.point.n_readings
@@ -148,7 +150,7 @@ class EmitterTrack:
         self.window.clear()
         self.status = "filter diverged: restarting from new bearings"
         log.error("filter %s diverged (non-finite particles or estimate); restarting", self.cfg.algorithm)
-        self.reject("filter_diverged", 1)
+        self.reject(Reason.FILTER_DIVERGED, 1)
 
     def finish(self) -> bool:
         """End of data: the worker's job still running is applied (and a start the worker lagged behind is tried
@@ -169,11 +171,6 @@ class EmitterTrack:
         return changed and self.estimating
 
     # -- the check worker -----------------------------------------------------------------------------
-    def submit(self, job) -> Future | None:
-        """The job handed to the worker (its future); None without one, or when it cannot take it (then the caller
-        runs it)."""
-        return None if self.worker is None else self.worker.submit(job)
-
     def snapshot(self) -> Snapshot:
         """What a start search or global check needs, copied: it may run in the worker while the track goes on."""
         f = self.filter
@@ -193,9 +190,9 @@ class EmitterTrack:
         try:
             result = job.future.result()
         except Exception:  # the worker's boundary: a failed check never stops the track
-            if self.worker is None or self.worker.failures <= 1:
+            if self.scheduler.failures <= 1:
                 log.exception("global check failed in the worker; skipped (further failures are counted)")
-            self.reject("internal_error", 1)
+            self.reject(Reason.INTERNAL_ERROR, 1)
             return False
         if self.filter is not job.filter:
             return False
@@ -205,7 +202,7 @@ class EmitterTrack:
             self.supervisor.apply_check(result, job.groups)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError):
             log.exception("applying a global check failed; skipped")
-            self.reject("internal_error", 1)
+            self.reject(Reason.INTERNAL_ERROR, 1)
             return False
         if self.filter is not None and not self.filter.finite():
             self._diverged()

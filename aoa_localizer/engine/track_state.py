@@ -23,7 +23,7 @@ class TrackState(Enum):
 class TrackStatus:
     """A track as programs read it (the node's /diagnostics): its state, the one-line status, whether the cloud no
     longer explains the newest points (the estimate is being checked), the share of recent points it explains only
-    as outliers, and the points and bearings its estimate uses."""
+    as outliers, the points and bearings its estimate uses, and what its latest point cost (s)."""
 
     state: TrackState
     text: str
@@ -31,6 +31,7 @@ class TrackStatus:
     outlier_share: float
     points_used: int
     bearings_used: int
+    update_s: float
 
 
 @dataclass

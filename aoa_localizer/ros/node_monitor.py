@@ -1,0 +1,243 @@
+"""What the node watches of itself and says on /diagnostics: its inputs (received, lost, stamp gaps), its load and
+latency, and the engine's state, robustness and warnings, one status for the localizer and one per channel."""
+from __future__ import annotations
+
+import math
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from rclpy.event_handler import SubscriptionEventCallbacks
+
+from aoa_localizer.engine.channels import DEFAULT
+from aoa_localizer.engine.crlb import ellipse_axes
+from aoa_localizer.engine.input_guard import StampGaps
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.noise import sentence as noise_sentence
+from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
+
+_MAX_LOAD = 0.8  # share of wall time spent working (inputs, idle moves, diagnostics) above which it warns
+_STALL_PERIODS = 2.0  # a diagnostics period this many times longer than configured: the node was held up
+_GAP_FACTOR = 1.5  # a stamp gap this many typical intervals long holds lost records (a regular receiver jitters less)
+_GAP_STREAMS = 256  # input streams whose stamp gaps are followed; past it the one heard least recently is dropped
+
+
+def _gaps(streams: OrderedDict, station: str, frequency_hz: float = math.nan) -> StampGaps:
+    """The stamp gaps of one input stream: a station's fixes, or its DF records of one frequency (NaN: the default
+    channel); the _GAP_STREAMS heard most recently are kept."""
+    key = (station, frequency_hz if math.isfinite(frequency_hz) else 0.0)
+    gaps = streams.get(key)
+    if gaps is None:
+        gaps = streams[key] = StampGaps(factor=_GAP_FACTOR)
+        if len(streams) > _GAP_STREAMS:
+            streams.popitem(last=False)
+    else:
+        streams.move_to_end(key)
+    return gaps
+
+
+class NodeMonitor:
+    """The node's counts, timings and input health over a diagnostics period, and the /diagnostics it makes of them
+    and of the engine. `period_s()` reads diagnostics_period_s (a parameter that may change)."""
+
+    def __init__(self, now: float, stale_after_s: float, period_s: Callable[[], float]):
+        self.period_s = period_s
+        self.health = NodeHealth(now, stale_after_s)
+        self.counts = dict.fromkeys(("fixes_received", "bearings_received", "adapter_errors", "fixes_lost",
+                                     "bearings_lost"), 0)
+        self.lost_reported = 0  # fixes_lost + bearings_lost at the last diagnostics
+        self.df_gaps: OrderedDict[tuple[str, float], StampGaps] = OrderedDict()  # per station and frequency
+        self.fix_gaps: OrderedDict[tuple[str, float], StampGaps] = OrderedDict()  # per station
+        self.callback_s: list[float] = []
+        self.callback_max_s = 0.0
+        self.other_s = 0.0  # work in the period outside the input callbacks: idle moves, the periodic work
+        self.period_start = time.perf_counter()
+        self.overload = Overload()
+        self.arrival_ns = time.time_ns()
+        self.latency_ms: list[float] = []  # from a message's arrival to the publication of each pose it made
+        self.latency_since_start = LatencyHistogram()
+
+    # -- what the node tells it -----------------------------------------------------------------------
+    def lost_counter(self, key: str) -> SubscriptionEventCallbacks:
+        """The middleware's message-lost events of a subscription, counted under `key`."""
+
+        def on_lost(status):
+            self.counts[key] += int(status.total_count_change)
+
+        return SubscriptionEventCallbacks(message_lost=on_lost)
+
+    def arrived(self, info) -> None:
+        """When the message being handled reached this process (the middleware's receive time, else now): the
+        start of the latency of any pose it produces."""
+        received = info.get("received_timestamp", 0) if isinstance(info, dict) else 0
+        self.arrival_ns = received if received > 0 else time.time_ns()
+
+    def fix_stamp(self, station: str, stamp: float) -> None:
+        if math.isfinite(stamp):
+            _gaps(self.fix_gaps, station).add(stamp)
+
+    def df_stamp(self, station: str, stamp: float, frequency_hz: float = math.nan) -> None:
+        if math.isfinite(stamp):
+            _gaps(self.df_gaps, station, frequency_hz).add(stamp)
+
+    def published(self) -> None:
+        """A pose the input being handled made went out."""
+        self.latency_ms.append(1e-6 * (time.time_ns() - self.arrival_ns))
+
+    def timed(self, t0: float) -> None:
+        """An input callback that started at perf_counter `t0` ended."""
+        dt = time.perf_counter() - t0
+        self.callback_s.append(dt)
+        self.callback_max_s = max(self.callback_max_s, dt)
+
+    def period_done(self) -> None:
+        """The period's latencies join those since the start (before its diagnostics)."""
+        self.latency_since_start.add(self.latency_ms)
+
+    def end_period(self, t0: float) -> None:
+        """The periodic work that started at `t0` is done: a new period begins (that work counts in it)."""
+        self.callback_s, self.callback_max_s, self.latency_ms = [], 0.0, []
+        self.period_start = time.perf_counter()
+        self.other_s = self.period_start - t0
+
+    # -- /diagnostics ---------------------------------------------------------------------------------
+    def diagnostics(self, loc: Localizer, now: float, held: dict, wrong: list[str]) -> tuple[int, str, dict]:
+        """(level, message, values) of the localizer's state: WARN before the first estimate, while a global check
+        runs, and while any warning holds (its words join the message); ERROR while the filter keeps restarting.
+        `held`: parameters waiting for the rest of their group; `wrong`: publishers of the wrong type."""
+        values = self._state_values(loc)
+        values.update(self._robustness_values(loc))
+        if held:
+            values["parameters_held"] = ", ".join(sorted(held)) + " (waiting for the rest of the group)"
+        values.update(df_stamp_gaps=sum(g.gaps for g in self.df_gaps.values()),
+                      df_missing_by_stamp=sum(g.missing for g in self.df_gaps.values()),
+                      fix_stamp_gaps=sum(g.gaps for g in self.fix_gaps.values()),
+                      fixes_missing_by_stamp=sum(g.missing for g in self.fix_gaps.values()))
+        self.health.count_restarts(now, loc.events + loc.rejected)
+        warnings = self._warnings(loc, wrong) + self.health.stale(now)
+        error = self.health.restart_error()
+        if error:
+            warnings.append(("restarting", *error))
+        values.update({key: value for key, value, _ in warnings})
+        checking = loc.track_status().alarm  # the cloud no longer explains the newest points
+        est = loc.estimate
+        if est is not None:
+            values["state"] = est.state
+            warnings += [(f"warning_{i}", text, text) for i, text in enumerate(est.warnings)]
+        suspect = est is not None and est.state == "suspect"
+        level = 2 if error else 1 if est is None or checking or warnings or suspect else 0
+        return level, "; ".join([loc.status] + [words for _, _, words in warnings]), values
+
+    def _state_values(self, loc: Localizer) -> dict[str, Any]:
+        """Counts, rejections by reason, callback load and the estimate."""
+        track = loc.track_status()
+        values: dict[str, Any] = dict(self.counts)
+        values.update(status=loc.status, algorithm=loc.cfg.algorithm, bearings_used=track.bearings_used,
+                      points_used=track.points_used, unknown_quality=loc.unknown_quality,
+                      bearings_rejected=sum(v for k, v in loc.rejected.items() if not k.startswith("fix_")),
+                      fixes_rejected=sum(v for k, v in loc.rejected.items() if k.startswith("fix_")))
+        values.update({f"rejected.{k}": v for k, v in sorted(loc.rejected.items())})
+        if self.callback_s:
+            values.update(callback_mean_ms=f"{1e3 * sum(self.callback_s) / len(self.callback_s):.3f}",
+                          callback_max_ms=f"{1e3 * self.callback_max_s:.3f}",
+                          callbacks_in_period=len(self.callback_s))
+        values.update(load_pct=f"{100 * self._load():.0f}", period_s=f"{time.perf_counter() - self.period_start:.3f}",
+                      rejected_while_overloaded=sum(self.overload.rejected.values()))
+        if self.latency_ms:
+            p50, p99, top = np.percentile(self.latency_ms, (50, 99, 100), method="higher")
+            values.update(poses_in_period=len(self.latency_ms), pose_latency_p50_ms=f"{p50:.3f}",
+                          pose_latency_p99_ms=f"{p99:.3f}", pose_latency_max_ms=f"{top:.3f}")
+        if self.latency_since_start.total:
+            values.update(poses_since_start=self.latency_since_start.total,
+                          pose_latency_p99_ms_since_start=f"{self.latency_since_start.percentile(99):.3f}")
+        est = loc.estimate
+        if est is not None:
+            values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * track.update_s:.3f}", east=f"{est.east:.2f}",
+                          north=f"{est.north:.2f}", lat=f"{est.lat:.7f}", lon=f"{est.lon:.7f}",
+                          ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
+        return values
+
+    def _load(self) -> float:
+        """Share of the period since the last diagnostics spent working: input callbacks, idle moves and the
+        periodic work (a period the node was held up in lasts longer than configured: its wall time counts)."""
+        period = max(time.perf_counter() - self.period_start, self.period_s())
+        return (sum(self.callback_s) + self.other_s) / period
+
+    def _warnings(self, loc: Localizer, wrong: list[str]) -> list[tuple[str, str, str]]:
+        """(key, value, words for the status message) of each warning that holds now."""
+        out = []
+        if wrong:
+            out.append(("wrong_encoding", "; ".join(wrong), wrong[0]))
+        overload = self._overload(loc)
+        if overload:
+            out.append(("overload", overload, "the node cannot keep up with its inputs"))
+        lost = self.counts["fixes_lost"] + self.counts["bearings_lost"]
+        if lost > self.lost_reported:
+            out.append(("messages_lost", f"{lost - self.lost_reported} input messages lost by the middleware in the "
+                        "last period (network, or input_queue_depth too small for the load)",
+                        "input messages are being lost"))
+        self.lost_reported = lost
+        clock = loc.clock_hint_sentence()
+        if clock:
+            out.append(("clock_offset", clock, "the DF stamps look offset from the GPS clock"))
+        return out
+
+    def _overload(self, loc: Localizer) -> str | None:
+        """Why the node could not keep up in this period (its work over _MAX_LOAD of the wall time, or the period
+        held up), with the inputs refused meanwhile; the words hold one more period, since what a stall lost is
+        refused while its backlog is worked off. None when it kept up."""
+        period = self.period_s()
+        wall = time.perf_counter() - self.period_start
+        load = self._load()
+        cause = None
+        if wall > _STALL_PERIODS * period:
+            cause = f"the node was held up: this diagnostics period lasted {wall:.1f} s ({period:g} s configured)"
+        elif load > _MAX_LOAD:
+            cause = f"the node worked {100 * load:.0f} % of the last period"
+        return self.overload.judge(cause, loc.rejected, self._missing())
+
+    def _missing(self) -> int:
+        """Inputs that never arrived, as far as anything can tell: the middleware's lost counts and stamp gaps."""
+        return (self.counts["fixes_lost"] + self.counts["bearings_lost"]
+                + sum(g.missing for g in self.df_gaps.values()) + sum(g.missing for g in self.fix_gaps.values()))
+
+    @staticmethod
+    def _robustness_values(loc: Localizer) -> dict:
+        """Self-calibrated noise, modes, the health test and the robustness events, as diagnostic values."""
+        values: dict[str, Any] = {}
+        if loc.cfg.calibrate_noise:
+            noise = loc.noise_summary()
+            values["noise"] = noise_sentence(noise)
+            values.update({f"noise.sigma_deg.q{k}": v for k, v in noise["sigma_deg"].items()})
+            values.update({"noise.reading_outlier_prob": noise["reading_outlier_prob"],
+                           "noise.point_outlier_prob": noise["point_outlier_prob"]})
+        values["health.recent_outlier_share"] = f"{loc.track_status().outlier_share:.2f}"
+        est = loc.estimate
+        if est is not None:
+            values["modes"] = len(est.modes)
+            values.update({f"mode.{i + 1}": f"E {e:.1f} N {n:.1f} mass {m:.3f}"
+                           for i, (e, n, m) in enumerate(est.modes)})
+        values.update({f"events.{k}": v for k, v in sorted(loc.events.items())})
+        return values
+
+    @staticmethod
+    def channel_diagnostics(loc: Localizer, diag_name: str) -> list[tuple[str, int, str, dict]]:
+        """One status per frequency channel: WARN before its first estimate or while its check runs, OK tracking
+        or retired."""
+        out = []
+        for channel in loc.channels.all():
+            if channel.id == DEFAULT:
+                continue
+            track, est = loc.track_status(channel), channel.estimate
+            values: dict[str, Any] = {"frequency_hz": f"{channel.frequency_hz:.0f}", "status": track.text,
+                                      "bearings_used": track.bearings_used, "points_used": track.points_used,
+                                      "topics": f"emitter/{channel.id}/"}
+            if est is not None:
+                values.update(east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}",
+                              lon=f"{est.lon:.7f}", ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
+            level = 0 if channel.retired else 1 if est is None or track.alarm else 0
+            message = f"retired (silent for channel_timeout_s); {track.text}" if channel.retired else track.text
+            out.append((f"{diag_name} channel {channel.id}", level, message, values))
+        return out

@@ -1,0 +1,125 @@
+"""What the node publishes of the engine's estimates: each channel's pose, fix, particles and markers (emitter/ for the
+primary channel), the channel summary, the datum and the vehicles' paths."""
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from types import SimpleNamespace
+from typing import Any
+
+from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from aoa_localizer.engine.channels import DEFAULT
+from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.ros.vehicle_path import VehiclePath
+from msgs_adapters import build
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class NodeOutputs:
+    """The node's publishers of what the engine makes. `types`: the message classes (msgs_adapters.build)."""
+
+    def __init__(self, node: Node, types: SimpleNamespace, stations: list[str], map_frame: str, emitter_frame: str,
+                 now: Callable[[], float]):
+        self.node, self.types, self.map_frame, self.emitter_frame, self.now = node, types, map_frame, emitter_frame, now
+        self.channel_pubs: dict[str, SimpleNamespace] = {DEFAULT: self._channel_publishers("emitter/")}
+        self.pub_channels = node.create_publisher(types.String, "emitter/channels", LATCHED)
+        self.pub_datum = node.create_publisher(types.NavSatFix, "emitter/datum", LATCHED)
+        self.pub_path = {name: node.create_publisher(types.Path, (f"{name}/" if name else "") + "vehicle/path", 1)
+                         for name in stations}  # relative names: namespaces and remaps apply
+        self.summary_sent: Any = None  # the channel summary last published on emitter/channels
+        self.datum_sent: Any = None  # the LocalFrame last published on emitter/datum
+
+    def _channel_publishers(self, prefix: str) -> SimpleNamespace:
+        """pose (latched), fix, particles and markers under `prefix` (emitter/ or emitter/<channel>/). A frequency
+        channel's publishers go without rclpy's default QoS-event handlers: each is a waitable the executor walks
+        at every message, and 50 channels' 200 of them took most of the node's time."""
+        T = self.types
+        events = PublisherEventCallbacks(use_default_callbacks=prefix == "emitter/")
+
+        def make(kind, topic, qos):
+            return self.node.create_publisher(kind, prefix + topic, qos, event_callbacks=events)
+
+        return SimpleNamespace(pose=make(T.PoseWithCovarianceStamped, "pose", LATCHED),
+                               fix=make(T.NavSatFix, "fix", LATCHED), particles=make(T.PoseArray, "particles", 10),
+                               markers=make(T.MarkerArray, "markers", 10))
+
+    def estimate(self, loc: Localizer, est, marker_rays: int):
+        """An estimate on its channel's topics, and on emitter/ too when its channel is the primary one."""
+        pubs = self.channel_pubs.get(est.channel)
+        if pubs is None:
+            pubs = self.channel_pubs[est.channel] = self._channel_publishers(f"emitter/{est.channel}/")
+        self._publish_on(loc, pubs, est, marker_rays)
+        if est.channel != DEFAULT and getattr(loc.channels.primary(), "id", None) == est.channel:
+            self._publish_on(loc, self.channel_pubs[DEFAULT], est, marker_rays)  # emitter/ carries the primary
+
+    def _publish_on(self, loc: Localizer, pubs: SimpleNamespace, est, marker_rays: int):
+        """The estimate on one set of publishers (a channel's, or emitter/ for the primary channel)."""
+        T, frame = self.types, self.map_frame
+        pubs.pose.publish(build.emitter_pose(T, est, frame))
+        pubs.fix.publish(build.emitter_fix(T, est, loc.datum_frame().alt0, self.emitter_frame))
+        # The cloud and the markers cost about 1 ms to build: only for someone listening.
+        if pubs.particles.get_subscription_count():
+            pubs.particles.publish(build.particle_array(T, est, frame))
+        if pubs.markers.get_subscription_count():
+            rays = loc.recent_points(marker_rays, est.channel)[:, :3]
+            ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
+            pubs.markers.publish(build.markers(T, est, rays, ring, frame))
+
+    @staticmethod
+    def channel_summary(loc: Localizer) -> dict[str, dict]:
+        """Every channel with an estimate: its frequency, topics, state (live or retired) and latest estimate."""
+        out = {}
+        for channel in loc.channels.all():
+            est = channel.estimate
+            if est is None:
+                continue
+            out[channel.id] = {
+                "frequency_hz": channel.frequency_hz if math.isfinite(channel.frequency_hz) else None,
+                "topics": "emitter/" if channel.id == DEFAULT else f"emitter/{channel.id}/",
+                "state": "retired" if channel.retired else "live",
+                "stamp": est.stamp, "lat": est.lat, "lon": est.lon, "east": round(est.east, 2),
+                "north": round(est.north, 2), "ellipse95_major_m": round(float(ellipse_axes(est.cov)[0]), 2),
+                "points_used": est.points_used,
+            }
+        return out
+
+    def summary(self, loc: Localizer, only_if_new_channel: list[str] | None = None):
+        """emitter/channels (latched std_msgs/String): a JSON object of the channels, when it changed; with
+        `only_if_new_channel`, only when one of those channels is not in the last one sent."""
+        sent = self.summary_sent
+        if only_if_new_channel is not None and not any(sent is None or c not in sent for c in only_if_new_channel):
+            return
+        summary = self.channel_summary(loc)
+        if summary != sent:
+            self.pub_channels.publish(self.types.String(data=json.dumps({"channels": summary}, sort_keys=True)))
+            self.summary_sent = summary
+
+    def datum(self, loc: Localizer):
+        """emitter/datum (latched) whenever the map frame's origin is new: set from a fix, or configured."""
+        datum = loc.frame
+        if datum is not None and datum != self.datum_sent:
+            self.pub_datum.publish(build.datum_fix(self.types, self.now(), datum.lat0, datum.lon0, datum.alt0,
+                                                   self.map_frame))
+            self.datum_sent = datum
+
+    def paths(self, path: VehiclePath):
+        """Each station's vehicle/path when a fix was added since the last one and someone listens (a full path each
+        time: Path has no deltas, and 1000 poses cost about 15 ms to build)."""
+        for station, poses in path.new_paths().items():
+            pub = self.pub_path.get(station)
+            if pub is not None and pub.get_subscription_count():
+                pub.publish(build.vehicle_path(self.types, poses[-1][0], poses, self.map_frame))
+
+    def drop_gone(self, loc: Localizer):
+        """The publishers of channels the engine no longer keeps (retired long ago): memory stays bounded under a
+        stream of ever new frequencies."""
+        kept = {c.id for c in loc.channels.all()} | {DEFAULT}
+        for cid in [cid for cid in self.channel_pubs if cid not in kept]:
+            for pub in vars(self.channel_pubs.pop(cid)).values():
+                self.node.destroy_publisher(pub)
