@@ -70,6 +70,18 @@ def test_the_readme_parameter_tables_are_the_declarations():
     assert readme[readme.index(BEGIN):readme.index(END) + len(END)] == block()
 
 
+def test_the_rejection_reasons_table_is_the_reason_registry():
+    """docs/design.md's table of rejection reasons is written from `Reason`: a reason is declared in one place."""
+    from pathlib import Path
+
+    from aoa_localizer.engine.rejections import Reason
+    from aoa_localizer.tools.param_docs import REASONS_BEGIN, REASONS_END, reasons_block
+
+    design = (Path(__file__).resolve().parents[1] / "docs" / "design.md").read_text()
+    assert design[design.index(REASONS_BEGIN):design.index(REASONS_END) + len(REASONS_END)] == reasons_block()
+    assert all(f"| `{r.value}` |" in design for r in Reason)
+
+
 def test_every_parameter_is_declared_with_a_meaning_and_checked_by_its_declaration():
     from aoa_localizer.engine.config import parameter_specs
 
