@@ -5,13 +5,13 @@ import math
 
 import numpy as np
 import pytest
+from conftest import DATUM
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
 
-DATUM = (39.1, 117.2, 5.0)
 FRAME = LocalFrame(*DATUM)
 # urban's track (the seed polyline, three corners) driven at 10 m/s, without GPS noise or wild readings
 DRIVE = dataclasses.replace(SCENARIOS["urban"], name="drive", gps_noise_m=0.0, wild_share=0.0)

@@ -3,14 +3,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import open_point, track_of
+from conftest import DATUM, open_point, track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scenarios import simulate
 from aoa_localizer.engine.track_state import TrackState
 
-DATUM = (39.1, 117.2, 5.0)
 FRAME = LocalFrame(*DATUM)
 EMITTER = (1200.0, 800.0)
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
-from conftest import ros_env
+from conftest import DATUM, ros_env
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.qos import QoSProfile
@@ -26,7 +26,6 @@ from msgs_adapters.fields import diagnostics_values, estimate_from_pose
 
 ROOT = Path(__file__).resolve().parent.parent
 T = build.rclpy_types()
-DATUM = (39.1, 117.2, 5.0)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]  # real processes over Fast DDS
 
