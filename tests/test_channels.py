@@ -7,6 +7,7 @@ import pytest
 from aoa_localizer.engine.channels import DEFAULT, channel_id
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.fleet import simulate_fleet
+from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
 
@@ -203,3 +204,32 @@ def test_the_primary_channel_is_the_default_while_it_has_data_else_the_one_with_
     assert primaries[first_default - 1][1] == busy.id
     assert all(primary == DEFAULT for _, primary in primaries[first_default:])
     assert loc.channels.primary() is loc.channels.default
+
+
+@pytest.mark.slow
+def test_two_localizers_split_the_spectrum_by_band_and_each_emitter_is_found_once():
+    """`frequency_band_hz` (half-open [low, high)): two nodes sharing one receiver's records over adjacent bands
+    localise every emitter exactly once, as one node does; each counts the other's records as `other_band`, not
+    as refused, and a record without a frequency belongs to no band."""
+    fleet = simulate_fleet({"": SCENARIOS["seed"]}, EMITTERS, 0)
+    bands = ([400e6, 446.0e6], [446.0e6, 1e9])  # 446.0 MHz is on the edge: the second band's, not the first's
+    found: dict[str, list] = {}
+    for band in bands:
+        loc = Localizer(LocalizerConfig(seed=1, frequency_band_hz=band))
+        play(loc, fleet)
+        assert not set(loc.rejected) - {"point_outlier"} and loc.channels.default.estimate is None  # (noise)
+        refused = sum(loc.rejected.values())
+        assert loc.other_band == sum(1 for kind, _, row in fleet.events() if kind == "bearing"
+                                     and not band[0] <= row[3] < band[1])
+        for channel in loc.channels.all():
+            if channel.estimate is not None:
+                found.setdefault(channel.id, []).append(channel.estimate)
+        before = loc.other_band
+        loc.add_bearing(1e9, 10.0, 50.0)  # no frequency: not in any band
+        assert loc.other_band == before + 1
+        assert sum(loc.rejected.values()) == refused
+    assert sorted(found) == sorted(channel_id(f) for f in EMITTERS)
+    for f, truth in EMITTERS.items():
+        (est,) = found[channel_id(f)]  # exactly once
+        e, n = LocalFrame(*fleet.scenario.datum).to_enu(est.lat, est.lon)
+        assert math.hypot(e - truth[0], n - truth[1]) < 10.0

@@ -22,6 +22,9 @@ def test_defaults_are_the_papers():
     ({"df_time_offset_s": float("nan")}, "df_time_offset_s"),
     ({"max_stamp_jump_s": 0.0}, "max_stamp_jump_s"),
     ({"calibrate_noise": "yes"}, "calibrate_noise"),
+    ({"frequency_band_hz": [2e8, 1e8]}, "frequency_band_hz must be empty or \\[low, high\\]"),
+    ({"frequency_band_hz": [1e8]}, "frequency_band_hz"),
+    ({"frequency_band_hz": [1e8, 2e8, 3e8]}, "frequency_band_hz"),
     ({"init_method": "guess"}, "init_method"),
     ({"health_window": 1}, "health_window"),
     ({"health_p_value": 1.0}, "health_p_value"),
@@ -88,7 +91,7 @@ def test_every_parameter_is_declared_with_a_meaning_and_checked_by_its_declarati
     specs = parameter_specs()
     assert len({p.name for p in specs}) == len(specs) == len(LocalizerConfig().to_dict())
     for p in specs:
-        assert p.spec.doc and p.spec.kind in (int, float, bool, str)
+        assert p.spec.doc and p.spec.kind in (int, float, bool, str, list)
         if p.spec.kind is str:
             assert p.default in p.spec.choices
     # init_min_crossing_deg < 90 used to be checked in Python only, num_particles' cap in ROS only

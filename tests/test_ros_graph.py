@@ -793,3 +793,62 @@ def test_hostile_records_and_parameters_cost_only_themselves_through_the_graph(s
         assert not result.successful and "afsa.try_number" in result.reason
     assert node_p.poll() is None
     assert "Traceback" not in open(node_p.log_path).read()
+
+
+def test_two_nodes_split_fifty_emitters_by_band_and_each_is_localised_once(spawn, domain):
+    """`frequency_band_hz`: two nodes in their own namespaces read one receiver's shared gps/fix and df/bearing,
+    each over half the spectrum; every one of 50 emitters is on exactly one node's emitter/channels, near its
+    truth, and each node counts the other's records as `other_band`."""
+    from dataclasses import replace
+
+    from aoa_localizer.engine.fleet import simulate_fleet
+    from aoa_localizer.engine.scenarios import SCENARIOS
+
+    rng = np.random.default_rng(7)
+    emitters = {400e6 + 25e3 * k: (float(rng.uniform(300, 1800)), float(rng.uniform(300, 1300))) for k in range(50)}
+    split = 400e6 + 25e3 * 25
+    bands = {"low": [400e6, split], "high": [split, 402e6]}
+    fleet = simulate_fleet({"": replace(SCENARIOS["seed"], points=20)}, emitters, 0)
+    for name, band in bands.items():
+        spawn(["aoa_localizer.node", "--ros-args", "-r", f"__ns:=/{name}", "-r", "gps/fix:=/gps/fix",
+               "-r", "df/bearing:=/df/bearing", "-p", f"frequency_band_hz:=[{band[0]:.1f},{band[1]:.1f}]",
+               "-p", "seed:=1", "-p", "input_reliability:=reliable", "-p", "input_queue_depth:=20000",
+               "-p", "diagnostics_period_s:=0.5"], domain)
+    with client(domain) as (node, executor):
+        got: dict = {}
+        latched = QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+        for name in bands:
+            node.create_subscription(T.String, f"/{name}/emitter/channels",
+                                     lambda m, name=name: got.update({name: json.loads(m.data)["channels"]}), latched)
+        node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: got.update(  # "<ns>/aoa_localizer: ..."
+            {f"diag {s.name.split('/')[0]}": s for s in m.status if s.name.endswith(": localizer")}), 10)
+        reliable = QoSProfile(depth=20000)
+        fix_pub = node.create_publisher(T.NavSatFix, "/gps/fix", reliable)
+        df_pub = node.create_publisher(T.Vector3Stamped, "/df/bearing", reliable)
+        assert spin_until(executor, lambda: fix_pub.get_subscription_count() == 2
+                          and df_pub.get_subscription_count() == 2, 15)
+        spin_until(executor, lambda: False, 1.0)
+        start, first = time.monotonic(), None
+        for kind, _, row in fleet.events():  # at 50x the receiver's pace: a burst would reach the node unpaired
+            first = row[0] if first is None else first
+            while time.monotonic() - start < (row[0] - first) / 50.0:
+                executor.spin_once(timeout_sec=0.001)
+            if kind == "fix":
+                fix_pub.publish(build.navsatfix(T, row[0], row[1], row[2], row[3]))
+            else:
+                df_pub.publish(build.df_record(T, row[0], row[1], row[2], row[3]))
+        everyone = {f"f{int(f)}" for f in emitters}
+        assert spin_until(executor, lambda: set(got.get("low", {})) | set(got.get("high", {})) == everyone, 60), (
+            sorted(everyone - set(got.get("low", {})) - set(got.get("high", {}))))
+        assert not set(got["low"]) & set(got["high"])  # each emitter on one node only
+        frame = LocalFrame(*DATUM)
+        for name, band in bands.items():
+            for cid, entry in got[name].items():
+                assert band[0] <= entry["frequency_hz"] < band[1]
+                e, n = frame.to_enu(entry["lat"], entry["lon"])
+                truth = emitters[entry["frequency_hz"]]
+                assert math.hypot(e - truth[0], n - truth[1]) < 30.0, (cid, entry, truth)
+        assert spin_until(executor, lambda: all(f"diag {name}" in got for name in bands), 5)
+        for name in bands:
+            values = diagnostics_values(T.DiagnosticArray(status=[got[f"diag {name}"]]))[got[f"diag {name}"].name]
+            assert int(values["other_band"]) > 0 and "rejected.bad_frequency" not in values

@@ -8,7 +8,7 @@ import zlib
 
 import numpy as np
 
-from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.config import FREQUENCY_MAX_HZ, LocalizerConfig
 from aoa_localizer.engine.preprocess import PointBuilder
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduler import Scheduler
@@ -18,7 +18,6 @@ from aoa_localizer.engine.types import Estimate
 DEFAULT = "default"  # the channel of records without a frequency
 # Carrier frequencies a DF receiver can report: above 0 and at most 1 THz (receivers stop near 50 GHz), so a
 # channel's id stays a short, valid ROS name token whatever the record says
-FREQUENCY_MAX_HZ = 1e12
 # Frequencies remembered with their channel: past this the memory starts again (a stream of distinct jittered
 # frequencies would otherwise grow it without bound; a forgotten one is matched by tolerance again)
 _HEARD_MAX = 4096

@@ -23,6 +23,7 @@ GROUPS = groups()
 # Parameters set together or not at all (a place needs both coordinates, a prior its place and its spread)
 SET_TOGETHER = (("prior_east", "prior_north", "prior_sigma_m"), ("datum_lat", "datum_lon"))
 MAX_PARTICLES = 100_000
+FREQUENCY_MAX_HZ = 1e12  # the highest frequency a DF record may carry (above: `bad_frequency`)
 
 
 @dataclass(frozen=True)
@@ -166,6 +167,11 @@ class LocalizerConfig(GroupAccess):
         low=0.0,
         high=1e6,
     )
+    frequency_band_hz: tuple = param(
+        (), "[low, high] (Hz): take only DF records with low <= frequency < high, so several nodes can share a "
+        "spectrum; the others, and records without a frequency, are counted as `other_band`, not refused. Empty: "
+        "every record", kind=list, low=0, high=2, read_only=True,
+    )
     # What a DF azimuth is measured from (docs/design.md, "Bearing reference").
     bearing_reference: str = choice(
         "true_north",
@@ -300,7 +306,16 @@ class LocalizerConfig(GroupAccess):
     groups: tuple[tuple[str, Any], ...] = field(default_factory=default_groups)
 
     def __post_init__(self):
+        if isinstance(self.frequency_band_hz, list):  # as ROS and YAML give it; a tuple keeps the config hashable
+            object.__setattr__(self, "frequency_band_hz", tuple(self.frequency_band_hz))
         _validate(self)
+
+    def in_band(self, frequency_hz: float) -> bool:
+        """Whether this configuration takes a DF record of `frequency_hz` (NaN or 0: none given)."""
+        if not self.frequency_band_hz:
+            return True
+        low, high = self.frequency_band_hz
+        return low <= frequency_hz < high  # half-open: adjacent bands share no frequency; False for NaN
 
     @property
     def has_prior(self) -> bool:
@@ -366,6 +381,10 @@ def _validate(cfg: LocalizerConfig):
         _check(isinstance(group, GROUPS[name]), f"{name} must be a {GROUPS[name].__name__}")
         for g in fields(group):
             g.metadata["spec"].check(f"{name}.{g.name}", getattr(group, g.name))
+    band = cfg.frequency_band_hz
+    _check(not band or (len(band) == 2 and 0 <= band[0] < band[1] <= FREQUENCY_MAX_HZ),
+           f"frequency_band_hz must be empty or [low, high] with 0 <= low < high <= {FREQUENCY_MAX_HZ:g}, got "
+           f"{list(band)!r}")
     _check(
         cfg.init_max_points >= cfg.init_bearings,
         f"init_max_points must be >= init_bearings ({cfg.init_bearings}), got {cfg.init_max_points!r}",
@@ -381,7 +400,9 @@ def parameter_specs() -> list[ParameterSpec]:
     out = []
     for f in fields(LocalizerConfig):
         if f.name != "groups":
-            out.append(ParameterSpec(f.name, None if f.default is MISSING else f.default, f.metadata["spec"]))
+            default = None if f.default is MISSING else f.default
+            out.append(ParameterSpec(f.name, list(default) if isinstance(default, tuple) else default,
+                                     f.metadata["spec"]))
     for name, cls in GROUPS.items():
         out += [ParameterSpec(f"{name}.{g.name}", g.default, g.metadata["spec"]) for g in fields(cls)]
     return out

@@ -51,6 +51,7 @@ class Intake:
         self.stations: dict[str, Station] = {}
         self.input_events: Counter = Counter()  # fix_clock_jump, df_clock_jump
         self.unknown_quality = 0  # readings used with NaN quality (no correction, default sigma)
+        self.other_band = 0  # DF records outside frequency_band_hz, left to the node of their band
         self.waiting_line = "waiting for a GPS fix"
 
     def reset(self, channels: Channels):
@@ -152,6 +153,9 @@ class Intake:
         """Check a DF record and hold it at its station until a fix places it (release): its station and its stamp on
         the GPS clock, or None when refused."""
         stamp, azimuth, quality, frequency = map(as_float, (stamp, azimuth_deg, quality, frequency_hz))
+        if not self.cfg.in_band(frequency):  # another node's (frequency_band_hz): not ours, not an error
+            self.other_band += 1
+            return None
         stamp += self.cfg.df_time_offset_s  # on the GPS clock
         if not math.isfinite(stamp):
             self.reject(Reason.BAD_STAMP)

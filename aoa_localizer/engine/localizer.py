@@ -103,6 +103,11 @@ class Localizer:
         return self.intake.unknown_quality
 
     @property
+    def other_band(self) -> int:
+        """DF records outside `frequency_band_hz` (another node's band), not used and not refused."""
+        return self.intake.other_band
+
+    @property
     def observer(self) -> Observer | None:
         return self.intake.observer
 

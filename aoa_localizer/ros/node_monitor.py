@@ -135,7 +135,7 @@ class NodeMonitor:
         track = loc.track_status()
         values: dict[str, Any] = dict(self.counts)
         values.update(status=loc.status, algorithm=loc.cfg.algorithm, bearings_used=track.bearings_used,
-                      points_used=track.points_used, unknown_quality=loc.unknown_quality,
+                      points_used=track.points_used, unknown_quality=loc.unknown_quality, other_band=loc.other_band,
                       bearings_rejected=sum(v for k, v in loc.rejected.items() if not k.startswith("fix_")),
                       fixes_rejected=sum(v for k, v in loc.rejected.items() if k.startswith("fix_")))
         values.update({f"rejected.{k}": v for k, v in sorted(loc.rejected.items())})
