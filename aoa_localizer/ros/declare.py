@@ -35,6 +35,15 @@ def descriptor(p: ParameterSpec) -> ParameterDescriptor:
     return d
 
 
+def value_of(node: Node, p: ParameterSpec):
+    """A declared parameter's value (a list as a list); its default while a list declared by type is unset."""
+    try:
+        value = node.get_parameter(p.name).value
+    except ParameterUninitializedException:
+        return p.default
+    return list(value) if isinstance(value, (list, tuple)) else value
+
+
 def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
     """Declare every spec on `node` and return the values; raises ConfigError (the caller refuses to start) for a
     value outside its declaration when `check`."""
@@ -55,12 +64,7 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
             if given is not None:
                 p.spec.check(p.name, given.value)
             raise ConfigError(f"{p.name} must be {p.spec.describe()}; {exc}") from exc
-        try:
-            values[p.name] = node.get_parameter(p.name).value
-        except ParameterUninitializedException:
-            values[p.name] = p.default
-        if isinstance(values[p.name], (list, tuple)):
-            values[p.name] = list(values[p.name])
+        values[p.name] = value_of(node, p)
     if check:
         for p in specs:
             p.spec.check(p.name, values[p.name])

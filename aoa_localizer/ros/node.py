@@ -30,7 +30,7 @@ from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
 from aoa_localizer.engine.rejections import REASONS
-from aoa_localizer.ros.declare import declare, refuse_unknown
+from aoa_localizer.ros.declare import declare, refuse_unknown, value_of
 from aoa_localizer.ros.node_monitor import NodeMonitor
 from aoa_localizer.ros.node_outputs import NodeOutputs
 from aoa_localizer.ros.node_params import NODE_PARAMS, STATION_POSITION
@@ -51,7 +51,8 @@ FIX_TYPE = "sensor_msgs/msg/NavSatFix"
 DRAIN_MAX = 100  # DF records handled per executor callback beyond the first (then GPS, timers and services get a turn)
 
 _NODE_SPECS = {p.name: p for p in NODE_PARAMS}
-ENGINE_PARAMS = frozenset(p.name for p in parameter_specs())
+ENGINE_SPECS = parameter_specs()
+ENGINE_PARAMS = frozenset(p.name for p in ENGINE_SPECS)
 
 
 class RosLogHandler(logging.Handler):
@@ -213,7 +214,7 @@ class LocalizerNode(Node):
 
     # -- parameters ---------------------------------------------------------------------------------
     def _config_from(self, changes: dict) -> LocalizerConfig:
-        values = {name: self.get_parameter(name).value for name in ENGINE_PARAMS}
+        values = {p.name: value_of(self, p) for p in ENGINE_SPECS}
         values.update(changes)
         return LocalizerConfig.from_dict(values)
 
