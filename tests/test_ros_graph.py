@@ -583,7 +583,8 @@ def test_the_engines_log_lines_reach_rosout(domain):
 
 def test_paired_parameters_set_through_the_standard_service(spawn, domain):
     """Finding 10: datum_lat + datum_lon in one standard set_parameters request were each refused ("set
-    together ... or not at all"); only the atomic service worked. A wrong value is still refused."""
+    together ... or not at all"); only the atomic service worked. A wrong value is still refused, and an unknown
+    name in the engine's words (rclpy's own reason named no parameter)."""
     spawn(["aoa_localizer.node"], domain)
     with client(domain) as (node, executor):
 
@@ -601,6 +602,8 @@ def test_paired_parameters_set_through_the_standard_service(spawn, domain):
         assert [r.successful for r in results] == [True, True], [r.reason for r in results]
         bad = call(executor, node, SetParameters, "/aoa_localizer/set_parameters", req(datum_lat=95.0)).results[0]
         assert not bad.successful and "datum_lat" in bad.reason
+        typo = call(executor, node, SetParameters, "/aoa_localizer/set_parameters", req(datum_la=39.1)).results[0]
+        assert not typo.successful and typo.reason == "datum_la: unknown parameter; did you mean datum_lat?"
         # Now the datum is configured: ~/reset_datum refuses to drop it, and says how to move it.
         refused = call(executor, node, Trigger, "/aoa_localizer/reset_datum", Trigger.Request())
         assert not refused.success and "datum_lat" in refused.message

@@ -25,7 +25,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
-from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec
+from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec, unknown_names
 from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
@@ -103,7 +103,9 @@ class LocalizerNode(Node):
     """Runs the Localizer on the node's inputs and publishes what it makes."""
 
     def __init__(self):
-        super().__init__(NODE_NAME)
+        # Undeclared names reach on_set_parameters, which refuses them in the engine's words ("did you mean"):
+        # rclpy's own refusal names no parameter. Unknown names given at start are refused by refuse_unknown.
+        super().__init__(NODE_NAME, allow_undeclared_parameters=True)
         self._init_logging()
         self._init_parameters()  # raises ConfigError: the caller refuses to start
         self.types = build.rclpy_types()
@@ -219,6 +221,10 @@ class LocalizerNode(Node):
         return LocalizerConfig.from_dict(values)
 
     def on_set_parameters(self, params) -> SetParametersResult:
+        unknown = [p.name for p in params if not self.has_parameter(p.name)]
+        if unknown:
+            known = self.get_parameters_by_prefix("").keys()
+            return SetParametersResult(successful=False, reason=unknown_names(unknown, known))
         for p in params:
             if p.name in _NODE_SPECS:
                 try:
