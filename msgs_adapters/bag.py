@@ -163,6 +163,36 @@ class BagTopicsError(BagError):
     """A valid bag without the topics the engine needs: the message lists what it has and what it needs."""
 
 
+def stations_in(topic_names) -> dict[str, dict[str, str]]:
+    """The stations a bag's topic names show: NAME for each pair `/NAME/gps/fix`, `/NAME/df/bearing` (the node's
+    `stations` layout; with `/NAME/heading/imu` when present), as {NAME: {kind: topic}}."""
+    names = set(topic_names)
+    found: dict[str, dict[str, str]] = {}
+    for topic in sorted(names):
+        prefix, _, tail = topic.rpartition("/gps/fix")
+        name = prefix.rpartition("/")[2]
+        if tail or not name or f"{prefix}/df/bearing" not in names:
+            continue
+        its = {"fix": topic, "bearing": f"{prefix}/df/bearing"}
+        if f"{prefix}/heading/imu" in names:
+            its["heading"] = f"{prefix}/heading/imu"
+        found.setdefault(name, its)
+    return found
+
+
+def found_stations(path, inventory, topics: dict[str, str]) -> dict[str, dict[str, str]] | None:
+    """The stations the bag's topic names show when it lacks `topics`' fix or bearing topic (a bag of several
+    stations read without --station), said in a warning; None otherwise."""
+    names = {t.name for t in inventory}
+    if {topics["fix"], topics["bearing"]} <= names:
+        return None
+    found = stations_in(names) or None
+    if found:
+        log.warning("%s has no %s and %s: reading the stations its topic names show: %s", path, topics["fix"],
+                    topics["bearing"], "; ".join(f"{n} ({its['fix']}, {its['bearing']})" for n, its in found.items()))
+    return found
+
+
 def _needs(topics: dict[str, str]) -> str:
     return (f"{topics['fix']} ({' or '.join(_ACCEPTED['fix'])}) and "
             f"{topics['bearing']} ({' or '.join(_ACCEPTED['bearing'])})")
@@ -179,16 +209,17 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None,
     unreadable bag, and for a damaged one after yielding every message that could be trusted.
     """
     topics = {**TOPICS, **(topics or {})}
-    by_topic = {t: (k, "") for k, t in topics.items()}
-    needed = [topics]
-    if stations:
-        by_topic = {t: (k, "") for k, t in topics.items() if k not in ("fix", "bearing", "heading")}
-        by_topic.update({t: (k, name) for name, its in stations.items() for k, t in its.items()})
-        needed = list(stations.values())
     try:
         with BagFiles(path) as files:
             reader = RawReader(files)
             inventory = reader.topics()
+            stations = stations or found_stations(path, inventory, topics)
+            by_topic = {t: (k, "") for k, t in topics.items()}
+            needed = [topics]
+            if stations:
+                by_topic = {t: (k, "") for k, t in topics.items() if k not in ("fix", "bearing", "heading")}
+                by_topic.update({t: (k, name) for name, its in stations.items() for k, t in its.items()})
+                needed = list(stations.values())
             for need in needed:
                 if not {need["fix"], need["bearing"]} <= {t.name for t in inventory}:
                     raise BagTopicsError(f"{path}: no usable fix and bearing topics; it has "

@@ -209,9 +209,10 @@ PAIR_STATIONS = ["--station", "car1=/car1/gps/fix,/car1/df/bearing", "--station"
 
 
 @pytest.mark.slow
-def test_the_two_station_sample_bag_is_fused_with_station_options(tmp_path, cli):
+def test_the_two_station_sample_bag_is_fused_with_station_options(tmp_path, cli, caplog):
     """bags/pair: two cars on their own topics; with --station each car's bearings go on its own track and the
-    emitter comes out of both (40 points), near the bag's truth. Without --station the bag's topics are listed."""
+    emitter comes out of both (40 points), near the bag's truth. Without --station the stations are read from the
+    topic names (NAME/gps/fix with NAME/df/bearing), said in a warning, with the same result."""
     out = tmp_path / "pair.jsonl"
     res = cli(replay_main, ROOT / "bags/pair", "--offline", "--output", out, "--seed", 1, *PAIR_STATIONS)
     assert res.returncode == 0, res.stderr
@@ -219,8 +220,10 @@ def test_the_two_station_sample_bag_is_fused_with_station_options(tmp_path, cli)
     assert last["points_used"] == 40 and last["channel"] == "default" and last["frequency_hz"] is None
     error = float(re.search(r"error against the bag's truth .*: ([\d.]+) m", res.stderr)[1])
     assert error < 10.0
-    res = cli(replay_main, ROOT / "bags/pair", "--offline", "--output", tmp_path / "none.jsonl")
-    assert res.returncode == 2 and "/car1/gps/fix" in res.stderr and "--station" in res.stderr
+    res = cli(replay_main, ROOT / "bags/pair", "--offline", "--output", tmp_path / "found.jsonl", "--seed", 1)
+    assert res.returncode == 0 and lines(tmp_path / "found.jsonl")[-1] == last, res.stderr
+    assert ("has no /gps/fix and /df/bearing: reading the stations its topic names show: car1 (/car1/gps/fix, "
+            "/car1/df/bearing); car2 (/car2/gps/fix, /car2/df/bearing)") in caplog.text
 
 
 @pytest.mark.parametrize("args, words", [

@@ -89,9 +89,8 @@ def test_vehicle_and_node_converge_and_the_launcher_leaves_no_process(tmp_path, 
 def test_the_two_car_scenario_plays_both_cars_into_one_node_and_its_bag_replays(tmp_path, domain):
     """`--scenario pair`: the vehicle plays car1 and car2 on their own topics, the launcher gives the node
     `stations: [car1, car2]`; the ellipse is the fused one (each car alone: 21-23 m long, tests/test_stations.py).
-    The sample bag replays live the same way."""
-    for args in (["--scenario", "pair", "--speedup", 40], ["--bag", ROOT / "bags/pair", "--scenario", "pair",
-                                                           "--rate", 0]):
+    The sample bag replays live the same way, its stations read from its topic names (no --scenario)."""
+    for args in (["--scenario", "pair", "--speedup", 40], ["--bag", ROOT / "bags/pair", "--rate", 0]):
         res = launch([*args, "--seed", 1, "--domain-id", domain, "--result", tmp_path / "r.json"])
         assert res.returncode == 0, res.stdout + res.stderr
         result = json.loads((tmp_path / "r.json").read_text())

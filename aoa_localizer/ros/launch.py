@@ -37,6 +37,8 @@ from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.scenarios import SCENARIOS
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
+from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
+from msgs_adapters.bag_files import BagFiles, BagFilesError
 
 CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by this
 
@@ -116,6 +118,19 @@ class Child:
         return "\n".join(f"  [{self.name}] {line}" for line in lines[-n:])
 
 
+def bag_stations(args) -> dict[str, dict[str, str]]:
+    """With --bag of several stations and no --scenario that names them: the stations its topic names show (the
+    node then gets `stations`, the replay their topics), said in a warning; {} otherwise or for an unreadable bag
+    (replay says why)."""
+    if not args.bag or args.scenario in FLEETS:
+        return {}
+    try:
+        with BagFiles(args.bag) as files:
+            return found_stations(args.bag, RawReader(files).topics(), TOPICS) or {}
+    except (BagFilesError, BagError):
+        return {}
+
+
 def build_commands(args, node_params: dict) -> tuple[list[str], list[str]]:
     py = sys.executable
     node = [py, "-m", "aoa_localizer.node", "--ros-args"]
@@ -124,8 +139,14 @@ def build_commands(args, node_params: dict) -> tuple[list[str], list[str]]:
     for k, v in node_params.items():
         node += ["-p", f"{k}:={ros_value(v)}"]
     if args.bag:
-        inputs = [f"/{name}/{topic}" for name in FLEETS[args.scenario].stations for topic in ("gps/fix", "df/bearing")
-                  ] if args.scenario in FLEETS else ["/gps/fix", "/df/bearing"]
+        found = bag_stations(args)
+        if args.scenario in FLEETS:
+            inputs = [f"/{name}/{topic}" for name in FLEETS[args.scenario].stations for topic in ("gps/fix",
+                                                                                                  "df/bearing")]
+        elif found:
+            inputs = [its[kind] for its in found.values() for kind in ("fix", "bearing")]
+        else:
+            inputs = ["/gps/fix", "/df/bearing"]
         source = [py, "-m", "aoa_localizer.replay", str(args.bag), "--rate", str(args.rate),
                   "--topics", *inputs, "/sim/truth", "/sim/datum"]
     else:
@@ -150,6 +171,9 @@ def node_parameters(args) -> dict:
         params.update(sc.filter_overrides)
         if fleet:
             params.update(fleet.node_params())
+    found = bag_stations(args)
+    if found:
+        params["stations"] = list(found)
     if args.seed is not None:
         params["seed"] = args.seed
     # The node must read what the vehicle publishes: its bearing encoding goes to the node too.

@@ -10,7 +10,7 @@ from builtin_interfaces.msg import Time
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from msgs_adapters.bag import TOPICS, BagError, RawReader
+from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
 from msgs_adapters.bag_files import BagFiles, BagFilesError, describe_topics
 from msgs_adapters.types import message_class
 
@@ -49,6 +49,10 @@ def played_topics(args, inventory) -> list:
     else:
         chosen = {args.fix_topic, args.bearing_topic, args.heading_topic, TOPICS["truth"], TOPICS["datum"]}
         chosen |= {topic for _, topics in args.station or [] for topic in topics.values()}
+        if not args.station:  # a bag of several stations: their inputs, as its topic names show them
+            wanted = {"fix": args.fix_topic, "bearing": args.bearing_topic}
+            found = found_stations(args.bag, inventory, wanted) or {}
+            chosen |= {topic for topics in found.values() for topic in topics.values()}
     return [t for t in inventory if t.name in chosen]
 
 
