@@ -96,3 +96,17 @@ def test_whiten_is_the_triangular_solve(d):
     v = rng.standard_normal((7, d)) * 50.0
     assert np.allclose(moves.whiten(v, chol), np.linalg.solve(chol, v.T).T, rtol=1e-12, atol=1e-12)
     assert np.allclose(moves.whiten(v[:, None, :], chol)[:, 0], np.linalg.solve(chol, v.T).T, rtol=1e-12)
+
+
+def test_one_acceptance_rule_for_every_move():
+    """log U < log_ratio row by row: a possible place proposed from an impossible one (+inf) is always taken, two
+    impossible places (NaN) never, an impossible proposal (-inf) never; the independence move from modes and the
+    pair moves decide with the same rule as the rest."""
+    rng = np.random.default_rng(0)
+    ratio = np.array([np.inf, np.nan, -np.inf, 0.0, -1e9])
+    for _ in range(20):
+        assert moves.accepted(ratio, rng).tolist() == [True, False, False, True, False]
+    x, prop = np.zeros((2, 2)), np.ones((2, 2))
+    target, prop_target = np.array([-np.inf, 0.0]), np.array([0.0, -np.inf])
+    kept, kept_target, n = moves.accept(x, target, prop, prop_target, prop_target - target, rng)
+    assert kept.tolist() == [[1.0, 1.0], [0.0, 0.0]] and kept_target.tolist() == [0.0, 0.0] and n == 1

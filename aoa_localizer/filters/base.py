@@ -21,8 +21,6 @@ from aoa_localizer.filters.registry import GroupAccess, default_groups
 from aoa_localizer.filters.resampling import SCHEMES
 from aoa_localizer.models.base import StateSpaceModel, StaticPosterior
 
-_RW_FLOOR_M2 = 1e-4  # added to the cloud's covariance before the safety moves' Cholesky factor (a collapsed cloud)
-
 
 @dataclass(frozen=True)
 class FilterSettings(GroupAccess):
@@ -189,7 +187,7 @@ class ParticleFilter:
         it; the weights are untouched. Returns the share of accepted moves."""
         target = self.log_target(self.x)
         accepted, tried = 0, 0
-        chol = moves.RW_SCALE * np.linalg.cholesky(self.estimate()[1] + _RW_FLOOR_M2 * np.eye(2))
+        chol = moves.cloud_chol(self.estimate()[1], moves.RW_SCALE)
         for _ in range(sweeps):
             self.x, target, a = moves.random_walk(self.x, target, self.log_target, self.rng, chol)
             accepted, tried = accepted + a, tried + self.n

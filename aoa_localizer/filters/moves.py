@@ -15,6 +15,12 @@ import numpy as np
 
 LogTarget = Callable[[np.ndarray], np.ndarray]
 RW_SCALE = 2.38 / 2**0.5  # the optimal random-walk scale in 2-D (Roberts, Gelman, Gilks 1997), in cloud sigmas
+SPREAD_FLOOR_M2 = 1e-2  # added to a cloud's covariance before its Cholesky factor: moves stay alive in a collapse
+
+
+def cloud_chol(cov: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Cholesky factor of scale^2 times a cloud's covariance, floored: the scale of every move built on the cloud."""
+    return scale * np.linalg.cholesky(cov + SPREAD_FLOOR_M2 * np.eye(len(cov)))
 
 
 def halves(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -23,9 +29,15 @@ def halves(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return order[: n // 2], order[n // 2:]
 
 
+def accepted(log_ratio: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The Metropolis-Hastings decision per row, log U < log_ratio: a NaN ratio (two impossible places) rejects,
+    +inf (a possible place proposed from an impossible one) accepts. Every move decides with it."""
+    return np.log(rng.random(log_ratio.shape[0])) < log_ratio
+
+
 def accept(x, target, prop, prop_target, log_ratio, rng: np.random.Generator):
-    """Metropolis-Hastings acceptance, row by row: keep prop where log U < log_ratio."""
-    take = np.log(rng.random(x.shape[0])) < np.where(np.isfinite(log_ratio), log_ratio, -np.inf)
+    """Keep prop where the MH decision (`accepted`) takes it."""
+    take = accepted(log_ratio, rng)
     return np.where(take[:, None], prop, x), np.where(take, prop_target, target), int(take.sum())
 
 
@@ -78,8 +90,7 @@ def independence_from(x, target, log_target: LogTarget, rng: np.random.Generator
     prop = proposal.sample(x.shape[0], rng)
     prop_target = log_target(prop)
     log_ratio = (prop_target - proposal.logpdf(prop)) - (target - proposal.logpdf(x))
-    take = np.log(rng.random(x.shape[0])) < log_ratio
-    return np.where(take[:, None], prop, x), np.where(take, prop_target, target), int(take.sum())
+    return accept(x, target, prop, prop_target, log_ratio, rng)
 
 
 def de_mc(x, target, log_target: LogTarget, rng: np.random.Generator, gamma: float, cr: float, jitter: np.ndarray):
@@ -146,7 +157,7 @@ def pair_scale(x, target, log_target: LogTarget, rng: np.random.Generator, draw_
         forward = log_attempt(target[i], target[j])
         tried = np.log(rng.random(i.size)) < forward
         log_ratio = np.where(tried, log_ratio + log_attempt(t1, t2) - forward, -np.inf)
-    take = np.log(rng.random(i.size)) < np.where(np.isfinite(log_ratio), log_ratio, -np.inf)
+    take = accepted(log_ratio, rng)
     x[i[take]], x[j[take]] = c1[take], c2[take]
     target[i[take]], target[j[take]] = t1[take], t2[take]
     return x, target, 2 * int(take.sum())

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.models.base import StaticPosterior
-
-MIN_SPREAD_M2 = 1e-2  # added to the cloud's covariance before its Cholesky factor: moves stay alive in a collapse
 
 
 class ResampleMove(ParticleFilter):
@@ -46,8 +45,7 @@ class ResampleMove(ParticleFilter):
 
     def chol(self, scale: float = 1.0) -> np.ndarray:
         """Cholesky factor of scale^2 times the cloud's spread (floored)."""
-        d = self.model.dim
-        return scale * np.linalg.cholesky(self.spread + MIN_SPREAD_M2 * np.eye(d))
+        return moves.cloud_chol(self.spread, scale)
 
     def update(self, z) -> bool:
         ok = super().update(z)
@@ -74,10 +72,10 @@ class ResampleMove(ParticleFilter):
             self.owed = self.sweeps
             self._sweeps(self.sweeps, z)
             return
-        still = self.owed
+        unpaid = self.owed
         self.owed += self.sweeps
-        if still:
-            self._sweeps(still, z)
+        if unpaid:
+            self._sweeps(unpaid, z)
 
     def _sweeps(self, count: int, z):
         self.owed -= count

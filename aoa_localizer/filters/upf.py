@@ -29,7 +29,7 @@ from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.de import DeConfig, evolve
 from aoa_localizer.filters.moves import RW_SCALE
 from aoa_localizer.filters.registry import register
-from aoa_localizer.filters.resample_move import MIN_SPREAD_M2, ResampleMove
+from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
 from aoa_localizer.models.base import StaticPosterior, TransitionDensity, UnscentedForm
 
@@ -118,13 +118,13 @@ class UkfGaussianMoves(ResampleMove):
         w /= w.sum()
         m0 = w @ self.x_prev
         dev = self.x_prev - m0
-        P0 = (w[:, None] * dev).T @ dev + MIN_SPREAD_M2 * np.eye(d)
+        P0 = (w[:, None] * dev).T @ dev + moves.SPREAD_FLOOR_M2 * np.eye(d)
         f, Q, h, R, angles, zvec = self.model.ukf(self.k, z)
         ukf = BatchedUKF(d)
         m, P = ukf.update(m0[None, :], P0[None, :, :], h, R, zvec, angles)
         self.ukf_mean = m[0]
         try:
-            self.ukf_chol = WIDEN * np.linalg.cholesky(P[0] + MIN_SPREAD_M2 * np.eye(d))
+            self.ukf_chol = moves.cloud_chol(P[0], WIDEN)
         except np.linalg.LinAlgError:  # a degenerate update: the cloud's own spread proposes instead
             self.ukf_mean, self.ukf_chol = m0, self.chol(WIDEN)
         super().move(z)
