@@ -42,7 +42,7 @@ def rclpy_types() -> SimpleNamespace:
         Vector3,
         Vector3Stamped,
     )
-    from nav_msgs.msg import Path
+    from nav_msgs.msg import MapMetaData, OccupancyGrid, Path
     from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
     from std_msgs.msg import ColorRGBA, Header, String
     from visualization_msgs.msg import Marker, MarkerArray
@@ -50,7 +50,7 @@ def rclpy_types() -> SimpleNamespace:
     return SimpleNamespace(**{c.__name__: c for c in (
         Time, Header, NavSatFix, NavSatStatus, Vector3Stamped, Vector3, PointStamped, Point, Pose, PoseArray,
         PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, ColorRGBA, Marker, MarkerArray,
-        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu, String)})
+        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu, String, OccupancyGrid, MapMetaData)})
 
 
 def header(T, stamp: float, frame_id: str):
@@ -122,6 +122,16 @@ def vehicle_path(T, stamp: float, track, frame_id: str = "map"):
         for t, e, n in track
     ]
     return T.Path(header=header(T, stamp, frame_id), poses=poses)
+
+
+def occupancy_grid(T, stamp: float, east0: float, north0: float, resolution: float, values, frame_id: str = "map"):
+    """emitter/posterior: `values` (rows going north, columns east, 0-100) as an OccupancyGrid whose cell (0, 0) has
+    its lower-left corner at (east0, north0) in the map frame."""
+    rows, cols = values.shape
+    info = T.MapMetaData(map_load_time=header(T, stamp, frame_id).stamp, resolution=float(resolution), width=cols,
+                         height=rows, origin=T.Pose(position=T.Point(x=float(east0), y=float(north0), z=0.0),
+                                                    orientation=T.Quaternion(w=1.0)))
+    return T.OccupancyGrid(header=header(T, stamp, frame_id), info=info, data=values.astype("int8").ravel().tolist())
 
 
 def particle_array(T, est, frame_id: str = "map"):

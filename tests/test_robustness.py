@@ -127,6 +127,9 @@ def test_two_modes_are_reported_with_their_masses():
     assert min(m[2] for m in modes) > 0.1, modes  # both real; N = 100 estimates 0.5 / 0.5 roughly (design.md)
     places = np.array(sorted(data.frame.to_enu(*loc.frame.to_geodetic(m[0], m[1])[:2]) for m in modes))
     assert np.hypot(*(places - [[-300.0, 800.0], [300.0, 800.0]]).T).max() < 25, places
+    grid = loc.posterior_grid()  # emitter/posterior shows both, not one ellipse between them
+    rows, cols = grid.cell_of([m[0] for m in modes], [m[1] for m in modes])
+    assert all(grid.value[r, c] > 0 for r, c in zip(rows, cols, strict=True)), (rows, cols)
 
 
 @pytest.mark.slow

@@ -234,10 +234,18 @@ def test_an_outside_client_gets_pose_and_fix_near_the_truth(spawn, domain):
         latched = QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: got.update(pose=m), latched)
         node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: got.update(fix=m), 10)
+        node.create_subscription(T.OccupancyGrid, "emitter/posterior", lambda m: got.update(grid=m), 1)
         _publish_drive(node, executor, emitter)
         assert spin_until(executor, lambda: "pose" in got and "fix" in got, 10), open(node_p.log_path).read()
         spin_until(executor, lambda: False, 2.0)  # the last points
         _, east, north, cov = estimate_from_pose(got["pose"])
+        # emitter/posterior, while listened to: the estimate in its most probable cells, in the map frame
+        assert spin_until(executor, lambda: "grid" in got, 5)
+        grid, info = got["grid"], got["grid"].info
+        values = np.array(grid.data, np.int8).reshape(info.height, info.width)
+        row = int((north - info.origin.position.y) / info.resolution)
+        col = int((east - info.origin.position.x) / info.resolution)
+        assert grid.header.frame_id == "map" and values[row, col] >= 50 and values.max() == 100
         assert got["pose"].header.frame_id == "map"
         assert math.hypot(east - emitter[0], north - emitter[1]) < 15.0
         e, n = LocalFrame(*DATUM).to_enu(got["fix"].latitude, got["fix"].longitude)

@@ -19,6 +19,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.intake import Closed, Intake, as_float
 from aoa_localizer.engine.noise import sentence as noise_sentence
+from aoa_localizer.engine.posterior_grid import PosteriorGrid, posterior_grid
 from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduler import Scheduler
@@ -176,6 +177,17 @@ class Localizer:
         if events:
             lines.append("robustness events: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
         return lines
+
+    def posterior_grid(self, channel: Channel | None = None) -> PosteriorGrid | None:
+        """The posterior of `channel`'s track (None: the latest estimate's channel) on a map grid around its
+        estimate (engine/posterior_grid.py); None before its first estimate."""
+        channel = channel or self.latest
+        track, est = channel.track, channel.estimate
+        if est is None or not track.estimating:
+            return None
+        places = np.vstack([track.cloud.x, np.array([m[:2] for m in est.modes]).reshape(-1, 2)])
+        return posterior_grid(track.posterior_points(), track.robust(), np.array([est.east, est.north]), est.cov,
+                              places)
 
     def datum_frame(self) -> LocalFrame:
         """The map frame at the datum (ENU metres); raises RuntimeError before the datum is set."""

@@ -261,6 +261,10 @@ class EmitterTrack:
     def points(self) -> Points:
         return points_of([e.point for e in self.window])
 
+    def posterior_points(self) -> Points:
+        """The points the estimate's posterior is over: the running filter's, else the ones held."""
+        return Points.of(self.model.history.data) if self.filter is not None else self.points()
+
     def robust(self, prior: bool = True) -> Robust:
         """The robust posterior's settings the searches use: the calibrated outlier share and latent noise, with the
         filter's prior, the configured one, or (before a start) the radio-range prior of the points held."""
@@ -297,7 +301,7 @@ class EmitterTrack:
         sd = math.inf if self.calibration.offset else prior_sd(self.cfg)
         if sd == 0.0:
             return mean, cov
-        pts = Points.of(self.model.history.data) if self.filter is not None else self.points()
+        pts = self.posterior_points()
         shift, spread = marginalise(pts, mean, self.robust(), sd)
         return mean + shift, cov + spread
 

@@ -368,7 +368,8 @@ class LocalizerNode(Node):
         self.monitor.other_s += time.perf_counter() - t0
 
     def on_period(self):
-        """Every diagnostics_period_s: /diagnostics, vehicle/path if it grew, the channel summary."""
+        """Every diagnostics_period_s: /diagnostics, vehicle/path if it grew, the posteriors listened to, the channel
+        summary."""
         t0 = time.perf_counter()
         mon = self.monitor
         mon.period_done()
@@ -377,6 +378,7 @@ class LocalizerNode(Node):
         self.pub_diag.publish(build.diagnostic_array(self.types, self._now(), self.diag_name, level, message, values,
                                                      hardware_id, mon.channel_diagnostics(self.loc, self.diag_name)))
         self.outputs.paths(self.path)
+        self.outputs.posteriors(self.loc)
         self.outputs.summary(self.loc)
         self.outputs.drop_gone(self.loc)
         mon.end_period(t0)

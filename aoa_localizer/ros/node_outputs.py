@@ -47,7 +47,8 @@ class NodeOutputs:
 
         return SimpleNamespace(pose=make(T.PoseWithCovarianceStamped, "pose", LATCHED),
                                fix=make(T.NavSatFix, "fix", LATCHED), particles=make(T.PoseArray, "particles", 10),
-                               markers=make(T.MarkerArray, "markers", 10))
+                               markers=make(T.MarkerArray, "markers", 10),
+                               posterior=make(T.OccupancyGrid, "posterior", 1))
 
     def estimate(self, loc: Localizer, est, marker_rays: int):
         """An estimate on its channel's topics, and on emitter/ too when its channel is the primary one."""
@@ -70,6 +71,23 @@ class NodeOutputs:
             rays = loc.recent_points(marker_rays, est.channel)[:, :3]
             ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
             pubs.markers.publish(build.markers(T, est, rays, ring, frame))
+
+    def posteriors(self, loc: Localizer):
+        """Each channel's posterior grid on its emitter/<channel>/posterior, and the primary channel's on
+        emitter/posterior, for the ones someone listens to (a grid costs up to a few hundred ms: once a period)."""
+        primary = loc.channels.primary()
+        for channel in loc.channels.all():
+            listening = [pubs.posterior for cid, pubs in self.channel_pubs.items()
+                         if (cid == channel.id or (cid == DEFAULT and channel is primary))
+                         and pubs.posterior.get_subscription_count()]
+            est = channel.estimate
+            grid = loc.posterior_grid(channel) if listening and est is not None else None
+            if grid is None or est is None:
+                continue
+            msg = build.occupancy_grid(self.types, est.stamp, grid.east0, grid.north0, grid.resolution, grid.value,
+                                       self.map_frame)
+            for pub in listening:
+                pub.publish(msg)
 
     @staticmethod
     def channel_summary(loc: Localizer) -> dict[str, dict]:
