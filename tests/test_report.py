@@ -202,3 +202,24 @@ def test_a_report_of_two_stations_and_two_emitters_draws_and_exports_each(tmp_pa
     assert len(list(root.iter(f"{{{KML_NS}}}Point"))) == 2
     summary = (tmp_path / "r/summary.md").read_text()
     assert "## Other emitters (channels)" in summary and "MHz" in summary
+
+
+@pytest.mark.slow
+def test_the_map_draws_the_posterior_grid_where_it_lies(tmp_path, monkeypatch):
+    """map.png carries emitter/posterior's layer: an image on the map at the grid's place, and on the zoom at its
+    place relative to the estimate."""
+    from aoa_localizer.engine.config import LocalizerConfig
+    from aoa_localizer.engine.evaluation import run
+    from aoa_localizer.engine.scenarios import simulate
+    from aoa_localizer.reporting import plots
+
+    loc = run(simulate("seed", 1), LocalizerConfig(seed=1)).localizer
+    est, grid = loc.estimate, loc.posterior_grid()
+    figures = []
+    monkeypatch.setattr(plots.plt, "close", figures.append)
+    plots.map_figure(tmp_path / "map.png", loc.datum_frame(), {}, np.zeros((0, 5)), np.zeros(0, bool), est,
+                     posterior=grid)
+    side = grid.resolution * grid.value.shape[0]
+    (main,), (zoom,) = figures[0].axes[0].images, figures[0].axes[1].images
+    assert main.get_extent() == pytest.approx([grid.east0, grid.east0 + side, grid.north0, grid.north0 + side])
+    assert zoom.get_extent()[0] == pytest.approx(grid.east0 - est.east)

@@ -44,16 +44,19 @@ def _rays(readings: np.ndarray, target, keep_all: bool, t_range, colour) -> Line
 
 
 def map_figure(path, frame, tracks: dict[str, np.ndarray], readings: np.ndarray, kept: np.ndarray, est,
-               truth=None, title_extra: str = "", others=()):
+               truth=None, title_extra: str = "", others=(), posterior=None):
     """map.png: each station's track (rows stamp, east, north), bearing rays (used: blue, fading with age; gated
-    out as wild: red dashed), particles, estimate with its 95 % ellipse, the other emitters' (channels') estimates
-    and ellipses in their colours, truth if known; metres at the datum, scale bar. The zoom on the estimate and
-    the legend sit in their own panels beside the map, so neither hides any of the track."""
+    out as wild: red dashed), particles, estimate with its 95 % ellipse, the posterior's 95 % region (`posterior`,
+    a PosteriorGrid, as emitter/posterior shows it), the other emitters' (channels') estimates and ellipses in
+    their colours, truth if known; metres at the datum, scale bar. The zoom on the estimate and the legend sit in
+    their own panels beside the map, so neither hides any of the track."""
     fig = plt.figure(figsize=(12, 8), dpi=110)
     grid = fig.add_gridspec(2, 2, width_ratios=(3, 1.15), height_ratios=(1, 1.1))
     ax = fig.add_subplot(grid[:, 0])
     target = (est.east, est.north)
     _draw_inputs(ax, tracks, readings, kept, target)
+    if posterior is not None:
+        _draw_posterior(ax, posterior)
     for other in others:
         colour = channel_colour(other.channel) or (0.5, 0.5, 0.5)  # as in RViz; the default channel grey
         ring_o = ellipse_points((other.east, other.north), other.cov)
@@ -97,7 +100,7 @@ def map_figure(path, frame, tracks: dict[str, np.ndarray], readings: np.ndarray,
         f"map frame: ENU metres at datum {frame.lat0:.6f}, {frame.lon0:.6f}{title_extra}",
         fontsize=10,
     )
-    _zoom(fig.add_subplot(grid[0, 1]), est, ring, truth, a)
+    _zoom(fig.add_subplot(grid[0, 1]), est, ring, truth, a, posterior)
     legend_panel = fig.add_subplot(grid[1, 1])
     legend_panel.axis("off")
     legend_panel.legend(*ax.get_legend_handles_labels(), loc="upper left", fontsize=8, frameon=False)
@@ -124,9 +127,22 @@ def _draw_inputs(ax, tracks: dict[str, np.ndarray], readings: np.ndarray, kept: 
             ax.plot(fixes[0, 1], fixes[0, 2], "o", color="0.25", ms=5)
 
 
-def _zoom(ins, est, ring: np.ndarray, truth, a: float):
+def _draw_posterior(ax, grid, origin=(0.0, 0.0)):
+    """The posterior grid's 95 % region (its cells valued 5-100, darker: more probable), `origin` taken off."""
+    n = grid.value.shape[0]
+    left, bottom = grid.east0 - origin[0], grid.north0 - origin[1]
+    shown = np.ma.masked_equal(grid.value.astype(float), 0.0)
+    ax.imshow(shown, origin="lower", cmap="Purples", vmin=0, vmax=100, alpha=0.55, interpolation="nearest",
+              extent=(left, left + n * grid.resolution, bottom, bottom + n * grid.resolution), zorder=2)
+    ax.plot([], [], "s", color=(0.6, 0.5, 0.8), ms=8, label="posterior, 95 % region (emitter/posterior)")
+
+
+def _zoom(ins, est, ring: np.ndarray, truth, a: float, posterior=None):
     """A zoom on the estimate: the ellipse is metres wide on a map kilometres wide."""
     target = (est.east, est.north)
+    if posterior is not None:
+        _draw_posterior(ins, posterior, target)
+        ins.set_autoscale_on(False)
     half = max(4 * a, 10.0)
     if truth is not None:
         half = max(half, 1.3 * math.hypot(truth[0] - target[0], truth[1] - target[1]))

@@ -274,7 +274,9 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     kept = readings[:, 5].astype(bool)
     args.out.mkdir(parents=True, exist_ok=True)
     others = [e for e in finals if e.channel != est.channel]
-    plots.map_figure(args.out / "map.png", frame, tracks, readings[:, :5], kept, est, truth, others=others)
+    posterior = loc.posterior_grid() if loc.estimate is est else None  # the run's own estimate, not a file's
+    plots.map_figure(args.out / "map.png", frame, tracks, readings[:, :5], kept, est, truth, others=others,
+                     posterior=posterior)
     bound = None
     if truth is not None:
         t, err, bounds, major = error_series(estimates, readings[kept][:, :5], truth)
