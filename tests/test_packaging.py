@@ -45,6 +45,26 @@ def test_the_launch_file_parses_and_starts_the_installed_programs_with_its_argum
     assert arguments["scenario"]["default_value"] in SCENARIOS
 
 
+def test_the_spectrum_launch_file_starts_one_node_per_band_on_the_shared_inputs():
+    """launch/spectrum.launch.py: `edges` f0,...,fK give K nodes in namespaces band0... over adjacent half-open bands
+    (each frequency in exactly one), reading /gps/fix and /df/bearing; the file is installed with the package."""
+    from aoa_localizer.ros.bands import band_nodes
+
+    source = (ROOT / "launch" / "spectrum.launch.py").read_text()
+    tree = ast.parse(source)
+    assert "generate_launch_description" in {f.name for f in tree.body if isinstance(f, ast.FunctionDef)}
+    keywords = [{k.arg: k.value for k in c.keywords} for c in ast.walk(tree) if isinstance(c, ast.Call)]
+    assert {k["executable"].value for k in keywords if "executable" in k} == {"aoa_localizer"}
+    assert '("gps/fix", "/gps/fix"), ("df/bearing", "/df/bearing")' in source and "band_nodes(" in source
+    assert "launch/spectrum.launch.py" in (ROOT / "setup.py").read_text()
+    default = next(k["default_value"].value for k in keywords if "default_value" in k)
+    assert band_nodes(default) == [("band0", [4.0e8, 4.5e8]), ("band1", [4.5e8, 5.0e8])]
+    for bad, words in (("4e8", "at least two"), ("a,b", "separated by commas"), ("5e8,4e8", "increase"),
+                       ("4e8,inf", "must be in")):
+        with pytest.raises(ValueError, match=words):
+            band_nodes(bad)
+
+
 @pytest.mark.parametrize(
     "program, listed",
     [
