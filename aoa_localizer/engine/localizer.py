@@ -63,11 +63,11 @@ class Localizer:
         self.cfg = cfg = config or LocalizerConfig()
         self.on_estimate = on_estimate
         self.rng = np.random.default_rng(cfg.seed)
-        self.scheduler = Scheduler(cfg.scheduling == "realtime" or (cfg.scheduling == "auto" and live))
         frame = None
         if cfg.datum_lat is not None and cfg.datum_lon is not None:
             frame = LocalFrame(cfg.datum_lat, cfg.datum_lon, cfg.datum_alt or 0.0)
         self.rejections = Rejections()
+        self.scheduler = Scheduler(cfg.scheduling == "realtime" or (cfg.scheduling == "auto" and live), self.rejections)
         self.channels = Channels(cfg, self.rng, self.rejections, self.scheduler)
         self.intake = Intake(cfg, self.channels, self.rejections, frame, observer)
         self._fixed_stations: dict[str, tuple[float, float, float, float] | None] = {}  # configured positions
@@ -284,10 +284,9 @@ class Localizer:
         check it was due, and one owed move made, for the channel owing the most, so the points that follow carry
         none. Returns the estimates the results made (each also goes to `on_estimate`)."""
         live = list(self.channels.live.values())
-        done = {id(t) for t in self.scheduler.finished(c.track for c in live)}
-        made = [est for est in (self._publish(c) for c in live if id(c.track) in done) if est is not None]
-        if self.scheduler.move_one(c.track for c in live)[1]:
-            self.rejections(Reason.INTERNAL_ERROR)
+        done = self.scheduler.finished(c.track for c in live)
+        made = [est for est in (self._publish(c) for c in live if c.track in done) if est is not None]
+        self.scheduler.move_one(c.track for c in live)
         return made
 
     def catch_up(self) -> int:
@@ -297,13 +296,9 @@ class Localizer:
         tracks = [c.track for c in self.channels.live.values()]
         self.scheduler.wait(tracks)
         made = 0
-        while True:
-            moved, failed = self.scheduler.move_one(tracks)
-            if failed:
-                self.rejections(Reason.INTERNAL_ERROR)
-            if not moved:
-                return made
+        while self.scheduler.move_one(tracks):
             made += 1
+        return made
 
     def close(self):
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""

@@ -9,13 +9,14 @@ following point makes one. Any of these moves keeps the posterior invariant, so 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future, wait
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from aoa_localizer.engine.checks import CheckWorker
+from aoa_localizer.engine.rejections import Reason
 
 if TYPE_CHECKING:  # the tracks take the scheduler: the type only, for the checker
     from aoa_localizer.engine.track import EmitterTrack
@@ -26,8 +27,10 @@ log = logging.getLogger("aoa_localizer")
 class Scheduler:
     """Runs the tracks' jobs inline or in the worker (`realtime`), and makes the moves they owe when asked."""
 
-    def __init__(self, realtime: bool):
+    def __init__(self, realtime: bool, reject: Callable[[Reason], None]):
+        """`reject`: told of a move that failed (counted as an internal error, the track goes on)."""
         self.worker = CheckWorker() if realtime else None
+        self.reject = reject
 
     @property
     def realtime(self) -> bool:
@@ -48,16 +51,17 @@ class Scheduler:
         """The tracks whose job finished, its result applied now, that have a new estimate."""
         return [t for t in tracks if t.collect() and t.estimating]
 
-    def move_one(self, tracks: Iterable[EmitterTrack]) -> tuple[bool, bool]:
-        """One owed move, for the track owing the most: (whether one was owed, whether it failed)."""
+    def move_one(self, tracks: Iterable[EmitterTrack]) -> bool:
+        """One owed move, for the track owing the most; False when none was owed (or it failed: counted)."""
         owing = max(tracks, key=lambda t: t.owed, default=None)
         if owing is None or not owing.owed:
-            return False, False
+            return False
         try:
-            return owing.pay_owed(), False
+            return owing.pay_owed()
         except (ArithmeticError, ValueError, np.linalg.LinAlgError):
             log.exception("a move sweep between points failed; skipped")
-            return False, True
+            self.reject(Reason.INTERNAL_ERROR)
+            return False
 
     def wait(self, tracks: Iterable[EmitterTrack]) -> None:
         """Wait until the worker has finished the tracks' jobs (their results are applied at each one's next point,

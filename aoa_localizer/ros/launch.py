@@ -118,7 +118,7 @@ class Child:
         return "\n".join(f"  [{self.name}] {line}" for line in lines[-n:])
 
 
-def bag_stations(args) -> dict[str, dict[str, str]]:
+def stations_of_bag(args) -> dict[str, dict[str, str]]:
     """With --bag of several stations and no --scenario that names them: the stations its topic names show (the
     node then gets `stations`, the replay their topics), said in a warning; {} otherwise or for an unreadable bag
     (replay says why)."""
@@ -131,7 +131,8 @@ def bag_stations(args) -> dict[str, dict[str, str]]:
         return {}
 
 
-def build_commands(args, node_params: dict) -> tuple[list[str], list[str]]:
+def build_commands(args, node_params: dict, found: dict[str, dict[str, str]]) -> tuple[list[str], list[str]]:
+    """The node's and the source's command lines; `found`: the bag's stations (stations_of_bag)."""
     py = sys.executable
     node = [py, "-m", "aoa_localizer.node", "--ros-args"]
     if args.params_file:
@@ -139,7 +140,6 @@ def build_commands(args, node_params: dict) -> tuple[list[str], list[str]]:
     for k, v in node_params.items():
         node += ["-p", f"{k}:={ros_value(v)}"]
     if args.bag:
-        found = bag_stations(args)
         if args.scenario in FLEETS:
             inputs = [f"/{name}/{topic}" for name in FLEETS[args.scenario].stations for topic in ("gps/fix",
                                                                                                   "df/bearing")]
@@ -160,8 +160,11 @@ def build_commands(args, node_params: dict) -> tuple[list[str], list[str]]:
     return node, source
 
 
-def node_parameters(args) -> dict:
-    """The scenario's frame and filter settings (so the node's map is the truth's), then the user's -p."""
+def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dict:
+    """The scenario's frame and filter settings (so the node's map is the truth's), the bag's stations (`found`,
+    read from the bag when not given), then the user's -p."""
+    if found is None:
+        found = stations_of_bag(args)
     params: dict = {}
     if args.scenario:
         fleet = FLEETS.get(args.scenario)
@@ -171,7 +174,6 @@ def node_parameters(args) -> dict:
         params.update(sc.filter_overrides)
         if fleet:
             params.update(fleet.node_params())
-    found = bag_stations(args)
     if found:
         params["stations"] = list(found)
     if args.seed is not None:
@@ -391,7 +393,8 @@ class Run:
     def execute(self) -> int:
         """Start the node, then the source; watch until the source ends; print and return the verdict's code."""
         args = self.args
-        node_cmd, source_cmd = build_commands(args, node_parameters(args))
+        found = stations_of_bag(args)
+        node_cmd, source_cmd = build_commands(args, node_parameters(args, found), found)
         self.monitor = monitor = Monitor(args.record)
         node = self.start("aoa_localizer", node_cmd)
         monitor.spin(1.5)  # let the node come up and the monitor discover it
