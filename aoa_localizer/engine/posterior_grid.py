@@ -18,7 +18,7 @@ import numpy as np
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.global_search import Points, Robust, log_posterior
 
-CELLS = 64  # cells a side: the evaluation costs cells x points (urban, 240 points: about 0.15 s)
+CELLS = 64  # cells a side: the evaluation costs cells^2 x points (docs/interface.md gives the times)
 WINDOW_SIGMAS = 3.0  # the window's half-width, in 95 % ellipse major semi-axes
 MIN_RESOLUTION_M = 0.1
 REGION = 0.95  # the highest-density region the values show

@@ -74,7 +74,7 @@ class NodeOutputs:
 
     def posteriors(self, loc: Localizer):
         """Each channel's posterior grid on its emitter/<channel>/posterior, and the primary channel's on
-        emitter/posterior, for the ones someone listens to (a grid costs up to a few hundred ms: once a period)."""
+        emitter/posterior, for the ones someone listens to (a grid costs cells x points: once a period)."""
         primary = loc.channels.primary()
         for channel in loc.channels.all():
             listening = [pubs.posterior for cid, pubs in self.channel_pubs.items()
