@@ -134,6 +134,27 @@ def occupancy_grid(T, stamp: float, east0: float, north0: float, resolution: flo
     return T.OccupancyGrid(header=header(T, stamp, frame_id), info=info, data=values.astype("int8").ravel().tolist())
 
 
+def goal_pose(T, stamp: float, vehicle: tuple[float, float], goal: tuple[float, float], frame_id: str = "map"):
+    """emitter/next_goal: the goal (east, north in the map frame), facing the way from `vehicle` to it."""
+    yaw = math.atan2(goal[1] - vehicle[1], goal[0] - vehicle[0])
+    orientation = T.Quaternion(z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+    return T.PoseStamped(header=header(T, stamp, frame_id),
+                         pose=T.Pose(position=T.Point(x=float(goal[0]), y=float(goal[1]), z=0.0),
+                                     orientation=orientation))
+
+
+def goal_arrow(T, stamp: float, vehicle: tuple[float, float], goal: tuple[float, float], channel: str,
+               frame_id: str = "map"):
+    """emitter/next_goal_marker: an arrow from the vehicle to the goal (a frequency channel's in its colour)."""
+    own = channel_colour(channel)
+    r, g, b = own or (0.1, 0.8, 0.3)
+    return T.Marker(header=header(T, stamp, frame_id), ns=("" if own is None else f"{channel}/") + "next_goal", id=0,
+                    type=0, action=0, scale=T.Vector3(x=3.0, y=8.0, z=8.0), color=T.ColorRGBA(r=r, g=g, b=b, a=1.0),
+                    pose=T.Pose(orientation=T.Quaternion(w=1.0)),
+                    points=[T.Point(x=float(vehicle[0]), y=float(vehicle[1]), z=0.0),
+                            T.Point(x=float(goal[0]), y=float(goal[1]), z=0.0)])
+
+
 def particle_array(T, est, frame_id: str = "map"):
     """emitter/particles: one pose per particle."""
     poses = [

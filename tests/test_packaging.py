@@ -86,6 +86,7 @@ def test_every_programs_help_shows_its_defaults_and_describes_its_options(cli):
     --scenario, --fix-topic, --bearing-topic no description."""
     from aoa_localizer.reporting.report import main as report_main
     from aoa_localizer.ros.launch import main as launch_main
+    from aoa_localizer.tools.param_docs import main as param_docs_main
     from aoa_localizer.tools.replay import main as replay_main
     from aoa_localizer.tools.simulate import main as simulate_main
 
@@ -95,6 +96,7 @@ def test_every_programs_help_shows_its_defaults_and_describes_its_options(cli):
         replay_main: ["(default: 400.0)", "(default: 3.0)", "the bag's GPS topic", "the bag's DF topic"],
         report_main: ["the bag's GPS topic (sensor_msgs/msg/NavSatFix) (default: /gps/fix)"],
         simulate_main: ["public scenario", "(default: seed)"],
+        param_docs_main: ["DOCUMENT [DOCUMENT ...]", "a Markdown file holding a generated block"],
     }
     for main, words in expected.items():
         res = cli(main, "--help")

@@ -256,3 +256,32 @@ def test_channels_in_a_bag_give_one_line_per_channel_and_json_lines_per_emitter(
         e, n = frame.to_enu(last["lat"], last["lon"])
         assert math.hypot(e - truth[0], n - truth[1]) < 10.0
         assert f"channel {cid}: estimate: lat" in res.stderr
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_offline_replay_or_report_ends_in_one_line_and_keeps_what_was_written(tmp_path):
+    """Ctrl-C mid-run: exit 130 (documented), one line saying what is kept, no traceback; the estimates replay
+    already wrote stay in its output, each a whole JSON line."""
+    import signal
+    import time
+
+    out = tmp_path / "est.jsonl"
+    slow = ["--particles", "3000"]  # long enough to be interrupted mid-run
+    errs = []
+    for args, ready in ((["aoa_localizer.replay", ROOT / "bags/urban", "--offline", "--output", out, *slow],
+                         lambda _: out.exists() and len(out.read_text().splitlines()) >= 3),
+                        (["aoa_localizer.report", ROOT / "bags/urban", "--out", tmp_path / "rep", *slow],
+                         lambda started: time.monotonic() > started + 3.0)):
+        started = time.monotonic()
+        p = subprocess.Popen([sys.executable, "-m", *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+        while not ready(started) and p.poll() is None and time.monotonic() < started + 60:
+            time.sleep(0.05)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+        assert p.returncode == 130 and "Traceback" not in err, err
+        assert "interrupted (Ctrl-C)" in err.splitlines()[-1]
+        errs.append(err)
+    lines = out.read_text().splitlines()
+    assert len(lines) >= 3 and all(json.loads(line) for line in lines)
+    assert f"the {len(lines) - 1} estimates written to {out} are kept" in errs[0]  # the header line, then estimates

@@ -21,7 +21,9 @@ from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.scenarios import SCENARIOS
 from msgs_adapters import build
+from msgs_adapters.bag import read_bag
 from msgs_adapters.fields import diagnostics_values, estimate_from_pose
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -97,27 +99,17 @@ def test_the_two_car_scenario_plays_both_cars_into_one_node_and_its_bag_replays(
         assert result["converged"] and result["error_m"] < 10.0 and result["ellipse95_m"][0] < 15.0, result
 
 
-def test_pose_encoding_end_to_end(tmp_path, domain):
-    res = launch(
-        [
-            "--scenario",
-            "homing",
-            "--speedup",
-            40,
-            "--seed",
-            3,
-            "--domain-id",
-            domain,
-            "-p",
-            "bearing_encoding=pose",
-            "--vehicle-param",
-            "bearing_encoding=pose",
-            "--result",
-            tmp_path / "r.json",
-        ]
-    )
+def test_pose_encoding_and_a_vehicle_driving_to_the_goal_end_to_end(tmp_path, domain):
+    """The pose encoding end to end, with the vehicle following emitter/next_goal (`drive=goal`): it leaves the
+    straight road (north -200 m) for the emitter (1200, 800) once the node has an estimate."""
+    res = launch(["--scenario", "straight", "--speedup", 40, "--seed", 3, "--domain-id", domain,
+                  "-p", "bearing_encoding=pose", "--vehicle-param", "bearing_encoding=pose",
+                  "--vehicle-param", "drive=goal", "--record", tmp_path / "bag", "--result", tmp_path / "r.json"])
     assert res.returncode == 0, res.stdout + res.stderr
     assert json.loads((tmp_path / "r.json").read_text())["error_m"] < 10.0
+    frame = LocalFrame(*SCENARIOS["straight"].datum)
+    norths = [frame.to_enu(ev.record.lat, ev.record.lon)[1] for ev in read_bag(tmp_path / "bag") if ev.kind == "fix"]
+    assert min(norths) == pytest.approx(-200.0, abs=1.0) and max(norths) > 300.0
 
 
 @contextmanager
@@ -226,8 +218,10 @@ def _publish_drive(node, executor, emitter, seconds=60.0, speed=20.0, df_hz=10.0
         executor.spin_once(timeout_sec=0.002)
 
 
-def test_an_outside_client_gets_pose_and_fix_near_the_truth(spawn, domain):
-    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1"], domain)
+def test_an_outside_client_gets_pose_fix_posterior_and_goal(spawn, domain):
+    """emitter/pose and emitter/fix near the truth; emitter/posterior with the estimate in its most probable cells;
+    emitter/next_goal within goal_radius_m of the vehicle's last place (1200, 0), its arrow from there."""
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1", "-p", "goal_radius_m:=300.0"], domain)
     emitter = (600.0, 400.0)
     with client(domain) as (node, executor):
         got = {}
@@ -235,6 +229,8 @@ def test_an_outside_client_gets_pose_and_fix_near_the_truth(spawn, domain):
         node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: got.update(pose=m), latched)
         node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: got.update(fix=m), 10)
         node.create_subscription(T.OccupancyGrid, "emitter/posterior", lambda m: got.update(grid=m), 1)
+        node.create_subscription(T.PoseStamped, "emitter/next_goal", lambda m: got.update(goal=m), 1)
+        node.create_subscription(T.Marker, "emitter/next_goal_marker", lambda m: got.update(arrow=m), 1)
         _publish_drive(node, executor, emitter)
         assert spin_until(executor, lambda: "pose" in got and "fix" in got, 10), open(node_p.log_path).read()
         spin_until(executor, lambda: False, 2.0)  # the last points
@@ -251,6 +247,13 @@ def test_an_outside_client_gets_pose_and_fix_near_the_truth(spawn, domain):
         e, n = LocalFrame(*DATUM).to_enu(got["fix"].latitude, got["fix"].longitude)
         assert math.hypot(e - emitter[0], n - emitter[1]) < 15.0
         assert got["fix"].position_covariance_type == 1
+        got.pop("goal", None)
+        assert spin_until(executor, lambda: "goal" in got and "arrow" in got, 5)  # refreshed once a second
+        goal, arrow = got["goal"].pose.position, got["arrow"].points
+        assert (arrow[0].x, arrow[0].y) == pytest.approx((1200.0, 0.0), abs=0.5)  # the vehicle's last fix
+        assert got["goal"].header.frame_id == "map"
+        assert math.hypot(goal.x - arrow[0].x, goal.y - arrow[0].y) <= 300.0 + 1e-6
+        assert (arrow[1].x, arrow[1].y) == pytest.approx((goal.x, goal.y))
     assert node_p.poll() is None
 
 
@@ -357,6 +360,7 @@ def test_bad_messages_leave_the_node_running_and_are_counted(spawn, domain):
             executor, lambda: all(diag.get(k) == v for k, v in expected.items()) and "wrong_encoding" in diag, 10
         ), json.dumps(diag)
         assert "PoseWithCovarianceStamped" in diag["wrong_encoding"] and diag["level"] == "1"
+        assert "-p bearing_encoding:=pose" in diag["wrong_encoding"]  # the hint names the fix
         assert diag["bearings_received"] == "4" and diag["fixes_received"] == "4"
         assert node_p.poll() is None
 
@@ -478,20 +482,25 @@ def test_the_node_and_live_replay_stop_cleanly_on_a_signal(spawn, domain, sig):
 
 def test_a_node_on_sim_time_follows_a_bag_replayed_with_clock(spawn, domain):
     """ROS-package issue: with use_sim_time:=true the node's diagnostics stopped, since replay never published
-    /clock. `replay --clock` publishes the bag's log time; the node's timer runs on it and it localises."""
+    /clock. `replay --clock` publishes the bag's log time; the node's timer runs on it and it localises. The
+    bearings go through remaps at both ends (replay's `--remap`, the node's `-r` as the README writes it), with no
+    deprecated-syntax warning from rcl."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-    spawn(["aoa_localizer.node", "--ros-args", "-p", "use_sim_time:=true", "-p", "seed:=1"], domain)
+    spawn(["aoa_localizer.node", "--ros-args", "-p", "use_sim_time:=true", "-p", "seed:=1",
+           "-r", "df/bearing:=/df1/bearing"], domain)
     with client(domain) as (node, executor):
         diags, poses = [], []
         node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(PoseWithCovarianceStamped, "/emitter/pose", poses.append, latched)
-        spawn(["aoa_localizer.replay", str(ROOT / "bags/seed"), "--clock", "--rate", "4"], domain)
+        replay = spawn(["aoa_localizer.replay", str(ROOT / "bags/seed"), "--clock", "--rate", "4",
+                        "--remap", "/df/bearing:=/df1/bearing"], domain)
         assert spin_until(executor, lambda: len(diags) >= 5 and poses, 90), (len(diags), len(poses))
+        assert "deprecated" not in open(replay.log_path).read()
         stamps = [d.header.stamp.sec + 1e-9 * d.header.stamp.nanosec for d in diags]
         assert stamps[-1] > stamps[0]  # moving
         assert time.time() - stamps[-1] > 600  # on the bag's clock (recorded hours before), not the wall clock

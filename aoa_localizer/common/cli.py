@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import sys
 
 import yaml
 
@@ -22,6 +23,15 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
         if unset or "%(default)" in text or not action.option_strings:
             return text
         return f"{text} (default: %(default)s)"
+
+
+INTERRUPTED = 130  # the exit code after Ctrl-C: 128 + SIGINT, as a shell reports an interrupted program
+
+
+def interrupted(program: str, kept: str) -> int:
+    """Ctrl-C: one line saying what is kept (no traceback), and INTERRUPTED."""
+    print(f"{program}: interrupted (Ctrl-C); {kept}", file=sys.stderr)
+    return INTERRUPTED
 
 
 def seed_value(text: str) -> int:

@@ -17,7 +17,9 @@ import numpy as np
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.gps_track import GpsTrack
 from aoa_localizer.engine.intake import Closed, Intake, as_float
+from aoa_localizer.engine.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.posterior_grid import PosteriorGrid, posterior_grid
 from aoa_localizer.engine.preprocess import reading_sigma
@@ -188,6 +190,27 @@ class Localizer:
         places = np.vstack([track.cloud.x, np.array([m[:2] for m in est.modes]).reshape(-1, 2)])
         return posterior_grid(track.posterior_points(), track.robust(), np.array([est.east, est.north]), est.cov,
                               places)
+
+    def vehicle_place(self, station: str = "") -> tuple[float, float] | None:
+        """A moving station's newest accepted fix (east, north in the map frame, m); None before one, or for a fixed
+        site."""
+        st = self.intake.stations.get(station)
+        if st is None or not isinstance(st.gps, GpsTrack) or not len(st.gps):
+            return None
+        return st.gps.e[-1], st.gps.n[-1]
+
+    def next_goal(self, vehicle: tuple[float, float], radius_m: float, channel: Channel | None = None
+                  ) -> NextGoal | None:
+        """Where within `radius_m` of `vehicle` (east, north) the next bearing is expected to shrink the posterior of
+        `channel` (None: the latest estimate's) most (engine/next_goal.py), for a bearing as noisy as the median of the
+        points used; None before its first estimate, and while a provisional one is behind the points held (the
+        vehicle should drive on, across its bearings)."""
+        channel = channel or self.latest
+        track, est = channel.track, channel.estimate
+        if est is None or not track.cloud_is_current:
+            return None
+        sigma = float(np.median(track.posterior_points().sigma))
+        return next_goal(track.cloud.x, track.cloud.weights, vehicle, radius_m, sigma)
 
     def datum_frame(self) -> LocalFrame:
         """The map frame at the datum (ENU metres); raises RuntimeError before the datum is set."""

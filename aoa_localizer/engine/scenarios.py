@@ -167,17 +167,29 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
         t_df = np.arange(sc.df_clock_offset_s, traj.duration, 1.0 / sc.df_rate_hz)
     t_gps = np.arange(sc.gps_clock_offset_s - 1.0 / sc.gps_rate_hz, traj.duration + 2.0, 1.0 / sc.gps_rate_hz)
     t_gps = t_gps[t_gps >= 0]
+    fixes = gps_fixes(sc, frame, rng, t_gps, traj.at(t_gps))
+    sensor = traj.at(t_df)
+    bearings, sigma, wild, emitter = df_records(sc, frame, rng, t_df, sensor)
+    e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1], 0.0)
+    return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)))
 
-    # GPS fixes: true positions plus noise, as lat/lon.
-    gps_enu = traj.at(t_gps) + sc.gps_noise_m * rng.standard_normal((t_gps.size, 2))
+
+def gps_fixes(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_gps: np.ndarray,
+              true_enu: np.ndarray) -> np.ndarray:
+    """(F, 4) fixes stamp, lat, lon, alt: the true positions at `t_gps` with the scenario's GPS noise and drop-outs."""
+    gps_enu = true_enu + sc.gps_noise_m * rng.standard_normal((t_gps.size, 2))
     if sc.gps_dropout_prob:
         kept = rng.random(t_gps.size) >= sc.gps_dropout_prob
         t_gps, gps_enu = t_gps[kept], gps_enu[kept]
     lat, lon, alt = frame.to_geodetic(gps_enu[:, 0], gps_enu[:, 1], np.zeros(t_gps.size))
-    fixes = np.column_stack([t_gps, lat, lon, alt])
+    return np.column_stack([t_gps, lat, lon, alt])
 
-    # DF readings: geodesic azimuth from the true antenna position to the emitter, plus noise.
-    sensor = traj.at(t_df)
+
+def df_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_df: np.ndarray, sensor: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """DF records (B, 3) stamp, azimuth deg, quality taken at `t_df` from the antenna places `sensor`: the geodesic
+    azimuth to the emitter with the scenario's noise, wild bearings and reflector; with each bearing's true sigma,
+    whether it was wild, and the emitter's place at the end."""
     s_lat, s_lon, _ = frame.to_geodetic(sensor[:, 0], sensor[:, 1], np.zeros(t_df.size))
     e_lat, e_lon, _ = frame.to_geodetic(sc.emitter[0], sc.emitter[1], 0.0)
     _, az_true = vincenty.vdist(s_lat, s_lon, np.full(t_df.size, e_lat), np.full(t_df.size, e_lon))
@@ -200,9 +212,7 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
         wild = wild | ghost
     if not sc.quality_known:
         quality = np.full(t_df.size, np.nan)
-    bearings = np.column_stack([t_df, wrap_360(az), quality])
-    e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1], 0.0)
-    return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)))
+    return np.column_stack([t_df, wrap_360(az), quality]), sigma, wild, emitter
 
 
 def _azimuths(frame: LocalFrame, sensor: np.ndarray, s_lat, s_lon, target: np.ndarray) -> np.ndarray:

@@ -43,6 +43,7 @@ log = logging.getLogger("aoa_localizer")
 
 # The radio-range prior's scale: this many times the antennas' spread, at least this many metres.
 _REACH_FACTOR, _REACH_MIN_M = 2.0, 100.0
+_CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
 
 
 class EmitterTrack:
@@ -241,6 +242,14 @@ class EmitterTrack:
         if self.provisional is None:
             raise RuntimeError("no estimate yet")  # an engine bug, never bad input
         return self.provisional
+
+    @property
+    def cloud_is_current(self) -> bool:
+        """Whether the cloud describes the points held now: a running filter's always; a provisional sample's while it
+        holds all but a tenth of them (a start search that finds no place leaves the last sample standing)."""
+        if self.filter is not None:
+            return True
+        return self.provisional is not None and self.provisional.k >= _CURRENT_SHARE * len(self.window)
 
     @property
     def estimating(self) -> bool:

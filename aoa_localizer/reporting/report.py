@@ -27,6 +27,7 @@ from aoa_localizer.common.cli import (
     bag_stations,
     bag_topics,
     config_from_args,
+    interrupted,
     setup_logging,
 )
 from aoa_localizer.core.spec import ConfigError
@@ -206,6 +207,8 @@ def main(argv=None) -> int:
     except ReportError as exc:
         print(f"report: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        return interrupted("report", f"the report in {args.out} is not complete (files written so far are kept)")
 
 
 def _made_with(path: Path) -> LocalizerConfig:

@@ -125,6 +125,7 @@ class LocalizerNode(Node):
         self.create_timer(self.get_parameter("diagnostics_period_s").value, self.on_period)
         self.old_objects = OldObjects()
         self.create_timer(IDLE_PERIOD_S, self.on_idle)
+        self.create_timer(GOAL_PERIOD_S, self.on_goal_period)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.outputs.datum(self.loc)  # a configured datum is known at once
         self.get_logger().info(f"started: algorithm {self.cfg.algorithm}, N = {self.cfg.num_particles}, "
@@ -354,7 +355,9 @@ class LocalizerNode(Node):
             topic = sub.topic_name
             for info in self.get_publishers_info_by_topic(topic):
                 if info.topic_type != want:
-                    out.append(f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}")
+                    hint = next((f": start the node with -p bearing_encoding:={encoding}"
+                                 for encoding, kind in INPUT_TYPES.items() if kind == info.topic_type), "")
+                    out.append(f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}{hint}")
         return out
 
     def on_idle(self):
@@ -382,6 +385,15 @@ class LocalizerNode(Node):
         self.outputs.summary(self.loc)
         self.outputs.drop_gone(self.loc)
         mon.end_period(t0)
+
+    def on_goal_period(self):
+        """Once a second: where to drive next (emitter/next_goal), for the channels someone listens to, from the
+        first moving station's newest fix."""
+        t0 = time.perf_counter()
+        moving = [name for name in self.station_names if name not in self.fixed_positions]
+        vehicle = self.loc.vehicle_place(moving[0]) if moving else None
+        self.outputs.next_goals(self.loc, vehicle, self.get_parameter("goal_radius_m").value)
+        self.monitor.other_s += time.perf_counter() - t0
 
     def on_reset(self, request, response):
         self.loc.reset()
@@ -427,6 +439,7 @@ def usage() -> str:
 SWITCH_INTERVAL_S = 0.0005
 # One owed sweep (about 2 ms at 300 points) per tick: 50 a second, several times what 50 emitters owe.
 IDLE_PERIOD_S = 0.02
+GOAL_PERIOD_S = 1.0  # emitter/next_goal is refreshed at most this often (s)
 
 
 def main(argv=None) -> int:

@@ -12,7 +12,7 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from aoa_localizer.engine.channels import DEFAULT
+from aoa_localizer.engine.channels import DEFAULT, Channel
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.ros.vehicle_path import VehiclePath
@@ -48,7 +48,9 @@ class NodeOutputs:
         return SimpleNamespace(pose=make(T.PoseWithCovarianceStamped, "pose", LATCHED),
                                fix=make(T.NavSatFix, "fix", LATCHED), particles=make(T.PoseArray, "particles", 10),
                                markers=make(T.MarkerArray, "markers", 10),
-                               posterior=make(T.OccupancyGrid, "posterior", 1))
+                               posterior=make(T.OccupancyGrid, "posterior", 1),
+                               goal=make(T.PoseStamped, "next_goal", 1),
+                               goal_marker=make(T.Marker, "next_goal_marker", 1))
 
     def estimate(self, loc: Localizer, est, marker_rays: int):
         """An estimate on its channel's topics, and on emitter/ too when its channel is the primary one."""
@@ -75,19 +77,44 @@ class NodeOutputs:
     def posteriors(self, loc: Localizer):
         """Each channel's posterior grid on its emitter/<channel>/posterior, and the primary channel's on
         emitter/posterior, for the ones someone listens to (a grid costs cells x points: once a period)."""
-        primary = loc.channels.primary()
-        for channel in loc.channels.all():
-            listening = [pubs.posterior for cid, pubs in self.channel_pubs.items()
-                         if (cid == channel.id or (cid == DEFAULT and channel is primary))
-                         and pubs.posterior.get_subscription_count()]
+        for channel, listening in self._listened(loc, "posterior"):
             est = channel.estimate
-            grid = loc.posterior_grid(channel) if listening and est is not None else None
+            grid = loc.posterior_grid(channel) if est is not None else None
             if grid is None or est is None:
                 continue
             msg = build.occupancy_grid(self.types, est.stamp, grid.east0, grid.north0, grid.resolution, grid.value,
                                        self.map_frame)
             for pub in listening:
                 pub.publish(msg)
+
+    def next_goals(self, loc: Localizer, vehicle: tuple[float, float] | None, radius_m: float):
+        """Each channel's goal (engine/next_goal.py) for the vehicle at `vehicle` (map frame) on its
+        emitter/<channel>/next_goal and next_goal_marker, the primary channel's on emitter/, for the ones someone
+        listens to; none without an estimate or a vehicle's place."""
+        if vehicle is None:
+            return
+        for channel, listening in self._listened(loc, "goal", "goal_marker"):
+            goal = loc.next_goal(vehicle, radius_m, channel)
+            est = channel.estimate
+            if goal is None or est is None:
+                continue
+            place = (goal.east, goal.north)
+            pose = build.goal_pose(self.types, est.stamp, vehicle, place, self.map_frame)
+            arrow = build.goal_arrow(self.types, est.stamp, vehicle, place, channel.id, self.map_frame)
+            for pub in listening:
+                pub.publish(pose if pub.msg_type is self.types.PoseStamped else arrow)
+
+    def _listened(self, loc: Localizer, *kinds: str) -> list[tuple[Channel, list]]:
+        """The channels with a listener on one of their `kinds` of publishers (its own, or emitter/'s for the primary
+        channel), each with those publishers."""
+        primary, out = loc.channels.primary(), []
+        for channel in loc.channels.all():
+            listening = [getattr(pubs, kind) for cid, pubs in self.channel_pubs.items()
+                         if cid == channel.id or (cid == DEFAULT and channel is primary)
+                         for kind in kinds if getattr(pubs, kind).get_subscription_count()]
+            if listening:
+                out.append((channel, listening))
+        return out
 
     @staticmethod
     def channel_summary(loc: Localizer) -> dict[str, dict]:

@@ -19,6 +19,9 @@ NODE_PARAMS = [
                                             low=0, high=1_000_000)),
     ParameterSpec("marker_rays", 20, Spec("bearing rays drawn in emitter/markers (the latest observation points)",
                                           int, low=0, high=10_000)),
+    ParameterSpec("goal_radius_m", 500.0, Spec(
+        "emitter/next_goal is the place within this distance of the vehicle (the first moving station) whose next "
+        "bearing is expected to shrink the posterior most (m)", float, low=1.0, high=100_000.0)),
     ParameterSpec("diagnostics_period_s", 1.0, Spec("period of /diagnostics and vehicle/path (s)", float, low=0.01,
                                                     high=3600.0, read_only=True)),
     ParameterSpec("stale_after_s", 5.0, Spec("/diagnostics warns when no DF reading or no valid GPS fix arrived for "

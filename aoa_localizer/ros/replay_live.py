@@ -133,7 +133,8 @@ def run_live(args) -> int:
         return 2
     files, reader, topics = opened
     # Our own SIGINT/SIGTERM handling: rclpy's would invalidate the context under a publish (an RCLError traceback)
-    rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    # args=[]: replay's own options are not ROS arguments (rcl would read --remap's FROM:=TO as an old-style remap)
+    rclpy.init(args=[], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node("aoa_replay")
     player = LivePlayer(node, topics, remap, args.clock)
     old = {s: signal.signal(s, player.stop) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -142,8 +143,8 @@ def run_live(args) -> int:
         player.wait_for_subscribers(args.wait)
         player.play(reader.messages(set(player.pubs)), args.rate, args.max_rate)
         stopped = f" (stopped by {player.stopped_by})" if player.stopped_by else ""
-        print(f"replayed {player.sent} messages of {', '.join(sorted(player.pubs))} from {args.bag}{stopped}",
-              file=sys.stderr)
+        names = [f"{t} as {remap[t]}" if t in remap else t for t in sorted(player.pubs)]
+        print(f"replayed {player.sent} messages of {', '.join(names)} from {args.bag}{stopped}", file=sys.stderr)
         if reader.damage:
             print(f"replay: {args.bag}: damaged ({'; '.join(reader.damage)}); every intact message was played",
                   file=sys.stderr)

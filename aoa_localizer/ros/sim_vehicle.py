@@ -9,7 +9,8 @@ allows); header stamps follow the simulated clock, starting at the wall time of 
 truth goes out latched on `sim/truth` (PointStamped, emitter in `map` at the scenario's datum) and
 `sim/datum` (NavSatFix of that datum). The node exits when the scenario is played. A scenario with several
 stations (`pair`: two cars) plays each on NAME/gps/fix and NAME/df/bearing; overrides apply to single-vehicle
-scenarios only.
+scenarios only. With `drive:=goal` the vehicle drives its track until the localizer publishes `emitter/next_goal`,
+then towards the newest goal, stop by stop (engine/goal_drive.py), for `duration_s` or as long as its scenario.
 """
 from __future__ import annotations
 
@@ -25,7 +26,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from aoa_localizer.core.spec import ConfigError, ParameterSpec, Spec
 from aoa_localizer.engine.fleet import FLEETS, simulate_fleet
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.goal_drive import GoalDrive
+from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, simulate
 from aoa_localizer.ros.declare import declare, refuse_unknown
 from aoa_localizer.ros.ros_main import run_node
 from msgs_adapters import build
@@ -63,6 +66,9 @@ OVERRIDES = [
 SETTINGS = [
     ParameterSpec("scenario", "seed", Spec("public scenario (`pair`: two stations)", str,
                                            choices=tuple(SCENARIOS) + tuple(FLEETS))),
+    ParameterSpec("drive", "track", Spec("`track`: the scenario's track; `goal`: its track until the localizer "
+                                         "publishes emitter/next_goal, then towards the newest goal (a stop-and-go "
+                                         "single-vehicle scenario)", str, choices=("track", "goal"))),
     ParameterSpec("data_seed", 0, Spec("seed of the simulated data", int, low=0)),
     ParameterSpec("speedup", 1.0, Spec("simulated seconds per wall second; 0: as fast as max_rate_hz", float,
                                        low=0.0)),
@@ -125,7 +131,12 @@ class SimVehicle(Node):
         self.wait_for, self.start_timeout_s = s["wait_for_subscribers"], s["start_timeout_s"]
         self.start_delay_s = s["start_delay_s"]
         self.T = build.rclpy_types()
-        self.stations = self._simulate(overrides)
+        self.goal: tuple[float, float] | None = None  # the newest emitter/next_goal, in the scenario's frame
+        self.node_datum: LocalFrame | None = None
+        self.counts: tuple[int, int] | None = None  # fixes and DF readings of a run made ahead (drive:=track)
+        self.sigma_of: dict[float, float] = {}  # each bearing's noise by its stamp, for the pose encoding
+        self.goal_end_s = 0.0
+        self.stations = self._goal_drive(overrides) if s["drive"] == "goal" else self._simulate(overrides)
         latched = QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
         )
@@ -137,6 +148,43 @@ class SimVehicle(Node):
                                self.create_publisher(bearing_type, prefix + "df/bearing", 100))
         self.pub_truth = self.create_publisher(self.T.PointStamped, "sim/truth", latched)
         self.pub_datum = self.create_publisher(self.T.NavSatFix, "sim/datum", latched)
+        if s["drive"] == "goal":
+            self.create_subscription(self.T.NavSatFix, "emitter/datum", self.on_node_datum, latched)
+            self.create_subscription(self.T.PoseStamped, "emitter/next_goal", self.on_goal, 1)
+
+    def _goal_drive(self, overrides: dict) -> list[str]:
+        """`drive:=goal`: the vehicle's legs are made as it goes (`events` a generator reading `goal` at each stop);
+        ConfigError for a scenario it cannot drive."""
+        if self.scenario_name in FLEETS:
+            raise ConfigError(f"drive goal: {self.scenario_name} has several stations; goal driving is for one vehicle")
+        sc = scenario_from(self.scenario_name, overrides)
+        if not sc.points:
+            raise ConfigError(f"drive goal: {self.scenario_name} drives without stopping; goal driving is stop-and-go "
+                              f"(set points > 0)")
+        drive = GoalDrive(sc, self.data_seed)
+        self.datum, self.emitter = sc.datum, sc.emitter
+        stops = [drive.spacing_m * k for k in range(sc.points)]
+        self.goal_end_s = Trajectory(sc.track, sc.speed, stops, sc.dwell_s).duration
+
+        def legs():
+            while True:
+                leg = drive.leg(self.goal)
+                self.sigma_of.update(zip(leg.bearings[:, 0].tolist(), leg.sigma.tolist(), strict=False))
+                yield from ((row[0], "", kind, row) for kind, row in leg.events())
+
+        self.events = legs()
+        return [""]
+
+    def on_node_datum(self, msg):
+        self.node_datum = LocalFrame(msg.latitude, msg.longitude, msg.altitude)
+
+    def on_goal(self, msg):
+        """The localizer's goal, from its map frame (at emitter/datum) into the scenario's."""
+        if self.node_datum is None:
+            return
+        lat, lon, _ = self.node_datum.to_geodetic(msg.pose.position.x, msg.pose.position.y, 0.0)
+        east, north = LocalFrame(*self.datum).to_enu(float(lat), float(lon))
+        self.goal = (float(east), float(north))
 
     def _simulate(self, overrides: dict) -> list[str]:
         """Simulate the run; sets `events` ((t, station, kind, row) in stamp order), `datum`, `emitter` (ENU) and
@@ -156,7 +204,6 @@ class SimVehicle(Node):
         self.events = [(row[0], name, kind, row) for kind, name, row in f.events()]
         self.datum, self.emitter = f.scenario.datum, next(iter(f.truth.values()))
         self.counts = (sum(map(len, f.fixes.values())), sum(map(len, f.bearings.values())))
-        self.sigma_of = {}  # the fleet's scenarios have a constant noise
         self.sigma_rad = f.scenario.sigma_rad
         return list(fleet.stations)
 
@@ -182,11 +229,16 @@ class SimVehicle(Node):
         self.pub_datum.publish(build.navsatfix(T, base, *self.datum, frame_id="map"))
         self.pub_truth.publish(build.point_stamped(T, base, *self.emitter))
         events = self.events
-        end = events[-1][0] if not self.duration_s else min(events[-1][0], self.duration_s)
-        self.get_logger().info(
-            f"playing {self.scenario_name}: {self.counts[0]} fixes, {self.counts[1]} DF readings, "
-            f"{end:.0f} s simulated at speed-up {self.speedup:g}"
-        )
+        if self.counts is None:
+            end = self.duration_s or self.goal_end_s
+            self.get_logger().info(f"driving {self.scenario_name} towards emitter/next_goal: {end:.0f} s simulated at "
+                                   f"speed-up {self.speedup:g}")
+        else:
+            end = events[-1][0] if not self.duration_s else min(events[-1][0], self.duration_s)
+            self.get_logger().info(
+                f"playing {self.scenario_name}: {self.counts[0]} fixes, {self.counts[1]} DF readings, "
+                f"{end:.0f} s simulated at speed-up {self.speedup:g}"
+            )
         t_wall0, next_log = time.monotonic(), 0.0
         for t, station, kind, row in events:
             if t > end or not rclpy.ok():

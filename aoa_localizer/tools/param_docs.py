@@ -3,6 +3,7 @@ reasons from `Reason` (`python -m aoa_localizer.param_docs README.md docs/design
 fails when a document and the code differ)."""
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -64,14 +65,18 @@ def rewrite(text: str) -> str:
 
 
 def main(argv=None) -> int:
-    args = sys.argv[1:] if argv is None else argv
-    if not args:
-        print("usage: python -m aoa_localizer.param_docs README.md [docs/design.md ...]", file=sys.stderr)
-        return 2
-    for path in map(Path, args):
-        text = path.read_text()
+    parser = argparse.ArgumentParser(prog="python -m aoa_localizer.param_docs", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("documents", nargs="+", type=Path, metavar="DOCUMENT",
+                        help="a Markdown file holding a generated block (parameters, or rejection reasons)")
+    for path in parser.parse_args(argv).documents:
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            print(f"param_docs: cannot read {path}: {exc.strerror}", file=sys.stderr)
+            return 2
         if not any(begin in text and end in text for begin, end, _ in BLOCKS):
-            print(f"{path}: no generated block (parameters, or rejection reasons)", file=sys.stderr)
+            print(f"param_docs: {path}: no generated block (parameters, or rejection reasons)", file=sys.stderr)
             return 2
         path.write_text(rewrite(text))
     return 0

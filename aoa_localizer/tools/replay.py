@@ -25,6 +25,7 @@ from aoa_localizer.common.cli import (
     bag_stations,
     bag_topics,
     config_from_args,
+    interrupted,
     setup_logging,
 )
 from aoa_localizer.core.spec import ConfigError
@@ -65,6 +66,8 @@ def run_offline(args) -> int:
     except BagError as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        return interrupted("replay", f"the {written} estimates written to {args.output} are kept")
     finally:
         if out is not sys.stdout:
             out.close()
