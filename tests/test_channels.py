@@ -233,3 +233,19 @@ def test_two_localizers_split_the_spectrum_by_band_and_each_emitter_is_found_onc
         (est,) = found[channel_id(f)]  # exactly once
         e, n = LocalFrame(*fleet.scenario.datum).to_enu(est.lat, est.lon)
         assert math.hypot(e - truth[0], n - truth[1]) < 10.0
+
+
+@pytest.mark.slow
+def test_the_simulator_shows_two_cars_and_several_frequencies_without_hardware(cli):
+    """`simulate --scenario pair` (two stations) and `--emitters F,E,N ...` (one channel per frequency): each
+    emitter's estimate printed with its error, exit 0 when every one is inside 3 times its ellipse."""
+    from aoa_localizer.tools.simulate import main as simulate_main
+
+    pair = cli(simulate_main, "--scenario", "pair")
+    assert pair.returncode == 0 and "stations car1, car2" in pair.stdout, pair.stdout + pair.stderr
+    two = cli(simulate_main, "--emitters", "433.92e6,1200,800", "446e6,400,1100")
+    assert two.returncode == 0, two.stdout + two.stderr
+    for name in ("433.920 MHz", "446.000 MHz"):
+        line = next(line for line in two.stdout.splitlines() if line.startswith(name))
+        assert float(line.split("error ")[1].split(" m")[0]) < 10.0
+    assert cli(simulate_main, "--emitters", "433e6,12").returncode == 2

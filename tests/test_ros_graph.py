@@ -435,6 +435,8 @@ def test_the_node_refuses_unknown_names_and_bad_node_only_values_at_start(tmp_pa
     (["-p", "gps_dropout_prob:=2.0"], "gps_dropout_prob must be a finite number in [0, 1) or unset, got 2.0"),
     (["-p", "wild_share:=abc"], "wild_share must be a finite number in [0, 1] or unset, got 'abc'"),
     (["-p", "scenari:=urban"], "scenari: unknown parameter; did you mean scenario?"),
+    (["-p", "emitters:=[4.0e8,1.0]"], "emitters needs frequency, east, north triples"),
+    (["-p", "drive:=goal", "-p", "scenario:=urban"], "drive goal: urban drives without stopping"),
 ])
 def test_the_vehicle_refuses_bad_parameters_at_start(domain, args, words):
     """ROS-package issue: gps_dropout_prob 2 was accepted, wild_share abc gave a numpy traceback."""

@@ -25,7 +25,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from aoa_localizer.core.spec import ConfigError, ParameterSpec, Spec
-from aoa_localizer.engine.fleet import FLEETS, simulate_fleet
+from aoa_localizer.engine.fleet import FLEETS, Fleet, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.goal_drive import GoalDrive
 from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, simulate
@@ -44,6 +44,9 @@ OVERRIDES = [
     ParameterSpec("emitter_north", None, _number("emitter north (m, map)")),
     ParameterSpec("track", None, Spec("track polyline as a flat list e0, n0, e1, n1, ... (m, map)", list,
                                       optional=True)),
+    ParameterSpec("emitters", None, Spec("transmitters instead of the scenario's one, as a flat list f0, e0, n0, f1, "
+                                         "... (frequency Hz > 0, east and north m in map): each on its frequency, "
+                                         "a channel each", list, optional=True)),
     ParameterSpec("speed", None, _number("vehicle speed (m/s)", low=0.0, low_open=True, high=100.0)),
     ParameterSpec("points", None, _number("observation points (stop-and-go); 0: drive without stopping", int,
                                           low=0, high=100_000)),
@@ -117,6 +120,17 @@ def scenario_from(name: str, o: dict):
     return dataclasses.replace(sc, **changes)
 
 
+def emitters_from(flat: list) -> dict[float, tuple[float, float]]:
+    """The `emitters` parameter (f0, e0, n0, f1, ...) by frequency; ValueError when it is not such triples."""
+    values = [float(v) for v in flat]
+    if not values or len(values) % 3:
+        raise ValueError("emitters needs frequency, east, north triples (f0, e0, n0, f1, ...)")
+    triples = list(zip(values[::3], values[1::3], values[2::3], strict=True))
+    if any(not (f > 0 and math.isfinite(f) and math.isfinite(e) and math.isfinite(n)) for f, e, n in triples):
+        raise ValueError("emitters: each frequency must be > 0 Hz and each place finite")
+    return {f: (e, n) for f, e, n in triples}
+
+
 class SimVehicle(Node):
     """Publishes one simulated run, paced by the simulated clock."""
 
@@ -155,8 +169,9 @@ class SimVehicle(Node):
     def _goal_drive(self, overrides: dict) -> list[str]:
         """`drive:=goal`: the vehicle's legs are made as it goes (`events` a generator reading `goal` at each stop);
         ConfigError for a scenario it cannot drive."""
-        if self.scenario_name in FLEETS:
-            raise ConfigError(f"drive goal: {self.scenario_name} has several stations; goal driving is for one vehicle")
+        if self.scenario_name in FLEETS or overrides.get("emitters") is not None:
+            raise ConfigError(f"drive goal: follows one vehicle's goal for one emitter, not {self.scenario_name} with "
+                              f"emitters {overrides.get('emitters')}")
         sc = scenario_from(self.scenario_name, overrides)
         if not sc.points:
             raise ConfigError(f"drive goal: {self.scenario_name} drives without stopping; goal driving is stop-and-go "
@@ -190,6 +205,10 @@ class SimVehicle(Node):
         """Simulate the run; sets `events` ((t, station, kind, row) in stamp order), `datum`, `emitter` (ENU) and
         `sigma_of` (each bearing's noise, for the pose encoding); returns the station names ("" for one vehicle)."""
         fleet = FLEETS.get(self.scenario_name)
+        emitters = overrides.pop("emitters", None)
+        if emitters is not None:
+            stations = fleet.stations if fleet is not None else {"": scenario_from(self.scenario_name, overrides)}
+            fleet, overrides = Fleet(stations, emitters_from(emitters)), {}
         if fleet is None:
             d = simulate(scenario_from(self.scenario_name, overrides), self.data_seed)
             self.events = [(row[0], "", kind, row) for kind, row in d.events()]

@@ -2,6 +2,10 @@
 
 Unless --seed is given, the filter is seeded 10000 + data seed (the benchmark's pairing), so a run
 repeats exactly. Exit 0 when the final error is within 5x the scenario's Cramer-Rao bound (plus 1 m), 1 otherwise.
+
+`--scenario pair` (two cars) and `--emitters F,E,N ...` (several transmitters, each on its frequency: one channel
+each) run every station and emitter through one localizer and print each channel's estimate and error; exit 0
+when every emitter has an estimate whose error is inside 3 times its 95 % ellipse.
 """
 from __future__ import annotations
 
@@ -13,21 +17,41 @@ import numpy as np
 
 from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, seed_value, setup_logging
 from aoa_localizer.core.spec import ConfigError
-from aoa_localizer.engine.crlb import ellipse_axes
+from aoa_localizer.engine.channels import channel_id
+from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse
 from aoa_localizer.engine.evaluation import run, scenario_config
+from aoa_localizer.engine.fleet import FLEETS, FleetData, simulate_fleet
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+
+
+def emitter_value(text: str) -> tuple[float, tuple[float, float]]:
+    """argparse type of --emitters F,E,N: a frequency (Hz, > 0) and an ENU place (m)."""
+    try:
+        f, e, n = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"an emitter is FREQUENCY_HZ,EAST_M,NORTH_M, got {text!r}") from None
+    if not (f > 0 and math.isfinite(f) and math.isfinite(e) and math.isfinite(n)):
+        raise argparse.ArgumentTypeError(f"an emitter needs a frequency > 0 and a finite place, got {text!r}")
+    return f, (e, n)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.simulate", description=__doc__,
                                      formatter_class=HelpFormatter)
-    parser.add_argument("--scenario", choices=sorted(SCENARIOS), default="seed",
-                        help="public scenario (docs/benchmarks.md, Scenarios)")
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS) + sorted(FLEETS), default="seed",
+                        help="public scenario (docs/benchmarks.md, Scenarios; pair: two cars)")
+    parser.add_argument("--emitters", nargs="+", type=emitter_value, metavar="F,E,N",
+                        help="transmitters at these frequencies (Hz) and places (east, north m) instead of the "
+                        "scenario's one, each its own channel")
     parser.add_argument("--data-seed", type=seed_value, default=0, help="seed of the simulated data")
     parser.add_argument("--write-bag", metavar="DIR", help="also write the simulated run as a rosbag2 MCAP bag")
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
+    if args.scenario in FLEETS or args.emitters:
+        return run_fleet(args)
     data = simulate(args.scenario, args.data_seed)
     try:
         cfg = config_from_args(args)
@@ -62,6 +86,61 @@ def main(argv=None) -> int:
         print(line)
     ok = s["error"] <= 5 * s["crlb"] + 1.0 and math.isfinite(s["error"])
     return 0 if ok else 1
+
+
+def run_fleet(args) -> int:
+    """Several stations (`pair`) or several emitters (`--emitters`) through one localizer: each channel's estimate
+    and its error against its emitter."""
+    fleet = FLEETS.get(args.scenario)
+    stations = fleet.stations if fleet is not None else {"": SCENARIOS[args.scenario]}
+    emitters = dict(args.emitters) if args.emitters else FLEETS[args.scenario].emitters
+    try:
+        cfg = config_from_args(args)
+    except ConfigError as exc:
+        print(f"simulate: {exc}", file=sys.stderr)
+        return 2
+    cfg = cfg if cfg.seed is not None else cfg.with_changes(seed=10000 + args.data_seed)
+    data = simulate_fleet(stations, emitters, args.data_seed)
+    if args.write_bag:
+        from msgs_adapters.bag import write_bag
+
+        named = {n: (data.fixes[n], data.bearings[n]) for n in stations if n}
+        write_bag(args.write_bag, data.fixes.get("", []), data.bearings.get("", []), next(iter(emitters.values())),
+                  data.scenario.datum, stations=named)
+        print(f"bag written to {args.write_bag}")
+    loc = feed_fleet(Localizer(cfg), data)
+    print(f"scenario {args.scenario}: stations {', '.join(n or 'default' for n in stations)}; "
+          f"{sum(map(len, data.bearings.values()))} DF readings of {len(emitters)} emitter(s)")
+    frame, found = LocalFrame(*data.scenario.datum), 0
+    for f, truth in data.truth.items():
+        channel = loc.channels.live.get(channel_id(f)) if f else loc.channels.live.get("default")
+        est = channel.estimate if channel is not None else None
+        name = f"{f / 1e6:.3f} MHz" if f else "the emitter"
+        if est is None:
+            print(f"{name}: no estimate")
+            continue
+        east, north = frame.to_enu(est.lat, est.lon)
+        error = (float(east - truth[0]), float(north - truth[1]))
+        a, b, _ = ellipse_axes(est.cov)
+        inside = inside_ellipse(error, est.cov, 9 * ELLIPSE_95)
+        found += inside
+        print(f"{name}: lat {est.lat:.7f} lon {est.lon:.7f}, 95% ellipse semi-axes {a:.1f} m x {b:.1f} m; error "
+              f"{math.hypot(*error):.2f} m (truth E {truth[0]:.0f} N {truth[1]:.0f}); {est.points_used} points")
+    loc.close()
+    return 0 if found == len(data.truth) else 1
+
+
+def feed_fleet(loc: Localizer, data: FleetData) -> Localizer:
+    """Every station's fixes and DF records into `loc` in stamp order, then the end of the data."""
+    for kind, station, row in data.events():
+        if kind == "fix":
+            loc.add_fix(row[0], row[1], row[2], row[3], station=station)
+        else:
+            loc.add_bearing(row[0], row[1], row[2], station=station, frequency_hz=row[3])
+        loc.catch_up()
+    loc.flush()
+    loc.finish()
+    return loc
 
 
 if __name__ == "__main__":
