@@ -584,6 +584,7 @@ def test_the_engines_log_lines_reach_rosout(domain):
         # callback died of "Logger severity cannot be changed between calls" at the first datum after a warning).
         engine.info("a test line %d", 1)
         engine.warning("re-start: a test line %d", 42)
+        logging.getLogger("aoa_localizer").info("a root line")  # the node's name is not repeated before it
         engine.error("a test line %d", 3)
         end = time.monotonic() + 10.0
         while time.monotonic() < end and not any("a test line 3" in msg for _, msg, _ in seen):
@@ -592,6 +593,7 @@ def test_the_engines_log_lines_reach_rosout(domain):
         assert lines.get("aoa_localizer.track: a test line 1") == Log.INFO, seen
         assert lines.get("aoa_localizer.track: re-start: a test line 42") == Log.WARN
         assert lines.get("aoa_localizer.track: a test line 3") == Log.ERROR
+        assert lines.get("a root line") == Log.INFO
         node.destroy_node()
         assert not logging.getLogger("aoa_localizer").handlers  # the bridge leaves with the node
         listener.destroy_node()

@@ -53,7 +53,7 @@ def _estimate_lines(loc: Localizer, est, truth, datum) -> list[str]:
     else:
         origin = loc.datum_frame()
         where = f"E {est.east:.1f} m, N {est.north:.1f} m from the datum {origin.lat0:.7f}, {origin.lon0:.7f}"
-    lines = [f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} ({where}), 95% ellipse {a:.1f} x {b:.1f} m, "
+    lines = [f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} ({where}), 95% ellipse semi-axes {a:.1f} x {b:.1f} m, "
              f"{est.bearings_used} bearings in {est.points_used} points"]
     if truth is not None and datum is not None:
         lines.append(f"error against the bag's truth (E {truth[1]:.1f} m, N {truth[2]:.1f} m, same frame): "

@@ -490,7 +490,7 @@ def print_result(ok: bool, why: str, f: dict):
         where = f"lat {f['lat']:.7f} lon {f['lon']:.7f}, " if f.get("lat") is not None else ""
         print(
             f"estimate: {where}E {f['east']:.1f} m N {f['north']:.1f} m, "
-            f"95% ellipse {f['ellipse95_m'][0]:.1f} m x {f['ellipse95_m'][1]:.1f} m"
+            f"95% ellipse semi-axes {f['ellipse95_m'][0]:.1f} m x {f['ellipse95_m'][1]:.1f} m"
         )
         if "error_m" in f:
             print(f"error against the simulated truth: {f['error_m']:.2f} m")

@@ -48,6 +48,7 @@ NODE_NAME = "aoa_localizer"
 DATUM_PARAMS = frozenset({"datum_lat", "datum_lon", "datum_alt"})  # the only parameters that move the map frame
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
+ENGINE_LOGGER = "aoa_localizer"  # the engine's logger (engine/localizer.py); its modules' are children
 DRAIN_MAX = 100  # DF records handled per executor callback beyond the first (then GPS, timers and services get a turn)
 
 _NODE_SPECS = {p.name: p for p in NODE_PARAMS}
@@ -66,7 +67,9 @@ class RosLogHandler(logging.Handler):
     def emit(self, record: logging.LogRecord):
         # One call line per severity: rclpy keys its log settings on the calling line and raises "Logger severity
         # cannot be changed between calls" when one line logs at two severities (it crashed the node's callback).
-        level, ros, text = record.levelno, self.ros_logger, f"{record.name}: {record.getMessage()}"
+        # The engine's own logger carries the node's name already ("[aoa_localizer]: ..."); a module's adds its own.
+        where = "" if record.name == ENGINE_LOGGER else f"{record.name}: "
+        level, ros, text = record.levelno, self.ros_logger, where + record.getMessage()
         if level >= logging.ERROR:
             ros.error(text)
         elif level >= logging.WARNING:
@@ -134,7 +137,7 @@ class LocalizerNode(Node):
     def _init_logging(self):
         """The engine's Python log lines go to the ROS logger (console and /rosout), not a second time to the root."""
         self.log_bridge = RosLogHandler(self.get_logger())
-        engine_log = logging.getLogger("aoa_localizer")
+        engine_log = logging.getLogger(ENGINE_LOGGER)
         self._engine_log_was = (engine_log.level, engine_log.propagate)
         engine_log.addHandler(self.log_bridge)
         engine_log.setLevel(logging.INFO)
@@ -209,7 +212,7 @@ class LocalizerNode(Node):
         self.made[est.channel] = est
 
     def destroy_node(self):
-        engine_log = logging.getLogger("aoa_localizer")
+        engine_log = logging.getLogger(ENGINE_LOGGER)
         engine_log.removeHandler(self.log_bridge)
         engine_log.level, engine_log.propagate = self._engine_log_was
         self.loc.close()

@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     est = res.estimates[-1]
     a, b, _ = ellipse_axes(est.cov)
     print(f"estimate ({loc.cfg.algorithm}, N={loc.cfg.num_particles}): lat {est.lat:.7f} lon {est.lon:.7f}, "
-          f"95% ellipse {a:.1f} m x {b:.1f} m")
+          f"95% ellipse semi-axes {a:.1f} m x {b:.1f} m")
     print(f"error {s['error']:.2f} m (east {s['err_east']:+.2f}, north {s['err_north']:+.2f}); "
           f"Cramer-Rao bound {s['crlb']:.2f} m; truth inside the ellipse: {'yes' if s['inside95'] else 'no'}")
     print(f"{est.bearings_used} readings in {est.points_used} observation points; median step "
