@@ -758,6 +758,10 @@ def test_two_stations_and_two_emitters_each_get_their_topics_summary_and_status(
         assert any(math.hypot(top.x - channels[cid]["east"], top.y - channels[cid]["north"]) < 0.5
                    for cid in ids if channels[cid]["points_used"] == most), (top, channels)
         assert set(got["paths"]) == set(PAIR)
+        # the node's own status counts every channel's bearings (one /diagnostics message: the same moment)
+        values = diagnostics_values(T.DiagnosticArray(status=list(got["status"].values())))
+        per_channel = [int(values[f"aoa_localizer: localizer channel {cid}"]["bearings_used"]) for cid in ids]
+        assert int(values["aoa_localizer: localizer"]["bearings_used"]) == sum(per_channel) > max(per_channel)
     assert node_p.poll() is None
 
 

@@ -133,9 +133,13 @@ class NodeMonitor:
     def _state_values(self, loc: Localizer) -> dict[str, Any]:
         """Counts, rejections by reason, callback load and the estimate."""
         track = loc.track_status()
+        # Totals over every channel kept (each channel's own are in its status, channel_diagnostics)
+        tracks = [loc.track_status(channel) for channel in loc.channels.all()] or [track]
         values: dict[str, Any] = dict(self.counts)
-        values.update(status=loc.status, algorithm=loc.cfg.algorithm, bearings_used=track.bearings_used,
-                      points_used=track.points_used, unknown_quality=loc.unknown_quality, other_band=loc.other_band,
+        values.update(status=loc.status, algorithm=loc.cfg.algorithm,
+                      bearings_used=sum(t.bearings_used for t in tracks),
+                      points_used=sum(t.points_used for t in tracks),
+                      unknown_quality=loc.unknown_quality, other_band=loc.other_band,
                       bearings_rejected=sum(v for k, v in loc.rejected.items() if not k.startswith("fix_")),
                       fixes_rejected=sum(v for k, v in loc.rejected.items() if k.startswith("fix_")))
         values.update({f"rejected.{k}": v for k, v in sorted(loc.rejected.items())})
