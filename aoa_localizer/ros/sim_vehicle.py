@@ -169,9 +169,10 @@ class SimVehicle(Node):
     def _goal_drive(self, overrides: dict) -> list[str]:
         """`drive:=goal`: the vehicle's legs are made as it goes (`events` a generator reading `goal` at each stop);
         ConfigError for a scenario it cannot drive."""
-        if self.scenario_name in FLEETS or overrides.get("emitters") is not None:
-            raise ConfigError(f"drive goal: follows one vehicle's goal for one emitter, not {self.scenario_name} with "
-                              f"emitters {overrides.get('emitters')}")
+        if self.scenario_name in FLEETS:
+            raise ConfigError(f"drive goal: one vehicle follows the goal; {self.scenario_name} has several stations")
+        if overrides.get("emitters") is not None:
+            raise ConfigError("drive goal: the goal is one emitter's; emitters gives several")
         sc = scenario_from(self.scenario_name, overrides)
         if not sc.points:
             raise ConfigError(f"drive goal: {self.scenario_name} drives without stopping; goal driving is stop-and-go "
