@@ -106,15 +106,15 @@ class NodeOutputs:
 
     def _listened(self, loc: Localizer, *kinds: str) -> list[tuple[Channel, list]]:
         """The channels with a listener on one of their `kinds` of publishers (its own, or emitter/'s for the primary
-        channel), each with those publishers."""
-        primary, out = loc.channels.primary(), []
-        for channel in loc.channels.all():
-            listening = [getattr(pubs, kind) for cid, pubs in self.channel_pubs.items()
-                         if cid == channel.id or (cid == DEFAULT and channel is primary)
-                         for kind in kinds if getattr(pubs, kind).get_subscription_count()]
-            if listening:
-                out.append((channel, listening))
-        return out
+        channel), each with those publishers. One pass over the publishers: a node keeps hundreds of them."""
+        primary, by_id = loc.channels.primary(), {c.id: c for c in loc.channels.all()}
+        out: dict[str, tuple[Channel, list]] = {}
+        for cid, pubs in self.channel_pubs.items():
+            channel = (primary or by_id.get(DEFAULT)) if cid == DEFAULT else by_id.get(cid)
+            listening = [getattr(pubs, kind) for kind in kinds if getattr(pubs, kind).get_subscription_count()]
+            if channel is not None and listening:
+                out.setdefault(channel.id, (channel, []))[1].extend(listening)
+        return list(out.values())
 
     @staticmethod
     def channel_summary(loc: Localizer) -> dict[str, dict]:
