@@ -18,6 +18,7 @@ import numpy as np
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.crlb import crlb_rmse
+from aoa_localizer.engine.evaluation import feed_fleet
 from aoa_localizer.engine.fleet import simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
@@ -40,11 +41,7 @@ def main() -> None:
     t0 = time.perf_counter()
     for band in ([400e6, split], [split, 400e6 + SPACING_HZ * (args.emitters + 1)]):
         loc = Localizer(LocalizerConfig(seed=1, frequency_band_hz=band))
-        for kind, _, row in fleet.events():
-            if kind == "fix":
-                loc.add_fix(*row[:4])
-            else:
-                loc.add_bearing(*row[:3], frequency_hz=row[3])
+        feed_fleet(loc, fleet)
         loc.flush()
         loc.finish()
         for channel in loc.channels.all():

@@ -8,6 +8,7 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, inside_ellipse, nees
+from aoa_localizer.engine.fleet import FleetData
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import ScenarioData
 from aoa_localizer.engine.types import Estimate
@@ -38,6 +39,17 @@ def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
         on_result(
             loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2])
         )
+        loc.catch_up()
+
+
+def feed_fleet(loc: Localizer, data: FleetData) -> None:
+    """Every station's fixes and DF records (with their frequencies) into `loc` in stamp order, as `feed` does for
+    one vehicle."""
+    for kind, station, row in data.events():
+        if kind == "fix":
+            loc.add_fix(row[0], row[1], row[2], row[3], station=station)
+        else:
+            loc.add_bearing(row[0], row[1], row[2], station=station, frequency_hz=row[3])
         loc.catch_up()
 
 

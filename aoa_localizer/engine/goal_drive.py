@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from aoa_localizer.engine.evaluation import feed
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import Scenario, ScenarioData, Trajectory, df_records, gps_fixes
-
-if TYPE_CHECKING:  # the localizer drives the vehicle only in closed_loop: no import at run time
-    from aoa_localizer.engine.localizer import Localizer
-    from aoa_localizer.engine.types import Estimate
+from aoa_localizer.engine.types import Estimate
 
 ARRIVED_M = 1.0  # a target nearer than this is reached: the vehicle stays and takes its readings there
 
@@ -87,12 +85,7 @@ def closed_loop(drive: GoalDrive, loc: Localizer, radius_m: float, follow_goal: 
     each leg (None before the first). Ends when the vehicle has no goal and its track is driven."""
     goal = None
     while goal is not None or drive.route_s < drive.route.length or not drive.legs:
-        for kind, row in drive.leg(goal).events():
-            if kind == "fix":
-                loc.add_fix(*row[:4])
-            else:
-                loc.add_bearing(*row[:3])
-        loc.catch_up()
+        feed(loc, drive.leg(goal), lambda _: None)
         if follow_goal:
             place = loc.vehicle_place()
             found = loc.next_goal(place, radius_m) if place is not None else None

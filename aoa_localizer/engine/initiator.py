@@ -87,11 +87,10 @@ class Initiator:
         if not modes or not res.determined:
             t.status = f"waiting for geometry: {res.why}"
             # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later);
-            # at once when points came while the worker searched: the stream may have ended, and no later point
+            # at once when enough came while the worker searched: the stream may have ended, and no later point
             # would ask again (the live node kept emitters of its last seconds without an estimate).
-            lagged = len(t.window) > res.searched
             self.next_start_try = res.searched + min(_START_RETRY_MAX, max(1, res.searched // 10))
-            if lagged and len(t.window) >= self.next_start_try and t.job is None:
+            if len(t.window) >= self.next_start_try:
                 self.try_start()
             if not modes:
                 return False

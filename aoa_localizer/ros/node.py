@@ -148,6 +148,8 @@ class LocalizerNode(Node):
         declare(self, parameter_specs(), check=False)  # the engine's values are checked together, by its config
         node_values = declare(self, NODE_PARAMS)
         self.station_names, self.fixed_positions = self._stations(node_values)
+        moving = [name for name in self.station_names if name not in self.fixed_positions]
+        self.vehicle = moving[0] if moving else None  # the station emitter/next_goal guides
         refuse_unknown(self)
         self.cfg = self._config_from({})
         self.pending_params: dict = {}  # the first parameters of a group set together, held until it is complete
@@ -393,8 +395,7 @@ class LocalizerNode(Node):
         """Once a second: where to drive next (emitter/next_goal), for the channels someone listens to, from the
         first moving station's newest fix."""
         t0 = time.perf_counter()
-        moving = [name for name in self.station_names if name not in self.fixed_positions]
-        vehicle = self.loc.vehicle_place(moving[0]) if moving else None
+        vehicle = self.loc.vehicle_place(self.vehicle) if self.vehicle is not None else None
         self.outputs.next_goals(self.loc, vehicle, self.get_parameter("goal_radius_m").value)
         self.monitor.other_s += time.perf_counter() - t0
 

@@ -78,8 +78,7 @@ class NodeOutputs:
         """Each channel's posterior grid on its emitter/<channel>/posterior, and the primary channel's on
         emitter/posterior, for the ones someone listens to (a grid costs cells x points: once a period)."""
         for channel, listening in self._listened(loc, "posterior"):
-            est = channel.estimate
-            grid = loc.posterior_grid(channel) if est is not None else None
+            est, grid = channel.estimate, loc.posterior_grid(channel)
             if grid is None or est is None:
                 continue
             msg = build.occupancy_grid(self.types, est.stamp, grid.east0, grid.north0, grid.resolution, grid.value,

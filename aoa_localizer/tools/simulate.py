@@ -19,8 +19,8 @@ from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse
-from aoa_localizer.engine.evaluation import run, scenario_config
-from aoa_localizer.engine.fleet import FLEETS, FleetData, simulate_fleet
+from aoa_localizer.engine.evaluation import feed_fleet, run, scenario_config
+from aoa_localizer.engine.fleet import FLEETS, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
@@ -108,7 +108,10 @@ def run_fleet(args) -> int:
         write_bag(args.write_bag, data.fixes.get("", []), data.bearings.get("", []), next(iter(emitters.values())),
                   data.scenario.datum, stations=named)
         print(f"bag written to {args.write_bag}")
-    loc = feed_fleet(Localizer(cfg), data)
+    loc = Localizer(cfg)
+    feed_fleet(loc, data)
+    loc.flush()
+    loc.finish()
     print(f"scenario {args.scenario}: stations {', '.join(n or 'default' for n in stations)}; "
           f"{sum(map(len, data.bearings.values()))} DF readings of {len(emitters)} emitter(s)")
     frame, found = LocalFrame(*data.scenario.datum), 0
@@ -128,19 +131,6 @@ def run_fleet(args) -> int:
               f"{math.hypot(*error):.2f} m (truth E {truth[0]:.0f} N {truth[1]:.0f}); {est.points_used} points")
     loc.close()
     return 0 if found == len(data.truth) else 1
-
-
-def feed_fleet(loc: Localizer, data: FleetData) -> Localizer:
-    """Every station's fixes and DF records into `loc` in stamp order, then the end of the data."""
-    for kind, station, row in data.events():
-        if kind == "fix":
-            loc.add_fix(row[0], row[1], row[2], row[3], station=station)
-        else:
-            loc.add_bearing(row[0], row[1], row[2], station=station, frequency_hz=row[3])
-        loc.catch_up()
-    loc.flush()
-    loc.finish()
-    return loc
 
 
 if __name__ == "__main__":
