@@ -10,7 +10,7 @@ from conftest import DATUM
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, mounted, simulate
 
 FRAME = LocalFrame(*DATUM)
 # urban's track (the seed polyline, three corners) driven at 10 m/s, without GPS noise or wild readings
@@ -147,3 +147,27 @@ def test_offline_replay_feeds_a_bags_imu_headings_to_the_engine():
     assert feed(loc, BagEvent("heading", 0, HeadingRecord(1.0, 0.3))) is None
     assert feed(loc, BagEvent("heading", 0, HeadingRecord(0.5, 0.3))) is None
     assert loc.stations[""].heading.samples.t == [1.0] and loc.rejected["heading_out_of_order"] == 1
+
+
+def test_the_simulator_takes_azimuths_from_the_forward_axis_with_its_mount_offset():
+    """`Scenario.mount_offset_deg`: the same run's azimuths less the heading (east on `straight`'s road: 90 deg) and
+    the mount, to within the meridian convergence over the road (0.02 deg); at a corner the vehicle faces the way
+    it came."""
+    north, rel = simulate(SCENARIOS["straight"], 4), simulate(mounted(SCENARIOS["straight"], 30.0), 4)
+    np.testing.assert_allclose((north.bearings[:, 1] - rel.bearings[:, 1]) % 360.0, 120.0, atol=0.03)
+    np.testing.assert_array_equal(rel.fixes, north.fixes)
+    corner = Trajectory(((0, 0), (100, 0), (100, 100)), 10.0)
+    np.testing.assert_allclose(corner.course([0.0, 5.0, 10.0, 15.0]), [0.0, 0.0, 0.0, math.pi / 2])
+
+
+@pytest.mark.slow
+def test_simulate_shows_relative_bearings_and_a_wrong_mount_offset_learned(cli):
+    """`simulate --mount-offset-deg 30` sets the localizer to read what it records; with `-p mount_offset_deg=0`
+    the offset is found, learned and named."""
+    from aoa_localizer.tools.simulate import main as simulate_main
+
+    right = cli(simulate_main, "--mount-offset-deg", 30)
+    assert right.returncode == 0 and "heading_unknown" in right.stdout, right.stdout + right.stderr
+    wrong = cli(simulate_main, "--mount-offset-deg", 30, "-p", "mount_offset_deg=0")
+    assert wrong.returncode == 0 and "set mount_offset_deg to 30.0?" in wrong.stdout, wrong.stdout + wrong.stderr
+    assert cli(simulate_main, "--mount-offset-deg", "north").returncode == 2

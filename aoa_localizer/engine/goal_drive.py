@@ -35,6 +35,7 @@ class GoalDrive:
         self.spacing_m = self.route.length / max(1, scenario.points - 1)
         self.route_s = 0.0
         self.place = np.array(scenario.track[0], float)
+        self.course = float(self.route.course(0.0))  # the vehicle's forward axis (ENU angle, rad)
         self.t = 0.0  # the simulated clock at the start of the next leg (s)
         self.odometer_m = 0.0
         self.legs = 0
@@ -70,7 +71,10 @@ class GoalDrive:
         t_df = t0 + drive_s + 1.0 + np.arange(sc.readings_per_point) / sc.df_rate_hz
         fixes = gps_fixes(sc, self.frame, self.rng, t_gps, at(t_gps))
         sensor = at(t_df)
-        bearings, sigma, wild, emitter = df_records(sc, self.frame, self.rng, t_df, sensor)
+        if distance > 0:
+            self.course = math.atan2(target[1] - self.place[1], target[0] - self.place[0])
+        bearings, sigma, wild, emitter = df_records(sc, self.frame, self.rng, t_df, sensor,
+                                                    np.full(t_df.size, self.course))
         self.place, self.t = target, t1
         self.odometer_m += distance
         self.legs += 1

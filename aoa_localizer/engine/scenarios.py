@@ -54,6 +54,9 @@ class Scenario:
     gps_clock_offset_s: float = 0.37
     df_clock_offset_s: float = 0.05
     datum: tuple[float, float, float] = DATUM
+    # None: azimuths from true north. A number: azimuths from the vehicle's forward axis (its direction of travel),
+    # as a DF array mounted with its zero this far clockwise from that axis measures them.
+    mount_offset_deg: float | None = None
     # Filter settings this scenario asks for (the prior of `straight`, the receiver calibration of `urban`).
     filter_overrides: dict = field(default_factory=dict)
 
@@ -70,6 +73,19 @@ SCENARIOS = {
     "homing": Scenario("homing", (1500, 1500), ((0, 0), (1200, 1200), (1600, 1000), (2000, 1700)),
                        readings_per_point=3),
 }
+
+
+def mounted(sc: Scenario, mount_offset_deg: float | None) -> Scenario:
+    """`sc` with its DF array mounted on the vehicle at this offset (None: `sc` as it is)."""
+    return sc if mount_offset_deg is None else replace(sc, mount_offset_deg=float(mount_offset_deg))
+
+
+def receiver_settings(mount_offset_deg: float | None) -> dict:
+    """The localizer settings that read a scenario's DF records as its array took them: none for azimuths from true
+    north; the vehicle's forward axis, its course from the GPS track and the mount offset otherwise."""
+    if mount_offset_deg is None:
+        return {}
+    return {"bearing_reference": "vehicle", "heading_source": "track", "mount_offset_deg": float(mount_offset_deg)}
 
 
 def robustness_cells() -> dict[str, Scenario]:
@@ -138,6 +154,14 @@ class Trajectory:
         """Time the vehicle reaches its stop number `stop_index`."""
         return float(self.t_knots[1 + 2 * stop_index])
 
+    def course(self, t) -> np.ndarray:
+        """The vehicle's forward axis at times t as an ENU angle (rad): the direction of the segment it drives, or at
+        a vertex the one it arrived by (a stopped vehicle faces the way it came)."""
+        s = np.interp(t, self.t_knots, self.s_knots)
+        seg = np.clip(np.searchsorted(self.cum, s, side="left") - 1, 0, len(self.v) - 2)
+        step = self.v[seg + 1] - self.v[seg]
+        return np.arctan2(step[..., 1], step[..., 0])
+
     def at(self, t) -> np.ndarray:
         """ENU positions at times t."""
         s = np.interp(t, self.t_knots, self.s_knots)
@@ -169,7 +193,7 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
     t_gps = t_gps[t_gps >= 0]
     fixes = gps_fixes(sc, frame, rng, t_gps, traj.at(t_gps))
     sensor = traj.at(t_df)
-    bearings, sigma, wild, emitter = df_records(sc, frame, rng, t_df, sensor)
+    bearings, sigma, wild, emitter = df_records(sc, frame, rng, t_df, sensor, traj.course(t_df))
     e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1], 0.0)
     return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)))
 
@@ -185,11 +209,12 @@ def gps_fixes(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_gps: 
     return np.column_stack([t_gps, lat, lon, alt])
 
 
-def df_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_df: np.ndarray, sensor: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def df_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_df: np.ndarray, sensor: np.ndarray,
+               course: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """DF records (B, 3) stamp, azimuth deg, quality taken at `t_df` from the antenna places `sensor`: the geodesic
-    azimuth to the emitter with the scenario's noise, wild bearings and reflector; with each bearing's true sigma,
-    whether it was wild, and the emitter's place at the end."""
+    azimuth to the emitter with the scenario's noise, wild bearings and reflector (from the vehicle's forward axis,
+    `course` an ENU angle, when the scenario has a mount offset); with each bearing's true sigma, whether it was
+    wild, and the emitter's place at the end."""
     s_lat, s_lon, _ = frame.to_geodetic(sensor[:, 0], sensor[:, 1], np.zeros(t_df.size))
     e_lat, e_lon, _ = frame.to_geodetic(sc.emitter[0], sc.emitter[1], 0.0)
     _, az_true = vincenty.vdist(s_lat, s_lon, np.full(t_df.size, e_lat), np.full(t_df.size, e_lon))
@@ -212,6 +237,9 @@ def df_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_df: 
         wild = wild | ghost
     if not sc.quality_known:
         quality = np.full(t_df.size, np.nan)
+    if sc.mount_offset_deg is not None:  # the forward axis as an azimuth from true north, at the antenna
+        heading = np.degrees(np.asarray(frame.north_angle(s_lat, s_lon)) - course)
+        az = az - heading - sc.mount_offset_deg
     return np.column_stack([t_df, wrap_360(az), quality]), sigma, wild, emitter
 
 

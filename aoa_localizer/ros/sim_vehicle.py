@@ -28,7 +28,7 @@ from aoa_localizer.core.spec import ConfigError, ParameterSpec, Spec
 from aoa_localizer.engine.fleet import FLEETS, Fleet, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.goal_drive import GoalDrive
-from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, simulate
+from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, mounted, simulate
 from aoa_localizer.ros.declare import declare, refuse_unknown
 from aoa_localizer.ros.ros_main import run_node
 from msgs_adapters import build
@@ -60,6 +60,10 @@ OVERRIDES = [
     ParameterSpec("gps_noise_m", None, _number("GPS noise per axis (m)", low=0.0, high=10_000.0)),
     ParameterSpec("gps_dropout_prob", None, _number("share of GPS fixes lost", low=0.0, high=1.0, high_open=True)),
     ParameterSpec("df_rate_hz", None, _number("DF rate (Hz)", low=0.0, low_open=True, high=10_000.0)),
+    ParameterSpec("mount_offset_deg", None, _number("publish azimuths from the vehicle's forward axis, the DF "
+                                                    "array's zero this far clockwise from it (deg; unset: azimuths "
+                                                    "from true north); every station of a fleet", low=-360.0,
+                                                    high=360.0)),
     ParameterSpec("datum_lat", None, _number("datum latitude (deg)", low=-89.0, high=89.0)),
     ParameterSpec("datum_lon", None, _number("datum longitude (deg)", low=-180.0, high=180.0)),
     ParameterSpec("datum_alt", None, _number("datum altitude (m)", low=-1000.0, high=10_000.0)),
@@ -114,6 +118,8 @@ def scenario_from(name: str, o: dict):
         changes["quality"] = (given("quality_low", sc.quality[0]), given("quality_high", sc.quality[1]))
     if o.get("sigma_deg") is not None:
         changes.update(sigma_rad=math.radians(o["sigma_deg"]), sigma_q_deg=None)
+    if o.get("mount_offset_deg") is not None:  # drive:=goal; a played run mounts every station's array itself
+        changes["mount_offset_deg"] = float(o["mount_offset_deg"])
     if any(o.get(k) is not None for k in ("datum_lat", "datum_lon", "datum_alt")):
         changes["datum"] = (given("datum_lat", sc.datum[0]), given("datum_lon", sc.datum[1]),
                             given("datum_alt", sc.datum[2]))
@@ -206,12 +212,12 @@ class SimVehicle(Node):
         """Simulate the run; sets `events` ((t, station, kind, row) in stamp order), `datum`, `emitter` (ENU) and
         `sigma_of` (each bearing's noise, for the pose encoding); returns the station names ("" for one vehicle)."""
         fleet = FLEETS.get(self.scenario_name)
-        emitters = overrides.pop("emitters", None)
+        emitters, mount = overrides.pop("emitters", None), overrides.pop("mount_offset_deg", None)
         if emitters is not None:
             stations = fleet.stations if fleet is not None else {"": scenario_from(self.scenario_name, overrides)}
             fleet, overrides = Fleet(stations, emitters_from(emitters)), {}
         if fleet is None:
-            d = simulate(scenario_from(self.scenario_name, overrides), self.data_seed)
+            d = simulate(mounted(scenario_from(self.scenario_name, overrides), mount), self.data_seed)
             self.events = [(row[0], "", kind, row) for kind, row in d.events()]
             self.datum, self.emitter, self.counts = d.scenario.datum, d.emitter_enu, (len(d.fixes), len(d.bearings))
             self.sigma_of = dict(zip(d.bearings[:, 0].tolist(), d.sigma.tolist(), strict=False))
@@ -220,7 +226,8 @@ class SimVehicle(Node):
         if given:
             raise ConfigError(f"{', '.join(given)}: overrides apply to single-vehicle scenarios, not "
                               f"{self.scenario_name}")
-        f = simulate_fleet(fleet.stations, fleet.emitters, self.data_seed)
+        stations = {name: mounted(sc, mount) for name, sc in fleet.stations.items()}
+        f = simulate_fleet(stations, fleet.emitters, self.data_seed)
         self.events = [(row[0], name, kind, row) for kind, name, row in f.events()]
         self.datum, self.emitter = f.scenario.datum, next(iter(f.truth.values()))
         self.counts = (sum(map(len, f.fixes.values())), sum(map(len, f.bearings.values())))

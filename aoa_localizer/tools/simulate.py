@@ -6,6 +6,11 @@ repeats exactly. Exit 0 when the final error is within 5x the scenario's Cramer-
 `--scenario pair` (two cars) and `--emitters F,E,N ...` (several transmitters, each on its frequency: one channel
 each) run every station and emitter through one localizer and print each channel's estimate and error; exit 0
 when every emitter has an estimate whose error is inside 3 times its 95 % ellipse.
+
+`--mount-offset-deg DEG` records the azimuths from the vehicle's forward axis, as an array mounted with its zero DEG
+clockwise from that axis measures them, and sets the localizer to read them so (bearing_reference vehicle,
+heading_source track, mount_offset_deg DEG); a -p for one of those wins, e.g. -p mount_offset_deg=0 shows what a
+wrong offset does.
 """
 from __future__ import annotations
 
@@ -18,12 +23,13 @@ import numpy as np
 from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, seed_value, setup_logging
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.channels import channel_id
+from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse
 from aoa_localizer.engine.evaluation import feed_fleet, run, scenario_config
 from aoa_localizer.engine.fleet import FLEETS, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.engine.scenarios import SCENARIOS, mounted, receiver_settings, simulate
 
 
 def emitter_value(text: str) -> tuple[float, tuple[float, float]]:
@@ -37,6 +43,22 @@ def emitter_value(text: str) -> tuple[float, tuple[float, float]]:
     return f, (e, n)
 
 
+def finite_degrees(text: str) -> float:
+    """argparse type of --mount-offset-deg: a finite angle (deg)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"an angle in degrees, got {text!r}")
+    return value
+
+
+def receiver_config(mount_offset_deg: float | None) -> LocalizerConfig:
+    """The defaults with the settings that read the simulated array's azimuths as it took them."""
+    return LocalizerConfig().with_changes(**receiver_settings(mount_offset_deg))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.simulate", description=__doc__,
                                      formatter_class=HelpFormatter)
@@ -46,15 +68,18 @@ def main(argv=None) -> int:
                         help="transmitters at these frequencies (Hz) and places (east, north m) instead of the "
                         "scenario's one, each its own channel")
     parser.add_argument("--data-seed", type=seed_value, default=0, help="seed of the simulated data")
+    parser.add_argument("--mount-offset-deg", type=finite_degrees, metavar="DEG",
+                        help="azimuths from the vehicle's forward axis, the array's zero DEG clockwise from it "
+                        "(unset: from true north); the localizer is set to match unless -p says otherwise")
     parser.add_argument("--write-bag", metavar="DIR", help="also write the simulated run as a rosbag2 MCAP bag")
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
     if args.scenario in FLEETS or args.emitters:
         return run_fleet(args)
-    data = simulate(args.scenario, args.data_seed)
+    data = simulate(mounted(SCENARIOS[args.scenario], args.mount_offset_deg), args.data_seed)
     try:
-        cfg = config_from_args(args)
+        cfg = config_from_args(args, receiver_config(args.mount_offset_deg))
         if cfg.seed is None:  # no seed given: the benchmark's pairing, a reproducible demo
             cfg = cfg.with_changes(seed=10000 + args.data_seed)
         scenario_config(data, cfg)
@@ -79,6 +104,7 @@ def main(argv=None) -> int:
           f"95% ellipse semi-axes {a:.1f} m x {b:.1f} m")
     print(f"error {s['error']:.2f} m (east {s['err_east']:+.2f}, north {s['err_north']:+.2f}); "
           f"Cramer-Rao bound {s['crlb']:.2f} m; truth inside the ellipse: {'yes' if s['inside95'] else 'no'}")
+    print(f"state: {est.state}" + "".join(f"; {w}" for w in est.warnings))
     print(f"{est.bearings_used} readings in {est.points_used} observation points; median step "
           f"{1e3 * float(np.median(res.step_s)):.3f} ms; inputs not used: "
           f"{', '.join(f'{k} {v}' for k, v in sorted(loc.rejected.items())) or 'none'}")
@@ -93,9 +119,10 @@ def run_fleet(args) -> int:
     and its error against its emitter."""
     fleet = FLEETS.get(args.scenario)
     stations = fleet.stations if fleet is not None else {"": SCENARIOS[args.scenario]}
+    stations = {name: mounted(sc, args.mount_offset_deg) for name, sc in stations.items()}
     emitters = dict(args.emitters) if args.emitters else FLEETS[args.scenario].emitters
     try:
-        cfg = config_from_args(args)
+        cfg = config_from_args(args, receiver_config(args.mount_offset_deg))
     except ConfigError as exc:
         print(f"simulate: {exc}", file=sys.stderr)
         return 2
