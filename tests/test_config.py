@@ -24,6 +24,9 @@ def test_defaults_are_the_papers():
     ({"calibrate_noise": "yes"}, "calibrate_noise"),
     ({"frequency_band_hz": [2e8, 1e8]}, "frequency_band_hz must be empty or \\[low, high\\]"),
     ({"frequency_band_hz": [1e8]}, "frequency_band_hz"),
+    # YAML (a params file, -p NAME:=VALUE) reads 433e6 as text: the refusal says how to write it
+    ({"frequency_band_hz": ["433e6", 4.4e8]}, "'433e6' was read as text; YAML reads 4.33e\\+08 or 433000000"),
+    ({"bearing_sigma_deg": "nan"}, "bearing_sigma_deg must be a finite number in \\(0, 90\\], got 'nan'$"),
     ({"frequency_band_hz": [1e8, 2e8, 3e8]}, "frequency_band_hz"),
     ({"init_method": "guess"}, "init_method"),
     ({"health_window": 1}, "health_window"),

@@ -106,3 +106,8 @@ def test_the_launcher_gives_the_vehicles_encoding_and_a_bags_scenario_settings_t
     params = node_parameters(parse_args(["--bag", "b", "--scenario", "urban"]))
     assert params == SCENARIOS["urban"].filter_overrides
     assert node_parameters(parse_args(["--bag", "b"])) == {}  # the node's defaults, as the README says
+    params = node_parameters(parse_args(["--vehicle-param", "mount_offset_deg=30"]))
+    assert (params["bearing_reference"], params["heading_source"], params["mount_offset_deg"]) == ("vehicle", "track",
+                                                                                                   30.0)
+    assert node_parameters(parse_args(["--vehicle-param", "mount_offset_deg=30", "-p", "mount_offset_deg=0"])
+                           )["mount_offset_deg"] == "0"  # the user's -p wins

@@ -81,9 +81,10 @@ def test_help_prints_usage_and_parameters_and_starts_nothing(cli, program, liste
     assert not rclpy.ok()  # no ROS context was created: nothing joined a domain
 
 
-def test_every_programs_help_shows_its_defaults_and_describes_its_options(cli):
+def test_every_programs_help_shows_its_defaults_and_describes_its_options(cli, monkeypatch):
     """ROS-package issue: --rate, --timeout, --max-ellipse, --max-rate, --wait had no default in their help, and
-    --scenario, --fix-topic, --bearing-topic no description."""
+    --scenario, --fix-topic, --bearing-topic no description; the usage wrapped narrower than the description."""
+    from aoa_localizer.common.cli import HELP_WIDTH
     from aoa_localizer.reporting.report import main as report_main
     from aoa_localizer.ros.launch import main as launch_main
     from aoa_localizer.tools.param_docs import main as param_docs_main
@@ -91,19 +92,22 @@ def test_every_programs_help_shows_its_defaults_and_describes_its_options(cli):
     from aoa_localizer.tools.simulate import main as simulate_main
 
     expected = {
-        launch_main: ["--rate RATE", "(default: 10.0)", "(default: 600.0)", "(default: 50.0)", "public scenario",
+        launch_main: ["--rate X", "(default: 10.0)", "(default: 600.0)", "(default: 50.0)", "public scenario",
                       "seed of the simulated data (default: 0)"],
         replay_main: ["(default: 400.0)", "(default: 3.0)", "the bag's GPS topic", "the bag's DF topic"],
         report_main: ["the bag's GPS topic (sensor_msgs/msg/NavSatFix) (default: /gps/fix)"],
         simulate_main: ["public scenario", "(default: seed)"],
         param_docs_main: ["DOCUMENT [DOCUMENT ...]", "a Markdown file holding a generated block"],
     }
+    monkeypatch.setenv("COLUMNS", "80")  # a narrow terminal: the usage still wraps as wide as the description
     for main, words in expected.items():
         res = cli(main, "--help")
         text = " ".join(res.stdout.split())  # argparse wraps lines
         assert res.returncode == 0 and "(default: None)" not in text
         for word in words:
             assert word in text, (main.__module__, word)
+        usage = res.stdout.split("\n\n")[0].splitlines()
+        assert len(usage) == 1 or 100 < max(map(len, usage)) <= HELP_WIDTH, usage
 
 
 def test_help_into_a_closed_pipe_is_not_an_error(monkeypatch):

@@ -14,6 +14,7 @@ from aoa_localizer.engine.noise import NoiseModel
 from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal
 from aoa_localizer.engine.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
+from aoa_localizer.engine.track_report import merge_overlapping
 from aoa_localizer.filters.moves import independence_from
 
 BASE = robustness_cells()["wild0"]
@@ -130,6 +131,20 @@ def test_two_modes_are_reported_with_their_masses():
     grid = loc.posterior_grid()  # emitter/posterior shows both, not one ellipse between them
     rows, cols = grid.cell_of([m[0] for m in modes], [m[1] for m in modes])
     assert all(grid.value[r, c] > 0 for r, c in zip(rows, cols, strict=True)), (rows, cols)
+
+
+def test_hypotheses_inside_each_others_ellipse_are_one_place_and_far_ones_stay_two():
+    """Two clusters of unit spread 1 m apart are one hypothesis (mass 1, centre halfway); 100 m apart, two."""
+    rng = np.random.default_rng(0)
+    blob = rng.standard_normal((200, 2))
+    for gap, count in ((1.0, 1), (100.0, 2)):
+        x = np.vstack([blob, blob + [gap, 0.0]])
+        w = np.full(400, 1 / 400)
+        clusters = merge_overlapping(x, w, np.repeat([0, 1], 200))
+        assert len(clusters) == count
+        assert sum(mass for _, _, mass in clusters) == pytest.approx(1.0)
+    centre, _, _ = merge_overlapping(np.vstack([blob, blob + [1.0, 0.0]]), w, np.repeat([0, 1], 200))[0]
+    np.testing.assert_allclose(centre, blob.mean(axis=0) + [0.5, 0.0])
 
 
 @pytest.mark.slow

@@ -99,6 +99,23 @@ def test_the_two_car_scenario_plays_both_cars_into_one_node_and_its_bag_replays(
         assert result["converged"] and result["error_m"] < 10.0 and result["ellipse95_m"][0] < 15.0, result
 
 
+def test_a_vehicle_with_its_array_mounted_at_an_offset_is_read_as_mounted(tmp_path, domain):
+    """`--vehicle-param mount_offset_deg=30`: the vehicle publishes azimuths from its forward axis and the launcher
+    tells the node so (read as true-north azimuths they would point 30-120 deg away)."""
+    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 4, "--domain-id", domain,
+                  "--vehicle-param", "mount_offset_deg=30", "--result", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert json.loads((tmp_path / "r.json").read_text())["error_m"] < 10.0
+
+
+def test_a_launcher_timeout_says_where_the_run_stood(domain):
+    """`--timeout`: exit 2 with the last status (what was received and used, the estimate so far), not a bare
+    "timeout"."""
+    res = launch(["--scenario", "seed", "--speedup", 10, "--timeout", 6, "--domain-id", domain])
+    assert res.returncode == 2 and "timeout after 6 s; last status [" in res.stderr, res.stdout + res.stderr
+    assert "bearings received" in res.stderr.split("timeout after")[1], res.stderr
+
+
 def test_pose_encoding_and_a_vehicle_driving_to_the_goal_end_to_end(tmp_path, domain):
     """The pose encoding end to end, with the vehicle following emitter/next_goal (`drive=goal`): it leaves the
     straight road (north -200 m) for the emitter (1200, 800) once the node has an estimate."""

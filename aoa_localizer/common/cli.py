@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import shutil
 import sys
 
 import yaml
@@ -11,10 +12,17 @@ import yaml
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import ALGORITHMS, LocalizerConfig
 
+HELP_WIDTH = 120  # the programs' docstrings, which --help prints as written, keep to the code's 120 columns
+
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
-    """The programs' --help: the description as written, and every option's default that is a value (an option
-    left unset says in its help what unset means)."""
+    """The programs' --help: the description as written, the usage and options wrapped as wide as it (or the
+    terminal, when wider), and every option's default that is a value (an option left unset says in its help
+    what unset means)."""
+
+    def __init__(self, prog: str, **kwargs):
+        kwargs.setdefault("width", max(shutil.get_terminal_size().columns - 2, HELP_WIDTH))
+        super().__init__(prog, **kwargs)
 
     def _get_help_string(self, action):
         text = action.help or ""

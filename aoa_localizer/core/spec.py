@@ -45,7 +45,7 @@ class Spec:
         if value is None and self.optional:
             return
         if not self._typed(value) or not self._in_range(value):
-            raise ConfigError(f"{name} must be {self.describe()}, got {value!r}")
+            raise ConfigError(f"{name} must be {self.describe()}, got {value!r}{_number_as_text_hint(value)}")
 
     def _typed(self, value) -> bool:
         if self.kind is bool:
@@ -134,3 +134,22 @@ def unknown_names(names, known) -> str:
         near = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
         parts.append(f"{name}: unknown parameter" + (f"; did you mean {near[0]}?" if near else ""))
     return "; ".join(parts)
+
+
+def _number_as_text_hint(value: Any) -> str:
+    """A hint when a number came as text: YAML (ROS parameters, params files) reads `433e6` as a string, since its
+    floats need a dot and a signed exponent."""
+    texts = [value] if isinstance(value, str) else [v for v in value if isinstance(v, str)] if isinstance(
+        value, Sequence) else []
+    for text in texts:
+        try:
+            number = float(text)
+        except ValueError:
+            continue
+        if not math.isfinite(number):
+            continue
+        mantissa, exponent = f"{number:e}".split("e")
+        mantissa = mantissa.rstrip("0") + ("0" if mantissa.rstrip("0").endswith(".") else "")
+        plain = f" or {number:.0f}" if number.is_integer() else ""
+        return f" ({text!r} was read as text; YAML reads {mantissa}e{exponent}{plain} as a number)"
+    return ""

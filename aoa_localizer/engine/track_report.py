@@ -2,6 +2,7 @@
 and their masses, and the estimate's state with the warnings behind it (docs/interface.md, "Estimate states")."""
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -38,22 +39,47 @@ def cloud_estimate(f: ParticleFilter, best: Mode) -> tuple[np.ndarray, np.ndarra
 
 
 def mode_masses(track: EmitterTrack) -> list[tuple[float, float, float]]:
-    """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first."""
+    """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first; the particles
+    go to their nearest mode, and modes whose centres lie inside each other's 95 % ellipse are one place."""
     f, modes = track.cloud, track.modes
     w = f.weights
     if len(modes) < 2:
         mean = w @ f.x
         return [(float(mean[0]), float(mean[1]), 1.0)]
     d2 = np.stack([np.einsum("ni,ij,nj->n", f.x - m.mean, np.linalg.inv(m.cov), f.x - m.mean) for m in modes])
-    nearest = np.argmin(d2, axis=0)
-    out = []
-    for j in range(len(modes)):
-        sel = nearest == j
-        mass = float(w[sel].sum())
-        if mass >= _MODE_MIN_MASS:
-            c = (w[sel] @ f.x[sel]) / mass
-            out.append((float(c[0]), float(c[1]), mass))
+    clusters = merge_overlapping(f.x, w, np.argmin(d2, axis=0))
+    out = [(float(c[0]), float(c[1]), mass) for c, _, mass in clusters if mass >= _MODE_MIN_MASS]
     return sorted(out, key=lambda t: -t[2])
+
+
+def merge_overlapping(x: np.ndarray, w: np.ndarray, label: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Weighted particles `x`, `w` in the clusters `label` gives, as (centre, covariance, mass) each, after joining
+    any two clusters whose centres lie inside either one's 95 % ellipse (two hypotheses a metre apart are one)."""
+    label = label.copy()
+    while True:
+        stats = {}
+        for j in np.unique(label):
+            sel = label == j
+            mass = float(w[sel].sum())
+            if mass <= 0:
+                continue
+            c = (w[sel] @ x[sel]) / mass
+            d = x[sel] - c
+            stats[j] = (c, (w[sel, None] * d).T @ d / mass, mass)
+        pair = next(((i, j) for i in stats for j in stats if i < j
+                     and min(_inside(stats[i], stats[j][0]), _inside(stats[j], stats[i][0])) <= ELLIPSE_95), None)
+        if pair is None:
+            return list(stats.values())
+        label[label == pair[1]] = pair[0]
+
+
+def _inside(cluster: tuple[np.ndarray, np.ndarray, float], place: np.ndarray) -> float:
+    """The squared Mahalanobis distance of `place` from a cluster (inf for a cluster with no spread)."""
+    centre, cov, _ = cluster
+    try:
+        return float((place - centre) @ np.linalg.solve(cov, place - centre))
+    except np.linalg.LinAlgError:
+        return math.inf
 
 
 def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[str, list[str]]:

@@ -34,7 +34,7 @@ from aoa_localizer.engine.crlb import nees as crlb_nees
 from aoa_localizer.engine.fleet import FLEETS
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.parent_death import die_with_parent
-from aoa_localizer.engine.scenarios import SCENARIOS
+from aoa_localizer.engine.scenarios import SCENARIOS, receiver_settings
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
 from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
@@ -178,10 +178,12 @@ def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dic
         params["stations"] = list(found)
     if args.seed is not None:
         params["seed"] = args.seed
-    # The node must read what the vehicle publishes: its bearing encoding goes to the node too.
-    encoding = parse_params(args.vehicle_param, "--vehicle-param").get("bearing_encoding")
-    if encoding:
-        params["bearing_encoding"] = encoding
+    # The node must read what the vehicle publishes: its bearing encoding and its array's mounting go to the node too.
+    vehicle = parse_params(args.vehicle_param, "--vehicle-param")
+    if vehicle.get("bearing_encoding"):
+        params["bearing_encoding"] = vehicle["bearing_encoding"]
+    if vehicle.get("mount_offset_deg"):
+        params.update(receiver_settings(float(yaml.safe_load(vehicle["mount_offset_deg"]))))
     params.update(parse_params(args.param))
     return params
 
@@ -302,22 +304,27 @@ def parse_args(argv) -> argparse.Namespace:
     parser.add_argument("--scenario", choices=sorted(SCENARIOS) + sorted(FLEETS),
                         help="public scenario to simulate (docs/benchmarks.md, Scenarios; unset: seed); with --bag, "
                         "the scenario whose receiver settings the node gets (unset: the node's defaults)")
-    parser.add_argument("--speedup", type=float, default=10.0, help="simulated seconds per wall second")
-    parser.add_argument("--duration", type=float, help="simulated seconds to play (unset: the whole scenario)")
-    parser.add_argument("--data-seed", type=seed_value, default=0, help="seed of the simulated data")
-    parser.add_argument("--bag", type=Path, help="replay this bag into the node instead of the simulated vehicle")
-    parser.add_argument("--rate", type=float, default=10.0, help="with --bag: replay rate (0: as fast as allowed)")
-    parser.add_argument("--record", type=Path, help="record every topic into this rosbag2 MCAP bag directory")
-    parser.add_argument("--seed", type=seed_value, help="the node's filter seed (unset: random)")
+    parser.add_argument("--speedup", type=float, default=10.0, metavar="X", help="simulated seconds per wall second")
+    parser.add_argument("--duration", type=float, metavar="S",
+                        help="simulated seconds to play (unset: the whole scenario)")
+    parser.add_argument("--data-seed", type=seed_value, default=0, metavar="N", help="seed of the simulated data")
+    parser.add_argument("--bag", type=Path, metavar="DIR",
+                        help="replay this bag into the node instead of the simulated vehicle")
+    parser.add_argument("--rate", type=float, default=10.0, metavar="X",
+                        help="with --bag: replay rate (0: as fast as allowed)")
+    parser.add_argument("--record", type=Path, metavar="DIR",
+                        help="record every topic into this rosbag2 MCAP bag directory")
+    parser.add_argument("--seed", type=seed_value, metavar="N", help="the node's filter seed (unset: random)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE", help="node parameter")
-    parser.add_argument("--params-file", type=Path, help="node parameters file (ROS 2 YAML)")
+    parser.add_argument("--params-file", type=Path, metavar="YAML", help="node parameters file (ROS 2 YAML)")
     parser.add_argument("--vehicle-param", action="append", default=[], metavar="NAME=VALUE",
                         help="sim_vehicle parameter, e.g. gps_dropout_prob=0.1")
-    parser.add_argument("--domain-id", type=int,
+    parser.add_argument("--domain-id", type=int, metavar="ID",
                         help="ROS_DOMAIN_ID (unset: random in 1-101, the range ROS recommends)")
-    parser.add_argument("--timeout", type=float, default=600.0, help="wall seconds before giving up")
-    parser.add_argument("--max-ellipse", type=float, default=50.0, help="widest 95 %% ellipse (m) called converged")
-    parser.add_argument("--result", type=Path, help="write the final estimate and verdict as JSON")
+    parser.add_argument("--timeout", type=float, default=600.0, metavar="S", help="wall seconds before giving up")
+    parser.add_argument("--max-ellipse", type=float, default=50.0, metavar="M",
+                        help="widest 95 %% ellipse (m) called converged")
+    parser.add_argument("--result", type=Path, metavar="FILE", help="write the final estimate and verdict as JSON")
     args = parser.parse_args(argv)
     if args.scenario is None and not args.bag:
         args.scenario = "seed"
@@ -424,7 +431,8 @@ class Run:
                 return f"the localizer died (code {node.proc.returncode}):\n{node.tail()}"
             elapsed = time.monotonic() - t0
             if elapsed > self.args.timeout:
-                return f"timeout after {self.args.timeout:g} s"
+                last = progress_line(self.monitor.state(), elapsed)
+                return f"timeout after {self.args.timeout:g} s; last status {last}"
             if elapsed >= next_print:
                 print(progress_line(self.monitor.state(), elapsed), flush=True)
                 next_print += 2.0
