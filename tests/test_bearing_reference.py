@@ -18,20 +18,6 @@ DRIVE = dataclasses.replace(SCENARIOS["urban"], name="drive", gps_noise_m=0.0, w
 MOUNT = 30.0
 
 
-def _course_deg(data) -> np.ndarray:
-    """The vehicle's true heading (deg clockwise from north) at each reading, from its true positions."""
-    d = np.diff(data.sensor_enu, axis=0)
-    d = np.vstack([d, d[-1:]])
-    return np.degrees(np.arctan2(d[:, 0], d[:, 1]))
-
-
-def _relative(data, mount: float):
-    """The same run with each azimuth turned into a bearing from the vehicle's forward axis."""
-    rel = data.bearings.copy()
-    rel[:, 1] = (data.bearings[:, 1] - _course_deg(data) - mount) % 360.0
-    return dataclasses.replace(data, bearings=rel)
-
-
 def _cfg(**changes):
     return LocalizerConfig(seed=5).with_changes(**changes)
 
@@ -40,9 +26,8 @@ def _cfg(**changes):
 def test_relative_bearings_on_a_curved_track_give_the_accuracy_of_true_ones():
     true_err, rel_err = [], []
     for r in range(3):
-        data = simulate(DRIVE, r)
-        true_err.append(run(data, _cfg()).scores["error"])
-        res = run(_relative(data, MOUNT), _cfg(bearing_reference="vehicle", mount_offset_deg=MOUNT))
+        true_err.append(run(simulate(DRIVE, r), _cfg()).scores["error"])
+        res = run(simulate(mounted(DRIVE, MOUNT), r), _cfg(bearing_reference="vehicle", mount_offset_deg=MOUNT))
         rel_err.append(res.scores["error"])
         assert res.localizer.rejected["heading_unknown"] == 0
     rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731

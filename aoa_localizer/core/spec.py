@@ -139,9 +139,8 @@ def unknown_names(names, known) -> str:
 def _number_as_text_hint(value: Any) -> str:
     """A hint when a number came as text: YAML (ROS parameters, params files) reads `433e6` as a string, since its
     floats need a dot and a signed exponent."""
-    texts = [value] if isinstance(value, str) else [v for v in value if isinstance(v, str)] if isinstance(
-        value, Sequence) else []
-    for text in texts:
+    items = value if isinstance(value, Sequence) and not isinstance(value, str) else [value]
+    for text in (v for v in items if isinstance(v, str)):
         try:
             number = float(text)
         except ValueError:

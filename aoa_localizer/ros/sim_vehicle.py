@@ -20,6 +20,7 @@ import sys
 import time
 from typing import Any
 
+import numpy as np
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -118,8 +119,6 @@ def scenario_from(name: str, o: dict):
         changes["quality"] = (given("quality_low", sc.quality[0]), given("quality_high", sc.quality[1]))
     if o.get("sigma_deg") is not None:
         changes.update(sigma_rad=math.radians(o["sigma_deg"]), sigma_q_deg=None)
-    if o.get("mount_offset_deg") is not None:  # drive:=goal; a played run mounts every station's array itself
-        changes["mount_offset_deg"] = float(o["mount_offset_deg"])
     if any(o.get(k) is not None for k in ("datum_lat", "datum_lon", "datum_alt")):
         changes["datum"] = (given("datum_lat", sc.datum[0]), given("datum_lon", sc.datum[1]),
                             given("datum_alt", sc.datum[2]))
@@ -179,12 +178,12 @@ class SimVehicle(Node):
             raise ConfigError(f"drive goal: one vehicle follows the goal; {self.scenario_name} has several stations")
         if overrides.get("emitters") is not None:
             raise ConfigError("drive goal: the goal is one emitter's; emitters gives several")
-        sc = scenario_from(self.scenario_name, overrides)
+        sc = mounted(scenario_from(self.scenario_name, overrides), overrides.get("mount_offset_deg"))
         if not sc.points:
             raise ConfigError(f"drive goal: {self.scenario_name} drives without stopping; goal driving is stop-and-go "
                               f"(set points > 0)")
         drive = GoalDrive(sc, self.data_seed)
-        self.datum, self.emitter = sc.datum, sc.emitter
+        self.datum, self.emitter = sc.datum, np.array(sc.emitter, float)  # as a played run's truth
         stops = [drive.spacing_m * k for k in range(sc.points)]
         self.goal_end_s = Trajectory(sc.track, sc.speed, stops, sc.dwell_s).duration
 
