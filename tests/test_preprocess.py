@@ -108,10 +108,13 @@ def test_point_builder_closes_on_time_distance_and_count():
 
 
 def random_group(rng, n):
-    """n readings round a random bearing, a fifth of them wild, with random sigmas, qualities and positions."""
+    """n readings round a random bearing, a fifth of them wild, with random sigmas, qualities and positions, and
+    half the time a random heading sigma."""
     theta = rng.uniform(-math.pi, math.pi) + rng.normal(0.0, 0.05, n) + (rng.random(n) < 0.2) * rng.uniform(-3, 3, n)
+    heading = rng.uniform(0.0, 0.1, n) * (rng.random() < 0.5)
     return [Reading(100.0 + 0.1 * i, float(theta[i]), float(rng.uniform(40, 100)), float(rng.uniform(0.01, 0.1)),
-                    float(rng.normal(0, 100)), float(rng.normal(0, 100)), float(rng.uniform(0, 3))) for i in range(n)]
+                    float(rng.normal(0, 100)), float(rng.normal(0, 100)), float(rng.uniform(0, 3)),
+                    heading_sigma=float(heading[i])) for i in range(n)]
 
 
 @pytest.mark.slow
@@ -136,6 +139,16 @@ def test_a_small_point_in_plain_floats_is_the_numpy_reference_to_rounding():
         fields_only.cols = columns(readings)
         again, again_kept = make_point(fields_only, cfg, sigma)
         assert again == point and np.array_equal(again_kept, kept)
+
+
+def test_a_point_adds_its_readings_heading_sigma_whole_on_both_paths():
+    """Four readings of 0.02 rad turned by headings of sigma 0.03 rad: the receiver's errors average down to 0.01
+    rad, the heading's error is one error for the point, so its sigma is sqrt(0.01^2 + 0.03^2)."""
+    readings = [Reading(float(i), 0.1, 80.0, 0.02, 0.0, 0.0, heading_sigma=0.03) for i in range(4)]
+    cfg = LocalizerConfig()
+    expected = math.sqrt(0.01**2 + 0.03**2)
+    assert make_point(readings, cfg)[0].sigma == pytest.approx(expected)
+    assert make_point_arrays(readings, cfg)[0].sigma == pytest.approx(expected)
 
 
 def test_an_even_count_has_two_central_readings_and_the_first_is_the_median_on_both_paths():

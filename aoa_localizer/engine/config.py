@@ -207,6 +207,11 @@ class LocalizerConfig(GroupAccess):
         "held (m/s)", low=0.0, low_open=True,
         high=100.0,
     )
+    heading_max_sigma_deg: float = param(
+        10.0, "`heading_source: track`: the most uncertain course used (deg); its sigma, from the GPS fixes' "
+        "jitter, is added to the bearings' (a longer window is tried first: x2, x4)", low=0.0, low_open=True,
+        high=90.0,
+    )
     heading_hold_s: float = param(
         60.0, "longest a heading is held (stopped vehicle, IMU gap) before readings are refused as "
         "`heading_unknown` (s)", low=0.0,

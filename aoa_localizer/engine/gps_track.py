@@ -4,6 +4,7 @@ from __future__ import annotations
 import bisect
 import math
 from enum import Enum
+from typing import NamedTuple
 
 import numpy as np
 
@@ -14,6 +15,18 @@ _KEEP_FIXES = 512
 _VELOCITY_SPAN = 3  # fix-to-fix segments a velocity is measured over
 _STILL_MPS = 0.5  # an antenna slower than this at an isolated fix stood still (its position may be held) ...
 _HELD_MAX_M = 2.0  # ... if it cannot have gone farther than this from it at its mean speed across the gap
+
+
+class MotionFit(NamedTuple):
+    """A straight-line fit to fixes: velocity (m/s), the spread of the stamps (sum of squared deviations from
+    their mean, s^2), and the residual sum of squares across the direction of travel (m^2) with its degrees of
+    freedom."""
+
+    v_east: float
+    v_north: float
+    sxx: float
+    rss_across: float
+    dof: int
 
 
 class Where(Enum):
@@ -35,6 +48,7 @@ class GpsTrack:
         self.n: list[float] = []
         self.north: list[float] = []  # ENU angle of true north at each fix
         self.sigma: list[float] = []  # horizontal position sigma of each fix (m; 0: not known)
+        self._fits: dict[tuple[int, int], MotionFit] = {}  # fitted_motion by fix range, until the next fix
 
     def __len__(self):
         return len(self.t)
@@ -43,6 +57,7 @@ class GpsTrack:
         """Append a fix; returns a rejection reason if its stamp is not after the newest one."""
         if self.t and stamp <= self.t[-1]:
             return Reason.FIX_REPEATED if stamp == self.t[-1] else Reason.FIX_OUT_OF_ORDER
+        self._fits.clear()
         for column, value in ((self.t, stamp), (self.e, east), (self.n, north), (self.north, north_angle),
                               (self.sigma, sigma)):
             column.append(value)
@@ -82,19 +97,45 @@ class GpsTrack:
             return Where.GAP, None
         return Where.OK, (self.e[j], self.n[j], self.north[j], self.sigma[j], 0.0, 0.0)
 
-    def fitted_velocity(self, t0: float, t1: float) -> tuple[float, float] | None:
-        """East and north velocity (m/s): the least-squares slope of the fixes stamped in [t0, t1], None with fewer
-        than two. Centred on a reading, it is the course over ground at the reading without the lag of a
-        one-sided difference."""
+    def fitted_motion(self, t0: float, t1: float) -> MotionFit | None:
+        """The least-squares straight-line motion of the fixes stamped in [t0, t1] (None with fewer than two).
+        Centred on a reading, its velocity is the course over ground at the reading without the lag of a
+        one-sided difference. The readings between two fixes share their windows' fixes: each range is fitted once."""
         lo, hi = bisect.bisect_left(self.t, t0), bisect.bisect_right(self.t, t1)
         if hi - lo < 2:
             return None
+        fit = self._fits.get((lo, hi))
+        if fit is None:
+            fit = self._fits[lo, hi] = self._fit(lo, hi)
+        return fit
+
+    def _fit(self, lo: int, hi: int) -> MotionFit:
         t = np.asarray(self.t[lo:hi])
         dt = t - t.mean()
-        denom = float(dt @ dt)
-        if denom <= 0:
+        sxx = float(dt @ dt)  # > 0: the track's stamps increase
+        east, north = np.asarray(self.e[lo:hi]), np.asarray(self.n[lo:hi])
+        v_east, v_north = float(dt @ east) / sxx, float(dt @ north) / sxx
+        speed = math.hypot(v_east, v_north)
+        if speed == 0:
+            return MotionFit(0.0, 0.0, sxx, 0.0, 0)
+        # residuals across the direction of travel: a turn, or noise (a change of speed leaves the course alone)
+        across = ((north - north.mean() - v_north * dt) * v_east - (east - east.mean() - v_east * dt) * v_north) / speed
+        return MotionFit(v_east, v_north, sxx, float(across @ across), hi - lo - 2)
+
+    def line_residual(self) -> tuple[float, float] | None:
+        """How far the middle one of the newest three fixes lies across the line through its neighbours (squared,
+        m^2), and the multiple of one fix's variance per axis that this has for white position noise; None with
+        fewer than three fixes, across a gap or with the neighbours on one place. A straight drive gives 0 whatever
+        its speed does: it measures the fixes' jitter across the track, which is what turns into course noise."""
+        if len(self.t) < 3:
             return None
-        return float(dt @ np.asarray(self.e[lo:hi]) / denom), float(dt @ np.asarray(self.n[lo:hi]) / denom)
+        (t0, t1, t2), (e0, e1, e2), (n0, n1, n2) = self.t[-3:], self.e[-3:], self.n[-3:]
+        chord = math.hypot(e2 - e0, n2 - n0)
+        if t2 - t0 > 2 * self.max_gap_s or chord == 0:
+            return None
+        f = (t1 - t0) / (t2 - t0)
+        across = ((n1 - n0) * (e2 - e0) - (e1 - e0) * (n2 - n0)) / chord
+        return across * across, 1.0 + f * f + (1.0 - f) ** 2
 
     def _velocity(self, k: int) -> tuple[float, float]:
         """East and north velocity (m/s) over the fixes up to `_VELOCITY_SPAN` segments before fix k (after it for

@@ -192,11 +192,13 @@ class Intake:
 
     def flush(self) -> Closed:
         """End of data: bearings still waiting for a fix are dropped, the open observation points close."""
+        closed: Closed = []
         for st in self.stations.values():
+            closed += self.release(st, final=True)  # those only waiting for their course's later fixes
             self.reject(Reason.NO_FIX_AFTER, len(st.pending))
             st.pending.clear()
-        return [(channel, group) for channel in list(self.channels.live.values())
-                for group in (builder.flush() for builder in channel.builders.values()) if group]
+        return closed + [(channel, group) for channel in list(self.channels.live.values())
+                         for group in (builder.flush() for builder in channel.builders.values()) if group]
 
     # -- the steps ------------------------------------------------------------------------------------
     def _admit(self, clock: StreamClock, kind: str, jump_event: str, stamp: float) -> Verdict | None:
@@ -242,23 +244,28 @@ class Intake:
                     closed.append((channel, builder.flush() or []))
         return closed
 
-    def release(self, st: Station) -> Closed:
+    def release(self, st: Station, final: bool = False) -> Closed:
         """Pair a station's held bearings with its track in stamp order; stop at the first one still waiting for
-        a fix (every later one waits too)."""
+        a fix (every later one waits too). A bearing turned by the course over ground also waits for the fixes of
+        `heading_window_s` after it (its course is fitted centred on it: a trailing one lags a turn), except at the
+        end of data (`final`)."""
         closed: Closed = []
         gps = st.gps
+        lead = self.cfg.heading_window_s if isinstance(st.heading, TrackHeading) and isinstance(gps, GpsTrack) else 0.0
         while st.pending:
             p = st.pending.head()
-            # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s behind its channel's DF stream, no fix
-            # will come (each channel's own stream: a record stamped ahead on another one costs only itself)
-            if st.newest_df(p.channel) - p.stamp > 2 * self.cfg.gps_max_gap_s or len(st.pending) > _MAX_PENDING:
+            # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s (and the course's lead) behind its
+            # channel's DF stream, no fix will come (each channel's own stream: a record stamped ahead on another one
+            # costs only itself)
+            if (st.newest_df(p.channel) - p.stamp > 2 * self.cfg.gps_max_gap_s + lead
+                    or len(st.pending) > _MAX_PENDING):
                 st.pending.pop()
                 self.reject(Reason.GPS_GAP if len(gps) else Reason.BEFORE_FIRST_FIX)
                 continue
             if not len(gps):
                 break  # the datum waits for its confirming fix
             where, at = gps.locate(p.stamp)
-            if where is Where.WAIT:
+            if where is Where.WAIT or (lead and not final and where is Where.OK and gps.t[-1] < p.stamp + lead):
                 break
             st.pending.pop()
             if where is not Where.OK or at is None:
@@ -269,33 +276,35 @@ class Intake:
                 self.reject(Reason.CHANNEL_RETIRED)
                 continue
             east, north, north_angle, gps_sigma, v_east, v_north = at
-            theta = self._theta(st, p.stamp, p.azimuth, north_angle)
-            if theta is None:
+            turned = self._theta(st, p.stamp, p.azimuth, north_angle)
+            if turned is None:
                 self.reject(Reason.HEADING_UNKNOWN)
                 continue
+            theta, heading_sigma = turned
             if math.isnan(p.quality):
                 self.unknown_quality += 1
             sigma = reading_sigma(p.quality, self.cfg) if math.isnan(p.sigma) else p.sigma
             reading = Reading(p.stamp, theta, p.quality, sigma, east, north, float(gps_sigma), float(v_east),
-                              float(v_north))
+                              float(v_north), heading_sigma)
             closed += [(channel, group) for group in channel.builder(st.name).add(reading)]
         return closed
 
-    def _theta(self, st: Station, stamp: float, azimuth: float, north_angle: float) -> float | None:
-        """The reading's ENU angle (rad) from its azimuth as `bearing_reference` defines it; None when a
-        vehicle-relative azimuth has no heading at its stamp."""
+    def _theta(self, st: Station, stamp: float, azimuth: float, north_angle: float) -> tuple[float, float] | None:
+        """The reading's ENU angle (rad) from its azimuth as `bearing_reference` defines it, and the sigma of the
+        heading it was turned by (rad); None when a vehicle-relative azimuth has no heading at its stamp."""
         cfg = self.cfg
         if cfg.bearing_reference == "true_north":
-            return float(azimuth_to_enu(azimuth, north_angle))
+            return float(azimuth_to_enu(azimuth, north_angle)), 0.0
         if cfg.bearing_reference == "magnetic_north":
-            return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle))
+            return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle)), 0.0
         gps, source = st.gps, st.heading
         if isinstance(source, ImuHeading):
-            heading = source.at(gps, stamp, north_angle)
+            at = source.at(gps, stamp, north_angle)
         elif isinstance(source, TrackHeading) and isinstance(gps, GpsTrack):  # a fixed site has no course
-            heading = source.at(gps, stamp, north_angle)
+            at = source.at(gps, stamp, north_angle)
         else:
             return None  # the forward axis, ENU in the map plane
-        if heading is None:
+        if at is None:
             return None
-        return float(wrap_pi(heading - math.radians(azimuth + cfg.mount_offset_deg)))
+        heading, sigma = at
+        return float(wrap_pi(heading - math.radians(azimuth + cfg.mount_offset_deg))), sigma

@@ -80,15 +80,19 @@ class NoiseModel:
         k = self.k.tolist()
         return [_interp_band(q, k) for q in quality]
 
-    def fit(self, resid: np.ndarray, quality: np.ndarray, base_sigma: np.ndarray) -> float:
-        """EM on reading residuals (rad) at a candidate emitter position. Returns the log likelihood of the
-        readings under the fitted model (NaN, nothing changed, with too few readings)."""
+    def fit(self, resid: np.ndarray, quality: np.ndarray, base_sigma: np.ndarray,
+            known_var: np.ndarray | None = None) -> float:
+        """EM on reading residuals (rad) at a candidate emitter position; `known_var` (rad^2) is variance each
+        residual has besides the receiver's (the heading a relative bearing was turned by), so it is not
+        blamed on the receiver. Returns the log likelihood of the readings under the fitted model (NaN, nothing
+        changed, with too few readings)."""
         resid, base_sigma = np.asarray(resid, float), np.asarray(base_sigma, float)
-        ok = np.isfinite(resid) & np.isfinite(base_sigma) & (base_sigma > 0)
+        known = np.zeros(resid.size) if known_var is None else np.asarray(known_var, float)
+        ok = np.isfinite(resid) & np.isfinite(base_sigma) & (base_sigma > 0) & np.isfinite(known)
         if ok.sum() < _MIN_READINGS:
             return float("nan")
         resid, base_sigma, band = resid[ok], base_sigma[ok], band_of(np.asarray(quality, float)[ok])
-        ll, k2, eps, w, self.hollow = _em(resid, base_sigma, band, self._starts(resid / base_sigma))
+        ll, k2, eps, w, self.hollow = _em(resid, base_sigma, known[ok], band, self._starts(resid / base_sigma))
         self.k = np.sqrt(k2)
         self.reading_outlier_prob = eps
         self.readings = w
@@ -119,24 +123,25 @@ class NoiseModel:
         return {"sigma_deg": sig, "reading_outlier_prob": round(self.reading_outlier_prob, 4), "fits": self.fits}
 
 
-def _em(resid: np.ndarray, base_sigma: np.ndarray, band: np.ndarray, k0: np.ndarray):
+def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray):
     """EM from each starting scale in k0 (S,), all at once. Returns the best run's (log likelihood, k^2 per band,
     outlier rate, inlier weight per band, whether its core is hollow); a run with a hollow core is the best only
-    when every run's is."""
-    z2 = (resid / base_sigma) ** 2
+    when every run's is. A residual's variance is k^2 base_sigma^2 + known_var; the M-step takes the known part
+    off each squared residual (a moment step: unbiased, and exact EM when it is 0)."""
+    z2 = (resid / base_sigma) ** 2 - known_var / base_sigma**2
     onehot = np.zeros((resid.size, N_BANDS + 1))
     onehot[np.arange(resid.size), band] = 1.0
     k2 = np.repeat(np.clip(k0, *_K_RANGE)[:, None] ** 2, N_BANDS + 1, axis=1)  # (S, B)
     eps = np.full((k0.size, 1), 0.2)
     for _ in range(_EM_ITERATIONS):
-        gamma, _ = _responsibilities(resid, base_sigma, k2[:, band], eps)
+        gamma, _ = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
         w, s = gamma @ onehot, (gamma * z2) @ onehot
         k2 = np.clip((s + _SHRINK_READINGS * _shrink_target(w, s)) / (w + _SHRINK_READINGS), _K_RANGE[0] ** 2,
                      _K_RANGE[1] ** 2)
         eps = np.clip(1.0 - gamma.mean(axis=1, keepdims=True), *OUTLIER_RANGE)
-    gamma, dens = _responsibilities(resid, base_sigma, k2[:, band], eps)
+    gamma, dens = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
     ll = np.log(dens).sum(axis=1)
-    hollow = _hollow(gamma, z2 / k2[:, band])
+    hollow = _hollow(gamma, (resid / base_sigma) ** 2 / (k2[:, band] + known_var / base_sigma**2))
     b = int(np.argmax(np.where(hollow & ~hollow.all(), -np.inf, ll)))
     return float(ll[b]), k2[b], float(eps[b, 0]), gamma[b] @ onehot, bool(hollow[b])
 
@@ -149,9 +154,9 @@ def _hollow(gamma: np.ndarray, z2: np.ndarray) -> np.ndarray:
     return (weight >= _HOLLOW_MIN_WEIGHT) & (core < _HOLLOW_SHARE * weight)
 
 
-def _responsibilities(resid, base_sigma, k2_per_reading, eps):
+def _responsibilities(resid, base_sigma, known_var, k2_per_reading, eps):
     """Inlier weights and mixture densities of the readings (S, n) under each run's scales and outlier rate."""
-    var = k2_per_reading * base_sigma**2
+    var = k2_per_reading * base_sigma**2 + known_var
     g = (1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var)
     dens = g + eps / TWO_PI
     return g / dens, dens

@@ -127,12 +127,13 @@ def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig,
     ref = circular_mean(theta)
     rho = cfg.df_correlation
     cov = rho * np.outer(sigma, sigma) + (1.0 - rho) * np.diag(sigma**2)
+    heading = a @ cols.heading_sigma[keep]  # one heading error for the whole point: added whole
     point = ObservationPoint(
         stamp=float(a @ cols.stamp[keep]),
         east=float(a @ cols.east[keep]),
         north=float(a @ cols.north[keep]),
         theta=float(wrap_pi(ref + a @ wrap_pi(theta - ref))),
-        sigma=float(math.sqrt(a @ cov @ a)),
+        sigma=float(math.sqrt(a @ cov @ a + heading * heading)),
         n_readings=int(keep.sum()),
         # GPS errors at one place are the same error: the point's antenna is as uncertain as its readings'.
         gps_sigma=float(a @ cols.gps_sigma[keep]),
@@ -147,7 +148,7 @@ def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
                       sigma: np.ndarray | None) -> tuple[ObservationPoint, np.ndarray] | None:
     """make_point for a few readings in plain floats, the same maths term by term (make_point's numpy code is the
     reference the tests hold this to); None when a sigma is not positive and finite (the reference handles it)."""
-    stamp, theta, _, own, east, north, gps = field_lists(readings)[:7]
+    stamp, theta, _, own, east, north, gps, _, _, heading_sigma = field_lists(readings)
     sig = own if sigma is None else sigma.tolist()
     if not all(0.0 < s < math.inf for s in sig) or not all(0.0 < s < math.inf for s in own):
         return None
@@ -169,6 +170,8 @@ def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
     # a^T C a with C = rho s s^T + (1 - rho) diag(s^2)
     common = mean_of(sig)
     variance = rho * common * common + (1.0 - rho) * sum((ai * sig[i]) ** 2 for ai, i in zip(a, idx, strict=True))
+    heading = mean_of(heading_sigma)
+    variance += heading * heading
     point = ObservationPoint(
         stamp=mean_of(stamp),
         east=mean_of(east),
@@ -209,6 +212,7 @@ class Columns(NamedTuple):
     gps_sigma: np.ndarray
     v_east: np.ndarray
     v_north: np.ndarray
+    heading_sigma: np.ndarray
 
 
 _FIELDS = attrgetter(*Columns._fields)

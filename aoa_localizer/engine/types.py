@@ -20,6 +20,9 @@ class Reading:
     gps_sigma: float = 0.0  # horizontal sigma of the antenna position from the fixes (m; 0: not known)
     v_east: float = 0.0  # the vehicle's velocity at the stamp (m/s), for the DF clock offset check
     v_north: float = 0.0
+    # sigma of the vehicle's heading a vehicle-relative bearing was turned by (rad; 0: none, or exact). The readings
+    # of one point share the heading's error, so the point adds it whole, not averaged down.
+    heading_sigma: float = 0.0
 
 
 @dataclass(frozen=True)
