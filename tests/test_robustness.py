@@ -106,6 +106,21 @@ def test_calibration_learns_how_sigma_falls_with_quality():
     assert noise.reading_outlier_prob == pytest.approx(0.2, abs=0.04)
 
 
+def test_a_known_variance_beside_the_receivers_is_not_blamed_on_it():
+    """Readings of a 2 deg receiver turned by headings of sigma 4 deg: told the heading's variance, the fit finds 2 deg;
+    not told, it blames the receiver for about sqrt(2^2 + 4^2) = 4.5 deg."""
+    rng = np.random.default_rng(1)
+    q = np.full(3000, 80.0)
+    heading = np.radians(4.0)
+    resid = np.radians(2.0) * rng.standard_normal(q.size) + heading * rng.standard_normal(q.size)
+    base = np.full(q.size, np.radians(2.0))
+    told, blind = NoiseModel(0.05), NoiseModel(0.05)
+    told.fit(resid, q, base, np.full(q.size, heading**2))
+    blind.fit(resid, q, base)
+    assert 2.0 * told.scale(np.array([80.0]))[0] == pytest.approx(2.0, rel=0.15)
+    assert 2.0 * blind.scale(np.array([80.0]))[0] == pytest.approx(np.hypot(2.0, 4.0), rel=0.15)
+
+
 @pytest.mark.slow
 def test_two_modes_are_reported_with_their_masses():
     """A straight road through the datum, one reading per stop. Even stops see the emitter, odd stops its
