@@ -86,7 +86,7 @@ class TrackHeading:
     """Course over ground from the GPS track, with its sigma from the fixes' jitter: the least-squares velocity of
     the fixes within `heading_window_s` centred on the reading, widened (x2, x4) while the course is too uncertain,
     used when the vehicle moves at least `heading_min_speed_mps` and the course's sigma is at most
-    `heading_max_sigma_deg`; for a vehicle too slow for a course, the last good course (checked at every fix over the
+    `heading_max_sigma_deg`; for a vehicle not seen moving, the last good course (checked at every fix over the
     window before it) is held."""
 
     def __init__(self, cfg: LocalizerConfig):

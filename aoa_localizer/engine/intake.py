@@ -191,7 +191,8 @@ class Intake:
         return st, stamp
 
     def flush(self) -> Closed:
-        """End of data: bearings still waiting for a fix are dropped, the open observation points close."""
+        """End of data: bearings waiting only for the later fixes of their course are paired with the fixes there
+        are, those still waiting for a fix are dropped, the open observation points close."""
         closed: Closed = []
         for st in self.stations.values():
             closed += self.release(st, final=True)  # those only waiting for their course's later fixes
