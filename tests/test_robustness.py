@@ -119,6 +119,12 @@ def test_a_known_variance_beside_the_receivers_is_not_blamed_on_it():
     blind.fit(resid, q, base)
     assert 2.0 * told.scale(np.array([80.0]))[0] == pytest.approx(2.0, rel=0.15)
     assert 2.0 * blind.scale(np.array([80.0]))[0] == pytest.approx(np.hypot(2.0, 4.0), rel=0.15)
+    # a band whose residuals are smaller than the known variance alone: no receiver noise seen there, and the fit
+    # stays finite (its sum once went below 0 and its square root to NaN)
+    calm = np.radians(0.5) * rng.standard_normal(30)
+    told.fit(np.concatenate([resid, calm]), np.concatenate([q, np.full(30, 45.0)]), np.concatenate([base, base[:30]]),
+             np.full(q.size + 30, heading**2))
+    assert np.all(np.isfinite(told.k)) and 2.0 * told.scale(np.array([80.0]))[0] == pytest.approx(2.0, rel=0.15)
 
 
 @pytest.mark.slow

@@ -135,7 +135,8 @@ def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: 
     eps = np.full((k0.size, 1), 0.2)
     for _ in range(_EM_ITERATIONS):
         gamma, _ = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
-        w, s = gamma @ onehot, (gamma * z2) @ onehot
+        # the known variance taken off may leave a band's sum below 0: no receiver noise seen there
+        w, s = gamma @ onehot, np.maximum((gamma * z2) @ onehot, 0.0)
         k2 = np.clip((s + _SHRINK_READINGS * _shrink_target(w, s)) / (w + _SHRINK_READINGS), _K_RANGE[0] ** 2,
                      _K_RANGE[1] ** 2)
         eps = np.clip(1.0 - gamma.mean(axis=1, keepdims=True), *OUTLIER_RANGE)
