@@ -21,6 +21,14 @@ ROOT = Path(__file__).resolve().parent.parent
 _domains = itertools.count(random.Random(os.getpid()).randrange(101))
 
 
+def pytest_collection_modifyitems(items):
+    """The ROS tests form one xdist group: they run one at a time, as their real-time processes were timed to,
+    on one worker, beside the rest of the suite on the others."""
+    for item in items:
+        if item.get_closest_marker("ros"):
+            item.add_marker(pytest.mark.xdist_group("ros"))
+
+
 
 @pytest.fixture
 def domain():
