@@ -86,17 +86,23 @@ def yaw_of(q) -> float:
 
 
 class HeadingRecord(NamedTuple):
-    """An IMU's heading as Localizer.add_heading takes it: REP-103 yaw (rad, counter-clockwise from east)."""
+    """An IMU's heading as Localizer.add_heading takes it: REP-103 yaw (rad, counter-clockwise from east) and its
+    variance (rad^2; NaN: not known)."""
 
     stamp: float
     yaw_rad: float
+    variance_rad2: float = math.nan
 
 
 def heading_from_imu(msg) -> HeadingRecord:
-    """sensor_msgs/Imu -> HeadingRecord (the yaw of its orientation; NaN when the orientation is unknown, which
-    REP-145 marks with orientation_covariance[0] = -1)."""
-    known = _float(msg.orientation_covariance[0]) != -1.0
-    return HeadingRecord(stamp_seconds(msg.header), yaw_of(msg.orientation) if known else math.nan)
+    """sensor_msgs/Imu -> HeadingRecord: the yaw of its orientation (NaN when the orientation is unknown, which
+    REP-145 marks with orientation_covariance[0] = -1) and the yaw's variance, the covariance's last element (NaN
+    when it is 0, REP-145's "not known")."""
+    cov = msg.orientation_covariance
+    known = _float(cov[0]) != -1.0
+    variance = _float(cov[8])
+    return HeadingRecord(stamp_seconds(msg.header), yaw_of(msg.orientation) if known else math.nan,
+                         variance if known and variance > 0 else math.nan)
 
 
 def bearing_from_pose(msg) -> PoseBearing:

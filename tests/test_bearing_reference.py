@@ -198,8 +198,27 @@ def test_an_imu_message_gives_its_yaw_and_an_unknown_orientation_is_nan():
     msg.orientation.z, msg.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
     r = heading_from_imu(msg)
     assert r.stamp == 12.5 and r.yaw_rad == pytest.approx(yaw)
+    assert math.isnan(r.variance_rad2)  # a covariance of zeros: not known (REP-145)
+    msg.orientation_covariance[8] = 0.0025  # the yaw's variance: (0.05 rad)^2
+    assert heading_from_imu(msg).variance_rad2 == 0.0025
     msg.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
-    assert math.isnan(heading_from_imu(msg).yaw_rad)
+    assert math.isnan(heading_from_imu(msg).yaw_rad) and math.isnan(heading_from_imu(msg).variance_rad2)
+
+
+def test_an_imu_yaws_variance_is_the_readings_heading_sigma():
+    """An IMU's yaw known to 0.05 rad: the readings turned by it carry that heading sigma (the larger of the two
+    samples around them); a variance not known (NaN, 0, negative) is taken as exact."""
+    for variance, sigma in ((0.0025, 0.05), (float("nan"), 0.0), (0.0, 0.0), (-1.0, 0.0)):
+        loc = Localizer(_cfg(bearing_reference="vehicle", heading_source="imu", init_bearings=100,
+                             init_max_points=100))
+        readings = _readings_of(loc)
+        for k in range(12):
+            loc.add_heading(float(k), 0.0, variance_rad2=variance)
+            lat, lon, _ = FRAME.to_geodetic(0.0, 0.0, 0.0)
+            loc.add_fix(float(k), float(lat), float(lon), 5.0)
+            loc.add_bearing(k + 0.5, 0.0, 90.0)
+        loc.flush()
+        assert len(readings) == 11 and all(r.heading_sigma == pytest.approx(sigma) for r in readings)
 
 
 def test_offline_replay_feeds_a_bags_imu_headings_to_the_engine():

@@ -327,6 +327,37 @@ def test_frames_datum_path_and_stale_inputs_in_a_namespace(spawn, domain):
     assert node_p.poll() is None
 
 
+def test_an_imu_heading_and_its_variance_turn_relative_bearings_in_the_node(spawn, domain):
+    """`heading_source imu`: a vehicle driving east past the emitter publishes its IMU yaw (with a variance) and
+    azimuths from its nose; the node takes every heading and turns the bearings by it into an estimate."""
+    spawn(["aoa_localizer.node", "--ros-args", "-p", "bearing_reference:=vehicle", "-p", "heading_source:=imu",
+           "-p", "diagnostics_period_s:=0.5", "-p", "input_reliability:=reliable"], domain)
+    frame = LocalFrame(*DATUM)
+    emitter = np.array([150.0, 300.0])
+    with client(domain) as (node, executor):
+        diag = {}
+        node.create_subscription(T.DiagnosticArray, "/diagnostics",
+                                 lambda m: diag.update(diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        pubs = {topic: node.create_publisher(kind, topic, QoSProfile(depth=500))
+                for topic, kind in (("gps/fix", T.NavSatFix), ("df/bearing", T.Vector3Stamped), ("heading/imu", T.Imu))}
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs.values()), 10)
+        spin_until(executor, lambda: False, 1.0)
+        for k in range(61):  # 10 m/s east for 30 s, every half second
+            t = 100.0 + 0.5 * k
+            east = 10.0 * (t - 100.0)
+            imu = T.Imu(header=build.header(T, t, "imu"))
+            imu.orientation.w, imu.orientation_covariance[8] = 1.0, 1e-4  # yaw 0 (east), known to 0.01 rad
+            pubs["heading/imu"].publish(imu)
+            if k % 2 == 0:
+                lat, lon, _ = frame.to_geodetic(east, 0.0, 0.0)
+                pubs["gps/fix"].publish(build.navsatfix(T, t, float(lat), float(lon), 5.0))
+            true_azimuth = math.degrees(math.atan2(emitter[0] - east, emitter[1]))
+            pubs["df/bearing"].publish(build.df_record(T, t + 0.25, (true_azimuth - 90.0) % 360.0, 90.0))
+            spin_until(executor, lambda: False, 0.02)
+        assert spin_until(executor, lambda: int(diag.get("bearings_used", 0)) >= 40, 15), json.dumps(diag)
+        assert not [k for k in diag if "heading" in k and k.startswith("rejected.")], json.dumps(diag)
+
+
 def test_bad_messages_leave_the_node_running_and_are_counted(spawn, domain):
     # Every message must arrive: a best-effort subscription (the default) may drop one under load, so this test
     # asks for reliable ones. (Its last failure, 2 of 4 fixes, was the node dying in the log bridge: see rosout.)

@@ -24,7 +24,7 @@ def feed(loc: Localizer, event):
     if event.kind == "bearing_pose":
         return loc.add_bearing_enu(r.stamp, r.yaw_rad, r.variance_rad2, station=station)
     if event.kind == "heading":
-        loc.add_heading(r.stamp, r.yaw_rad, station=station)
+        loc.add_heading(r.stamp, r.yaw_rad, station=station, variance_rad2=r.variance_rad2)
     return None
 
 

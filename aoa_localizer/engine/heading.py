@@ -147,22 +147,22 @@ class ImuHeading:
         self.cfg = cfg
         self.samples = _Samples()
 
-    def add(self, stamp: float, yaw_rad: float) -> bool:
-        """False (not used) for a stamp not after the newest one."""
-        return self.samples.add(stamp, yaw_rad)
+    def add(self, stamp: float, yaw_rad: float, sd: float = 0.0) -> bool:
+        """False (not used) for a stamp not after the newest one. `sd`: the yaw's sigma (rad; 0: exact)."""
+        return self.samples.add(stamp, yaw_rad, sd)
 
     def at(self, _track: object, stamp: float, north_angle: float) -> tuple[float, float] | None:
-        """The heading (ENU rad) at `stamp` and its sigma (0: an IMU's yaw is taken as exact), or None."""
-        t, h = self.samples.t, self.samples.h
+        """The heading (ENU rad) at `stamp` and its sigma (the larger of its samples'), or None."""
+        t, h, sd = self.samples.t, self.samples.h, self.samples.sd
         k = bisect.bisect_left(t, stamp)
         if 0 < k < len(t) and t[k] - t[k - 1] <= self.cfg.heading_hold_s:
             f = (stamp - t[k - 1]) / (t[k] - t[k - 1])
-            yaw = h[k - 1] + f * wrap_pi(h[k] - h[k - 1])
+            yaw, sigma = h[k - 1] + f * wrap_pi(h[k] - h[k - 1]), max(sd[k - 1], sd[k])
         elif k < len(t) and t[k] == stamp:
-            yaw = h[k]
+            yaw, sigma = h[k], sd[k]
         else:
             held = self.samples.held(stamp, self.cfg.heading_hold_s)
             if held is None:
                 return None
-            yaw = held[0]
-        return float(wrap_pi(yaw + north_angle - math.pi / 2)), 0.0
+            yaw, sigma = held
+        return float(wrap_pi(yaw + north_angle - math.pi / 2)), sigma

@@ -138,14 +138,14 @@ class Intake:
             closed += self._store_fix(st, *candidate)
         return closed + self._store_fix(st, stamp, lat, lon, alt, sigma_m)
 
-    def add_heading(self, stamp, yaw_rad, station: str) -> None:
-        stamp, yaw = as_float(stamp), as_float(yaw_rad)
+    def add_heading(self, stamp, yaw_rad, station: str, variance_rad2=math.nan) -> None:
+        stamp, yaw, variance = as_float(stamp), as_float(yaw_rad), as_float(variance_rad2)
         heading = self.station(station).heading
         if not isinstance(heading, ImuHeading):  # only with bearing_reference vehicle and heading_source imu
             self.reject(Reason.HEADING_IGNORED)
         elif not (math.isfinite(stamp) and math.isfinite(yaw)):
             self.reject(Reason.BAD_HEADING)
-        elif not heading.add(stamp, yaw):
+        elif not heading.add(stamp, yaw, math.sqrt(variance) if 0 < variance < math.inf else 0.0):
             self.reject(Reason.HEADING_OUT_OF_ORDER)
 
     def admit_bearing(self, stamp, azimuth_deg, quality, sigma, station: str,

@@ -245,10 +245,11 @@ class Localizer:
         possible, if any."""
         return self._use(self.intake.add_fix(stamp, lat, lon, alt, status, sigma_m, station))
 
-    def add_heading(self, stamp, yaw_rad, station: str = "") -> None:
+    def add_heading(self, stamp, yaw_rad, station: str = "", variance_rad2=float("nan")) -> None:
         """The vehicle's heading from an IMU: REP-103 yaw (rad, counter-clockwise from east, ENU at the vehicle), as
-        sensor_msgs/Imu gives it. Used with `bearing_reference: vehicle` and `heading_source: imu`."""
-        self.intake.add_heading(stamp, yaw_rad, station)
+        sensor_msgs/Imu gives it, and the yaw's variance (rad^2; NaN, 0 or negative: not known, taken as exact). Used
+        with `bearing_reference: vehicle` and `heading_source: imu`."""
+        self.intake.add_heading(stamp, yaw_rad, station, variance_rad2)
 
     def add_bearing(self, stamp, azimuth_deg, quality=float("nan"), station: str = "",
                     frequency_hz=float("nan")) -> Estimate | None:

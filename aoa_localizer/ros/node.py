@@ -310,7 +310,7 @@ class LocalizerNode(Node):
         except (AttributeError, TypeError, ValueError, IndexError):
             self.monitor.counts["adapter_errors"] += 1
             return
-        self.loc.add_heading(r.stamp, r.yaw_rad, station=station)
+        self.loc.add_heading(r.stamp, r.yaw_rad, station=station, variance_rad2=r.variance_rad2)
 
     def on_bearing(self, msg, station: str = "", info=None):
         t0 = time.perf_counter()
