@@ -37,7 +37,12 @@ def main() -> None:
             rows = []
             for seed in args.seeds:
                 res = run(simulate(sc, seed), LocalizerConfig(seed=seed).with_changes(**receiver_settings(args.mount)))
-                est, refused = res.estimates[-1], res.localizer.rejected["heading_unknown"]
+                refused = res.localizer.rejected["heading_unknown"]
+                if not res.estimates:  # scored as infinitely far, outside, in a state of its own
+                    no_estimate = {"error": np.inf, "crlb": res.scores["crlb"], "inside95": False, "nees": np.inf}
+                    rows.append((no_estimate, "no estimate", np.array([np.inf, np.inf]), refused))
+                    continue
+                est = res.estimates[-1]
                 rows.append((res.scores, est.state, ellipse_axes(est.cov)[:2], refused))
             errors = [s["error"] for s, *_ in rows]
             ratio = float(np.median([s["error"] / s["crlb"] for s, *_ in rows]))
