@@ -11,7 +11,7 @@ from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.gps_track import GpsTrack
-from aoa_localizer.engine.heading import _Jitter
+from aoa_localizer.engine.heading import TrackHeading, _Jitter
 from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, mounted, simulate
 
 FRAME = LocalFrame(*DATUM)
@@ -129,6 +129,28 @@ def test_the_fixes_jitter_is_an_upper_bound_that_a_turn_does_not_lift():
         track.add(299.0 + k, 2990.0 + 2.0 * rng.standard_normal(), 10.0 * k + 2.0 * rng.standard_normal(), math.pi / 2)
         jitter.add(track.line_residual())
     assert abs(jitter.variance / straight - 1.0) < 0.1
+
+
+def test_a_smooth_gps_drift_the_jitter_cannot_see_is_inside_the_courses_sigma():
+    """A receiver's smoothed position error (1 m, swinging over a minute: up to 0.1 m/s) with 5 cm of jitter, on a
+    car at 2 m/s: the jitter alone would give a sigma of a fraction of a degree for errors of up to 3 deg; the
+    drift term (0.1 m/s) covers them."""
+    z = []
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        track, heading = GpsTrack(max_gap_s=5.0), TrackHeading(_cfg())
+        phase = rng.uniform(0.0, 2.0 * math.pi, 2)
+        for k in range(300):
+            t = k + 0.37
+            drift = np.sin(2.0 * math.pi * t / 60.0 + phase)
+            place = np.array([2.0 * t, 0.0]) + drift + 0.05 * rng.standard_normal(2)
+            track.add(t, place[0], place[1], math.pi / 2)
+            heading.note_fix(track)
+            if k > 20:  # a reading 5 s back: the fixes after it are there
+                course = heading.at(track, k - 4.5, 0.0)
+                if course is not None:
+                    z.append(math.remainder(course[0], 2.0 * math.pi) / course[1])
+    assert len(z) > 1000 and np.sqrt(np.mean(np.square(z))) < 1.2 and np.max(np.abs(z)) < 3.5
 
 
 def test_a_stopped_vehicle_on_noisy_gps_keeps_the_course_it_came_with_and_its_sigma_covers_the_error():

@@ -24,6 +24,9 @@ _JITTER_SAMPLES_MIN = 4  # fixes' jitter samples before any course is trusted
 _JITTER_KEEP = 0.9  # the share of the smallest samples the jitter is measured from
 _TRIMMED_MEAN = float(chi2.cdf(chi2.ppf(_JITTER_KEEP, 1), 3)) / _JITTER_KEEP  # E[X | X < its 90 % point], X chi2(1)
 _JITTER_FLOOR_M = 0.02  # the least jitter a window's fit is tested against (RTK's centimetres)
+# The velocity error that the fixes' jitter does not show: their slow errors (multipath, atmosphere) drift, which
+# a velocity from positions takes for motion; a receiver's own velocity is seldom better than this (m/s).
+_DRIFT_MPS = 0.1
 
 
 @functools.lru_cache(maxsize=1024)
@@ -115,8 +118,9 @@ class TrackHeading:
     def _course(self, track: GpsTrack, windows: list[tuple[float, float]]) -> tuple[tuple[float, float] | None, bool]:
         """The course and its sigma over the first window where it is good enough (else None), and whether the
         vehicle was seen moving. The course's variance is the velocity's across the direction of travel over the
-        speed^2: the fixes' jitter over the stamps' spread (sd_v^2). A window whose fixes lie farther across the line
-        than the jitter explains (a lack-of-fit test at 1 %) holds a turn, whose course no sigma describes: none."""
+        speed^2: the fixes' jitter over the stamps' spread, and the slow errors' drift (sd_v^2). A window whose fixes
+        lie farther across the line than the jitter explains (a lack-of-fit test at 1 %) holds a turn, whose course no
+        sigma describes: none."""
         variance = self.jitter.variance
         if variance is None:
             return None, False
@@ -125,7 +129,7 @@ class TrackHeading:
             fit = track.fitted_motion(t0, t1)
             if fit is None:
                 continue
-            speed, sd_v = math.hypot(fit.v_east, fit.v_north), math.sqrt(variance / fit.sxx)
+            speed, sd_v = math.hypot(fit.v_east, fit.v_north), math.sqrt(variance / fit.sxx + _DRIFT_MPS**2)
             if speed < self.cfg.heading_min_speed_mps:
                 return None, False  # a longer window would only average the stop in
             if speed < 3.0 * sd_v:
