@@ -100,7 +100,7 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
         return np.array([v for c in cols for v in getattr(c, name).tolist()])
 
     rob = replace(rob, grid=None)  # each trial noise is taken as it is
-    quality, base, heading = joined("quality"), joined("sigma"), joined("heading_sigma")
+    quality, base, heading_var = joined("quality"), joined("sigma"), joined("heading_sigma") ** 2
     at_readings = shifted(Points(joined("east"), joined("north"), joined("theta"), base), offset)
     configured = points_of([p for p, _ in build(groups, cfg, None, offset)])
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
@@ -110,7 +110,7 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
         """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
         trial, ll, readings = noise.copy(), float("nan"), shifted(at_readings, b - offset)
         for _ in range(2):
-            ll = trial.fit(residuals(x, readings), quality, base, heading**2)
+            ll = trial.fit(residuals(x, readings), quality, base, heading_var)
             if not np.isfinite(ll):
                 return None
             x = refined(x, points_of([p for p, _ in build(groups, cfg, trial, b)]), rob)

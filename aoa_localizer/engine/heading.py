@@ -43,7 +43,7 @@ class _Samples:
         self.h: list[float] = []
         self.sd: list[float] = []
 
-    def add(self, stamp: float, heading: float, sd: float = 0.0) -> bool:
+    def add(self, stamp: float, heading: float, sd: float) -> bool:
         if self.t and stamp <= self.t[-1]:
             return False
         self.t.append(stamp)
@@ -151,7 +151,7 @@ class ImuHeading:
         self.cfg = cfg
         self.samples = _Samples()
 
-    def add(self, stamp: float, yaw_rad: float, sd: float = 0.0) -> bool:
+    def add(self, stamp: float, yaw_rad: float, sd: float) -> bool:
         """False (not used) for a stamp not after the newest one. `sd`: the yaw's sigma (rad; 0: exact)."""
         return self.samples.add(stamp, yaw_rad, sd)
 

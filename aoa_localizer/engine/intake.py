@@ -252,7 +252,7 @@ class Intake:
         end of data (`final`)."""
         closed: Closed = []
         gps = st.gps
-        lead = self.cfg.heading_window_s if isinstance(st.heading, TrackHeading) and isinstance(gps, GpsTrack) else 0.0
+        lead = self.cfg.heading_window_s if st.course_source() else 0.0
         while st.pending:
             p = st.pending.head()
             # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s (and the course's lead) behind its
@@ -298,11 +298,11 @@ class Intake:
             return float(azimuth_to_enu(azimuth, north_angle)), 0.0
         if cfg.bearing_reference == "magnetic_north":
             return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle)), 0.0
-        gps, source = st.gps, st.heading
-        if isinstance(source, ImuHeading):
-            at = source.at(gps, stamp, north_angle)
-        elif isinstance(source, TrackHeading) and isinstance(gps, GpsTrack):  # a fixed site has no course
-            at = source.at(gps, stamp, north_angle)
+        course = st.course_source()
+        if isinstance(st.heading, ImuHeading):
+            at = st.heading.at(st.gps, stamp, north_angle)
+        elif course is not None:
+            at = course[0].at(course[1], stamp, north_angle)
         else:
             return None  # the forward axis, ENU in the map plane
         if at is None:

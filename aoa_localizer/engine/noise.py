@@ -128,7 +128,8 @@ def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: 
     outlier rate, inlier weight per band, whether its core is hollow); a run with a hollow core is the best only
     when every run's is. A residual's variance is k^2 base_sigma^2 + known_var; the M-step takes the known part
     off each squared residual (a moment step: unbiased, and exact EM when it is 0)."""
-    z2 = (resid / base_sigma) ** 2 - known_var / base_sigma**2
+    z2_all, z2_known = (resid / base_sigma) ** 2, known_var / base_sigma**2
+    z2 = z2_all - z2_known
     onehot = np.zeros((resid.size, N_BANDS + 1))
     onehot[np.arange(resid.size), band] = 1.0
     k2 = np.repeat(np.clip(k0, *_K_RANGE)[:, None] ** 2, N_BANDS + 1, axis=1)  # (S, B)
@@ -142,7 +143,7 @@ def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: 
         eps = np.clip(1.0 - gamma.mean(axis=1, keepdims=True), *OUTLIER_RANGE)
     gamma, dens = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
     ll = np.log(dens).sum(axis=1)
-    hollow = _hollow(gamma, (resid / base_sigma) ** 2 / (k2[:, band] + known_var / base_sigma**2))
+    hollow = _hollow(gamma, z2_all / (k2[:, band] + z2_known))
     b = int(np.argmax(np.where(hollow & ~hollow.all(), -np.inf, ll)))
     return float(ll[b]), k2[b], float(eps[b, 0]), gamma[b] @ onehot, bool(hollow[b])
 

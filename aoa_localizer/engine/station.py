@@ -88,6 +88,13 @@ class Station:
         self.df_clocks: dict[str, StreamClock] = {}  # per channel: VFOs of one receiver share their stamps
         self.datum_candidate: tuple[float, float, float, float, float] | None = None  # first fix, until confirmed
 
+    def course_source(self) -> tuple[TrackHeading, GpsTrack] | None:
+        """The course-over-ground heading and the track it is fitted to (None: another heading source, or a fixed
+        site, which has no course)."""
+        if isinstance(self.heading, TrackHeading) and isinstance(self.gps, GpsTrack):
+            return self.heading, self.gps
+        return None
+
     def newest_df(self, channel: str) -> float:
         """The newest DF stamp a channel's clock adopted at this station (-inf before any)."""
         clock = self.df_clocks.get(channel)
