@@ -77,14 +77,17 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
     data = simulate(scenario, 2)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling="realtime")))
     between = at_points = check_moves = 0
+    def debt():
+        return loc.scheduler.debt(track_of(loc).filter)
+
     for kind, row in data.events():
-        owed = track_of(loc).owed
+        owed = debt().sweeps
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
-        at_points += max(0, owed - track_of(loc).owed)  # sweeps a point made (a resampling adds to `owed`)
-        check_moves += track_of(loc).supervisor.move_owed  # a worker's check applied: its move on the modes is owed too
+        at_points += max(0, owed - debt().sweeps)  # sweeps a point made (a resampling adds to the debt)
+        check_moves += debt().modes  # a worker's check applied: its move on the modes is owed too
         between += loc.catch_up()
-        assert not track_of(loc).supervisor.move_owed
-    assert loc.catch_up() == 0 and track_of(loc).owed == 0  # nothing left owed
+        assert not debt().modes
+    assert loc.catch_up() == 0 and loc.scheduler.owed(track_of(loc)) == 0  # nothing left owed
     assert between >= 20 and at_points <= between // 10 and check_moves >= 1  # one scheduled check in these runs
     loc.flush()
     loc.finish()
@@ -100,7 +103,7 @@ def test_the_default_is_reproducible_from_python_and_realtime_in_the_node():
     live = Localizer(LocalizerConfig(seed=3), live=True)
     assert live.scheduler.realtime
     play(live, simulate("seed", 2))
-    assert track_of(live).running.sweeps_per_point == 1
+    assert track_of(live).running.deferred
     live.close()
     assert not Localizer(LocalizerConfig(scheduling="reproducible"), live=True).scheduler.realtime
     with pytest.raises(ConfigError, match="scheduling"):

@@ -1,4 +1,5 @@
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from aoa_localizer.engine.likelihood import (
     gaussian_loglik,
     mixture_loglik,
 )
+from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters import REGISTRY, make_filter
 from aoa_localizer.filters.afsa import AfsaMoves, uniform_disc
@@ -112,7 +114,7 @@ def test_mcmc_moves_keep_the_target_distribution():
     f.initialise(rng.multivariate_normal(mean, cov, 4000), mean, cov)
     f.spread = cov
     for _ in range(5):
-        f.move(None)
+        f.move(f.sweeps)
     assert 0.2 < f.acceptance < 0.95
     assert f.x.mean(axis=0) == pytest.approx(mean, abs=1.5)
     assert np.cov(f.x.T) == pytest.approx(cov, rel=0.12, abs=10)
@@ -125,7 +127,7 @@ def test_mcmc_moves_pull_a_misplaced_school_towards_the_posterior():
     f.initialise(np.full((500, 2), 30.0) + np.random.default_rng(0).normal(size=(500, 2)), mean, cov)
     f.spread = cov
     for _ in range(20):
-        f.move(None)
+        f.move(f.sweeps)
     assert np.linalg.norm(f.x.mean(axis=0)) < 6.0
 
 
@@ -170,49 +172,65 @@ def test_a_filter_refuses_a_model_without_the_capability_it_needs():
             make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), GrowthModel())
 
 
-def test_realtime_sweeps_are_owed_and_made_between_or_at_the_next_points():
-    """`sweeps_per_point` 1 (scheduling: realtime): none at the resampling, then one at each following point until
-    all `sweeps` are made, unless pay_owed() (the node's idle time) made them first; a resampling that comes before
-    the debt is paid pays it, so no cloud gets fewer sweeps than without the spreading. Default: all at once."""
-    def filter_counting(per_point):
+def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_next_points():
+    """Under `realtime` the scheduler takes a resampling's sweeps as owed: none at the resampling, then one at each
+    following point until all `sweeps` are made, unless move_one() (between points) made them first; a resampling
+    that comes before the debt is paid pays it, so no cloud gets fewer sweeps than without the spreading. Inline:
+    all at once, nothing owed."""
+    def filter_counting(realtime):
+        scheduler = Scheduler(realtime, lambda reason: None)
         f = _filter(n=200)
-        f.sweeps_per_point = per_point
+        scheduler.take(f)
         made = []
         real = f.sweep
         f.sweep = lambda target, z, made=made, real=real: made.append(1) or real(target, z)
         rng = np.random.default_rng(0)
         f.initialise(rng.normal(0.0, 10.0, (200, 2)), [0, 0], np.eye(2) * 1e6)
         f.spread = np.eye(2) * 100.0
-        return f, made
+        return scheduler, f, made
 
     def vague(k):  # a point that barely informs (sigma 1 rad): no resampling
         return ObservationPoint(float(k), 500.0, 500.0, 0.0, 1.0, 1)
 
-    for per_point, expected in ((0, [5, 0, 0, 0, 0, 0, 0]), (1, [0, 1, 1, 1, 1, 1, 0])):
-        f, made = filter_counting(per_point)
-        counts = []
+    def resampled(scheduler, f):  # the end of a step that resampled, as update() makes it
         f.resample()
-        f.after_resample(None)
+        f.resampled = True
+        f.after_resample(vague(-1))
+        scheduler.stepped(f)
+
+    def point(scheduler, f, k):
+        assert f.update(vague(k)) and not f.resampled
+        scheduler.stepped(f)
+
+    for realtime, expected in ((False, [5, 0, 0, 0, 0, 0, 0]), (True, [0, 1, 1, 1, 1, 1, 0])):
+        scheduler, f, made = filter_counting(realtime)
+        counts = []
+        resampled(scheduler, f)
         counts.append(len(made))
         for k in range(6):
             made.clear()
-            assert f.update(vague(k)) and not f.resampled
+            point(scheduler, f, k)
             counts.append(len(made))
-        assert counts == expected, per_point
+        assert counts == expected, realtime
         made.clear()
-        f.resample()
-        f.after_resample(None)  # realtime: none now, 5 owed
-        f.resample()
-        f.after_resample(None)  # resampled again before the debt is paid: the 5 owed now, 5 more owed
-        assert len(made) == (10 if per_point == 0 else 5) and f.owed == (0 if per_point == 0 else 5)
+        resampled(scheduler, f)  # realtime: none now, 5 owed
+        resampled(scheduler, f)  # resampled again before the debt is paid: the 5 owed now, 5 more owed
+        assert len(made) == (5 if realtime else 10) and scheduler.debt(f).sweeps == (5 if realtime else 0)
 
-    f, made = filter_counting(1)
-    assert f.update(vague(0)) and not f.pay_owed() and not made  # nothing owed
-    f.resample()
-    f.after_resample(None)
-    assert f.pay_owed() and f.pay_owed() and len(made) == 2 and f.owed == 3  # between points, one per call
+    scheduler, f, made = filter_counting(True)
+    track = SimpleNamespace(filter=f, supervisor=SimpleNamespace(move_on_modes=lambda: True))
+    point(scheduler, f, 0)
+    assert not scheduler.move_one([track]) and not made  # nothing owed
+    resampled(scheduler, f)
+    assert scheduler.move_one([track]) and scheduler.move_one([track]) and len(made) == 2  # one per call
+    assert scheduler.owed(track) == 3
     made.clear()
-    assert f.update(vague(1)) and len(made) == 1 and f.owed == 2  # the next point makes one of the rest
+    point(scheduler, f, 1)
+    assert len(made) == 1 and scheduler.owed(track) == 2  # the next point makes one of the rest
+    made.clear()
+    scheduler.owe_modes(f)
+    assert scheduler.owed(track) == 3 and scheduler.move_one([track]) and not made  # the modes' move first
+    assert scheduler.debt(_filter(n=200)).sweeps == 0  # a new filter owes nothing
 
 
 def test_the_cloud_summary_is_made_once_per_cloud_and_follows_a_replaced_cloud():

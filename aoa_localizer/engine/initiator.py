@@ -22,7 +22,6 @@ from aoa_localizer.engine.triangulation import initial_particles
 from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.base import ParticleFilter
-from aoa_localizer.filters.resample_move import ResampleMove
 
 if TYPE_CHECKING:
     from aoa_localizer.engine.track import EmitterTrack
@@ -171,8 +170,7 @@ class Initiator:
         model.grid = t.calibration.grid
         cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
         f = make_filter(cfg, t.rng, model)
-        if t.scheduler.realtime and isinstance(f, ResampleMove):  # realtime: a bounded step
-            f.sweeps_per_point = 1
+        t.scheduler.take(f)
         return f
 
     def _started(self, how: str):

@@ -42,7 +42,6 @@ class Supervisor:
         self.next_search = 0  # kept points at which the next scheduled global check is due
         self.last_search_point = -1  # the point (points_seen) of the last global check
         self.clock_hint: ClockHint | None = None  # a DF stamp shift the bearings prefer, from the last global check
-        self.move_owed = False  # realtime: the last check's move on the modes, not made yet
 
     @property
     def alarm(self) -> bool:
@@ -127,14 +126,11 @@ class Supervisor:
             self.health.clear()
         elif not t.scheduler.realtime:
             f.rejuvenate(1, t.proposal)
-        else:  # realtime: the modes' move is owed, made in idle time (or at the next point)
-            self.move_owed = True
+        else:  # realtime: the modes' move is owed, made between points (or at the next point)
+            t.scheduler.owe_modes(f)
 
-    def pay_move(self) -> bool:
-        """The owed move on the last check's modes, if any (an MH move: made late, it keeps the posterior)."""
-        if not self.move_owed:
-            return False
-        self.move_owed = False
+    def move_on_modes(self) -> bool:
+        """A move on the last check's modes (an MH move: made late, it keeps the posterior); False without them."""
         t = self.track
         if t.filter is None or t.proposal is None:
             return False

@@ -37,7 +37,6 @@ from aoa_localizer.engine.track_report import cloud_estimate
 from aoa_localizer.engine.track_state import PendingJob, TrackState, TrackStatus, WindowEntry
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
-from aoa_localizer.filters.resample_move import ResampleMove
 
 log = logging.getLogger("aoa_localizer")
 
@@ -90,7 +89,7 @@ class EmitterTrack:
     def add(self, readings: list[Reading]) -> bool:
         """One closed group of readings; True when the filter took it (or started) and has a new estimate."""
         t0 = time.perf_counter()
-        owed_before = self.supervisor.move_owed
+        owed_before = self.scheduler.debt(self.filter).modes
         self.collect()  # a background job's findings first: they may change the noise the point is made with
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept
@@ -107,12 +106,16 @@ class EmitterTrack:
         return took
 
     def update(self, entry: WindowEntry, owed_before: bool = False) -> bool:
-        """The running filter's update with one point, then the supervisor's watch; False when it did not take it."""
+        """The running filter's update with one point (and the moves it owes the scheduler), then the supervisor's
+        watch; False when it did not take it. `owed_before`: a check's move on the modes was owed before the point
+        came (and was not made between points): made now."""
         f = self.running
         before = self.model.history.appended
         logw_before = f.logw  # replaced by the update, never changed in place
         try:
             ok = f.update(entry.point)
+            if ok:
+                self.scheduler.stepped(f)
             if ok and self.model.history.appended > before:
                 self.window.append(entry)
                 while len(self.window) > len(self.model.history):
@@ -120,7 +123,7 @@ class EmitterTrack:
             if ok and f.finite():
                 self.supervisor.watch(logw_before)
                 if owed_before:
-                    self.supervisor.pay_move()  # owed before this point came and not made in idle time: now
+                    self.scheduler.pay_modes(self)
             if self.filter is None:  # the emitter moved and the re-start waits for more points
                 return False
             f = self.running
@@ -213,18 +216,6 @@ class EmitterTrack:
         """A search's noise and offset fit, if it made one, adopted by the calibrator."""
         if res.noise is not None and res.at is not None:
             self.calibration.apply(res.noise, res.at, _by_group(groups, res.built), res.offset)
-
-    def pay_owed(self) -> bool:
-        """One move owed (`scheduling: realtime`: a global check's move on the modes, then the filter's sweeps),
-        made between points; False if none is owed."""
-        f = self.filter
-        if f is None or not f.finite():
-            return False
-        return self.supervisor.pay_move() or (isinstance(f, ResampleMove) and f.pay_owed())
-
-    @property
-    def owed(self) -> int:
-        return int(self.supervisor.move_owed) + (self.filter.owed if isinstance(self.filter, ResampleMove) else 0)
 
     # -- what the track holds -------------------------------------------------------------------------
     @property

@@ -25,12 +25,11 @@ class ResampleMove(ParticleFilter):
         self.spread = np.eye(model.dim)  # the weighted cloud's covariance just before the last resampling
         self.acceptance = float("nan")  # share of accepted moves in the last move stage
         self.sweeps = settings.move_sweeps
-        # 0: all `sweeps` right after the resampling; n (`scheduling: realtime`, a bounded step): none there, owed,
-        # and at most n at each following point until all are made, unless pay_owed() (idle time) made them first.
-        # Any sweep keeps the current posterior invariant.
-        self.sweeps_per_point = 0
-        self.owed = 0
-        self.last_z = None  # the newest point, for sweeps made between points
+        # False: a resampling's `sweeps` are made right after it. True: none there; whoever drives the filter makes
+        # them later with move() (the engine's Scheduler, `scheduling: realtime`: a bounded step). Any sweep keeps the
+        # current posterior invariant, so when it is made changes no law.
+        self.deferred = False
+        self.last_z = None  # the newest point, for sweeps made after it
 
     def predict(self):
         """The emitter does not move: no process noise (the moves keep the cloud diverse)."""
@@ -41,7 +40,10 @@ class ResampleMove(ParticleFilter):
         return super().resample()
 
     def after_resample(self, z):
-        self.move(z)
+        self.last_z = z
+        self.prepare(z)
+        if not self.deferred:
+            self.move(self.sweeps)
 
     def chol(self, scale: float = 1.0) -> np.ndarray:
         """Cholesky factor of scale^2 times the cloud's spread (floored)."""
@@ -51,34 +53,18 @@ class ResampleMove(ParticleFilter):
         ok = super().update(z)
         if ok:
             self.last_z = z
-        if ok and not self.resampled and self.owed:
-            self._sweeps(min(self.owed, self.sweeps_per_point), z)
         return ok
 
-    def pay_owed(self) -> bool:
-        """One owed sweep now (the node's idle time), so the next point need not make it; False if none is owed."""
-        if not self.owed or self.last_z is None:
-            return False
-        self._sweeps(1, self.last_z)
-        return True
+    def prepare(self, z):
+        """Before a resampling's sweeps: what they share (an operator may build its proposal from the newest point
+        `z`)."""
 
-    def move(self, z):
-        """`sweeps` sweeps of the filter's operator on the posterior; the weights (equal after resampling) stay.
-        `z`: the newest point (an operator may build its proposal from it). With `sweeps_per_point`, none now: they
-        are owed, made by pay_owed() between points or `sweeps_per_point` at each following point; whatever the
-        last resampling still owed is made now: resamplings that come faster than the debt is paid get all their
-        sweeps, as without the spreading (the cloud would otherwise collapse onto a few copies)."""
-        if not self.sweeps_per_point:
-            self.owed = self.sweeps
-            self._sweeps(self.sweeps, z)
-            return
-        unpaid = self.owed
-        self.owed += self.sweeps
-        if unpaid:
-            self._sweeps(unpaid, z)
+    def move(self, count: int):
+        """`count` sweeps of the filter's operator on the posterior, given the newest point (None before one); the
+        weights (equal after a resampling) stay."""
+        self._sweeps(count, self.last_z)
 
     def _sweeps(self, count: int, z):
-        self.owed -= count
         target = self.log_target(self.x)
         accepted = tried = 0
         for _ in range(count):

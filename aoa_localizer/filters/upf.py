@@ -111,7 +111,7 @@ class UkfGaussianMoves(ResampleMove):
 
     needs = (StaticPosterior, UnscentedForm)
 
-    def move(self, z):
+    def prepare(self, z):
         """The UKF's Gaussian: the weighted cloud before the newest point, updated with it by one UKF step."""
         d = self.model.dim
         w = np.exp(self.prev_logw - self.prev_logw.max())
@@ -127,7 +127,6 @@ class UkfGaussianMoves(ResampleMove):
             self.ukf_chol = moves.cloud_chol(P[0], WIDEN)
         except np.linalg.LinAlgError:  # a degenerate update: the cloud's own spread proposes instead
             self.ukf_mean, self.ukf_chol = m0, self.chol(WIDEN)
-        super().move(z)
 
     def independence(self, target):
         return moves.independence(self.x, target, self.log_target, self.rng, self.ukf_mean, self.ukf_chol)
