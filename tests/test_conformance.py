@@ -9,7 +9,8 @@ import pytest
 from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.evaluation import run, run_model
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
-from aoa_localizer.filters import REGISTRY, filter_class
+from aoa_localizer.engine.emitter_model import EmitterModel
+from aoa_localizer.filters import REGISTRY, make_filter
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models import benchmarks as B
 
@@ -20,7 +21,8 @@ SMALL_SEED = dataclasses.replace(SCENARIOS["seed"], name="small", points=24, rea
 @pytest.mark.parametrize("algorithm", sorted(REGISTRY))
 def test_the_default_variant_localises_the_emitter_finitely_and_repeatably(algorithm):
     cfg = LocalizerConfig(algorithm=algorithm, seed=11)
-    assert issubclass(filter_class(cfg), ResampleMove)  # the default keeps the posterior (the mcmc variant)
+    f = make_filter(cfg, np.random.default_rng(0), EmitterModel(cfg))
+    assert isinstance(f, ResampleMove) and f.name == algorithm  # the default keeps the posterior (the mcmc variant)
     data = simulate(SMALL_SEED, 3)
     first, second = run(data, cfg), run(data, cfg)
     est = first.estimates[-1]

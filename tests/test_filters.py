@@ -108,7 +108,7 @@ def test_a_point_no_particle_can_explain_is_skipped_and_nothing_changes():
 def test_mcmc_moves_keep_the_target_distribution():
     """With no bearings the posterior is the Gaussian prior: the fish moves must leave it invariant."""
     f = _filter(n=4000)
-    assert isinstance(f, AfsaMoves)
+    assert isinstance(f.kernel, AfsaMoves)
     mean, cov = np.array([100.0, -50.0]), np.array([[400.0, 150.0], [150.0, 100.0]])
     rng = np.random.default_rng(2)
     f.initialise(rng.multivariate_normal(mean, cov, 4000), mean, cov)

@@ -1,7 +1,7 @@
 """The particle filters, by the `algorithm` name users choose them with, each in two variants: `mcmc` (the
-default: the paper's operator as moves that keep the posterior of all kept points, for the emitter) and `paper`
-(as printed, for the papers' own models). Every module here is imported, so a filter module's `register` call is
-all it takes to add an algorithm (registry.py)."""
+default: ResampleMove sweeping with the paper's operator as moves that keep the posterior of all kept points, for
+the emitter) and `paper` (as printed, for the papers' own models). Every module here is imported, so a filter
+module's `register` call is all it takes to add an algorithm (registry.py)."""
 import importlib
 import pkgutil
 from typing import Any
@@ -10,6 +10,7 @@ import numpy as np
 
 from aoa_localizer.filters.base import FilterSettings, ParticleFilter
 from aoa_localizer.filters.registry import REGISTRY
+from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models.base import CAPABILITY_WORDS, StateSpaceModel
 
 for _module in pkgutil.iter_modules(__path__):
@@ -20,21 +21,18 @@ class ModelMismatch(TypeError):
     """The model lacks a capability the chosen filter needs: the message names both."""
 
 
-def filter_class(cfg: Any) -> type[ParticleFilter]:
-    """The class `cfg.algorithm` (a LocalizerConfig's) and its group's `variant` name."""
-    algorithm = REGISTRY[cfg.algorithm]
-    return algorithm.variant(getattr(cfg, algorithm.group))
-
-
 def make_filter(cfg: Any, rng: np.random.Generator, model: StateSpaceModel) -> ParticleFilter:
     """The filter `cfg.algorithm` names (in its group's variant), with its own Generator, on `model`, given only the
     settings filters read. Raises ModelMismatch when the model lacks a capability the filter needs."""
-    cls = filter_class(cfg)
-    missing = [CAPABILITY_WORDS[need] for need in cls.needs if not isinstance(model, need)]
+    algorithm = REGISTRY[cfg.algorithm]
+    variant = getattr(cfg, algorithm.group).variant
+    needs = (*ResampleMove.needs, *algorithm.mcmc.needs) if variant == "mcmc" else algorithm.paper.needs
+    missing = [CAPABILITY_WORDS[need] for need in needs if not isinstance(model, need)]
     if missing:
-        algorithm = REGISTRY[cfg.algorithm]
-        variant = getattr(cfg, algorithm.group).variant
         hint = f" (the paper variant, {algorithm.group}.variant: paper, may run on it)" if variant == "mcmc" else ""
         raise ModelMismatch(f"{cfg.algorithm} ({algorithm.group}.variant {variant}) needs a model with "
                             f"{' and '.join(missing)}; {type(model).__name__} has not{hint}")
-    return cls(FilterSettings.of(cfg), rng, model)
+    settings = FilterSettings.of(cfg)
+    if variant == "mcmc":
+        return ResampleMove(settings, rng, model, algorithm.mcmc())
+    return algorithm.paper(settings, rng, model)

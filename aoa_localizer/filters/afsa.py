@@ -29,7 +29,7 @@ from aoa_localizer.core.spec import choice, param
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.registry import register
-from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resample_move import MoveKernel
 from aoa_localizer.models.base import StaticPosterior
 
 SWARM_NOISE = 0.5  # the swarm proposal's spread around its drift, in visual ranges
@@ -122,20 +122,19 @@ class AfsaFilter(ParticleFilter):
         return x
 
 
-class AfsaMoves(ResampleMove):
+class AfsaMoves(MoveKernel):
     """`afsa.variant: mcmc`: the fish school as moves on the posterior (prey: multiple-try Metropolis; swarm:
     a drift towards the other half's neighbours' centre, with its Hastings ratio)."""
 
     name = "afsa"
 
-    def __init__(self, settings, rng, model):
-        super().__init__(settings, rng, model)
-        self.sweeps = settings.afsa.max_iterations
+    def sweeps(self, settings) -> int:
+        return settings.afsa.max_iterations
 
-    def sweep(self, target, z):
-        a, rng, n = self.cfg.afsa, self.rng, self.n
-        look = self.chol(a.visual)
-        x, target, prey = moves.multiple_try(self.x, target, self.log_target, rng, min(a.mcmc_tries, a.try_number),
+    def sweep(self, f, target, z):
+        a, rng, n = f.cfg.afsa, f.rng, f.n
+        look = f.chol(a.visual)
+        x, target, prey = moves.multiple_try(f.x, target, f.log_target, rng, min(a.mcmc_tries, a.try_number),
                                              look)
 
         def towards_centre(xs, others, _others_target):
@@ -146,7 +145,7 @@ class AfsaMoves(ResampleMove):
             centre = np.where(count[:, None] > 0, (near @ others) / np.maximum(count, 1)[:, None], xs)
             return xs + a.step * (centre - xs)
 
-        x, target, swarm = moves.drift(x, target, self.log_target, rng, towards_centre, SWARM_NOISE * look)
+        x, target, swarm = moves.drift(x, target, f.log_target, rng, towards_centre, SWARM_NOISE * look)
         return x, target, prey + swarm, 2 * n
 
 

@@ -31,7 +31,7 @@ from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.moves import RW_SCALE
 from aoa_localizer.filters.registry import register
-from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resample_move import MoveKernel
 
 
 @dataclass(frozen=True)
@@ -115,17 +115,16 @@ class AgaPfFilter(ReplacesResampling, ParticleFilter):
         self.logw = np.zeros(n)
 
 
-class AgaPfMoves(ResampleMove):
+class AgaPfMoves(MoveKernel):
     """`agapf.variant: mcmc`: selection as resampling at every point, then crossover and mutation as MH moves
     tried with the adaptive probabilities."""
 
     name = "agapf"
 
-    def should_resample(self) -> bool:
-        return True  # selection, every point
+    every_point = True  # selection
 
-    def sweep(self, target, z):
-        g, rng = self.cfg.agapf, self.rng
+    def sweep(self, f, target, z):
+        g, rng = f.cfg.agapf, f.rng
         fit = np.exp(target - target.max())
         total = fit.sum()
         f_avg, f_max = float(fit.mean() / total), float(fit.max() / total)
@@ -141,11 +140,11 @@ class AgaPfMoves(ResampleMove):
         def log_pm(t):
             return np.log(adaptive_pm(fitness(t), f_avg, f_max, g.pm1, g.pm2, g.a, g.curve))
 
-        x, target, crossed = moves.pair_scale(self.x, target, self.log_target, rng,
+        x, target, crossed = moves.pair_scale(f.x, target, f.log_target, rng,
                                               lambda m: arithmetic_scale(rng, m), log_attempt=log_pc)
-        x, target, mutated = moves.random_walk(x, target, self.log_target, rng, self.chol(RW_SCALE),
+        x, target, mutated = moves.random_walk(x, target, f.log_target, rng, f.chol(RW_SCALE),
                                                log_attempt=log_pm)
-        return x, target, crossed + mutated, 2 * self.n
+        return x, target, crossed + mutated, 2 * f.n
 
 
 register("agapf", "adaptive genetic", "agapf", AgapfConfig, paper=AgaPfFilter, mcmc=AgaPfMoves)

@@ -24,7 +24,7 @@ from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.registry import register
-from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resample_move import MoveKernel
 from aoa_localizer.filters.resampling import systematic
 
 SMALL_STEP = 0.5  # the small random-walk step after the pair move, in standard deviations of the cloud
@@ -92,16 +92,16 @@ class EspfFilter(ParticleFilter):
         self.logw = np.zeros(n)
 
 
-class EspfMoves(ResampleMove):
+class EspfMoves(MoveKernel):
     """`espf.variant: mcmc`: SBX pair moves and a small random walk, both MH on the posterior."""
 
     name = "espf"
 
-    def sweep(self, target, z):
-        lam, rng = self.cfg.espf.sbx_lambda, self.rng
-        x, target, crossed = moves.pair_scale(self.x, target, self.log_target, rng, lambda m: sbx_scale(rng, m, lam))
-        x, target, walked = moves.random_walk(x, target, self.log_target, rng, self.chol(SMALL_STEP))
-        return x, target, crossed + walked, 2 * self.n
+    def sweep(self, f, target, z):
+        lam, rng = f.cfg.espf.sbx_lambda, f.rng
+        x, target, crossed = moves.pair_scale(f.x, target, f.log_target, rng, lambda m: sbx_scale(rng, m, lam))
+        x, target, walked = moves.random_walk(x, target, f.log_target, rng, f.chol(SMALL_STEP))
+        return x, target, crossed + walked, 2 * f.n
 
 
 register("espf", "evolution sampling", "espf", EspfConfig, paper=EspfFilter, mcmc=EspfMoves)

@@ -29,7 +29,7 @@ from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.registry import register
-from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resample_move import MoveKernel
 
 NOISE_SCALE = 0.5  # the proposal's spread around the gravitation move, in standard deviations of the cloud
 
@@ -90,27 +90,27 @@ class GfapfFilter(ParticleFilter):
             self.logw = new - new.max()
 
 
-class GfapfMoves(ResampleMove):
+class GfapfMoves(MoveKernel):
     """`gfapf.variant: mcmc`: the gravitation step as the mean of an MH proposal on the posterior."""
 
     name = "gfapf"
 
-    def __init__(self, settings, rng, model):
-        super().__init__(settings, rng, model)
-        self.sweeps = settings.gfapf.iterations or 1
+    def sweeps(self, settings) -> int:
+        return settings.gfapf.iterations or 1
 
-    def sweep(self, target, z):
-        g = self.cfg.gfapf
-        scale = 1.0 if g.scale == "absolute" else float(np.sqrt(max(np.trace(self.spread) / self.model.dim, 1e-12)))
-        f = g.rotation_max * self.rng.random()
+    def sweep(self, f, target, z):
+        g = f.cfg.gfapf
+        scale = 1.0 if g.scale == "absolute" else float(np.sqrt(max(np.trace(f.spread) / f.model.dim, 1e-12)))
+        rotation = g.rotation_max * f.rng.random()
 
         def pulled(xs, others, others_target):
             centre = others[int(np.argmax(others_target))]
             pool = np.vstack([centre[None, :], xs])  # the centre dust first, then the moving dusts
-            return gravitation_step(pool, 0, scale, g.attraction, g.attract_min, g.repel_max, np.full(len(pool), f))[1:]
+            turn = np.full(len(pool), rotation)
+            return gravitation_step(pool, 0, scale, g.attraction, g.attract_min, g.repel_max, turn)[1:]
 
-        x, target, accepted = moves.drift(self.x, target, self.log_target, self.rng, pulled, self.chol(NOISE_SCALE))
-        return x, target, accepted, self.n
+        x, target, accepted = moves.drift(f.x, target, f.log_target, f.rng, pulled, f.chol(NOISE_SCALE))
+        return x, target, accepted, f.n
 
 
 register("gfapf", "gravitation field", "gfapf", GfapfConfig, paper=GfapfFilter, mcmc=GfapfMoves)

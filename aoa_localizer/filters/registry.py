@@ -3,30 +3,32 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the classes a filter module registers: their types only, for the checker
+    from aoa_localizer.filters.base import ParticleFilter
+    from aoa_localizer.filters.resample_move import MoveKernel
 
 
 @dataclass(frozen=True)
 class Algorithm:
     """One `algorithm` value: how the docs call it, its settings group (a frozen dataclass of `param()` fields whose
-    `variant` picks the class; two algorithms may share a group) and its two classes."""
+    `variant` picks the variant; two algorithms may share a group), its `paper` filter class and its `mcmc` move
+    kernel (a MoveKernel class: the variant is a ResampleMove sweeping with it)."""
 
     name: str
     label: str
     group: str
     settings: type
-    paper: type
-    mcmc: type
-
-    def variant(self, settings: Any) -> type:
-        """The class the group's `variant` names."""
-        return self.mcmc if settings.variant == "mcmc" else self.paper
+    paper: type[ParticleFilter]
+    mcmc: type[MoveKernel]
 
 
 REGISTRY: dict[str, Algorithm] = {}
 
 
-def register(name: str, label: str, group: str, settings: type, paper: type, mcmc: type) -> None:
+def register(name: str, label: str, group: str, settings: type, paper: type[ParticleFilter],
+             mcmc: type[MoveKernel]) -> None:
     """Make `name` an `algorithm` value; a group registered twice must hold the same settings class."""
     for other in REGISTRY.values():
         if other.group == group and other.settings is not settings:

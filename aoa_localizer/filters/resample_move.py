@@ -2,9 +2,10 @@
 
 The emitter is static, so there is no prediction noise: each observation point re-weights the cloud by its
 likelihood, the cloud is resampled when its effective sample size falls under the threshold, and then
-`move_sweeps` sweeps of the filter's own operator, made a Metropolis-Hastings move on the posterior over all
-kept points (moves.py), restore diversity without changing the law. The weighted cloud stays a sample of the
-posterior, so its covariance is an honest ellipse, whatever operator a paper brings.
+`move_sweeps` sweeps of the paper's operator (its MoveKernel), made a Metropolis-Hastings move on the posterior over
+all kept points (moves.py), restore diversity without changing the law. The weighted cloud stays a sample of the
+posterior, so its covariance is an honest ellipse, whatever operator a paper brings. One ResampleMove class serves
+every algorithm: a filter module gives only its kernel.
 """
 from __future__ import annotations
 
@@ -15,16 +16,39 @@ from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.models.base import StaticPosterior
 
 
+class MoveKernel:
+    """One paper's operator as moves that keep the posterior over all kept points: what a ResampleMove sweeps with.
+    A filter module subclasses it once and registers it as its `mcmc` variant; one instance per filter holds what
+    its sweeps share."""
+
+    name = "base"
+    needs: tuple[type, ...] = ()  # model capabilities beyond the StaticPosterior every move needs
+    every_point = False  # resample at every point (a selection step), not only on a low ESS
+
+    def sweeps(self, settings) -> int:
+        """Sweeps after each resampling."""
+        return settings.move_sweeps
+
+    def prepare(self, f: ResampleMove, z):
+        """Before a resampling's sweeps: what they share (a proposal built from the newest point `z`)."""
+
+    def sweep(self, f: ResampleMove, target: np.ndarray, z) -> tuple[np.ndarray, np.ndarray, int, int]:
+        """One sweep on `f`'s cloud: (particles, their log posterior, moves accepted, moves tried)."""
+        raise NotImplementedError
+
+
 class ResampleMove(ParticleFilter):
-    """Static emitter, re-weight, resample on low ESS, then `sweep()` (each filter's operator) `sweeps` times."""
+    """Static emitter, re-weight, resample on low ESS, then `sweeps` sweeps of the kernel (the paper's operator)."""
 
     needs: tuple[type, ...] = (StaticPosterior,)
 
-    def __init__(self, settings, rng, model):
+    def __init__(self, settings, rng, model, kernel: MoveKernel):
         super().__init__(settings, rng, model)
+        self.kernel = kernel
+        self.name = kernel.name
         self.spread = np.eye(model.dim)  # the weighted cloud's covariance just before the last resampling
         self.acceptance = float("nan")  # share of accepted moves in the last move stage
-        self.sweeps = settings.move_sweeps
+        self.sweeps = kernel.sweeps(settings)
         # False: a resampling's `sweeps` are made right after it. True: none there; whoever drives the filter makes
         # them later with move() (the engine's Scheduler, `scheduling: realtime`: a bounded step). Any sweep keeps the
         # current posterior invariant, so when it is made changes no law.
@@ -34,6 +58,9 @@ class ResampleMove(ParticleFilter):
     def predict(self):
         """The emitter does not move: no process noise (the moves keep the cloud diverse)."""
 
+    def should_resample(self) -> bool:
+        return self.kernel.every_point or super().should_resample()
+
     def resample(self) -> np.ndarray:
         # The weighted cloud before resampling is the better picture of the posterior's spread.
         self.spread = self.estimate()[1]
@@ -41,7 +68,7 @@ class ResampleMove(ParticleFilter):
 
     def after_resample(self, z):
         self.last_z = z
-        self.prepare(z)
+        self.kernel.prepare(self, z)
         if not self.deferred:
             self.move(self.sweeps)
 
@@ -54,10 +81,6 @@ class ResampleMove(ParticleFilter):
         if ok:
             self.last_z = z
         return ok
-
-    def prepare(self, z):
-        """Before a resampling's sweeps: what they share (an operator may build its proposal from the newest point
-        `z`)."""
 
     def move(self, count: int):
         """`count` sweeps of the filter's operator on the posterior, given the newest point (None before one); the
@@ -74,5 +97,5 @@ class ResampleMove(ParticleFilter):
         self.targets_known(target)
 
     def sweep(self, target: np.ndarray, z) -> tuple[np.ndarray, np.ndarray, int, int]:
-        """One sweep of the operator: (particles, their log posterior, moves accepted, moves tried)."""
-        raise NotImplementedError
+        """One sweep of the kernel: (particles, their log posterior, moves accepted, moves tried)."""
+        return self.kernel.sweep(self, target, z)

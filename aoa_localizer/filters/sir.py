@@ -7,7 +7,7 @@ from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.moves import RW_SCALE
 from aoa_localizer.filters.registry import register
-from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resample_move import MoveKernel
 
 
 @dataclass(frozen=True)
@@ -25,14 +25,14 @@ class SirFilter(ParticleFilter):
     name = "sir"
 
 
-class SirMoves(ResampleMove):
+class SirMoves(MoveKernel):
     """`sir.variant: mcmc`: resample-move with random-walk MH moves scaled by the cloud."""
 
     name = "sir"
 
-    def sweep(self, target, z):
-        x, target, accepted = moves.random_walk(self.x, target, self.log_target, self.rng, self.chol(RW_SCALE))
-        return x, target, accepted, self.n
+    def sweep(self, f, target, z):
+        x, target, accepted = moves.random_walk(f.x, target, f.log_target, f.rng, f.chol(RW_SCALE))
+        return x, target, accepted, f.n
 
 
 register("sir", "bootstrap", "sir", SirConfig, paper=SirFilter, mcmc=SirMoves)

@@ -29,9 +29,9 @@ from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.de import DeConfig, evolve
 from aoa_localizer.filters.moves import RW_SCALE
 from aoa_localizer.filters.registry import register
-from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resample_move import MoveKernel
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
-from aoa_localizer.models.base import StaticPosterior, TransitionDensity, UnscentedForm
+from aoa_localizer.models.base import TransitionDensity, UnscentedForm
 
 WIDEN = 1.5  # the UKF's Gaussian is widened before it proposes: a bearing posterior has heavier tails
 JITTER = 0.01  # DE-MC's jitter, in standard deviations of the cloud
@@ -106,34 +106,38 @@ class PfDeFilter(DeInsteadOfResampling, ParticleFilter):
         return self.loglik(x, z)
 
 
-class UkfGaussianMoves(ResampleMove):
-    """Resample-move whose sweeps may use the UKF's Gaussian of the posterior after the newest point."""
+class UkfGaussianMoves(MoveKernel):
+    """Moves that may use the UKF's Gaussian of the posterior after the newest point."""
 
-    needs = (StaticPosterior, UnscentedForm)
+    needs = (UnscentedForm,)
 
-    def prepare(self, z):
+    def __init__(self):
+        self.ukf_mean = np.zeros(0)  # the UKF's Gaussian at the last resampling (prepare)
+        self.ukf_chol = np.zeros((0, 0))
+
+    def prepare(self, f, z):
         """The UKF's Gaussian: the weighted cloud before the newest point, updated with it by one UKF step."""
-        d = self.model.dim
-        w = np.exp(self.prev_logw - self.prev_logw.max())
+        d = f.model.dim
+        w = np.exp(f.prev_logw - f.prev_logw.max())
         w /= w.sum()
-        m0 = w @ self.x_prev
-        dev = self.x_prev - m0
+        m0 = w @ f.x_prev
+        dev = f.x_prev - m0
         P0 = (w[:, None] * dev).T @ dev + moves.SPREAD_FLOOR_M2 * np.eye(d)
-        f, Q, h, R, angles, zvec = self.model.ukf(self.k, z)
+        _, _, h, R, angles, zvec = f.model.ukf(f.k, z)
         ukf = BatchedUKF(d)
         m, P = ukf.update(m0[None, :], P0[None, :, :], h, R, zvec, angles)
         self.ukf_mean = m[0]
         try:
             self.ukf_chol = moves.cloud_chol(P[0], WIDEN)
         except np.linalg.LinAlgError:  # a degenerate update: the cloud's own spread proposes instead
-            self.ukf_mean, self.ukf_chol = m0, self.chol(WIDEN)
+            self.ukf_mean, self.ukf_chol = m0, f.chol(WIDEN)
 
-    def independence(self, target):
-        return moves.independence(self.x, target, self.log_target, self.rng, self.ukf_mean, self.ukf_chol)
+    def independence(self, f, target):
+        return moves.independence(f.x, target, f.log_target, f.rng, self.ukf_mean, self.ukf_chol)
 
-    def de_mc(self, x, target):
-        de = self.cfg.de
-        return moves.de_mc(x, target, self.log_target, self.rng, de.f2, de.cr, self.chol(JITTER))
+    def de_mc(self, f, x, target):
+        de = f.cfg.de
+        return moves.de_mc(x, target, f.log_target, f.rng, de.f2, de.cr, f.chol(JITTER))
 
 
 class UpfMoves(UkfGaussianMoves):
@@ -141,10 +145,10 @@ class UpfMoves(UkfGaussianMoves):
 
     name = "upf"
 
-    def sweep(self, target, z):
-        x, target, a1 = self.independence(target)
-        x, target, a2 = moves.random_walk(x, target, self.log_target, self.rng, self.chol(RW_SCALE))
-        return x, target, a1 + a2, 2 * self.n
+    def sweep(self, f, target, z):
+        x, target, a1 = self.independence(f, target)
+        x, target, a2 = moves.random_walk(x, target, f.log_target, f.rng, f.chol(RW_SCALE))
+        return x, target, a1 + a2, 2 * f.n
 
 
 class UpfDeMoves(UkfGaussianMoves):
@@ -152,21 +156,21 @@ class UpfDeMoves(UkfGaussianMoves):
 
     name = "upfde"
 
-    def sweep(self, target, z):
-        x, target, a1 = self.independence(target)
-        x, target, a2 = self.de_mc(x, target)
-        return x, target, a1 + a2, 2 * self.n
+    def sweep(self, f, target, z):
+        x, target, a1 = self.independence(f, target)
+        x, target, a2 = self.de_mc(f, x, target)
+        return x, target, a1 + a2, 2 * f.n
 
 
-class PfDeMoves(ResampleMove):
+class PfDeMoves(MoveKernel):
     """`de.variant: mcmc` for pfde: DE-MC on the posterior."""
 
     name = "pfde"
 
-    def sweep(self, target, z):
-        de = self.cfg.de
-        x, target, accepted = moves.de_mc(self.x, target, self.log_target, self.rng, de.f2, de.cr, self.chol(JITTER))
-        return x, target, accepted, self.n
+    def sweep(self, f, target, z):
+        de = f.cfg.de
+        x, target, accepted = moves.de_mc(f.x, target, f.log_target, f.rng, de.f2, de.cr, f.chol(JITTER))
+        return x, target, accepted, f.n
 
 
 register("upfde", "UKF proposal + differential evolution", "de", DeConfig, paper=UpfDeFilter, mcmc=UpfDeMoves)
