@@ -244,13 +244,12 @@ def test_an_imu_yaws_variance_is_the_readings_heading_sigma():
 
 
 def test_offline_replay_feeds_a_bags_imu_headings_to_the_engine():
-    from aoa_localizer.common.bag_run import feed
     from msgs_adapters.bag import BagEvent
     from msgs_adapters.fields import HeadingRecord
 
     loc = Localizer(_cfg(bearing_reference="vehicle", heading_source="imu"))
-    assert feed(loc, BagEvent("heading", 0, HeadingRecord(1.0, 0.3))) is None
-    assert feed(loc, BagEvent("heading", 0, HeadingRecord(0.5, 0.3))) is None
+    assert loc.feed(BagEvent("heading", 0, HeadingRecord(1.0, 0.3))) is None
+    assert loc.feed(BagEvent("heading", 0, HeadingRecord(0.5, 0.3))) is None
     assert loc.stations[""].heading.samples.t == [1.0] and loc.rejected["heading_out_of_order"] == 1
 
 

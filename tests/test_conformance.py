@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
+from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.evaluation import run, run_model
 from aoa_localizer.engine.scenarios import SCENARIOS, simulate
-from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.filters import REGISTRY, make_filter
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models import benchmarks as B

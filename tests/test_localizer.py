@@ -1,5 +1,7 @@
 """The Localizer's handling of real-vehicle data: pairing with GPS, and every kind of bad input."""
+import dataclasses
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -7,8 +9,9 @@ from conftest import DATUM, open_point, track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.engine.scenarios import SCENARIOS, simulate
 from aoa_localizer.engine.track_state import TrackState
+from aoa_localizer.engine.types import FixInput, Input
 
 FRAME = LocalFrame(*DATUM)
 EMITTER = (1200.0, 800.0)
@@ -282,3 +285,34 @@ def test_an_estimates_arrays_are_the_users_own():
     f = track_of(loc).filter
     assert np.array_equal(f.estimate()[1], cov_before) and f.weights.sum() == pytest.approx(1.0)
     assert np.any(f.x != 0.0)
+
+
+@pytest.mark.slow
+def test_run_feeds_a_source_and_ends_the_data_as_the_add_calls_flush_and_finish_do():
+    """Localizer.run(source): the offline call. Inputs of other kinds (a bag's truth) are passed over; the estimates
+    are those the add_ calls, flush() and finish() return, in order."""
+    data = simulate(dataclasses.replace(SCENARIOS["seed"], points=24, readings_per_point=2), 3)
+    by_hand = Localizer(LocalizerConfig(seed=3))
+    made = [by_hand.add_fix(*row[:4]) if kind == "fix" else by_hand.add_bearing(*row[:3])
+            for kind, row in data.events()]
+    made += [by_hand.flush(), by_hand.finish()]
+    expected = [e for e in made if e is not None]
+    ran = list(Localizer(LocalizerConfig(seed=3)).run([Input("truth", None), *data.inputs()]))
+    assert len(ran) == len(expected) > 10 and ran[-1].end_of_data == expected[-1].end_of_data
+    for got, want in zip(ran, expected, strict=True):
+        assert (got.stamp, got.east, got.north) == (want.stamp, want.east, want.north)
+        assert got.points_used == want.points_used and np.array_equal(got.cov, want.cov)
+
+
+def test_feed_takes_records_by_field_name_with_optional_fields_left_out_and_names_a_missing_one():
+    loc = Localizer(LocalizerConfig(seed=3))
+    assert loc.feed(Input("fix", SimpleNamespace(stamp=1.0, lat=DATUM[0], lon=DATUM[1]))) is None
+    assert loc.feed(Input("bearing", SimpleNamespace(stamp=1.0, azimuth_deg=45.0))) is None
+    assert loc.feed(Input("datum", None)) is None  # a bag's kind, not an input of the engine
+    with pytest.raises(TypeError, match="fix input's record has no lat, lon"):
+        loc.feed(Input("fix", SimpleNamespace(stamp=2.0)))
+    assert loc.feed(Input("bearing", SimpleNamespace(stamp=float("nan"), azimuth_deg="x"))) is None
+    assert loc.rejected["bad_stamp"] == 1
+    loc.feed(Input("fix", FixInput(2.0, DATUM[0], DATUM[1])))  # the fix after the bearing pairs it
+    (reading,) = open_point(loc)
+    assert math.isnan(reading.quality) and reading.stamp == 1.0

@@ -14,20 +14,6 @@ from aoa_localizer.engine.localizer import Localizer
 from msgs_adapters.bag import BagError, read_bag
 
 
-def feed(loc: Localizer, event):
-    """Give one bag event to the engine; returns an estimate or None."""
-    r, station = event.record, event.station
-    if event.kind == "fix":
-        return loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
-    if event.kind == "bearing":
-        return loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz)
-    if event.kind == "bearing_pose":
-        return loc.add_bearing_enu(r.stamp, r.yaw_rad, r.variance_rad2, station=station)
-    if event.kind == "heading":
-        loc.add_heading(r.stamp, r.yaw_rad, station=station, variance_rad2=r.variance_rad2)
-    return None
-
-
 def summary(loc: Localizer, truth, datum) -> list[str]:
     """Human-readable closing lines: the estimate (one line per channel when frequencies were heard), ellipse,
     counts, and error when the bag carries the truth."""
@@ -85,26 +71,26 @@ def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay"
             on_estimate(est)
         made.clear()
 
-    with tqdm(desc=desc, unit="msg", disable=None, file=sys.stderr) as bar:
-        try:
-            for event in read_bag(bag, topics, stations):
-                bar.update()
-                result.messages += 1
-                if event.kind == "truth":
-                    result.truth = event.record
-                elif event.kind == "datum":
-                    result.datum = (event.record.lat, event.record.lon, event.record.alt)
-                elif event.kind == "foreign":
-                    key = "{} ({})".format(*event.record)
-                    result.foreign[key] = result.foreign.get(key, 0) + 1
-                feed(loc, event)
-                hand_over()
-        except BagError as exc:
-            if not result.messages:
-                raise
-            result.damage = str(exc)
-    loc.flush()
-    hand_over()
-    loc.finish()
+    def events():
+        with tqdm(desc=desc, unit="msg", disable=None, file=sys.stderr) as bar:
+            try:
+                for event in read_bag(bag, topics, stations):
+                    bar.update()
+                    result.messages += 1
+                    if event.kind == "truth":
+                        result.truth = event.record
+                    elif event.kind == "datum":
+                        result.datum = (event.record.lat, event.record.lon, event.record.alt)
+                    elif event.kind == "foreign":
+                        key = "{} ({})".format(*event.record)
+                        result.foreign[key] = result.foreign.get(key, 0) + 1
+                    yield event
+            except BagError as exc:
+                if not result.messages:
+                    raise
+                result.damage = str(exc)
+
+    for _ in loc.run(events()):
+        hand_over()
     hand_over()
     return result

@@ -31,14 +31,12 @@ def scenario_config(data: ScenarioData, base: LocalizerConfig) -> LocalizerConfi
     return base.with_changes(**data.scenario.filter_overrides) if data.scenario.filter_overrides else base
 
 
-def feed(loc: Localizer, data: ScenarioData, on_result) -> None:
-    """A scenario's fixes and bearings into `loc` in stamp order; on_result(what each call returned). Under
-    `scheduling: realtime` each call waits for the worker and then makes the owed move sweeps, as a node does in
+def feed(loc: Localizer, data: ScenarioData) -> None:
+    """A scenario's fixes and bearings into `loc` in stamp order, without the end of data (more may follow). Under
+    `scheduling: realtime` each input waits for the worker and then makes the owed move sweeps, as a node does in
     the time a receiver's pace leaves between messages (Localizer.catch_up)."""
-    for kind, row in data.events():
-        on_result(
-            loc.add_fix(row[0], row[1], row[2], row[3]) if kind == "fix" else loc.add_bearing(row[0], row[1], row[2])
-        )
+    for event in data.inputs():
+        loc.feed(event)
         loc.catch_up()
 
 
@@ -64,10 +62,8 @@ def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
             step_s.append(loc.track_status().update_s)
 
     t0 = time.perf_counter()
-    feed(loc, data, keep)
-    keep(loc.flush())
-    keep(loc.finish())
-    loc.close()
+    for estimate in loc.run(data.inputs()):
+        keep(estimate)
     result = RunResult(estimates, step_s, loc, wall_s=time.perf_counter() - t0)
     result.scores = score(data, result)
     return result
@@ -79,7 +75,7 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
     big = 100_000  # the most points init_bearings allows: no filter ever starts on a benchmark run
     loc = Localizer(scenario_config(data, cfg).with_changes(init_bearings=big, init_max_points=big))
     t0 = time.perf_counter()
-    feed(loc, data, lambda est: None)
+    feed(loc, data)
     loc.flush()  # no finish(): no filter runs; the batch estimate is the end-of-data search
     mode = loc.latest.track.batch_estimate()
     wall = time.perf_counter() - t0

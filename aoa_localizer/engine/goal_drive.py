@@ -89,7 +89,7 @@ def closed_loop(drive: GoalDrive, loc: Localizer, radius_m: float, follow_goal: 
     each leg (None before the first). Ends when the vehicle has no goal and its track is driven."""
     goal = None
     while goal is not None or drive.route_s < drive.route.length or not drive.legs:
-        feed(loc, drive.leg(goal), lambda _: None)
+        feed(loc, drive.leg(goal))
         if follow_goal:
             place = loc.vehicle_place()
             found = loc.next_goal(place, radius_m) if place is not None else None

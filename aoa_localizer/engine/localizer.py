@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from typing import Protocol
 
 import numpy as np
@@ -28,9 +28,14 @@ from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.station import Station
 from aoa_localizer.engine.track_report import assess, mode_masses
 from aoa_localizer.engine.track_state import TrackStatus
-from aoa_localizer.engine.types import Estimate, Reading
+from aoa_localizer.engine.types import Estimate, Input, Reading
 
 log = logging.getLogger("aoa_localizer")
+
+
+# The required fields of each kind of input (Localizer.feed); the add_ calls' other arguments are optional.
+_INPUT_FIELDS = {"fix": ("stamp", "lat", "lon"), "bearing": ("stamp", "azimuth_deg"),
+                 "bearing_pose": ("stamp", "yaw_rad"), "heading": ("stamp", "yaw_rad")}
 
 
 class Observer(Protocol):
@@ -267,6 +272,49 @@ class Localizer:
         sigma = math.sqrt(var) if var > 0 and math.isfinite(var) else float("nan")
         azimuth = 90.0 - math.degrees(yaw) if math.isfinite(yaw) else yaw
         return self._add_bearing(stamp, azimuth, float("nan"), sigma, station, frequency_hz)
+
+    def feed(self, event: Input) -> Estimate | None:
+        """One input as a source gives it (an Input, or anything with its fields, as a bag's events): handed to the
+        add_ call of its kind; a kind that is not the engine's is passed over. Returns what that call returns. Its
+        values are checked as the add_ calls check them; a record without a required field is a programming error
+        (TypeError naming the field); optional ones (alt, status, sigma_m, quality, frequency_hz, variance_rad2)
+        may be left out."""
+        kind, station = event.kind, event.station
+        if kind not in _INPUT_FIELDS:
+            return None
+        r = event.record
+        missing = [name for name in _INPUT_FIELDS[kind] if not hasattr(r, name)]
+        if missing:
+            raise TypeError(f"a {kind} input's record has no {', '.join(missing)}: {r!r}")
+        nan = math.nan
+        if kind == "fix":
+            return self.add_fix(r.stamp, r.lat, r.lon, getattr(r, "alt", nan), getattr(r, "status", 0),
+                                getattr(r, "sigma_m", nan), station=station)
+        if kind == "bearing":
+            return self.add_bearing(r.stamp, r.azimuth_deg, getattr(r, "quality", nan), station=station,
+                                    frequency_hz=getattr(r, "frequency_hz", nan))
+        if kind == "bearing_pose":
+            return self.add_bearing_enu(r.stamp, r.yaw_rad, getattr(r, "variance_rad2", nan), station=station)
+        self.add_heading(r.stamp, r.yaw_rad, station=station, variance_rad2=getattr(r, "variance_rad2", nan))
+        return None
+
+    def run(self, source: Iterable[Input]) -> Iterator[Estimate]:
+        """Offline, in one call: every input of `source` fed in order, then the end of data (flush, finish) and the
+        worker stopped. Yields each estimate an input made, as feed() returns it, then flush's and finish's. Under
+        `scheduling: realtime` the worker is waited for and the owed moves made after each input (catch_up), so the
+        run is what a node at the receiver's pace would make."""
+        try:
+            for event in source:
+                estimate = self.feed(event)
+                if self.scheduler.realtime:
+                    self.catch_up()
+                if estimate is not None:
+                    yield estimate
+            for estimate in (self.flush(), self.finish()):
+                if estimate is not None:
+                    yield estimate
+        finally:
+            self.close()
 
     def _add_bearing(self, stamp, azimuth_deg, quality, sigma, station, frequency_hz) -> Estimate | None:
         admitted = self.intake.admit_bearing(stamp, azimuth_deg, quality, sigma, station, frequency_hz)

@@ -13,12 +13,14 @@ on without stopping.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pymap3d import vincenty
 
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_360
+from aoa_localizer.engine.types import BearingInput, FixInput, Input
 
 DATUM = (39.1, 117.2, 5.0)
 PAPER_SIGMA_RAD = math.sqrt(3.801e-4)
@@ -127,6 +129,11 @@ class ScenarioData:
         tagged = [(f[0], 0, "fix", f) for f in self.fixes] + [(b[0], 1, "bearing", b) for b in self.bearings]
         tagged.sort(key=lambda e: (e[0], e[1]))
         return [(kind, row) for _, _, kind, row in tagged]
+
+    def inputs(self) -> Iterator[Input]:
+        """The same stream as Localizer inputs (Localizer.run)."""
+        for kind, row in self.events():
+            yield Input(kind, FixInput(*row[:4]) if kind == "fix" else BearingInput(*row[:3]))
 
 
 class Trajectory:

@@ -3,8 +3,39 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 import numpy as np
+
+
+class Input(NamedTuple):
+    """One input as a source gives it (Localizer.feed and run): `kind` fix, bearing, bearing_pose or heading (other
+    kinds are not the engine's: passed over), `record` its fields by name (those of add_fix, add_bearing,
+    add_bearing_enu, add_heading: FixInput, BearingInput, or a bag's records), `station` ("": the default one)."""
+
+    kind: str
+    record: Any
+    station: str = ""
+
+
+class FixInput(NamedTuple):
+    """A GPS fix's fields, as add_fix takes them."""
+
+    stamp: float
+    lat: float
+    lon: float
+    alt: float = math.nan
+    status: int = 0
+    sigma_m: float = math.nan
+
+
+class BearingInput(NamedTuple):
+    """A DF record's fields, as add_bearing takes them."""
+
+    stamp: float
+    azimuth_deg: float
+    quality: float = math.nan
+    frequency_hz: float = math.nan
 
 
 @dataclass(frozen=True)
