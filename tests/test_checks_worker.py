@@ -29,11 +29,8 @@ def settle_starts(loc: Localizer):
 
 
 def play(loc: Localizer, data, paced=True):
-    for kind, row in data.events():
-        if kind == "fix":
-            loc.add_fix(*row[:4])
-        else:
-            loc.add_bearing(*row[:3])
+    for event in data.inputs():
+        loc.feed(event)
         if paced:
             loc.catch_up()
     loc.flush()
@@ -80,9 +77,9 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
     def debt():
         return loc.scheduler.debt(track_of(loc).filter)
 
-    for kind, row in data.events():
+    for event in data.inputs():
         owed = debt().sweeps
-        loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
+        loc.feed(event)
         at_points += max(0, owed - debt().sweeps)  # sweeps a point made (a resampling adds to the debt)
         check_moves += debt().modes  # a worker's check applied: its move on the modes is owed too
         between += loc.catch_up()
@@ -161,8 +158,8 @@ def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():
     applies the last one once the data pauses. The start is honest: the ellipse holds the emitter."""
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
-    for kind, row in data.events():
-        loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
+    for event in data.inputs():
+        loc.feed(event)
     made = []
     for _ in range(20):  # the data has ended: each idle() applies a finished search or starts a new one
         loc.catch_up()

@@ -23,12 +23,9 @@ BASE = robustness_cells()["wild0"]
 def feed(loc: Localizer, data, until_s=np.inf, after_s=-np.inf):
     """Feed a scenario's events with stamps in (after_s, until_s]; returns the estimates made."""
     out = []
-    for kind, row in data.events():
-        if not after_s < row[0] <= until_s:
-            continue
-        est = loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
-        if est is not None:
-            out.append(est)
+    for event in data.inputs():
+        if after_s < event.record.stamp <= until_s:
+            out += filter(None, [loc.feed(event)])
     return out
 
 
