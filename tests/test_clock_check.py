@@ -30,6 +30,10 @@ def test_a_known_late_stamp_is_found_and_an_exact_one_is_not():
     assert hint is not None and hint.shift_s == -1.0 and hint.gain > 10
     pts, velocity, emitter = _drive(late_s=0.0)
     assert best_shift(pts, velocity, emitter + 20.0, Robust(0.0)) is None
+    for late in (1.5, -2.5, 1.75):  # between the whole seconds: the search's halves and quarters find them
+        pts, velocity, emitter = _drive(late_s=late)
+        hint = best_shift(pts, velocity, emitter + 20.0, Robust(0.0))
+        assert hint is not None and abs(hint.shift_s + late) <= 0.25, late
 
 
 def test_a_straight_drive_or_a_parked_vehicle_gets_no_verdict():

@@ -215,3 +215,22 @@ def test_the_launcher_never_calls_a_suspect_estimate_converged():
     state["diag"] = {"state": "tracking"}
     ok, why, figures = verdict(state, 50.0)
     assert ok and why == "converged" and figures["state"] == "tracking"
+
+
+def test_the_marginal_from_densities_matches_the_log_sum_exp_of_its_definition_on_hostile_residuals():
+    """The marginal sums densities, not logs: against log-sum-exp over hypotheses of sums of log-mixtures, with
+    residuals from 0 to pi (a Gaussian part that underflows) and tiny to huge variances."""
+    grid = NoiseGrid.weak(2.0)
+    rng = np.random.default_rng(5)
+    r = np.concatenate([rng.normal(0.0, 0.03, (4, 20)), np.full((4, 3), np.pi)], axis=1)
+    var = np.concatenate([np.full(20, 1e-10), np.full(3, 1e4)])
+    extra = rng.uniform(0.0, 1e-6, (4, 23))
+    per_h = []
+    for scale, eps, prior in zip(grid.scale, grid.outlier, grid.log_prior, strict=True):
+        v = scale**2 * var + extra
+        g = -0.5 * r**2 / v - 0.5 * np.log(2 * np.pi * v) + np.log1p(-eps)
+        per_h.append(np.logaddexp(g, np.log(eps / (2 * np.pi))).sum(axis=-1) + prior)
+    expected = np.logaddexp.reduce(np.stack(per_h), axis=0)
+    np.testing.assert_allclose(marginal(r, var, extra, grid), expected, rtol=1e-12)
+    with pytest.raises(ValueError, match="wild shares"):
+        NoiseGrid(np.ones(1), np.zeros(1), np.zeros(1))

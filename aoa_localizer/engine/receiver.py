@@ -18,7 +18,6 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.preprocess import reading_sigma
 
-_LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers
 _N_SCALES = 8  # a factor 1.9 apart: the marginal over the sigma is smooth, and each hypothesis costs a pass
 # log-normal around the configured sigma, wide enough that the span's far end is within two standard deviations
@@ -35,6 +34,11 @@ class NoiseGrid:
     scale: np.ndarray
     outlier: np.ndarray
     log_prior: np.ndarray
+
+    def __post_init__(self):
+        # The densities are summed as they are, not as logs (_terms): a wild share keeps each mixture off zero.
+        if not np.all((self.outlier > 0.0) & (self.outlier < 1.0)):
+            raise ValueError(f"the noise hypotheses' wild shares must be in (0, 1), not {self.outlier}")
 
     @classmethod
     def weak(cls, configured_sigma_deg: float) -> NoiseGrid:
@@ -82,31 +86,33 @@ def em_weights(resid, var, extra_var, grid: NoiseGrid):
     post = np.exp(per_h - total[..., None])  # (..., H)
     prec = np.zeros(np.shape(terms[0][0]))
     inlier = np.zeros_like(prec)
-    for h, (ll, g, v) in enumerate(terms):
-        gamma = np.exp(g - ll) * post[..., h:h + 1]
+    for h, (mix, inl, v) in enumerate(terms):
+        gamma = inl / mix * post[..., h:h + 1]
         inlier += gamma
         prec += gamma / v
     return total, prec, inlier
 
 
 def _terms(resid, var, extra_var, grid: NoiseGrid) -> list:
-    """Per hypothesis, in the grid's order: each point's log mixture density, its Gaussian part (for the EM
-    weights) and its variance. The Gaussian is made once per scale and shared by that scale's wild shares."""
+    """Per hypothesis, in the grid's order: each point's mixture density, its inlier part (for the EM weights) and
+    its variance. Densities, not their logs: the wild share keeps every mixture above share / 2 pi, and one exp per
+    scale with a log per hypothesis costs less than a log-sum-exp per hypothesis. The Gaussian is
+    made once per scale and shared by that scale's wild shares."""
     resid2 = np.square(resid)
     out: list = []
     gauss: tuple | None = None
     for k, (scale, outlier) in enumerate(zip(grid.scale.tolist(), grid.outlier.tolist(), strict=True)):
         if gauss is None or scale != grid.scale[k - 1]:
             v = scale * scale * var + extra_var
-            gauss = (-0.5 * resid2 / v - 0.5 * np.log(v) - _LOG_SQRT_2PI, v)
-        g = gauss[0] + math.log1p(-outlier)
-        out.append((np.logaddexp(g, math.log(outlier / TWO_PI)), g, gauss[1]))
+            gauss = (np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v), v)
+        inl = (1.0 - outlier) * gauss[0]
+        out.append((inl + outlier / TWO_PI, inl, gauss[1]))
     return out
 
 
 def _joint(terms: list, grid: NoiseGrid):
-    """(log marginal (...), per-hypothesis log joint (..., H)) from the hypotheses' per-point terms (..., K)."""
-    per_h = np.stack([ll.sum(axis=-1) for ll, _, _ in terms], axis=-1) + grid.log_prior
+    """(log marginal (...), per-hypothesis log joint (..., H)) from the hypotheses' per-point densities (..., K)."""
+    per_h = np.stack([np.log(mix).sum(axis=-1) for mix, _, _ in terms], axis=-1) + grid.log_prior
     top = np.max(per_h, axis=-1, keepdims=True)
     top = np.where(np.isfinite(top), top, 0.0)
     return np.log(np.sum(np.exp(per_h - top), axis=-1)) + top[..., 0], per_h
