@@ -30,8 +30,10 @@ _DRIFT_MPS = 0.1
 
 
 @functools.lru_cache(maxsize=1024)
-def _chi2_99(dof: int) -> float:
-    return float(chi2.ppf(0.99, dof))
+def _chi2_quantile(p: float, dof: float) -> float:
+    """chi2.ppf, cached: every fix's jitter bound and every window's lack-of-fit test ask again for the same few
+    hundred values."""
+    return float(chi2.ppf(p, dof))
 
 
 class _Samples:
@@ -82,7 +84,7 @@ class _Jitter:
         kept = sorted(self.samples)[:max(1, round(_JITTER_KEEP * n))]
         # each sample is sigma^2 chi2(1); the kept ones' mean is sigma^2 _TRIMMED_MEAN on average
         dof = _JITTER_KEEP * n / 2
-        self.variance = sum(kept) / len(kept) / _TRIMMED_MEAN * dof / float(chi2.ppf(0.05, dof))
+        self.variance = sum(kept) / len(kept) / _TRIMMED_MEAN * dof / _chi2_quantile(0.05, dof)
 
 
 class TrackHeading:
@@ -135,7 +137,7 @@ class TrackHeading:
             if speed < 3.0 * sd_v:
                 continue  # the fixes' noise alone could give this speed: a longer window tells
             moving = True
-            if fit.dof and fit.rss_across > max(variance, _JITTER_FLOOR_M**2) * _chi2_99(fit.dof):
+            if fit.dof and fit.rss_across > max(variance, _JITTER_FLOOR_M**2) * _chi2_quantile(0.99, fit.dof):
                 break  # the fixes bend away from a line (a turn): a longer window bends more
             if sd_v <= speed * math.radians(self.cfg.heading_max_sigma_deg):
                 return (math.atan2(fit.v_north, fit.v_east), sd_v / speed), True
