@@ -57,12 +57,21 @@ def spin_until(executor, predicate, timeout):
     return predicate()
 
 
-def call(executor, node, srv_type, name, request, timeout=10.0):
+def call(executor, node, srv_type, name, request, timeout=10.0, resend_s=2.0):
+    """One service call; the request is sent again every `resend_s` until a response comes. Fast DDS may report
+    the service available before the server has matched the client's response reader, and then drops the
+    response (ros2/rmw_fastrtps#390: the server waits 100 ms for the match); every service the node offers gives
+    the same answer when asked twice."""
     cli = node.create_client(srv_type, name)
     assert cli.wait_for_service(timeout_sec=timeout), f"no service {name}"
-    future = cli.call_async(request)
-    assert spin_until(executor, future.done, timeout)
-    return future.result()
+    futures = [cli.call_async(request)]
+    end = time.monotonic() + timeout
+    while not any(f.done() for f in futures) and time.monotonic() < end:
+        if not spin_until(executor, lambda: any(f.done() for f in futures), min(resend_s, end - time.monotonic())):
+            futures.append(cli.call_async(request))
+    answered = [f for f in futures if f.done()]
+    assert answered, f"no response from {name} to {len(futures)} requests in {timeout} s"
+    return answered[0].result()
 
 
 def launch(args, timeout=180):
