@@ -257,7 +257,7 @@ def test_a_points_noise_scales_in_plain_floats_are_numpys_interpolation_to_the_b
 def test_a_points_calibrated_sigmas_are_the_same_from_its_readings_and_from_the_workers_columns():
     """The caller makes a point's sigmas from its readings, the worker from their packed columns: the same values
     to the bit, and numpy's (the reference for more readings) to rounding."""
-    from aoa_localizer.engine.checks import sigmas
+    from aoa_localizer.engine.point_batch import sigmas
     from aoa_localizer.engine.preprocess import Group, columns
     from aoa_localizer.engine.types import Reading
 

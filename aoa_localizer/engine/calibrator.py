@@ -11,10 +11,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from aoa_localizer.engine.checks import Built, fit_noise, offset_point, sigmas
+from aoa_localizer.engine.checks import fit_noise
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.global_search import residuals
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
+from aoa_localizer.engine.point_batch import Built, PointBatch, offset_point, sigmas
 from aoa_localizer.engine.preprocess import make_point
 from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.rejections import Reason
@@ -75,7 +76,8 @@ class Calibrator:
         """Fit position and noise jointly (checks.fit_noise) from the candidate places, then rebuild the points with
         the fitted noise and re-weight the cloud. True if a calibration was applied."""
         t = self.track
-        fit = fit_noise([e.readings for e in t.window], self.cfg, self.noise, t.robust(), candidates, by_density)
+        batch = PointBatch([e.readings for e in t.window], self.cfg)
+        fit = fit_noise(batch, self.noise, t.robust(), candidates, by_density)
         if fit is None:
             return False
         noise, at, offset = fit

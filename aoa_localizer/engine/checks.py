@@ -29,42 +29,17 @@ import numpy as np
 from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
-from aoa_localizer.engine.geodesy import wrap_pi, wrap_pi_float
+from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, log_posterior, refine, residuals
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
 from aoa_localizer.engine.parent_death import die_with_parent
-from aoa_localizer.engine.preprocess import SMALL_POINT, Columns, Group, columns, group_size, make_point
+from aoa_localizer.engine.point_batch import Built, PointBatch
+from aoa_localizer.engine.preprocess import Columns, Group, columns, group_size
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
-Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readings it kept
-
-
-def sigmas(group: list[Reading], noise: NoiseModel | None) -> np.ndarray:
-    """The readings' sigmas under `noise` (None: the configured ones)."""
-    if noise is not None and 0 < group_size(group) <= SMALL_POINT:  # a few readings: plain floats (per point)
-        cols = getattr(group, "cols", None)
-        if cols is not None:
-            return cols.sigma * np.array(noise.scales(cols.quality.tolist()))
-        return np.array([r.sigma for r in group], float) * np.array(noise.scales([r.quality for r in group]))
-    cols = columns(group)
-    return cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
-
-
-def build(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: NoiseModel | None,
-          offset: float = 0.0) -> list[Built]:
-    """Each group's observation point under `noise` (None: the configured sigmas), `offset` (rad) taken off."""
-    return [offset_point(make_point(group, cfg, sigmas(group, noise)), offset) for group in groups]
-
-
-def offset_point(built: Built, offset: float) -> Built:
-    """A point with a learned bearing offset (rad, offset.py) taken off its bearing."""
-    if not offset:
-        return built
-    point, kept = built
-    return replace(point, theta=wrap_pi_float(point.theta - offset)), kept
 
 
 def rows_of(points: Sequence[ObservationPoint]) -> np.ndarray:
@@ -81,8 +56,7 @@ def refined(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
     return refine(x[None, :], np.zeros(1), pts, rob)[0][0]
 
 
-def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: NoiseModel, rob: Robust,
-              candidates: list[np.ndarray], by_density: bool,
+def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: list[np.ndarray], by_density: bool,
               offset: float = 0.0) -> tuple[NoiseModel, np.ndarray, float] | None:
     """Position and noise jointly: at each candidate place, and at the best mode under the configured noise, EM
     fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins (a wrong place
@@ -90,7 +64,7 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
     between two sources, whose readings cluster either side of it). Then, with `learn_offset`, a constant bearing
     offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
     reference's prior log odds. Returns (noise, place, offset); None when the readings are too few for a fit."""
-    cols = [columns(g) for g in groups]
+    cfg, cols = batch.cfg, [columns(g) for g in batch.groups]
     if sum(c.theta.size for c in cols) < 2:
         return None
 
@@ -102,7 +76,7 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
     rob = replace(rob, grid=None)  # each trial noise is taken as it is
     quality, base, heading_var = joined("quality"), joined("sigma"), joined("heading_sigma") ** 2
     at_readings = shifted(Points(joined("east"), joined("north"), joined("theta"), base), offset)
-    configured = points_of([p for p, _ in build(groups, cfg, None, offset)])
+    configured = batch.points(None, offset)
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
     narrow = find_modes(configured, Robust(eps, cfg.gps_sigma_m), by_density=by_density)
 
@@ -113,7 +87,7 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
             ll = trial.fit(residuals(x, readings), quality, base, heading_var)
             if not np.isfinite(ll):
                 return None
-            x = refined(x, points_of([p for p, _ in build(groups, cfg, trial, b)]), rob)
+            x = refined(x, batch.points(trial, b), rob)
         return ll, trial, x
 
     best = None
@@ -128,7 +102,7 @@ def fit_noise(groups: Sequence[list[Reading]], cfg: LocalizerConfig, noise: Nois
         return None
     ll, trial, x = best
     if cfg.learn_offset:
-        found = _offset_fit(points_of([p for p, _ in build(groups, cfg, trial, offset)]), x, rob, offset, joint)
+        found = _offset_fit(batch.points(trial, offset), x, rob, offset, joint)
         # a first offset must beat the bearing reference's prior odds; one already learned is refined by any gain
         needed = 0.0 if offset else PRIOR_LOG_ODDS[cfg.bearing_reference]
         if found is not None and found[0] > ll + needed:
@@ -218,6 +192,7 @@ class _Calibrated:
 
     def __init__(self, snap: Snapshot):
         self.snap, self.pts, self.outlier = snap, Points.of(snap.rows), snap.outlier_prob
+        self.batch = PointBatch(snap.groups, snap.cfg)
         self.noise: NoiseModel | None = None
         self.at: np.ndarray | None = None
         self.built: list[Built] = []
@@ -225,7 +200,7 @@ class _Calibrated:
 
     def fit(self, candidates: list[np.ndarray], by_density: bool):
         snap = self.snap
-        fit = fit_noise(snap.groups, snap.cfg, snap.noise, snap.rob, candidates, by_density, snap.offset)
+        fit = fit_noise(self.batch, snap.noise, snap.rob, candidates, by_density, snap.offset)
         if fit is not None:
             self.noise, self.at, self.offset = fit
             self._rebuild()
@@ -235,8 +210,7 @@ class _Calibrated:
 
     def _rebuild(self):
         """The points and their outlier share under the fitted noise and offset."""
-        snap = self.snap
-        self.built = build(snap.groups, snap.cfg, self.noise, self.offset)
+        self.built = self.batch.built(self.noise, self.offset)
         self.pts = points_of([p for p, _ in self.built])
         self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.snap.outlier_prob)
 
@@ -247,7 +221,7 @@ class _Calibrated:
         snap, at = self.snap, self.at
         assert at is not None  # called after a fit
         rob = snap.robust(self.outlier, True)
-        before = points_of([p for p, _ in build(snap.groups, snap.cfg, self.noise, snap.offset)])
+        before = self.batch.points(self.noise, snap.offset)
         hint = best_shift(before, snap.velocity(), at, rob)
         if hint is None:
             return False

@@ -78,7 +78,7 @@ def recursive_corrected_mean(gammas, weights) -> float:
     return cmean
 
 
-_TIE_RAD = 1e-9  # spreads this close are a tie (an even count has two central readings): the first one wins
+TIE_RAD = 1e-9  # spreads this close are a tie (an even count has two central readings): the first one wins
 
 
 def point_outliers(theta: np.ndarray, sigma: np.ndarray, gate: float) -> np.ndarray:
@@ -91,7 +91,7 @@ def point_outliers(theta: np.ndarray, sigma: np.ndarray, gate: float) -> np.ndar
 def circular_median(theta: np.ndarray) -> float:
     """The reading with the least summed angular distance to the others (both ways of making a point use this)."""
     spread = np.abs(wrap_pi(theta[:, None] - theta[None, :])).sum(axis=1)
-    return float(theta[np.flatnonzero(spread <= spread.min() + _TIE_RAD)[0]])
+    return float(theta[np.flatnonzero(spread <= spread.min() + TIE_RAD)[0]])
 
 
 def make_point(readings: list[Reading], cfg: LocalizerConfig,

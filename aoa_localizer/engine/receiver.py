@@ -75,44 +75,38 @@ class NoiseGrid:
 def marginal(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
     """log sum_h prior_h prod_k p(resid_k | h): resid, var (points' sigma^2), extra_var (antenna position and
     smoothing terms, not scaled) broadcast to (..., K); returns (...)."""
-    return _joint(_terms(resid, var, extra_var, grid), grid)[0]
+    return _joint(_terms(resid, var, extra_var, grid)[0], grid)[0]
 
 
 def em_weights(resid, var, extra_var, grid: NoiseGrid):
     """The marginal's EM quantities at each place: (log marginal (...), precision weight (..., K) = E[inlier /
     variance], inlier weight (..., K)), the expectations over the hypotheses' posterior at that place."""
-    terms = _terms(resid, var, extra_var, grid)
-    total, per_h = _joint(terms, grid)
+    mix, inl, v = _terms(resid, var, extra_var, grid)
+    total, per_h = _joint(mix, grid)
     post = np.exp(per_h - total[..., None])  # (..., H)
-    prec = np.zeros(np.shape(terms[0][0]))
-    inlier = np.zeros_like(prec)
-    for h, (mix, inl, v) in enumerate(terms):
-        gamma = inl / mix * post[..., h:h + 1]
-        inlier += gamma
-        prec += gamma / v
-    return total, prec, inlier
+    gamma = inl / mix * np.moveaxis(post, -1, 0)[..., None]
+    return total, np.sum(gamma / v, axis=0), np.sum(gamma, axis=0)
 
 
-def _terms(resid, var, extra_var, grid: NoiseGrid) -> list:
-    """Per hypothesis, in the grid's order: each point's mixture density, its inlier part (for the EM weights) and
-    its variance. Densities, not their logs: the wild share keeps every mixture above share / 2 pi, and one exp per
-    scale with a log per hypothesis costs less than a log-sum-exp per hypothesis. The Gaussian is
-    made once per scale and shared by that scale's wild shares."""
+def _terms(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each point's mixture density, its inlier part (for the EM weights) and its variance, per hypothesis along
+    a first axis in the grid's order: (H, ..., K) each. Densities, not their logs: the wild share keeps every
+    mixture above share / 2 pi, and one exp per scale with a log per hypothesis costs less than a log-sum-exp per
+    hypothesis. The Gaussian is made once per scale and shared by that scale's wild shares; every hypothesis in
+    one array operation, since at a few points numpy's per-call cost is most of the work."""
     resid2 = np.square(resid)
-    out: list = []
-    gauss: tuple | None = None
-    for k, (scale, outlier) in enumerate(zip(grid.scale.tolist(), grid.outlier.tolist(), strict=True)):
-        if gauss is None or scale != grid.scale[k - 1]:
-            v = scale * scale * var + extra_var
-            gauss = (np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v), v)
-        inl = (1.0 - outlier) * gauss[0]
-        out.append((inl + outlier / TWO_PI, inl, gauss[1]))
-    return out
+    nd = len(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
+    scales, which = np.unique(grid.scale, return_inverse=True)
+    v = np.square(scales).reshape((-1,) + (1,) * nd) * var + extra_var  # (scales, ..., K)
+    gauss = np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v)
+    outlier = grid.outlier.reshape((-1,) + (1,) * nd)
+    inl = (1.0 - outlier) * gauss[which]
+    return inl + outlier / TWO_PI, inl, v[which]
 
 
-def _joint(terms: list, grid: NoiseGrid):
-    """(log marginal (...), per-hypothesis log joint (..., H)) from the hypotheses' per-point densities (..., K)."""
-    per_h = np.stack([np.log(mix).sum(axis=-1) for mix, _, _ in terms], axis=-1) + grid.log_prior
+def _joint(mix: np.ndarray, grid: NoiseGrid):
+    """(log marginal (...), per-hypothesis log joint (..., H)) from the hypotheses' per-point densities (H, ..., K)."""
+    per_h = np.moveaxis(np.log(mix).sum(axis=-1), 0, -1) + grid.log_prior
     top = np.max(per_h, axis=-1, keepdims=True)
     top = np.where(np.isfinite(top), top, 0.0)
     return np.log(np.sum(np.exp(per_h - top), axis=-1)) + top[..., 0], per_h

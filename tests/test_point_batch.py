@@ -1,0 +1,69 @@
+"""Every point of a check remade at once (engine/point_batch.py) agrees with make_point, point by point."""
+import math
+
+import numpy as np
+import pytest
+
+from aoa_localizer import LocalizerConfig
+from aoa_localizer.engine.noise import NoiseModel
+from aoa_localizer.engine.point_batch import PointBatch, offset_point, sigmas
+from aoa_localizer.engine.preprocess import Group, make_point
+from aoa_localizer.engine.types import Reading
+
+FIELDS = ("stamp", "east", "north", "theta", "sigma", "n_readings", "gps_sigma")
+
+
+def groups(rng: np.random.Generator) -> list[Group]:
+    """Points of 1 to 40 readings (the plain-float and the numpy reference paths), some of each size, with wild
+    readings to gate, unknown qualities, headings' sigmas and bearings either side of +-pi."""
+    out = []
+    for size in [1, 2, 3, 3, 3, 4, 5, 5, 8, 12, 33, 40, 1, 2]:
+        centre = rng.uniform(-math.pi, math.pi)
+        theta = centre + rng.normal(0, 0.02, size)
+        theta[rng.random(size) < 0.2] += rng.uniform(0.5, 2.5)  # wild
+        quality = rng.uniform(40, 100, size)
+        quality[rng.random(size) < 0.2] = np.nan
+        out.append(Group(Reading(float(100 + i), float((t + math.pi) % (2 * math.pi) - math.pi), float(q),
+                                 float(rng.uniform(0.005, 0.05)), float(rng.uniform(-1e3, 1e3)),
+                                 float(rng.uniform(-1e3, 1e3)), float(rng.uniform(0, 5)), 0.0, 0.0,
+                                 float(rng.uniform(0, 0.01)))
+                         for i, (t, q) in enumerate(zip(theta, quality, strict=True))))
+    return out
+
+
+def fitted() -> NoiseModel:
+    model = NoiseModel(0.05)
+    model.k = np.linspace(0.7, 3.1, model.k.size)[::-1].copy()  # a scale per quality band and for unknown quality
+    return model
+
+
+@pytest.mark.parametrize("weighting", ["inverse_variance", "equal", "paper"])
+@pytest.mark.parametrize("noise", [None, "fitted"])
+@pytest.mark.parametrize("offset", [0.0, 0.3, -3.0])
+def test_the_batch_remakes_each_point_as_make_point_does(weighting, noise, offset):
+    cfg = LocalizerConfig(point_weighting=weighting, df_correlation=0.3)
+    model = fitted() if noise else None
+    gs = groups(np.random.default_rng(7))
+    batch = PointBatch(gs, cfg)
+    built = batch.built(model, offset)
+    pts = batch.points(model, offset)
+    assert len(built) == len(gs) == len(pts)
+    gated = 0
+    for k, g in enumerate(gs):
+        ref, ref_kept = offset_point(make_point(g, cfg, sigmas(g, model) if model else None), offset)
+        point, kept = built[k]
+        assert np.array_equal(kept, ref_kept)
+        gated += int((~kept).sum())
+        for name in FIELDS:
+            a, b = getattr(point, name), getattr(ref, name)
+            if name == "theta":
+                a, b = math.remainder(a - b, 2 * math.pi), 0.0
+            assert a == pytest.approx(b, rel=1e-12, abs=1e-12), (k, name)
+        assert (pts.east[k], pts.north[k], pts.theta[k], pts.sigma[k], pts.gps[k]) == (
+            point.east, point.north, point.theta, point.sigma, point.gps_sigma)
+    assert gated > 0  # the gate was exercised
+
+
+def test_an_empty_batch_has_no_points():
+    batch = PointBatch([], LocalizerConfig())
+    assert batch.built(None) == [] and len(batch.points(fitted(), 0.2)) == 0
