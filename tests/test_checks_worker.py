@@ -315,3 +315,32 @@ def alive(pid: int) -> bool:
             return f.read().split(") ")[1][0] != "Z"
     except FileNotFoundError:
         return False
+
+
+def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeypatch):
+    """With hundreds of channels queued behind one worker every start search comes back stale (more points than it
+    searched): searching again each time never started a filter (the node under 250 carriers published nothing in
+    two minutes). One stale result is searched again; a second is used, its modes proposing for every point held."""
+    from concurrent.futures import Future
+
+    from aoa_localizer.engine.checks import search_start
+
+    data = simulate("seed", 2)
+    loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
+    monkeypatch.setattr(loc.scheduler, "submit", lambda job: Future())  # a worker that never answers
+    snap = None
+    for event in data.inputs():
+        loc.feed(event)
+        t = loc.channels.default.track
+        if snap is None and len(t.window) == 20:
+            snap = t.snapshot()
+    assert snap is not None and t.filter is None and len(t.window) >= 40
+    res = search_start(snap, initiator_module.MIN_INLIERS, initiator_module.MAX_ELLIPSE_RANGE_SHARE)
+    assert res.determined and res.searched == 20
+    t.job = None
+    assert not t.initiator.apply_start(res, snap.groups) and t.filter is None  # stale: searched again
+    assert t.job is not None
+    t.job = None
+    assert t.initiator.apply_start(res, snap.groups) and t.filter is not None  # stale again: used
+    assert t.points_used == len(t.window)
+    loc.close()

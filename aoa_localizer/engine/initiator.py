@@ -47,6 +47,7 @@ class Initiator:
         self.track, self.cfg = track, cfg
         self.next_start_try = 0  # points the window must hold before the next start search
         self.start_cloud: np.ndarray | None = None  # the particles of the latest start
+        self.searched_again = False  # the pending start search was made again because the one before was stale
 
     def try_start(self, inline: bool = False, final: bool = False) -> bool:
         """Start the filter once the points allow (`inline`: the start search here, even with a worker; `final`: the
@@ -76,11 +77,15 @@ class Initiator:
         """Start the filter from a start search's modes over the points held now (a background search's snapshot
         may have fewer): an importance sample of the posterior, then MH sweeps; or wait for more points."""
         t = self.track
-        if len(t.window) > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE):
+        stale = len(t.window) > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE)
+        if stale and not self.searched_again:
             # Points came far faster than the worker searched (a bag replayed at full speed): a mode of the few
-            # points searched is no start for the many held now. Search again, over all of them.
-            self.next_start_try = 0
+            # points searched is no start for the many held now. Search again, over all of them, once: when that
+            # search is stale too, the worker is the bottleneck (hundreds of channels queue behind it), and
+            # searching again would never end; its modes still propose for every point held now.
+            self.next_start_try, self.searched_again = 0, True
             return self.try_start()
+        self.searched_again = False
         t.apply_fit(res, groups)
         modes = res.modes
         if not modes or not res.determined:
