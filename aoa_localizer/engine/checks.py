@@ -64,18 +64,12 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     between two sources, whose readings cluster either side of it). Then, with `learn_offset`, a constant bearing
     offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
     reference's prior log odds. Returns (noise, place, offset); None when the readings are too few for a fit."""
-    cfg, cols = batch.cfg, [columns(g) for g in batch.groups]
-    if sum(c.theta.size for c in cols) < 2:
+    cfg, c = batch.cfg, batch.cols
+    if c.theta.size < 2:
         return None
-
-    def joined(name: str) -> np.ndarray:
-        # Made element by element, not concatenated: the EM's sums are the same to the last bit as before the
-        # checks could run in a worker (with concatenated arrays they changed with the heap's layout).
-        return np.array([v for c in cols for v in getattr(c, name).tolist()])
-
     rob = replace(rob, grid=None)  # each trial noise is taken as it is
-    quality, base, heading_var = joined("quality"), joined("sigma"), joined("heading_sigma") ** 2
-    at_readings = shifted(Points(joined("east"), joined("north"), joined("theta"), base), offset)
+    quality, base, heading_var = c.quality, c.sigma, c.heading_sigma**2
+    at_readings = shifted(Points(c.east, c.north, c.theta, base), offset)
     configured = batch.points(None, offset)
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
     narrow = find_modes(configured, Robust(eps, cfg.gps_sigma_m), by_density=by_density)

@@ -27,8 +27,8 @@ class ClockHint:
 
 def best_shift(pts: Points, velocity: np.ndarray, x0: np.ndarray, rob: Robust) -> ClockHint | None:
     """The shift (to a quarter second, COARSE_S then FINE_S) that fits best when it beats no shift by MIN_GAIN, else
-    None. `velocity` (K, 2) is
-    the vehicle's east/north velocity at each point, `x0` the emitter estimate the fits start from."""
+    None. `velocity` (K, 2) is the vehicle's east/north velocity at each point, `x0` the emitter estimate the fits
+    start from."""
     if len(pts) < 3 or float(np.median(np.hypot(velocity[:, 0], velocity[:, 1]))) < MIN_SPEED_MPS:
         return None
     scores: dict[float, float] = {}

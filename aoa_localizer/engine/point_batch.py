@@ -16,7 +16,6 @@ from aoa_localizer.engine.preprocess import (
     SMALL_POINT,
     TIE_RAD,
     Columns,
-    circular_median,
     columns,
     group_size,
     make_point,
@@ -54,8 +53,10 @@ class PointBatch:
         cols = [columns(g) for g in groups]
         self.sizes = np.array([c.stamp.size for c in cols], int)
         self.of = np.repeat(np.arange(len(cols)), self.sizes)  # each reading's point
-        self.cols = Columns(*(np.concatenate(f) if cols else np.zeros(0) for f in zip(*cols, strict=True))) \
-            if cols else Columns(*(np.zeros(0) for _ in Columns._fields))
+        # Made element by element, not concatenated: the noise fit's sums are the same to the last bit as before the
+        # checks could run in a worker (with concatenated arrays they changed with the heap's layout).
+        self.cols = Columns(*(np.array([v for c in cols for v in getattr(c, name).tolist()], float)
+                              for name in Columns._fields))
         self.off_median = self._off_median(cols)
 
     def _off_median(self, cols: list[Columns]) -> np.ndarray:
@@ -67,10 +68,6 @@ class PointBatch:
         start = np.concatenate([[0], np.cumsum(self.sizes)[:-1]])
         for n in np.unique(self.sizes[self.sizes >= 3]).tolist():
             which = np.flatnonzero(self.sizes == n)
-            if which.size == 1:  # the reference's own call: the same median to the bit
-                idx = start[which[0]] + np.arange(n)
-                off[idx] = np.abs(wrap_pi(self.cols.theta[idx] - circular_median(self.cols.theta[idx])))
-                continue
             idx = start[which][:, None] + np.arange(n)[None, :]  # (points, n)
             theta = self.cols.theta[idx]
             spread = np.abs(wrap_pi(theta[:, :, None] - theta[:, None, :])).sum(axis=2)

@@ -10,7 +10,7 @@ where a fixed 1.1 deg would call two of them wild and publish a tiny ellipse at 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,11 +34,14 @@ class NoiseGrid:
     scale: np.ndarray
     outlier: np.ndarray
     log_prior: np.ndarray
+    distinct: tuple[np.ndarray, np.ndarray] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         # The densities are summed as they are, not as logs (_terms): a wild share keeps each mixture off zero.
         if not np.all((self.outlier > 0.0) & (self.outlier < 1.0)):
             raise ValueError(f"the noise hypotheses' wild shares must be in (0, 1), not {self.outlier}")
+        # the distinct scales and each hypothesis' one (every likelihood under the latent noise reads them)
+        object.__setattr__(self, "distinct", np.unique(self.scale, return_inverse=True))
 
     @classmethod
     def weak(cls, configured_sigma_deg: float) -> NoiseGrid:
@@ -96,7 +99,7 @@ def _terms(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarr
     one array operation, since at a few points numpy's per-call cost is most of the work."""
     resid2 = np.square(resid)
     nd = len(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
-    scales, which = np.unique(grid.scale, return_inverse=True)
+    scales, which = grid.distinct
     v = np.square(scales).reshape((-1,) + (1,) * nd) * var + extra_var  # (scales, ..., K)
     gauss = np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v)
     outlier = grid.outlier.reshape((-1,) + (1,) * nd)
