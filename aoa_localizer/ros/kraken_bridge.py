@@ -23,7 +23,6 @@ whatever the server does), with the counts; 2 for bad options.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import time
 from collections import Counter
@@ -34,7 +33,7 @@ from rclpy.node import Node
 from aoa_localizer.common.http_poll import DEFAULT_MAX_BYTES, PollFailed, http_get
 from aoa_localizer.common.kraken_csv import KrakenLine, LineFilter, MalformedLine, parse_line, quality_from_confidence
 from aoa_localizer.engine.geodesy import wrap_360
-from aoa_localizer.ros.ros_main import run_node
+from aoa_localizer.ros.ros_main import Stop, run_node
 from msgs_adapters import build
 
 RETRY_S = 1.0
@@ -84,25 +83,19 @@ class KrakenBridge(Node):
         self.last_fix_stamp = -float("inf")  # the lines of one CPI repeat its position: one fix each
         self.skipped_said = time.monotonic()
         self.counts_said = (0, 0)  # (no_gps_heading, published) when the skipped lines were last looked at
-        # Our own SIGINT/SIGTERM: rclpy's would invalidate the context under a publish (an RCLError traceback).
-        self.stopped_by: str | None = None
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self.stop)
+        self.stop = Stop()  # run()'s, from run_node: SIGINT or SIGTERM
         self.get_logger().info(
             f"polling {args.url} at {args.rate:g} Hz; publishing "
             + ("azimuths from true north (DoA + the line's heading)" if args.azimuth == "true"
                else "array-relative azimuths: run the node with bearing_reference:=vehicle")
         )
 
-    def stop(self, signum, _frame):
-        self.stopped_by = signal.Signals(signum).name
-
     def fetch(self) -> str | None:
         """The page's text, or None while the server is unreachable (one log line per outage)."""
         try:
-            text = http_get(self.args.url, self.args.timeout, self.args.max_bytes, lambda: self.stopped_by is not None)
+            text = http_get(self.args.url, self.args.timeout, self.args.max_bytes, lambda: self.stop.requested)
         except PollFailed as exc:
-            if self.stopped_by is not None:
+            if self.stop.requested:
                 return None
             if self.down_since is None:
                 self.down_since = time.monotonic()
@@ -156,16 +149,17 @@ class KrakenBridge(Node):
                                             frame_id=r.station or "df_antenna"))
         self.counts["published"] += 1
 
-    def run(self):
+    def run(self, stop: Stop):
+        self.stop = stop
         period = 1.0 / self.args.rate
-        while self.stopped_by is None:
+        while not self.stop.requested:
             t0 = time.monotonic()
             text = self.fetch()
-            if text is not None and self.stopped_by is None:
+            if text is not None and not self.stop.requested:
                 self.take(text)
             wait = (RETRY_S if text is None else period) - (time.monotonic() - t0)
             rclpy.spin_once(self, timeout_sec=max(min(wait, 0.1), 0.0))
-            while self.stopped_by is None and time.monotonic() - t0 < (RETRY_S if text is None else period):
+            while not self.stop.requested and time.monotonic() - t0 < (RETRY_S if text is None else period):
                 rclpy.spin_once(self, timeout_sec=0.05)
 
     def destroy_node(self):

@@ -18,7 +18,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
@@ -34,7 +33,7 @@ from aoa_localizer.ros.declare import declare, refuse_unknown, value_of
 from aoa_localizer.ros.node_monitor import NodeMonitor
 from aoa_localizer.ros.node_outputs import NodeOutputs
 from aoa_localizer.ros.node_params import NODE_PARAMS, STATION_POSITION
-from aoa_localizer.ros.ros_main import run_node
+from aoa_localizer.ros.ros_main import run_node, spin
 from aoa_localizer.ros.vehicle_path import VehiclePath
 from msgs_adapters import build
 from msgs_adapters.fields import (
@@ -449,7 +448,7 @@ GOAL_PERIOD_S = 1.0  # emitter/next_goal is refreshed at most this often (s)
 def main(argv=None) -> int:
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     keep_freed_memory()
-    return run_node(NODE_NAME, LocalizerNode, rclpy.spin, (ConfigError,), argv, usage())
+    return run_node(NODE_NAME, LocalizerNode, spin, (ConfigError,), argv, usage())
 
 
 if __name__ == "__main__":

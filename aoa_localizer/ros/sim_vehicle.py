@@ -31,7 +31,7 @@ from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.goal_drive import GoalDrive
 from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, mounted, simulate
 from aoa_localizer.ros.declare import declare, refuse_unknown
-from aoa_localizer.ros.ros_main import run_node
+from aoa_localizer.ros.ros_main import Stop, run_node
 from msgs_adapters import build
 
 
@@ -141,6 +141,7 @@ class SimVehicle(Node):
 
     def __init__(self):
         super().__init__("sim_vehicle")
+        self.stop = Stop()  # play()'s, from run_node: SIGINT or SIGTERM
         self.sigma_rad = 0.0
         s = declare(self, SETTINGS)  # raises ConfigError: refused at start with the reason
         overrides = declare(self, OVERRIDES)
@@ -236,17 +237,18 @@ class SimVehicle(Node):
     def serve(self, seconds: float):
         """Wait `seconds` while serving the node's callbacks (parameter services, discovery), not sleeping."""
         end = time.monotonic() + seconds
-        while rclpy.ok() and (left := end - time.monotonic()) > 0:
+        while not self.stop.requested and (left := end - time.monotonic()) > 0:
             rclpy.spin_once(self, timeout_sec=left)
 
-    def play(self):
-        """Publish the run; returns when it is played (or the duration is reached)."""
+    def play(self, stop: Stop):
+        """Publish the run; returns when it is played, the duration is reached or `stop` is requested."""
+        self.stop = stop
         T = self.T
         deadline = time.monotonic() + self.start_timeout_s
         every = [pub for pair in self.pubs.values() for pub in pair]
         while (
             time.monotonic() < deadline
-            and rclpy.ok()
+            and not self.stop.requested
             and min(pub.get_subscription_count() for pub in every) < self.wait_for
         ):
             self.serve(0.05)
@@ -267,7 +269,7 @@ class SimVehicle(Node):
             )
         t_wall0, next_log = time.monotonic(), 0.0
         for t, station, kind, row in events:
-            if t > end or not rclpy.ok():
+            if t > end or self.stop.requested:
                 break
             if self.speedup > 0:
                 delay = t_wall0 + t / self.speedup - time.monotonic()
