@@ -234,3 +234,40 @@ def test_the_marginal_from_densities_matches_the_log_sum_exp_of_its_definition_o
     np.testing.assert_allclose(marginal(r, var, extra, grid), expected, rtol=1e-12)
     with pytest.raises(ValueError, match="wild shares"):
         NoiseGrid(np.ones(1), np.zeros(1), np.zeros(1))
+
+
+def test_a_points_weight_under_the_latent_noise_from_running_sums_matches_the_full_recomputation(monkeypatch):
+    """Issue 27's incremental work: the newest point's weight adds that point to the particles' per-hypothesis
+    sums when the cloud and the earlier points are unchanged (one point evaluated, not K), and starts the sums
+    again after a move, a dropped point or points remade; always the difference of the two full posteriors to
+    1e-9."""
+    from aoa_localizer.engine import emitter_model
+    from aoa_localizer.engine.types import ObservationPoint
+
+    seen = []
+    full = emitter_model.latent_log_densities
+    monkeypatch.setattr(emitter_model, "latent_log_densities", lambda x, pts, rob: seen.append(len(pts)) or full(
+        x, pts, rob))
+    model = emitter_model.EmitterModel(LocalizerConfig(history_points=10, gps_sigma_m=3.0))
+    model.grid = NoiseGrid.weak(2.0)
+    rng = np.random.default_rng(11)
+    x = rng.normal([400.0, 900.0], 150.0, (50, 2))
+    for k in range(12):
+        theta = math.atan2(900.0 - 40.0 * k, 400.0 - 0.5 * k * k) + rng.normal(0.0, 0.05)
+        if k == 5:
+            theta += 2.0  # a wild one
+        p = ObservationPoint(float(k), 40.0 * k, 0.5 * k * k, theta, 0.03, 4, gps_sigma=1.0 + k % 3)
+        if k == 7:
+            x = x + rng.normal(0.0, 5.0, x.shape)  # a move
+        if k == 9:
+            model.history.data[:, 3] *= 1.5  # the points remade with another sigma (a calibration)
+        model.observe(p)
+        seen.clear()
+        w = model.loglik(x, p)
+        h = model.history.data
+        expected = model._latent_posterior(x, h) - model._latent_posterior(x, h[:-1])
+        np.testing.assert_allclose(w, expected, rtol=1e-9, atol=1e-9)
+        # a move at the 8th point, points remade at the 10th; the window holds 10, so the 11th on drop the oldest
+        reused = k in (1, 2, 3, 4, 5, 6, 8)
+        assert seen == ([1] if reused else [len(h) - 1, 1]), (k, seen)
+    assert np.ptp(w) > 1.0  # the weights tell the particles apart: the comparison is not between constants

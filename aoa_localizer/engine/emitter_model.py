@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.global_search import Points, Robust, log_posterior, reach_log_prior
+from aoa_localizer.engine.global_search import Points, Robust, latent_log_densities, log_posterior, reach_log_prior
 from aoa_localizer.engine.likelihood import BearingLikelihood
-from aoa_localizer.engine.receiver import NoiseGrid
+from aoa_localizer.engine.receiver import NoiseGrid, log_sum
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.models.base import StateSpaceModel
 
@@ -34,6 +35,23 @@ class PointHistory:
         return self.data.shape[0]
 
 
+@dataclass
+class RunningSums:
+    """Per particle and noise hypothesis, the log densities of the points `rows` at the particles `x` (N, H)
+    (receiver.log_densities): the next point's weight adds that point's alone when the cloud and the points
+    are still these."""
+
+    x: np.ndarray
+    rows: np.ndarray
+    grid: NoiseGrid
+    gps_var: float
+    sums: np.ndarray
+
+    def covers(self, x: np.ndarray, rows: np.ndarray, grid: NoiseGrid, gps_var: float) -> bool:
+        return (grid is self.grid and gps_var == self.gps_var and x.shape == self.x.shape
+                and rows.shape == self.rows.shape and np.array_equal(x, self.x) and np.array_equal(rows, self.rows))
+
+
 class EmitterModel(StateSpaceModel):
     """X_k = X_{k-1} + N(0, q^2 I) (paper eq. 17); z = bearing from the point's antenna (eq. 18)."""
 
@@ -49,6 +67,7 @@ class EmitterModel(StateSpaceModel):
         # and the likelihood's outlier share are taken as they are)
         self.grid: NoiseGrid | None = None
         self.reach: tuple[float, float, float] | None = None  # global_search.Robust.reach
+        self.sums: RunningSums | None = None  # the last point weight's, under the latent noise
 
     def set_prior(self, mean, cov):
         self.prior_mean = np.asarray(mean, float)
@@ -72,9 +91,25 @@ class EmitterModel(StateSpaceModel):
         if self.grid is not None and len(self.history) and self.history.data[-1, 2] == p.theta:
             # The noise is shared by all points: the newest point's weight is the predictive ratio of the posteriors
             # with and without it (every filter weights a point after observing it).
-            h = self.history.data
-            return self._latent_posterior(x, h) - self._latent_posterior(x, h[:-1])
+            return self._point_weight(np.asarray(x, float))
         return self.lik.log(x, p.east, p.north, p.theta, p.sigma, p.gps_sigma)
+
+    def _point_weight(self, x: np.ndarray) -> np.ndarray:
+        """The newest point's weight under the latent noise, log sum_h prior_h exp(S_h + d_h) - log sum_h prior_h
+        exp(S_h), with S the log densities of the points before it and d its own (the posterior's prior on x
+        cancels): S is the last weight's running sum when that covered exactly these points at these particles
+        (no move or re-start in between), so a point costs O(N H) instead of two passes over all K points."""
+        assert self.grid is not None
+        h, gps_var = self.history.data, self.lik.gps_var
+        rob = Robust(0.0, math.sqrt(gps_var), grid=self.grid)
+        s = self.sums
+        if s is not None and s.covers(x, h[:-1], self.grid, gps_var):
+            before = s.sums
+        else:
+            before = latent_log_densities(x, Points.of(h[:-1]), rob)
+        after = before + latent_log_densities(x, Points.of(h[-1:]), rob)
+        self.sums = RunningSums(x.copy(), h.copy(), self.grid, gps_var, after)
+        return log_sum(after, self.grid) - log_sum(before, self.grid)
 
     def _latent_posterior(self, x, h: np.ndarray) -> np.ndarray:
         """The log posterior over the points h with the noise marginalised over the grid: the global search's."""

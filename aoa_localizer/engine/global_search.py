@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
-from aoa_localizer.engine.receiver import NoiseGrid, em_weights, marginal
+from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 # Grid: azimuth cells, log-range cells, and the range span relative to the track's extent.
@@ -170,16 +170,25 @@ def _prior(x: np.ndarray, rob: Robust):
 
 def log_posterior(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
     """Robust log posterior (up to a constant) at x (..., 2); `widen2` (..., K) adds to each bearing variance."""
+    if rob.grid is not None:
+        return log_sum(latent_log_densities(x, pts, rob, widen2), rob.grid) + _prior(x, rob)
     resid, _, _, r2 = _residuals(x, pts)
     gps_var = pts.gps_var(rob)
-    if rob.grid is not None:
-        extra = widen2 + gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else widen2
-        return marginal(resid, pts.sigma**2, extra, rob.grid) + _prior(x, rob)
     var = pts.sigma**2 + widen2
     if np.any(gps_var):
         var = var + gps_var / np.maximum(r2, 1.0)
     ll, _ = _terms(resid, var, rob.outlier_prob)
     return ll.sum(axis=-1) + _prior(x, rob)
+
+
+def latent_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
+    """Under the latent noise (rob.grid): sum over the points of each bearing's log density per hypothesis at x,
+    (..., H) (receiver.log_densities); log_posterior is their log_sum plus the prior on x."""
+    assert rob.grid is not None
+    resid, _, _, r2 = _residuals(x, pts)
+    gps_var = pts.gps_var(rob)
+    extra = widen2 + gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else widen2
+    return log_densities(resid, pts.sigma**2, extra, rob.grid)
 
 
 def _grid(pts: Points):

@@ -78,14 +78,25 @@ class NoiseGrid:
 def marginal(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
     """log sum_h prior_h prod_k p(resid_k | h): resid, var (points' sigma^2), extra_var (antenna position and
     smoothing terms, not scaled) broadcast to (..., K); returns (...)."""
-    return _joint(_terms(resid, var, extra_var, grid)[0], grid)[0]
+    return log_sum(log_densities(resid, var, extra_var, grid), grid)
+
+
+def log_densities(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
+    """sum_k log p(resid_k | h) per hypothesis, (..., H): the part of the marginal that adds up over points, so a
+    running sum takes a new point at the cost of that point alone."""
+    return _per_hypothesis(_terms(resid, var, extra_var, grid)[0])
+
+
+def log_sum(densities: np.ndarray, grid: NoiseGrid) -> np.ndarray:
+    """The marginal from log_densities' per-hypothesis sums (..., H): log sum_h prior_h exp(densities_h)."""
+    return _joint(densities, grid)[0]
 
 
 def em_weights(resid, var, extra_var, grid: NoiseGrid):
     """The marginal's EM quantities at each place: (log marginal (...), precision weight (..., K) = E[inlier /
     variance], inlier weight (..., K)), the expectations over the hypotheses' posterior at that place."""
     mix, inl, v = _terms(resid, var, extra_var, grid)
-    total, per_h = _joint(mix, grid)
+    total, per_h = _joint(_per_hypothesis(mix), grid)
     post = np.exp(per_h - total[..., None])  # (..., H)
     gamma = inl / mix * np.moveaxis(post, -1, 0)[..., None]
     return total, np.sum(gamma / v, axis=0), np.sum(gamma, axis=0)
@@ -107,9 +118,14 @@ def _terms(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarr
     return inl + outlier / TWO_PI, inl, v[which]
 
 
-def _joint(mix: np.ndarray, grid: NoiseGrid):
-    """(log marginal (...), per-hypothesis log joint (..., H)) from the hypotheses' per-point densities (H, ..., K)."""
-    per_h = np.moveaxis(np.log(mix).sum(axis=-1), 0, -1) + grid.log_prior
+def _per_hypothesis(mix: np.ndarray) -> np.ndarray:
+    """sum_k log mix over the points, hypotheses last: (H, ..., K) -> (..., H)."""
+    return np.moveaxis(np.log(mix).sum(axis=-1), 0, -1)
+
+
+def _joint(densities: np.ndarray, grid: NoiseGrid):
+    """(log marginal (...), per-hypothesis log joint (..., H)) from the per-hypothesis log densities (..., H)."""
+    per_h = densities + grid.log_prior
     top = np.max(per_h, axis=-1, keepdims=True)
     top = np.where(np.isfinite(top), top, 0.0)
     return np.log(np.sum(np.exp(per_h - top), axis=-1)) + top[..., 0], per_h
