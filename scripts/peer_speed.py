@@ -2,14 +2,15 @@
 extended Kalman filter and particle filter and the `particles` IBIS sampler, on the same readings, in one process,
 the runs interleaved (issue "predictable cost", docs/benchmarks.md has the figures).
 
-    python scripts/peer_speed.py [--runs 10] [--cases seed,straight,urban,homing,ring,wild20]
+    python scripts/peer_speed.py [--runs 10] [--cases seed,straight,urban,homing,ring,wild20] [--particles 100]
 
 Ours: every `add_fix` and `add_bearing` call, then `flush` and `finish`, timed through the public API under the
-default configuration (N = 100, `scheduling: reproducible`, so every start search and check is paid in the calls).
+default configuration (N = 100 unless --particles, `scheduling: reproducible`, so every start search and check is
+paid in the calls).
 Stone Soup 1.9: one predict and one update per reading, a static emitter (random walk of 1e-6 m^2/s), the bearing
 model `Cartesian2DToBearing` at the antenna's true place with the reading's true noise, and our start as its prior
 (mean, and covariance doubled, of the start cloud: Stone Soup has no start of its own and is given ours, untimed).
-Its particle filter has N = 100 and resamples when the ESS falls under N / 2. IBIS (warmed: one run in the process
+Its particle filter has our N and resamples when the ESS falls under N / 2. IBIS (warmed: one run in the process
 first) steps over our observation points with our likelihood (scripts/particles_peers.py). Each peer's cost per
 reading is its total time over the run's DF readings; the slowest call is the median over runs of each run's
 slowest. The final error (m) says at what accuracy each cost was paid. Nothing here is a test.
@@ -64,9 +65,9 @@ T0 = datetime(2026, 1, 1)
 RANDOM_WALK = 1e-6  # m^2/s: a static emitter, kept proper for the predictors
 
 
-def ours(data: ScenarioData, seed: int) -> tuple[float, float, float, Localizer]:
+def ours(data: ScenarioData, seed: int, particles: int) -> tuple[float, float, float, Localizer]:
     """(total seconds, slowest call's seconds, final error m, the localizer) of one run through the public API."""
-    loc = Localizer(scenario_config(data, LocalizerConfig(seed=seed)))
+    loc = Localizer(scenario_config(data, LocalizerConfig(seed=seed, num_particles=particles)))
     total, slowest = 0.0, 0.0
     calls = [(lambda row=row: loc.add_fix(row[0], row[1], row[2], row[3])) if kind == "fix"
              else (lambda row=row: loc.add_bearing(row[0], row[1], row[2])) for kind, row in data.events()]
@@ -128,29 +129,30 @@ def in_scenario_frame(loc: Localizer, data: ScenarioData, place: np.ndarray) -> 
     return np.array(data.frame.to_enu(lat, lon), float)
 
 
-def ibis(loc: Localizer, data: ScenarioData, prior: tuple[np.ndarray, np.ndarray], seed: int
+def ibis(loc: Localizer, data: ScenarioData, prior: tuple[np.ndarray, np.ndarray], particles: int, seed: int
          ) -> tuple[float, float, float]:
     """(total seconds, slowest step, final error m) of IBIS over our observation points (in the localizer's frame;
     `prior` too)."""
-    estimates, steps = particles_peers.run_ibis(loc.recent_points(), prior[0], prior[1], 100, loc.cfg.outlier_prob,
+    estimates, steps = particles_peers.run_ibis(loc.recent_points(), prior[0], prior[1], particles,
+                                                loc.cfg.outlier_prob,
                                                 seed)
     error = float(np.hypot(*(in_scenario_frame(loc, data, estimates[-1]) - data.emitter_enu)))
     return float(np.sum(steps)), float(np.max(steps)), error
 
 
-def one_run(case: str, r: int) -> dict[str, tuple[float, float, float]]:
+def one_run(case: str, r: int, n_particles: int) -> dict[str, tuple[float, float, float]]:
     """Every method on run `r` of `case`: (cost per reading s, slowest call s, final error m) by method."""
     data = simulate(CASES[case], r)
     n = len(data.bearings)
-    total, slowest, error, loc = ours(data, 10000 + r)
+    total, slowest, error, loc = ours(data, 10000 + r, n_particles)
     out = {"ours": (total / n, slowest, error)}
     start = loc.start_cloud
     prior = (start.mean(axis=0), 2.0 * np.cov(start.T))
-    for name, particles in (("EKF", 0), ("PF", 100)):  # Stone Soup works in the scenario's frame
+    for name, particles in (("EKF", 0), ("PF", n_particles)):  # Stone Soup works in the scenario's frame
         total, slowest, error = stone_soup(data, (in_scenario_frame(loc, data, prior[0]), prior[1]), particles,
                                            10000 + r)
         out[name] = (total / n, slowest, error)
-    total, slowest, error = ibis(loc, data, prior, 10000 + r)
+    total, slowest, error = ibis(loc, data, prior, n_particles, 10000 + r)
     out["IBIS"] = (total / n, slowest, error)
     return out
 
@@ -159,6 +161,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--cases", default="seed,straight,urban,homing,ring,wild20")
+    parser.add_argument("--particles", type=int, default=100, help="N of ours, Stone Soup's PF and IBIS")
     args = parser.parse_args(argv)
     if Cartesian2DToBearing is None or not particles_peers.AVAILABLE:
         print("Stone Soup and `particles` are needed (pip install -e '.[bench]')", file=sys.stderr)
@@ -168,12 +171,13 @@ def main(argv=None) -> int:
     if unknown:
         print(f"unknown case(s) {', '.join(unknown)}; known: {', '.join(CASES)}", file=sys.stderr)
         return 2
-    one_run(cases[0], args.runs)  # untimed: every method's first calls in the process (IBIS's first step ~0.5 s)
+    # untimed: every method's first calls in the process (IBIS's first step ~0.5 s)
+    one_run(cases[0], args.runs, args.particles)
     print("| case | method | cost per reading, mean over runs (ms) | slowest call, median of runs (ms) | "
           "final error, median (m) | ours / this (cost) |")
     print("|---|---|---|---|---|---|")
     for case in cases:
-        runs = [one_run(case, r) for r in range(args.runs)]
+        runs = [one_run(case, r, args.particles) for r in range(args.runs)]
         mine = np.mean([run["ours"][0] for run in runs])
         for method in ("ours", "EKF", "PF", "IBIS"):
             cost, slow, err = (np.array([run[method][k] for run in runs]) for k in range(3))
