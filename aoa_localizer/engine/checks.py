@@ -88,6 +88,7 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     def joint(x: np.ndarray, b: float) -> tuple[float, NoiseModel, np.ndarray] | None:
         """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
         trial, ll, readings = noise.copy(), float("nan"), shifted(at_readings, b - offset)
+        cov = np.full((2, 2), np.nan)
         for _ in range(2):
             ll = trial.fit(residuals(x, readings), quality, base, heading_var)
             if not np.isfinite(ll):
