@@ -30,16 +30,7 @@ from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.geodesy import wrap_pi
-from aoa_localizer.engine.global_search import (
-    Mode,
-    Points,
-    Robust,
-    find_modes,
-    log_posterior,
-    refine,
-    residuals,
-    same_mode,
-)
+from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, log_posterior, refine, residuals
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
@@ -83,26 +74,18 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
     narrow = find_modes(configured, Robust(eps, cfg.gps_sigma_m), by_density=by_density)
 
-    fitted: list[Mode] = []  # each fit's place with its Laplace covariance
-
     def joint(x: np.ndarray, b: float) -> tuple[float, NoiseModel, np.ndarray] | None:
         """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
         trial, ll, readings = noise.copy(), float("nan"), shifted(at_readings, b - offset)
-        cov = np.full((2, 2), np.nan)
         for _ in range(2):
             ll = trial.fit(residuals(x, readings), quality, base, heading_var)
             if not np.isfinite(ll):
                 return None
-            means, covs, _ = refine(x[None, :], np.zeros(1), batch.points(trial, b), rob)
-            x, cov = means[0], covs[0]
-        fitted.append(Mode(x, cov, ll, ll, 0, 0.0))
+            x = refined(x, batch.points(trial, b), rob)
         return ll, trial, x
 
     best = None
     for x in list(candidates) + [m.mean for m in narrow[:1]]:
-        # a start in the basin of a place already fitted (find_modes' test for one mode) would find that place again
-        if any(same_mode(x, m) for m in fitted if np.all(np.isfinite(m.cov))):
-            continue
         fit = joint(x, offset)
         if fit is None:
             return None

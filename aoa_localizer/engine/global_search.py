@@ -318,7 +318,7 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
         sign, logdet = np.linalg.slogdet(covs[m])
         if sign <= 0:
             continue
-        if any(same_mode(means[m], o) for o in modes):
+        if any(_same(means[m], o) for o in modes):
             continue
         inlier = gamma[m] > 0.5
         if inlier.sum() < 2:  # a flat far-away "mode" that explains no bearing
@@ -337,8 +337,7 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
     return modes
 
 
-def same_mode(x: np.ndarray, mode: Mode) -> bool:
-    """Whether x lies within the mode's 3-sigma ellipse: one mode, not two."""
+def _same(x: np.ndarray, mode: Mode) -> bool:
     d = x - mode.mean
     return float(d @ np.linalg.solve(mode.cov, d)) < _MERGE_MAHALANOBIS2
 
