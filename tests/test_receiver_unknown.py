@@ -16,10 +16,15 @@ from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import TWO_PI, LocalFrame
 from aoa_localizer.engine.global_search import Points, Robust, log_posterior
 from aoa_localizer.engine.offset import joint_optimum
-from aoa_localizer.engine.receiver import NoiseGrid, em_weights, marginal
+from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
 from aoa_localizer.engine.scenarios import robustness_cells, simulate
 from aoa_localizer.engine.surveys import DATUM, Survey, hand_held, least_squares_fix, locate_survey
 from aoa_localizer.tools import locate
+
+
+def marginal(resid, var, extra_var, grid):
+    """The latent noise's marginal as the engine makes it (global_search.log_posterior)."""
+    return log_sum(log_densities(resid, var, extra_var, grid), grid)
 
 
 def _normal(r, sigma):

@@ -75,20 +75,15 @@ class NoiseGrid:
 
 
 
-def marginal(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
-    """log sum_h prior_h prod_k p(resid_k | h): resid, var (points' sigma^2), extra_var (antenna position and
-    smoothing terms, not scaled) broadcast to (..., K); returns (...)."""
-    return log_sum(log_densities(resid, var, extra_var, grid), grid)
-
-
 def log_densities(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
-    """sum_k log p(resid_k | h) per hypothesis, (..., H): the part of the marginal that adds up over points, so a
-    running sum takes a new point at the cost of that point alone."""
+    """sum_k log p(resid_k | h) per hypothesis, (..., H), for resid, var (points' sigma^2) and extra_var (antenna
+    position and smoothing terms, not scaled) broadcast to (..., K): the part of the marginal that adds up over
+    points, so a running sum takes a new point at the cost of that point alone."""
     return _per_hypothesis(_terms(resid, var, extra_var, grid)[0])
 
 
 def log_sum(densities: np.ndarray, grid: NoiseGrid) -> np.ndarray:
-    """The marginal from log_densities' per-hypothesis sums (..., H): log sum_h prior_h exp(densities_h)."""
+    """The marginal log sum_h prior_h prod_k p(resid_k | h) from log_densities' per-hypothesis sums (..., H)."""
     return _joint(densities, grid)[0]
 
 
