@@ -126,8 +126,10 @@ def test_a_launcher_timeout_says_where_the_run_stood(domain):
 
 
 def test_pose_encoding_and_a_vehicle_driving_to_the_goal_end_to_end(tmp_path, domain):
-    """The pose encoding end to end, with the vehicle following emitter/next_goal (`drive=goal`): it leaves the
-    straight road (north -200 m) for the emitter (1200, 800) once the node has an estimate."""
+    """The pose encoding end to end, with the vehicle following emitter/next_goal (`drive=goal`): it starts on the
+    straight road (north -200 m) and leaves it for the emitter (1200, 800) once the node has an estimate. Where it
+    goes first is the goal's choice: across the early bearings, which may be south of the road (once in six runs
+    it went to -301 m)."""
     res = launch(["--scenario", "straight", "--speedup", 40, "--seed", 3, "--domain-id", domain,
                   "-p", "bearing_encoding=pose", "--vehicle-param", "bearing_encoding=pose",
                   "--vehicle-param", "drive=goal", "--record", tmp_path / "bag", "--result", tmp_path / "r.json"])
@@ -135,7 +137,7 @@ def test_pose_encoding_and_a_vehicle_driving_to_the_goal_end_to_end(tmp_path, do
     assert json.loads((tmp_path / "r.json").read_text())["error_m"] < 10.0
     frame = LocalFrame(*SCENARIOS["straight"].datum)
     norths = [frame.to_enu(ev.record.lat, ev.record.lon)[1] for ev in read_bag(tmp_path / "bag") if ev.kind == "fix"]
-    assert min(norths) == pytest.approx(-200.0, abs=1.0) and max(norths) > 300.0
+    assert norths[0] == pytest.approx(-200.0, abs=1.0) and max(norths) > 300.0
 
 
 @contextmanager
