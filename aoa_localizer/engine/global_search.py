@@ -231,8 +231,16 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
     prec = rob.prior_prec if rob.prior_prec is not None else np.zeros((2, 2))
     levels = _ANNEAL if widen.any() else _ANNEAL[-1:]  # nothing to anneal from a start next to its mode
     for level in levels:
+        # A start whose step stayed put would stay put again at this level (the same place, the same sums): only
+        # the starts still moving take the level's further steps.
+        moving = np.arange(x.shape[0])
         for _ in range(_ITER_PER_STAGE if len(levels) > 1 else _POLISH_ITERATIONS):
-            x, info, _ = _gn_step(x, pts, rob, level * widen, prec)
+            stepped = _gn_step(x[moving], pts, rob, level * widen[moving], prec)
+            still = np.any(stepped != x[moving], axis=1)
+            x[moving] = stepped
+            moving = moving[still]
+            if not moving.size:
+                break
     _, grad, w, gamma = linearised(x, pts, rob)
     info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-12 * np.eye(2)
     return x, inverse_2x2(info), gamma
@@ -252,9 +260,9 @@ def inverse_2x2(a: np.ndarray) -> np.ndarray:
 
 
 def _gn_step(x, pts: Points, rob: Robust, widen_m, prec):
-    """One damped Gauss-Newton step with the EM weights: keeps the best of a few step lengths (or none)."""
+    """One damped Gauss-Newton step with the EM weights from each place: the best of a few step lengths (or none)."""
     resid, r2, grad = _geometry(x, pts)
-    w, gamma = _weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0), (widen_m[:, None] ** 2) / r2),
+    w, _ = _weights(resid, pts.sigma**2, (pts.gps_var(rob) / np.maximum(r2, 1.0), (widen_m[:, None] ** 2) / r2),
                         rob)
     info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-9 * np.eye(2)
     info = np.where(np.isfinite(info), info, 0.0) + 1e-9 * np.eye(2)
@@ -273,7 +281,7 @@ def _gn_step(x, pts: Points, rob: Robust, widen_m, prec):
     widen2 = (widen_m[:, None, None] ** 2) / _residuals(cand, pts)[3]
     lp = log_posterior(cand, pts, rob, widen2)
     pick = np.argmax(np.where(np.isfinite(lp), lp, -np.inf), axis=1)
-    return cand[np.arange(x.shape[0]), pick], info, gamma
+    return cand[np.arange(x.shape[0]), pick]
 
 
 def steepest_crossing_deg(x: np.ndarray, pts: Points, inlier: np.ndarray) -> float:

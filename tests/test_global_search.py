@@ -1,0 +1,53 @@
+"""The global search's Gauss-Newton refinement: its shortcut against the plain schedule it stands for."""
+import numpy as np
+import pytest
+
+from aoa_localizer.engine import global_search
+from aoa_localizer.engine.global_search import Points, Robust, refine
+from aoa_localizer.engine.receiver import NoiseGrid
+
+
+def _points(rng: np.random.Generator) -> Points:
+    """A drive along a road east of two sources (a ghost takes a third of the bearings), 2 deg noise."""
+    east = np.linspace(-800.0, 800.0, 30)
+    north = np.zeros_like(east)
+    source = np.where(np.arange(30) % 3 == 0, 1, 0)
+    target = np.array([[150.0, 900.0], [-600.0, 400.0]])[source]
+    theta = np.arctan2(target[:, 1] - north, target[:, 0] - east) + np.radians(2.0) * rng.standard_normal(30)
+    return Points(east, north, theta, np.full(30, np.radians(2.0)), np.full(30, 3.0))
+
+
+def _plain_refine(starts, widen, pts, rob):
+    """refine as the annealing schedule reads: every step at every level for every start."""
+    x = np.array(starts, float)
+    prec = rob.prior_prec if rob.prior_prec is not None else np.zeros((2, 2))
+    levels = global_search._ANNEAL if widen.any() else global_search._ANNEAL[-1:]
+    for level in levels:
+        for _ in range(global_search._ITER_PER_STAGE if len(levels) > 1 else global_search._POLISH_ITERATIONS):
+            x = global_search._gn_step(x, pts, rob, level * widen, prec)
+    _, grad, w, gamma = global_search.linearised(x, pts, rob)
+    info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-12 * np.eye(2)
+    return x, global_search.inverse_2x2(info), gamma
+
+
+@pytest.mark.parametrize("latent", [False, True])
+@pytest.mark.parametrize("annealed", [False, True])
+def test_refine_skips_the_steps_of_starts_that_stopped_and_ends_where_every_step_would(monkeypatch, latent, annealed):
+    """A start whose step stayed put stays put at that level, so refine takes no more steps from it: the places,
+    covariances and inlier weights are those of the plain schedule to the last bit, with fewer places stepped."""
+    rng = np.random.default_rng(3)
+    pts = _points(rng)
+    rob = Robust(0.05, 3.0, grid=NoiseGrid.weak(2.0) if latent else None)
+    starts = np.array([[100.0, 1000.0], [-500.0, 300.0], [2000.0, 5000.0], [0.0, -700.0], [149.0, 901.0]])
+    widen = np.array([300.0, 200.0, 2000.0, 500.0, 1.0]) if annealed else np.zeros(5)
+    expected = _plain_refine(starts, widen, pts, rob)
+    stepped = []
+    step = global_search._gn_step
+    monkeypatch.setattr(global_search, "_gn_step", lambda x, *a: stepped.append(len(x)) or step(x, *a))
+    got = refine(starts, widen, pts, rob)
+    for g, e in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(g, e)
+    steps = global_search._ITER_PER_STAGE * len(global_search._ANNEAL) if annealed else global_search._POLISH_ITERATIONS
+    plain = steps * len(starts)
+    assert sum(stepped) < plain if annealed else sum(stepped) <= plain  # polishing, starts tend to creep on
+    assert np.hypot(*(got[0][4] - [150.0, 900.0])) < 50.0  # the start next to the source ends at it
