@@ -194,7 +194,7 @@ class Localizer:
             return None
         places = np.vstack([track.cloud.x, np.array([m[:2] for m in est.modes]).reshape(-1, 2)])
         return posterior_grid(track.posterior_points(), track.robust(), np.array([est.east, est.north]), est.cov,
-                              places)
+                              places, track.modes)
 
     def vehicle_place(self, station: str = "") -> tuple[float, float] | None:
         """A moving station's newest accepted fix (east, north in the map frame, m); None before one, or for a fixed

@@ -11,12 +11,15 @@ the 95 % highest-density region are 5 or more, and the rest are 0.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import ndtr
 
 from aoa_localizer.engine.crlb import ellipse_axes
-from aoa_localizer.engine.global_search import Points, Robust, log_posterior
+from aoa_localizer.engine.geodesy import TWO_PI
+from aoa_localizer.engine.global_search import Mode, Points, Robust, log_posterior
 
 CELLS = 64  # cells a side: the evaluation costs cells^2 x points (docs/interface.md gives the times)
 WINDOW_SIGMAS = 3.0  # the window's half-width, in 95 % ellipse major semi-axes
@@ -52,8 +55,10 @@ def window(mean: np.ndarray, cov: np.ndarray, places: np.ndarray) -> tuple[float
     return float(mean[0]) - half, float(mean[1]) - half, resolution
 
 
-def posterior_grid(pts: Points, rob: Robust, mean: np.ndarray, cov: np.ndarray, places: np.ndarray) -> PosteriorGrid:
-    """The posterior over the points `pts` on the window around `mean` (see `window`)."""
+def posterior_grid(pts: Points, rob: Robust, mean: np.ndarray, cov: np.ndarray, places: np.ndarray,
+                   modes: Sequence[Mode] = ()) -> PosteriorGrid:
+    """The posterior over the points `pts` on the window around `mean` (see `window`); `modes`, the posterior's
+    modes as the last global search found them, make sure a mode narrower than a cell keeps its mass."""
     east0, north0, res = window(np.asarray(mean, float), np.asarray(cov, float), np.asarray(places, float))
     centres = (np.arange(CELLS) + 0.5) * res
     grid = np.stack(np.meshgrid(east0 + centres, north0 + centres), axis=-1).reshape(-1, 2)  # rows go north
@@ -62,7 +67,8 @@ def posterior_grid(pts: Points, rob: Robust, mean: np.ndarray, cov: np.ndarray, 
     # posterior narrower than a cell, such as one of two modes far apart.
     range2 = (grid[:, 0, None] - pts.east) ** 2 + (grid[:, 1, None] - pts.north) ** 2
     widen2 = res**2 / 12.0 / np.maximum(range2, res**2)
-    logp = log_posterior(grid, pts, rob, widen2).reshape(CELLS, CELLS)
+    logp = log_posterior(grid, pts, rob, widen2).reshape(CELLS, CELLS) + 2.0 * math.log(res)
+    logp = np.maximum(logp, _mode_masses(modes, pts, rob, east0, north0, res))
     finite = np.isfinite(logp)
     top = float(np.max(logp[finite])) if finite.any() else 0.0
     p = np.where(finite, np.exp(logp - top), 0.0)
@@ -73,6 +79,26 @@ def posterior_grid(pts: Points, rob: Robust, mean: np.ndarray, cov: np.ndarray, 
     above[order] = np.cumsum(prob.ravel()[order])  # mass of the cells at least as probable
     value = np.where(above - prob.ravel() < REGION, np.ceil(100.0 * (1.0 - above + prob.ravel())), 0.0)
     return PosteriorGrid(east0, north0, res, prob, np.clip(value, 0, 100).astype(np.int8).reshape(prob.shape))
+
+
+def _mode_masses(modes: Sequence[Mode], pts: Points, rob: Robust, east0: float, north0: float,
+                 res: float) -> np.ndarray:
+    """Each cell's log mass from the modes' Laplace approximations (the mode's log posterior now, over the points
+    held, with its covariance), spread over the cells by its east and north marginals: the widened centres alone
+    lose a mode narrower than a cell when their bearings, widened one by one, still cross far from the centre."""
+    out = np.full((CELLS, CELLS), -np.inf)
+    edges = np.arange(CELLS + 1) * res
+    for m in modes:
+        sign, logdet = np.linalg.slogdet(TWO_PI * m.cov)
+        log_mass = float(log_posterior(m.mean, pts, rob)) + 0.5 * logdet
+        sd = np.sqrt(np.diag(m.cov))
+        if sign <= 0 or not (math.isfinite(log_mass) and np.all(sd > 0)):
+            continue
+        east = np.diff(ndtr((east0 + edges - m.mean[0]) / sd[0]))
+        north = np.diff(ndtr((north0 + edges - m.mean[1]) / sd[1]))
+        with np.errstate(divide="ignore"):
+            out = np.logaddexp(out, log_mass + np.log(np.outer(north, east)))  # rows go north
+    return out
 
 
 def region_mass(grid: PosteriorGrid, particles: np.ndarray, weights: np.ndarray) -> float:
