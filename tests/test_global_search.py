@@ -1,10 +1,14 @@
-"""The global search's Gauss-Newton refinement: its shortcut against the plain schedule it stands for."""
+"""The global search's shortcuts against what they stand for: the Gauss-Newton refinement's against its plain
+schedule, the start grid's kept sums against a score made afresh."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from aoa_localizer.engine import global_search
-from aoa_localizer.engine.global_search import Points, Robust, refine
+from aoa_localizer.engine import global_search, start_grid
+from aoa_localizer.engine.global_search import Points, Robust, find_modes, refine
 from aoa_localizer.engine.receiver import NoiseGrid
+from aoa_localizer.engine.start_grid import StartGrid
 
 
 def _points(rng: np.random.Generator) -> Points:
@@ -51,3 +55,29 @@ def test_refine_skips_the_steps_of_starts_that_stopped_and_ends_where_every_step
     plain = steps * len(starts)
     assert sum(stepped) < plain if annealed else sum(stepped) <= plain  # polishing, starts tend to creep on
     assert np.hypot(*(got[0][4] - [150.0, 900.0])) < 50.0  # the start next to the source ends at it
+
+
+@pytest.mark.parametrize("latent", [False, True])
+def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_does(monkeypatch, latent):
+    """The start grid's score made from its kept sums plus the points that came since matches the score of all the
+    points made at once to 1e-9, scoring only the new points; points remade (a calibration) or another noise are
+    summed again from all of them, and on a grid laid for the same points the modes are find_modes'."""
+    pts = _points(np.random.default_rng(5))
+    rob = Robust(0.05, 3.0, grid=NoiseGrid.weak(2.0) if latent else None)
+    grid = StartGrid.around(pts.take(slice(0, 10)))
+    scored = []
+    summed = start_grid.summed_log_densities
+    monkeypatch.setattr(start_grid, "summed_log_densities", lambda x, p, *a: scored.append(len(p)) or summed(x, p, *a))
+    for k in (10, 11, 20, 30):
+        score = grid.score(pts.take(slice(0, k)), rob)
+        fresh = replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0).score(pts.take(slice(0, k)), rob)
+        np.testing.assert_allclose(score, fresh, rtol=0.0, atol=1e-9)
+    assert scored[::2] == [10, 1, 9, 10]  # each fresh score took all k points
+    remade = replace(pts, sigma=2.0 * pts.sigma)
+    grid.score(remade, rob)
+    grid.score(pts, replace(rob, gps_sigma_m=10.0))
+    assert scored[-2:] == [30, 30]
+    assert grid.covers(pts.take(slice(0, 13))) and not grid.covers(pts)  # laid for 10 points: twice their reach
+    laid = StartGrid.around(pts)
+    assert [m.mean.tolist() for m in laid.modes(pts, rob)] == \
+        [m.mean.tolist() for m in find_modes(pts, rob, by_density=True)]

@@ -37,6 +37,7 @@ from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
 from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.point_batch import Built, PointBatch
 from aoa_localizer.engine.preprocess import Columns, Group, columns, group_size
+from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -132,6 +133,7 @@ class Snapshot:
     best_particle: np.ndarray | None = None  # None before the start
     mode_means: list[np.ndarray] = field(default_factory=list)
     offset: float = 0.0  # the bearing offset learned so far (rad, offset.py)
+    start_grid: StartGrid | None = None  # a start search's grid and sums from the search before (start_grid.py)
 
     def __getstate__(self) -> dict:
         """For the worker process: the readings' fields as one array and the group sizes (a list of Reading
@@ -179,6 +181,7 @@ class CheckResult:
     why: str = ""  # a start search without a usable mode, or a best mode not determined enough to start from: why
     searched: int = 0  # points in the snapshot
     determined: bool = True  # a start search: the best mode is determined enough to start the filter from
+    start_grid: StartGrid | None = None  # a start search: its grid and sums, for the next one
 
 
 class _Calibrated:
@@ -225,7 +228,7 @@ class _Calibrated:
     def result(self, modes: list[Mode], hint: ClockHint | None = None, why: str = "",
                determined: bool = True) -> CheckResult:
         return CheckResult(self.noise, self.at, self.built, modes, hint, self.offset, why, len(self.snap.rows),
-                           determined)
+                           determined, self.snap.start_grid)
 
 
 def run_check(snap: Snapshot) -> CheckResult:
@@ -257,7 +260,12 @@ def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: floa
     determined well enough to start the filter from (too few points agree, or its ellipse is wide for its range).
     `final`: the end of data, where nearly parallel bearings still give their (radio-range bounded) posterior."""
     cfg, cal = snap.cfg, _Calibrated(snap)
-    modes = find_modes(cal.pts, snap.rob, by_density=True)
+    if len(cal.pts) < 2:
+        return cal.result([], why="no crossing of bearings in front of the antennas")
+    # The grid of the search before, with its sums, while the points stay within it (start_grid.py)
+    if snap.start_grid is None or not snap.start_grid.covers(cal.pts):
+        snap.start_grid = StartGrid.around(cal.pts)
+    modes = snap.start_grid.modes(cal.pts, snap.rob)
     if modes and modes[0].crossing_deg >= cfg.init_min_crossing_deg and cfg.calibrate_noise:
         cal.fit([m.mean for m in modes[:2]], True)
         if cal.noise is not None:

@@ -105,6 +105,14 @@ def _residuals(x: np.ndarray, pts: Points):
     return resid, dx, dy, np.maximum(dx * dx + dy * dy, 1e-6)
 
 
+def squared_ranges(x: np.ndarray, pts: Points) -> np.ndarray:
+    """Squared distances (m^2, at least 1e-6) from places x (..., 2) to the K points' antennas, as _residuals has
+    them."""
+    dx = x[..., None, 0] - pts.east
+    dy = x[..., None, 1] - pts.north
+    return np.maximum(dx * dx + dy * dy, 1e-6)
+
+
 def residuals(x, pts: Points) -> np.ndarray:
     """theta - bearing(x) of every point (rad, in (-pi, pi]) at one place x (2,)."""
     return _residuals(np.asarray(x, float), pts)[0]
@@ -170,15 +178,26 @@ def _prior(x: np.ndarray, rob: Robust):
 
 def log_posterior(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
     """Robust log posterior (up to a constant) at x (..., 2); `widen2` (..., K) adds to each bearing variance."""
+    return from_sums(summed_log_densities(x, pts, rob, widen2), x, rob)
+
+
+def summed_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
+    """The part of the log posterior at x (..., 2) that adds up over the points: their bearings' log densities
+    summed, per latent-noise hypothesis (..., H) under rob.grid, else (...). Sums over two sets of points add."""
     if rob.grid is not None:
-        return log_sum(latent_log_densities(x, pts, rob, widen2), rob.grid) + _prior(x, rob)
+        return latent_log_densities(x, pts, rob, widen2)
     resid, _, _, r2 = _residuals(x, pts)
     gps_var = pts.gps_var(rob)
     var = pts.sigma**2 + widen2
     if np.any(gps_var):
         var = var + gps_var / np.maximum(r2, 1.0)
     ll, _ = _terms(resid, var, rob.outlier_prob)
-    return ll.sum(axis=-1) + _prior(x, rob)
+    return ll.sum(axis=-1)
+
+
+def from_sums(sums: np.ndarray, x: np.ndarray, rob: Robust) -> np.ndarray:
+    """The log posterior at x (..., 2) from summed_log_densities' sums over all the points."""
+    return (sums if rob.grid is None else log_sum(sums, rob.grid)) + _prior(x, rob)
 
 
 def latent_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
@@ -191,10 +210,14 @@ def latent_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) ->
     return log_densities(resid, pts.sigma**2, extra, rob.grid)
 
 
-def _grid(pts: Points):
-    """Cell centres (A, R, 2), the cell radius (R,), and the polar grid's centre."""
-    centre = np.array([pts.east.mean(), pts.north.mean()])
-    extent = max(10.0, float(np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
+def extent_from(centre: np.ndarray, pts: Points) -> float:
+    """How far the points reach from `centre` (at least 10 m): the scale a polar grid there is laid for."""
+    return max(10.0, float(np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
+
+
+def grid_around(centre: np.ndarray, extent: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cell centres (A, R, 2) and the cell radius (R,) of the polar grid at `centre` for points within `extent`:
+    log-spaced in range from a hundredth of the extent to 200 times it (at least _R_MIN_M to _R_MAX_M)."""
     r_lo = max(_R_MIN_M, _R_MIN_FACTOR * extent)
     r_hi = max(_R_MAX_M, _R_MAX_FACTOR * extent)
     log_r = np.linspace(math.log(r_lo), math.log(r_hi), _N_R)
@@ -203,7 +226,7 @@ def _grid(pts: Points):
     r = np.exp(log_r)
     cells = centre + r[None, :, None] * np.stack([np.cos(az)[:, None] + 0 * r, np.sin(az)[:, None] + 0 * r], axis=-1)
     radius = 0.5 * r * math.hypot(TWO_PI / _N_AZ, d_log)
-    return cells, radius, centre
+    return cells, radius
 
 
 def _local_maxima(score: np.ndarray) -> np.ndarray:
@@ -308,11 +331,22 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
     coarse = pts
     if len(pts) > _MAX_GRID_POINTS:
         coarse = pts.take(np.linspace(0, len(pts) - 1, _MAX_GRID_POINTS).round().astype(int))
-    cells, radius, _ = _grid(coarse)
-    r2 = _residuals(cells, coarse)[3]
-    widen2 = (radius[None, :, None] ** 2) / r2
-    # the coarse score only picks the starts: under a latent noise, a sixth of its hypotheses does (NoiseGrid.coarse)
-    score = log_posterior(cells, coarse, rob if rob.grid is None else replace(rob, grid=rob.grid.coarse()), widen2)
+    centre = np.array([coarse.east.mean(), coarse.north.mean()])
+    cells, radius = grid_around(centre, extent_from(centre, coarse))
+    widen2 = (radius[None, :, None] ** 2) / squared_ranges(cells, coarse)
+    return modes_from_grid(cells, radius, log_posterior(cells, coarse, coarse_robust(rob), widen2), pts, rob,
+                           by_density)
+
+
+def coarse_robust(rob: Robust) -> Robust:
+    """The grid's score only picks the starts: under a latent noise, a sixth of its hypotheses do (NoiseGrid.coarse)."""
+    return rob if rob.grid is None else replace(rob, grid=rob.grid.coarse())
+
+
+def modes_from_grid(cells: np.ndarray, radius: np.ndarray, score: np.ndarray, pts: Points, rob: Robust,
+                    by_density: bool) -> list[Mode]:
+    """find_modes from a polar grid's cells (A, R, 2), radius (R,) and coarse score (A, R): its best local maxima
+    refined over `pts`, distinct, ordered as find_modes orders them."""
     top = _local_maxima(score)[:_MAX_STARTS]
     if top.size == 0:
         return []

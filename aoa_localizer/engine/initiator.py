@@ -17,6 +17,7 @@ from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import ModeProposal, importance_sample
+from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.track_state import PendingJob
 from aoa_localizer.engine.triangulation import initial_particles
 from aoa_localizer.engine.types import ObservationPoint, Reading
@@ -48,6 +49,7 @@ class Initiator:
         self.next_start_try = 0  # points the window must hold before the next start search
         self.start_cloud: np.ndarray | None = None  # the particles of the latest start
         self.searched_again = False  # the pending start search was made again because the one before was stale
+        self.start_grid: StartGrid | None = None  # the last start search's grid and sums (start_grid.py)
 
     def try_start(self, inline: bool = False, final: bool = False) -> bool:
         """Start the filter once the points allow (`inline`: the start search here, even with a worker; `final`: the
@@ -66,6 +68,7 @@ class Initiator:
         if not final and (len(t.window) < self.next_start_try or t.job is not None):
             return False
         snap = t.snapshot()
+        snap.start_grid = self.start_grid
         job = partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
         future = None if inline else t.scheduler.submit(job)
         if future is None:
@@ -77,6 +80,7 @@ class Initiator:
         """Start the filter from a start search's modes over the points held now (a background search's snapshot
         may have fewer): an importance sample of the posterior, then MH sweeps; or wait for more points."""
         t = self.track
+        self.start_grid = res.start_grid
         stale = len(t.window) > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE)
         if stale and not self.searched_again:
             # Points came far faster than the worker searched (a bag replayed at full speed): a mode of the few
@@ -102,7 +106,7 @@ class Initiator:
             t.provisional = self._sample_posterior(modes)
             t.status = f"poorly determined: {res.why}"
         else:
-            t.provisional = None
+            t.provisional, self.start_grid = None, None
             t.filter = self._sample_posterior(modes, start=True)
             self._started(f"global search: best of {len(modes)} mode(s), {modes[0].inliers} of {len(t.window)} "
                           "points agree")
