@@ -2,7 +2,9 @@
 as a ghost mode or the banana-shaped posterior of the first bearings.
 
 The robust posterior the global checks use is evaluated for every cell (its likelihood with the cell's width seen
-from each antenna added to the bearing variances) and normalised over the window (each cell's probability). The
+from each antenna added to the bearing variances), each mode of the last global search puts at least its Laplace
+mass into the cells it covers (a mode narrower than a cell can fall between the centres), and the cells are
+normalised over the window (each cell's probability). The
 window is centred on the estimate and spans WINDOW_SIGMAS times the 95 % ellipse's major semi-axis, widened to hold
 every mode and every particle; it has CELLS cells a side, so the resolution follows the ellipse. A cell's value is
 100 x (1 - the mass of the cells more probable than it), rounded up, so the most probable cell is 100, the cells of
