@@ -64,15 +64,15 @@ class StartGrid:
         coarse = coarse_robust(rob)
         rows = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
         key = _key(coarse)
-        done = len(self.rows)
+        sums, done = self.sums, len(self.rows)
         if key != self.key or len(rows) < done or not np.array_equal(rows[:done], self.rows):
-            self.sums, done = 0.0, 0
+            sums, done = 0.0, 0
         if done < len(rows):
             new = pts.take(slice(done, None))
             widen2 = self.radius[None, :, None] ** 2 / squared_ranges(self.cells, new)
-            self.sums = self.sums + summed_log_densities(self.cells, new, coarse, widen2)
-        self.rows, self.key = rows, key
-        return from_sums(np.asarray(self.sums), self.cells, coarse)
+            sums = sums + summed_log_densities(self.cells, new, coarse, widen2)
+        self.rows, self.key, self.sums = rows, key, sums  # together: a search that failed leaves the last ones
+        return from_sums(np.asarray(sums), self.cells, coarse)
 
 
 def _key(rob: Robust) -> tuple:
