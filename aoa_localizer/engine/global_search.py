@@ -105,12 +105,12 @@ def _residuals(x: np.ndarray, pts: Points):
     return resid, dx, dy, np.maximum(dx * dx + dy * dy, 1e-6)
 
 
-def squared_ranges(x: np.ndarray, pts: Points) -> np.ndarray:
-    """Squared distances (m^2, at least 1e-6) from places x (..., 2) to the K points' antennas, as _residuals has
-    them."""
-    dx = x[..., None, 0] - pts.east
-    dy = x[..., None, 1] - pts.north
-    return np.maximum(dx * dx + dy * dy, 1e-6)
+def cell_widening(cells: np.ndarray, radius: np.ndarray, pts: Points) -> np.ndarray:
+    """Each bearing's variance added at a polar grid's cells (A, R, 2) of radius (R,): the cell's radius seen from
+    the point's antenna, squared (A, R, K), so a peak narrower than a cell is not missed between centres."""
+    dx = cells[..., None, 0] - pts.east
+    dy = cells[..., None, 1] - pts.north
+    return (radius[None, :, None] ** 2) / np.maximum(dx * dx + dy * dy, 1e-6)
 
 
 def residuals(x, pts: Points) -> np.ndarray:
@@ -333,9 +333,8 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
         coarse = pts.take(np.linspace(0, len(pts) - 1, _MAX_GRID_POINTS).round().astype(int))
     centre = np.array([coarse.east.mean(), coarse.north.mean()])
     cells, radius = grid_around(centre, extent_from(centre, coarse))
-    widen2 = (radius[None, :, None] ** 2) / squared_ranges(cells, coarse)
-    return modes_from_grid(cells, radius, log_posterior(cells, coarse, coarse_robust(rob), widen2), pts, rob,
-                           by_density)
+    score = log_posterior(cells, coarse, coarse_robust(rob), cell_widening(cells, radius, coarse))
+    return modes_from_grid(cells, radius, score, pts, rob, by_density)
 
 
 def coarse_robust(rob: Robust) -> Robust:

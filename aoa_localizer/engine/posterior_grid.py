@@ -20,7 +20,6 @@ import numpy as np
 from scipy.special import ndtr
 
 from aoa_localizer.engine.crlb import ellipse_axes
-from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.global_search import Mode, Points, Robust, log_posterior
 
 CELLS = 64  # cells a side: the evaluation costs cells^2 x points (docs/interface.md gives the times)
@@ -91,10 +90,10 @@ def _mode_masses(modes: Sequence[Mode], pts: Points, rob: Robust, east0: float, 
     out = np.full((CELLS, CELLS), -np.inf)
     edges = np.arange(CELLS + 1) * res
     for m in modes:
-        sign, logdet = np.linalg.slogdet(TWO_PI * m.cov)
-        log_mass = float(log_posterior(m.mean, pts, rob)) + 0.5 * logdet
+        # the mode's Laplace mass with its log posterior over the points held now (its covariance's term kept)
+        log_mass = m.log_mass - m.log_post + float(log_posterior(m.mean, pts, rob))
         sd = np.sqrt(np.diag(m.cov))
-        if sign <= 0 or not (math.isfinite(log_mass) and np.all(sd > 0)):
+        if not (math.isfinite(log_mass) and np.all(sd > 0)):
             continue
         east = np.diff(ndtr((east0 + edges - m.mean[0]) / sd[0]))
         north = np.diff(ndtr((north0 + edges - m.mean[1]) / sd[1]))

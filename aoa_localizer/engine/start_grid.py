@@ -18,12 +18,12 @@ from aoa_localizer.engine.global_search import (
     Mode,
     Points,
     Robust,
+    cell_widening,
     coarse_robust,
     extent_from,
     from_sums,
     grid_around,
     modes_from_grid,
-    squared_ranges,
     summed_log_densities,
 )
 
@@ -69,8 +69,7 @@ class StartGrid:
             sums, done = 0.0, 0
         if done < len(rows):
             new = pts.take(slice(done, None))
-            widen2 = self.radius[None, :, None] ** 2 / squared_ranges(self.cells, new)
-            sums = sums + summed_log_densities(self.cells, new, coarse, widen2)
+            sums = sums + summed_log_densities(self.cells, new, coarse, cell_widening(self.cells, self.radius, new))
         self.rows, self.key, self.sums = rows, key, sums  # together: a search that failed leaves the last ones
         return from_sums(np.asarray(sums), self.cells, coarse)
 
