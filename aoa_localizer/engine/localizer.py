@@ -19,6 +19,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.gps_track import GpsTrack
 from aoa_localizer.engine.intake import Closed, Intake, as_float
+from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.posterior_grid import PosteriorGrid, posterior_grid
@@ -69,6 +70,7 @@ class Localizer:
         Localizer, scheduled `realtime` under `scheduling: auto`."""
         self.cfg = cfg = config or LocalizerConfig()
         self.on_estimate = on_estimate
+        keep_freed_memory()  # the particle temporaries are reused, not mapped afresh (memory.py)
         self.rng = np.random.default_rng(cfg.seed)
         frame = None
         if cfg.datum_lat is not None and cfg.datum_lon is not None:

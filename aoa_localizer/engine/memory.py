@@ -1,12 +1,13 @@
 """Memory settings for a long-running process. keep_freed_memory: the C allocator keeps freed memory for reuse (the
 filters' particles x points temporaries are a few MB each, and glibc by default maps each afresh and returns it at
-free, so every temporary paid its pages' first-touch faults: 2-4x the arithmetic on this machine); the node, its
-check worker and the programs call it at start, a Python user may too. OldObjects: the node's kept readings out of
+free, so every temporary paid its pages' first-touch faults: 2-4x the arithmetic on this machine); a Localizer
+calls it when made, and the check worker at its start. OldObjects: the node's kept readings out of
 the cyclic garbage collector's full passes (docs/ros.md, "Latency")."""
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import functools
 import gc
 import logging
 import time
@@ -18,9 +19,11 @@ MMAP_THRESHOLD = 32 * 1024 * 1024  # glibc's largest: blocks below come from the
 TRIM_THRESHOLD = 256 * 1024 * 1024  # free memory kept at the heap's top before any is given back
 
 
+@functools.cache
 def keep_freed_memory() -> bool:
     """Tell glibc's malloc to serve blocks up to 32 MiB from its heap and keep up to 256 MiB of freed memory;
-    True when applied (False on another C library: nothing changes)."""
+    True when applied (False on another C library: nothing changes). Once per process: the settings are the
+    process's, and finding the C library runs ldconfig."""
     name = ctypes.util.find_library("c")
     try:
         mallopt = ctypes.CDLL(name).mallopt if name else None
