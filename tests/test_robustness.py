@@ -7,6 +7,7 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer import LocalizerConfig
+from aoa_localizer.engine import noise as noise_module
 from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.global_search import Points, Robust, find_modes
 from aoa_localizer.engine.localizer import Localizer
@@ -271,3 +272,37 @@ def test_a_points_calibrated_sigmas_are_the_same_from_its_readings_and_from_the_
     here, there = sigmas(readings, model), sigmas(fields_only, model)
     assert np.array_equal(here, there)
     assert here == pytest.approx(fields_only.cols.sigma * model.scale(fields_only.cols.quality), rel=1e-15)
+
+
+@pytest.mark.parametrize("wild", [0.0, 0.3])
+def test_em_that_merges_its_runs_and_stops_when_converged_finds_what_every_run_to_the_end_finds(monkeypatch, wild):
+    """The noise fit's EM goes on with the runs that have not met an earlier one, and stops once nothing moves: the
+    same fit as every run kept through every iteration (to 1e-6), for fewer runs x iterations."""
+    rng = np.random.default_rng(7)
+    q = rng.uniform(40, 100, 2000)
+    resid = np.radians(2 + (q - 40) / 20) * rng.standard_normal(q.size)
+    bad = rng.random(q.size) < wild
+    resid[bad] = rng.uniform(-np.pi, np.pi, bad.sum())
+    base, band = np.full(q.size, np.radians(1.117)), noise_module.band_of(q)
+    starts = NoiseModel(0.05)._starts(resid / base)
+    work = []
+    responsibilities = noise_module._responsibilities
+    monkeypatch.setattr(noise_module, "_responsibilities",
+                        lambda *a: work.append(a[3].shape[0]) or responsibilities(*a))
+    fast = noise_module._em(resid, base, np.zeros(q.size), band, starts)
+    fast_work, work[:] = sum(work), []
+    plain = noise_module._em(resid, base, np.zeros(q.size), band, starts, tol=0.0)
+    assert all(n == starts.size for n in work)  # every run, to the end (or to a fixed point to the last bit)
+    assert fast_work < sum(work) / 2
+    assert fast[0] == pytest.approx(plain[0], rel=1e-6)
+    np.testing.assert_allclose(fast[1], plain[1], rtol=1e-6)
+    assert fast[2] == pytest.approx(plain[2], abs=1e-6)
+
+
+def test_em_runs_merge_only_where_one_reached_an_earlier_one():
+    """Of three runs, the third within 1e-5 of the first goes; the second, far from both, stays."""
+    k2 = np.array([[1.0] * 7, [4.0] * 7, [1.00001] * 7])
+    eps = np.array([[0.1], [0.1], [0.100001]])
+    kept_k2, kept_eps = noise_module._distinct_runs(k2, eps)
+    np.testing.assert_array_equal(kept_k2, k2[:2])
+    np.testing.assert_array_equal(kept_eps, eps[:2])

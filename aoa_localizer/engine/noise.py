@@ -25,6 +25,8 @@ _CENTRES = 0.5 * (BAND_EDGES[:-1] + BAND_EDGES[1:])
 _SHRINK_READINGS = 10.0  # pseudo-readings at the shrinkage target in every band
 _MIN_READINGS = 40  # fewer readings: keep the current calibration
 _EM_ITERATIONS = 25
+_EM_TOL = 1e-7  # EM has converged once no log k^2 or outlier rate moves by more than this ...
+_EM_MERGE = 1e-4  # ... and two runs this close go on as one
 _K_RANGE = (0.05, 50.0)
 OUTLIER_RANGE = (0.01, 0.6)
 _MIDDLE_HALF_Z = 0.6745  # half of a Gaussian lies within this many sigmas
@@ -123,11 +125,14 @@ class NoiseModel:
         return {"sigma_deg": sig, "reading_outlier_prob": round(self.reading_outlier_prob, 4), "fits": self.fits}
 
 
-def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray):
+def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,
+        tol: float = _EM_TOL):
     """EM from each starting scale in k0 (S,), all at once. Returns the best run's (log likelihood, k^2 per band,
     outlier rate, inlier weight per band, whether its core is hollow); a run with a hollow core is the best only
     when every run's is. A residual's variance is k^2 base_sigma^2 + known_var; the M-step takes the known part
-    off each squared residual (a moment step: unbiased, and exact EM when it is 0)."""
+    off each squared residual (a moment step: unbiased, and exact EM when it is 0). Runs that reach one another
+    (within _EM_MERGE) go on as one, and EM stops once no parameter moves by more than `tol` (0: every iteration,
+    every run): the starts mostly meet within a few iterations, and the rest would repeat the same run."""
     z2_all, z2_known = (resid / base_sigma) ** 2, known_var / base_sigma**2
     z2 = z2_all - z2_known
     onehot = np.zeros((resid.size, N_BANDS + 1))
@@ -138,14 +143,28 @@ def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: 
         gamma, _ = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
         # the known variance taken off may leave a band's sum below 0: no receiver noise seen there
         w, s = gamma @ onehot, np.maximum((gamma * z2) @ onehot, 0.0)
-        k2 = np.clip((s + _SHRINK_READINGS * _shrink_target(w, s)) / (w + _SHRINK_READINGS), _K_RANGE[0] ** 2,
-                     _K_RANGE[1] ** 2)
-        eps = np.clip(1.0 - gamma.mean(axis=1, keepdims=True), *OUTLIER_RANGE)
+        new_k2 = np.clip((s + _SHRINK_READINGS * _shrink_target(w, s)) / (w + _SHRINK_READINGS), _K_RANGE[0] ** 2,
+                         _K_RANGE[1] ** 2)
+        new_eps = np.clip(1.0 - gamma.mean(axis=1, keepdims=True), *OUTLIER_RANGE)
+        moved = max(float(np.max(np.abs(np.log(new_k2 / k2)))), float(np.max(np.abs(new_eps - eps))))
+        k2, eps = new_k2, new_eps
+        if moved <= tol:
+            break
+        if tol > 0.0:
+            k2, eps = _distinct_runs(k2, eps)
     gamma, dens = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
     ll = np.log(dens).sum(axis=1)
     hollow = _hollow(gamma, z2_all / (k2[:, band] + z2_known))
     b = int(np.argmax(np.where(hollow & ~hollow.all(), -np.inf, ll)))
     return float(ll[b]), k2[b], float(eps[b, 0]), gamma[b] @ onehot, bool(hollow[b])
+
+
+def _distinct_runs(k2: np.ndarray, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The runs that no earlier run has reached: every log k^2 and the outlier rate within _EM_MERGE of it."""
+    close = (np.max(np.abs(np.log(k2[:, None, :] / k2[None, :, :])), axis=2) <= _EM_MERGE) & (
+        np.abs(eps - eps.T) <= _EM_MERGE)
+    keep = ~np.tril(close, -1).any(axis=1)
+    return k2[keep], eps[keep]
 
 
 def _hollow(gamma: np.ndarray, z2: np.ndarray) -> np.ndarray:
