@@ -81,3 +81,26 @@ def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_doe
     laid = StartGrid.around(pts)
     assert [m.mean.tolist() for m in laid.modes(pts, rob)] == \
         [m.mean.tolist() for m in find_modes(pts, rob, by_density=True)]
+
+
+def test_a_start_grid_takes_off_the_points_a_window_dropped(monkeypatch):
+    """Points held as a window that dropped its oldest and took new ones: the kept sums lose the dropped points and
+    gain the new ones (scoring only those) and match a fresh score to 1e-9; a window that dropped more than it kept
+    is summed afresh. An empty grid lays itself around the points, and again when they leave it."""
+    pts = _points(np.random.default_rng(6))
+    rob = Robust(0.05, 3.0, grid=NoiseGrid.weak(2.0))
+    grid = StartGrid()
+    assert not grid.covers(pts)
+    grid.modes(pts.take(slice(0, 20)), rob)
+    assert grid.covers(pts.take(slice(0, 20)))
+    scored = []
+    summed = start_grid.summed_log_densities
+    monkeypatch.setattr(start_grid, "summed_log_densities", lambda x, p, *a: scored.append(len(p)) or summed(x, p, *a))
+    window = pts.take(slice(5, 24))  # 5 dropped, 4 new
+    score = grid.score(window, rob)
+    assert scored == [5, 4]
+    fresh = replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0).score(window, rob)
+    np.testing.assert_allclose(score, fresh, rtol=0.0, atol=1e-9)
+    scored.clear()
+    grid.score(pts.take(slice(16, 26)), rob)  # 11 of 19 dropped: afresh
+    assert scored == [10]

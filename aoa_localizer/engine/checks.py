@@ -263,8 +263,7 @@ def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: floa
     if len(cal.pts) < 2:
         return cal.result([], why="no crossing of bearings in front of the antennas")
     # The grid of the search before, with its sums, while the points stay within it (start_grid.py)
-    if snap.start_grid is None or not snap.start_grid.covers(cal.pts):
-        snap.start_grid = StartGrid.around(cal.pts)
+    snap.start_grid = snap.start_grid or StartGrid()
     modes = snap.start_grid.modes(cal.pts, snap.rob)
     if modes and modes[0].crossing_deg >= cfg.init_min_crossing_deg and cfg.calibrate_noise:
         cal.fit([m.mean for m in modes[:2]], True)

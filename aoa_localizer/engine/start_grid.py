@@ -3,10 +3,10 @@
 Until the filter starts, a track searches its posterior again at nearly every new point, over all the points it
 holds: scored afresh, the grid costs cells x points x hypotheses at each search. The part of the score that adds
 up over the points (global_search.summed_log_densities) is kept per cell instead, so a search adds only the points
-that came since the last one; the prior, which is not a sum over points, is added at each search. The grid stays
-where it was laid while the points stay within twice its extent, and the sums are made again from all the points
-when the points held are not the ones summed plus new ones (a point dropped, points remade by a calibration) or
-the noise they were summed under changed.
+that came since the last one (and takes off the oldest ones a window dropped); the prior, which is not a sum over
+points, is added at each search. The grid stays where it was laid while the points stay within twice its extent,
+and the sums are made again from all the points when the points held are not the ones summed plus new ones (points
+remade by a calibration) or the noise they were summed under changed.
 """
 from __future__ import annotations
 
@@ -32,13 +32,14 @@ _REGRID = 2.0  # points this many times farther from the grid's centre than when
 
 @dataclass
 class StartGrid:
-    """A polar grid laid around the points of a first search (cells (A, R, 2), radius (R,)), with the sums of the
-    points scored on it (`rows`: those points as (K, 5) rows; `key`: the noise they were scored under)."""
+    """A polar grid laid around the points of a first search (cells (A, R, 2), radius (R,); none before it), with
+    the sums of the points scored on it (`rows`: those points as (K, 5) rows; `key`: the noise they were scored
+    under)."""
 
-    centre: np.ndarray
-    extent: float
-    cells: np.ndarray
-    radius: np.ndarray
+    centre: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    extent: float = 0.0
+    cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
+    radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
     rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))
     key: tuple = ()
     sums: np.ndarray | float = 0.0
@@ -51,27 +52,54 @@ class StartGrid:
         return cls(centre, extent, *grid_around(centre, extent))
 
     def covers(self, pts: Points) -> bool:
-        """Whether the points stay close enough to the grid's centre for its cells (else lay a new one)."""
-        return extent_from(self.centre, pts) <= _REGRID * self.extent
+        """Whether the grid is laid and the points stay close enough to its centre for its cells (else lay a new
+        one)."""
+        return self.cells.size > 0 and extent_from(self.centre, pts) <= _REGRID * self.extent
 
-    def modes(self, pts: Points, rob: Robust) -> list[Mode]:
-        """find_modes(pts, rob, by_density=True) on this grid, its score made from the kept sums plus the points
-        that came since."""
-        return modes_from_grid(self.cells, self.radius, self.score(pts, rob), pts, rob, by_density=True)
+    def modes(self, pts: Points, rob: Robust, by_density: bool = True) -> list[Mode]:
+        """find_modes(pts, rob, by_density) on this grid, its score made from the kept sums plus the points that came
+        since; the grid laid (again) around the points first when they are not within it."""
+        if not self.covers(pts):
+            laid = StartGrid.around(pts)
+            self.centre, self.extent, self.cells, self.radius = laid.centre, laid.extent, laid.cells, laid.radius
+            self.rows, self.key, self.sums = laid.rows, laid.key, laid.sums
+        return modes_from_grid(self.cells, self.radius, self.score(pts, rob), pts, rob, by_density)
 
     def score(self, pts: Points, rob: Robust) -> np.ndarray:
         """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size."""
         coarse = coarse_robust(rob)
         rows = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
         key = _key(coarse)
-        sums, done = self.sums, len(self.rows)
-        if key != self.key or len(rows) < done or not np.array_equal(rows[:done], self.rows):
-            sums, done = 0.0, 0
+        sums: np.ndarray | float = 0.0
+        done = 0
+        dropped = _dropped(self.rows, rows) if key == self.key else None
+        if dropped is not None:
+            sums, done = self.sums, len(self.rows) - dropped
+            if dropped:
+                sums = sums - self._summed(Points.of(self.rows[:dropped]), coarse)
         if done < len(rows):
-            new = pts.take(slice(done, None))
-            sums = sums + summed_log_densities(self.cells, new, coarse, cell_widening(self.cells, self.radius, new))
+            sums = sums + self._summed(pts.take(slice(done, None)), coarse)
         self.rows, self.key, self.sums = rows, key, sums  # together: a search that failed leaves the last ones
         return from_sums(np.asarray(sums), self.cells, coarse)
+
+    def _summed(self, pts: Points, coarse: Robust) -> np.ndarray:
+        return summed_log_densities(self.cells, pts, coarse, cell_widening(self.cells, self.radius, pts))
+
+
+def _dropped(summed: np.ndarray, rows: np.ndarray) -> int | None:
+    """How many of the points summed (rows) lead the ones held now, which are the rest of them followed by new ones
+    (a window that dropped its oldest points); None when the points held are not (points remade, or most of the
+    sums would go: summing afresh costs less)."""
+    if not len(summed):
+        return 0
+    if not len(rows):
+        return None
+    first = np.flatnonzero((summed == rows[0]).all(axis=1))
+    dropped = int(first[0]) if first.size else len(summed)
+    kept = len(summed) - dropped
+    if dropped > kept or len(rows) < kept or not np.array_equal(rows[:kept], summed[dropped:]):
+        return None
+    return dropped
 
 
 def _key(rob: Robust) -> tuple:
