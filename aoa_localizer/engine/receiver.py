@@ -79,7 +79,11 @@ def log_densities(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
     """sum_k log p(resid_k | h) per hypothesis, (..., H), for resid, var (points' sigma^2) and extra_var (antenna
     position and smoothing terms, not scaled) broadcast to (..., K): the part of the marginal that adds up over
     points, so a running sum takes a new point at the cost of that point alone."""
-    return _per_hypothesis(_terms(resid, var, extra_var, grid)[0])
+    gauss, _ = _gauss(resid, var, extra_var, grid)
+    mix = gauss[grid.distinct[1]]  # (H, ..., K), made in place from here: the arrays are particles x points x H
+    mix *= (1.0 - grid.outlier).reshape((-1,) + (1,) * (mix.ndim - 1))
+    mix += (grid.outlier / TWO_PI).reshape((-1,) + (1,) * (mix.ndim - 1))
+    return np.moveaxis(np.log(mix, out=mix).sum(axis=-1), 0, -1)
 
 
 def log_sum(densities: np.ndarray, grid: NoiseGrid) -> np.ndarray:
@@ -103,14 +107,19 @@ def _terms(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarr
     mixture above share / 2 pi, and one exp per scale with a log per hypothesis costs less than a log-sum-exp per
     hypothesis. The Gaussian is made once per scale and shared by that scale's wild shares; every hypothesis in
     one array operation, since at a few points numpy's per-call cost is most of the work."""
-    resid2 = np.square(resid)
-    nd = len(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
-    scales, which = grid.distinct
-    v = np.square(scales).reshape((-1,) + (1,) * nd) * var + extra_var  # (scales, ..., K)
-    gauss = np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v)
-    outlier = grid.outlier.reshape((-1,) + (1,) * nd)
+    gauss, v = _gauss(resid, var, extra_var, grid)
+    which = grid.distinct[1]
+    outlier = grid.outlier.reshape((-1,) + (1,) * (gauss.ndim - 1))
     inl = (1.0 - outlier) * gauss[which]
     return inl + outlier / TWO_PI, inl, v[which]
+
+
+def _gauss(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's Gaussian density and variance under each distinct scale of the grid: (scales, ..., K) each."""
+    resid2 = np.square(resid)
+    nd = len(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
+    v = np.square(grid.distinct[0]).reshape((-1,) + (1,) * nd) * var + extra_var
+    return np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v), v
 
 
 def _per_hypothesis(mix: np.ndarray) -> np.ndarray:
