@@ -56,14 +56,14 @@ class StartGrid:
         one)."""
         return self.cells.size > 0 and extent_from(self.centre, pts) <= _REGRID * self.extent
 
-    def modes(self, pts: Points, rob: Robust, by_density: bool = True) -> list[Mode]:
-        """find_modes(pts, rob, by_density) on this grid, its score made from the kept sums plus the points that came
-        since; the grid laid (again) around the points first when they are not within it."""
+    def modes(self, pts: Points, rob: Robust) -> list[Mode]:
+        """find_modes(pts, rob, by_density=True) on this grid, its score made from the kept sums plus the points that
+        came since; the grid laid (again) around the points first when they are not within it."""
         if not self.covers(pts):
             laid = StartGrid.around(pts)
             self.centre, self.extent, self.cells, self.radius = laid.centre, laid.extent, laid.cells, laid.radius
             self.rows, self.key, self.sums = laid.rows, laid.key, laid.sums
-        return modes_from_grid(self.cells, self.radius, self.score(pts, rob), pts, rob, by_density)
+        return modes_from_grid(self.cells, self.radius, self.score(pts, rob), pts, rob, by_density=True)
 
     def score(self, pts: Points, rob: Robust) -> np.ndarray:
         """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size."""
