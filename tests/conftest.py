@@ -18,7 +18,12 @@ DATUM = (39.1, 117.2, 5.0)
 ROOT = Path(__file__).resolve().parent.parent
 
 
-_domains = itertools.count(random.Random(os.getpid()).randrange(101))
+# Each xdist worker takes its own share of the domains (1-101, the range ROS recommends): the ROS tests of two
+# workers can run at the same time, and a shared domain let one test's drive reach the other's node.
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0)
+_WORKERS = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+_SHARE = 101 // _WORKERS
+_domains = itertools.count(random.Random(os.getpid()).randrange(_SHARE))
 
 
 def pytest_collection_modifyitems(items):
@@ -32,8 +37,8 @@ def pytest_collection_modifyitems(items):
 
 @pytest.fixture
 def domain():
-    """A ROS domain of this test's own (1-101, the range ROS recommends)."""
-    return 1 + next(_domains) % 101
+    """A ROS domain of this test's own, from this worker's share of 1-101."""
+    return 1 + _WORKER * _SHARE + next(_domains) % _SHARE
 
 
 def ros_env(domain):
