@@ -215,6 +215,14 @@ def extent_from(centre: np.ndarray, pts: Points) -> float:
     return max(10.0, float(np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
 
 
+def polar_grid(pts: Points) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """The polar grid a search lays for `pts`: its centre (their mean place), extent (extent_from), cells and cell
+    radius (grid_around)."""
+    centre = np.array([pts.east.mean(), pts.north.mean()])
+    extent = extent_from(centre, pts)
+    return (centre, extent, *grid_around(centre, extent))
+
+
 def grid_around(centre: np.ndarray, extent: float) -> tuple[np.ndarray, np.ndarray]:
     """Cell centres (A, R, 2) and the cell radius (R,) of the polar grid at `centre` for points within `extent`:
     log-spaced in range from a hundredth of the extent to 200 times it (at least _R_MIN_M to _R_MAX_M)."""
@@ -331,8 +339,7 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
     coarse = pts
     if len(pts) > _MAX_GRID_POINTS:
         coarse = pts.take(np.linspace(0, len(pts) - 1, _MAX_GRID_POINTS).round().astype(int))
-    centre = np.array([coarse.east.mean(), coarse.north.mean()])
-    cells, radius = grid_around(centre, extent_from(centre, coarse))
+    _, _, cells, radius = polar_grid(coarse)
     score = log_posterior(cells, coarse, coarse_robust(rob), cell_widening(cells, radius, coarse))
     return modes_from_grid(cells, radius, score, pts, rob, by_density)
 

@@ -22,8 +22,8 @@ from aoa_localizer.engine.global_search import (
     coarse_robust,
     extent_from,
     from_sums,
-    grid_around,
     modes_from_grid,
+    polar_grid,
     summed_log_densities,
 )
 
@@ -47,9 +47,7 @@ class StartGrid:
     @classmethod
     def around(cls, pts: Points) -> StartGrid:
         """A grid laid for `pts`, as find_modes lays one (nothing summed yet)."""
-        centre = np.array([pts.east.mean(), pts.north.mean()])
-        extent = extent_from(centre, pts)
-        return cls(centre, extent, *grid_around(centre, extent))
+        return cls(*polar_grid(pts))
 
     def covers(self, pts: Points) -> bool:
         """Whether the grid is laid and the points stay close enough to its centre for its cells (else lay a new
@@ -60,9 +58,8 @@ class StartGrid:
         """find_modes(pts, rob, by_density=True) on this grid, its score made from the kept sums plus the points that
         came since; the grid laid (again) around the points first when they are not within it."""
         if not self.covers(pts):
-            laid = StartGrid.around(pts)
-            self.centre, self.extent, self.cells, self.radius = laid.centre, laid.extent, laid.cells, laid.radius
-            self.rows, self.key, self.sums = laid.rows, laid.key, laid.sums
+            self.centre, self.extent, self.cells, self.radius = polar_grid(pts)
+            self.rows, self.key, self.sums = np.zeros((0, 5)), (), 0.0
         return modes_from_grid(self.cells, self.radius, self.score(pts, rob), pts, rob, by_density=True)
 
     def score(self, pts: Points, rob: Robust) -> np.ndarray:
