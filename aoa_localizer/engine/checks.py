@@ -19,7 +19,7 @@ import multiprocessing
 import os
 import signal
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, replace
@@ -35,21 +35,12 @@ from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
 from aoa_localizer.engine.parent_death import die_with_parent
-from aoa_localizer.engine.point_batch import Built, PointBatch
+from aoa_localizer.engine.point_batch import Built, PointBatch, points_of
 from aoa_localizer.engine.preprocess import Columns, Group, columns, group_size
 from aoa_localizer.engine.start_grid import StartGrid
-from aoa_localizer.engine.types import ObservationPoint, Reading
+from aoa_localizer.engine.types import Reading
 
 log = logging.getLogger("aoa_localizer")
-
-
-def rows_of(points: Sequence[ObservationPoint]) -> np.ndarray:
-    """(K, 5) rows east, north, theta, sigma, gps sigma of the points."""
-    return np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for p in points])
-
-
-def points_of(points: Sequence[ObservationPoint]) -> Points:
-    return Points.of(rows_of(points))
 
 
 def refined(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:

@@ -25,6 +25,15 @@ from aoa_localizer.engine.types import ObservationPoint, Reading
 Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readings it kept
 
 
+def rows_of(points: Sequence[ObservationPoint]) -> np.ndarray:
+    """(K, 5) rows east, north, theta, sigma, gps sigma of the points."""
+    return np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma] for p in points])
+
+
+def points_of(points: Sequence[ObservationPoint]) -> Points:
+    return Points.of(rows_of(points))
+
+
 def sigmas(group: list[Reading], noise: NoiseModel | None) -> np.ndarray:
     """The readings' sigmas under `noise` (None: the configured ones)."""
     if noise is not None and 0 < group_size(group) <= SMALL_POINT:  # a few readings: plain floats (per point)
@@ -103,8 +112,7 @@ class PointBatch:
     def points(self, noise: NoiseModel | None, offset: float = 0.0) -> Points:
         """The points as the global search reads them."""
         if self.cfg.point_weighting == "paper":
-            return Points.of(np.array([[p.east, p.north, p.theta, p.sigma, p.gps_sigma]
-                                       for p, _ in self.built(noise, offset)]))
+            return points_of([p for p, _ in self.built(noise, offset)])
         f, _ = self._made(noise, offset)
         return Points(f["east"], f["north"], f["theta"], f["sigma"], f["gps_sigma"])
 

@@ -23,13 +23,13 @@ from typing import cast
 import numpy as np
 
 from aoa_localizer.engine.calibrator import Calibrator
-from aoa_localizer.engine.checks import CheckResult, Snapshot, points_of, rows_of
+from aoa_localizer.engine.checks import CheckResult, Snapshot
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes
 from aoa_localizer.engine.initiator import PRIOR_MIN_SIGMA_M, Initiator
 from aoa_localizer.engine.offset import marginalise, prior_sd
-from aoa_localizer.engine.point_batch import Built
+from aoa_localizer.engine.point_batch import Built, points_of, rows_of
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import ModeProposal
 from aoa_localizer.engine.scheduler import Scheduler
