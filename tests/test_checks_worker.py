@@ -327,7 +327,7 @@ def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeyp
 
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
-    monkeypatch.setattr(loc.scheduler, "submit", lambda job: Future())  # a worker that never answers
+    monkeypatch.setattr(loc.scheduler.worker, "submit", lambda job: Future())  # a worker that never answers
     snap = None
     for event in data.inputs():
         loc.feed(event)

@@ -8,6 +8,7 @@ import pytest
 from aoa_localizer.engine import global_search, start_grid
 from aoa_localizer.engine.global_search import Points, Robust, find_modes, refine
 from aoa_localizer.engine.receiver import NoiseGrid
+from aoa_localizer.engine.slices import run_whole
 from aoa_localizer.engine.start_grid import StartGrid
 
 
@@ -79,7 +80,7 @@ def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_doe
     assert scored[-2:] == [30, 30]
     assert grid.covers(pts.take(slice(0, 13))) and not grid.covers(pts)  # laid for 10 points: twice their reach
     laid = StartGrid.around(pts)
-    assert [m.mean.tolist() for m in laid.modes(pts, rob)] == \
+    assert [m.mean.tolist() for m in run_whole(laid.modes(pts, rob))] == \
         [m.mean.tolist() for m in find_modes(pts, rob, by_density=True)]
 
 
@@ -91,7 +92,7 @@ def test_a_start_grid_takes_off_the_points_a_window_dropped(monkeypatch):
     rob = Robust(0.05, 3.0, grid=NoiseGrid.weak(2.0))
     grid = StartGrid()
     assert not grid.covers(pts)
-    grid.modes(pts.take(slice(0, 20)), rob)
+    run_whole(grid.modes(pts.take(slice(0, 20)), rob))
     assert grid.covers(pts.take(slice(0, 20)))
     scored = []
     summed = start_grid.summed_log_densities

@@ -19,6 +19,7 @@ from aoa_localizer.engine.point_batch import Built, PointBatch, offset_point, si
 from aoa_localizer.engine.preprocess import make_point
 from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.rejections import Reason
+from aoa_localizer.engine.slices import run_whole
 from aoa_localizer.engine.track_state import WindowEntry
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
@@ -77,7 +78,7 @@ class Calibrator:
         the fitted noise and re-weight the cloud. True if a calibration was applied."""
         t = self.track
         batch = PointBatch([e.readings for e in t.window], self.cfg)
-        fit = fit_noise(batch, self.noise, t.robust(), candidates, by_density)
+        fit = run_whole(fit_noise(batch, self.noise, t.robust(), candidates, by_density))
         if fit is None:
             return False
         noise, at, offset = fit

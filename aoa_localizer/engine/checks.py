@@ -30,13 +30,23 @@ from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.geodesy import wrap_pi
-from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes, log_posterior, refine, residuals
+from aoa_localizer.engine.global_search import (
+    Mode,
+    Points,
+    Robust,
+    grid_score,
+    log_posterior,
+    modes_from_grid,
+    refine,
+    residuals,
+)
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
 from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.point_batch import Built, PointBatch, points_of
 from aoa_localizer.engine.preprocess import Columns, Group, columns, group_size
+from aoa_localizer.engine.slices import Steps, run_whole
 from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.types import Reading
 
@@ -49,13 +59,14 @@ def refined(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
 
 
 def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: list[np.ndarray], by_density: bool,
-              offset: float = 0.0) -> tuple[NoiseModel, np.ndarray, float] | None:
+              offset: float = 0.0) -> Steps[tuple[NoiseModel, np.ndarray, float] | None]:
     """Position and noise jointly: at each candidate place, and at the best mode under the configured noise, EM
     fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins (a wrong place
     explained by a wide noise loses to the right place with the right noise), unless its core is hollow (a place
     between two sources, whose readings cluster either side of it). Then, with `learn_offset`, a constant bearing
     offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
-    reference's prior log odds. Returns (noise, place, offset); None when the readings are too few for a fit."""
+    reference's prior log odds. Returns (noise, place, offset); None when the readings are too few for a fit. In
+    pieces (slices.py): each EM fit, each refinement, the search under the configured noise, the offset's optimum."""
     cfg, c = batch.cfg, batch.cols
     if c.theta.size < 2:
         return None
@@ -64,21 +75,23 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     at_readings = shifted(Points(c.east, c.north, c.theta, base), offset)
     configured = batch.points(None, offset)
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
-    narrow = find_modes(configured, Robust(eps, cfg.gps_sigma_m), by_density=by_density)
+    narrow = yield from modes_in_pieces(configured, Robust(eps, cfg.gps_sigma_m), by_density)
 
-    def joint(x: np.ndarray, b: float) -> tuple[float, NoiseModel, np.ndarray] | None:
+    def joint(x: np.ndarray, b: float) -> Steps[tuple[float, NoiseModel, np.ndarray] | None]:
         """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
         trial, ll, readings = noise.copy(), float("nan"), shifted(at_readings, b - offset)
         for _ in range(2):
             ll = trial.fit(residuals(x, readings), quality, base, heading_var)
+            yield
             if not np.isfinite(ll):
                 return None
             x = refined(x, batch.points(trial, b), rob)
+            yield
         return ll, trial, x
 
     best = None
     for x in list(candidates) + [m.mean for m in narrow[:1]]:
-        fit = joint(x, offset)
+        fit = yield from joint(x, offset)
         if fit is None:
             return None
         # a fit whose core is hollow explains the readings by a noise they do not have: any other wins over it
@@ -88,7 +101,7 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
         return None
     ll, trial, x = best
     if cfg.learn_offset:
-        found = _offset_fit(batch.points(trial, offset), x, rob, offset, joint)
+        found = yield from _offset_fit(batch.points(trial, offset), x, rob, offset, joint)
         # a first offset must beat the bearing reference's prior odds; one already learned is refined by any gain
         needed = 0.0 if offset else PRIOR_LOG_ODDS[cfg.bearing_reference]
         if found is not None and found[0] > ll + needed:
@@ -97,15 +110,16 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
 
 
 def _offset_fit(pts: Points, x: np.ndarray, rob: Robust, offset: float,
-                joint: Callable[[np.ndarray, float], tuple[float, NoiseModel, np.ndarray] | None]
-                ) -> tuple[float, NoiseModel, np.ndarray, float] | None:
+                joint: Callable[[np.ndarray, float], Steps[tuple[float, NoiseModel, np.ndarray] | None]]
+                ) -> Steps[tuple[float, NoiseModel, np.ndarray, float] | None]:
     """The joint (place, offset) optimum from x (offset.py) with the noise fitted again there: (log likelihood,
     noise, place, offset); None when the optimum is the current offset, or its fit's core is hollow."""
     b, x_b, _ = joint_optimum(pts, x, rob)
+    yield
     if not b:
         return None
     total = float(wrap_pi(offset + b))
-    fit = joint(x_b, total)
+    fit = yield from joint(x_b, total)
     return None if fit is None or fit[1].hollow else (fit[0], fit[1], fit[2], total)
 
 
@@ -186,15 +200,17 @@ class _Calibrated:
         self.built: list[Built] = []
         self.offset = snap.offset
 
-    def fit(self, candidates: list[np.ndarray], by_density: bool):
+    def fit(self, candidates: list[np.ndarray], by_density: bool) -> Steps[None]:
         snap = self.snap
-        fit = fit_noise(self.batch, snap.noise, snap.rob, candidates, by_density, snap.offset)
+        fit = yield from fit_noise(self.batch, snap.noise, snap.rob, candidates, by_density, snap.offset)
         if fit is not None:
             self.noise, self.at, self.offset = fit
             self._rebuild()
-            if self.offset != snap.offset and self._stamp_shift_explains_more():
+            yield
+            if self.offset != snap.offset and (yield from self._stamp_shift_explains_more()):
                 self.offset = snap.offset
                 self._rebuild()
+                yield
 
     def _rebuild(self):
         """The points and their outlier share under the fitted noise and offset."""
@@ -202,7 +218,7 @@ class _Calibrated:
         self.pts = points_of([p for p, _ in self.built])
         self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.snap.outlier_prob)
 
-    def _stamp_shift_explains_more(self) -> bool:
+    def _stamp_shift_explains_more(self) -> Steps[bool]:
         """Whether a DF stamp shift (clock_check.py) explains the points at the previous offset at least as well as
         the newly learned offset does: on a moving vehicle a late clock also bends every bearing, by an angle that
         follows the geometry, and an offset must not take the blame for it."""
@@ -210,7 +226,7 @@ class _Calibrated:
         assert at is not None  # called after a fit
         rob = snap.robust(self.outlier, True)
         before = self.batch.points(self.noise, snap.offset)
-        hint = best_shift(before, snap.velocity(), at, rob)
+        hint = yield from best_shift(before, snap.velocity(), at, rob)
         if hint is None:
             return False
         shifted_best = float(log_posterior(refined(at, before, rob), before, rob)) + hint.gain
@@ -223,17 +239,34 @@ class _Calibrated:
 
 
 def run_check(snap: Snapshot) -> CheckResult:
-    """The expensive part of a global check over the snapshot (nothing outside it is read or changed)."""
+    """The expensive part of a global check over the snapshot, whole (in the worker, at the end of data)."""
+    return run_whole(check(snap))
+
+
+def check(snap: Snapshot) -> Steps[CheckResult]:
+    """The expensive part of a global check over the snapshot (nothing outside it is read or changed), in pieces."""
     cal = _Calibrated(snap)
     if snap.cfg.calibrate_noise and snap.best_particle is not None:
         start = refined(snap.best_particle, cal.pts, snap.rob)
-        cal.fit([start] + snap.mode_means, False)
+        yield
+        yield from cal.fit([start] + snap.mode_means, False)
     pts, rob = cal.pts, snap.robust(cal.outlier, cal.noise is not None)
-    modes = find_modes(pts, rob)
+    modes = yield from modes_in_pieces(pts, rob, False)
     hint = None
     if modes:
-        hint = best_shift(pts, snap.velocity(), modes[0].mean, rob)
+        hint = yield from best_shift(pts, snap.velocity(), modes[0].mean, rob)
     return cal.result(modes, hint)
+
+
+def modes_in_pieces(pts: Points, rob: Robust, by_density: bool) -> Steps[list[Mode]]:
+    """find_modes in two pieces: the grid's score, then the refinement of its best cells."""
+    if len(pts) < 2:
+        return []
+    grid = grid_score(pts, rob)
+    yield
+    modes = modes_from_grid(*grid, pts, rob, by_density)
+    yield
+    return modes
 
 
 def ellipse_and_reach(mean: np.ndarray, cov: np.ndarray, east: np.ndarray, north: np.ndarray) -> tuple[float, float]:
@@ -244,22 +277,29 @@ def ellipse_and_reach(mean: np.ndarray, cov: np.ndarray, east: np.ndarray, north
 
 
 def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float, final: bool = False) -> CheckResult:
+    """A start search over the snapshot, whole (in the worker, at the end of data): start_search."""
+    return run_whole(start_search(snap, min_inliers, max_ellipse_range_share, final))
+
+
+def start_search(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float,
+                 final: bool = False) -> Steps[CheckResult]:
     """Modes of the robust posterior over the points waiting for a start (highest density first: under a flat
     prior a far, poorly determined mode gains Laplace mass from its size), after a noise fit when the best is
     determined. No modes, and why, when the posterior is not proper yet (no two bearings cross steeply enough in
     front of their antennas); the modes with `determined` False, and why, when it is proper but the best is not
     determined well enough to start the filter from (too few points agree, or its ellipse is wide for its range).
-    `final`: the end of data, where nearly parallel bearings still give their (radio-range bounded) posterior."""
+    `final`: the end of data, where nearly parallel bearings still give their (radio-range bounded) posterior. In
+    pieces (slices.py)."""
     cfg, cal = snap.cfg, _Calibrated(snap)
     if len(cal.pts) < 2:
         return cal.result([], why="no crossing of bearings in front of the antennas")
     # The grid of the search before, with its sums, while the points stay within it (start_grid.py)
     snap.start_grid = snap.start_grid or StartGrid()
-    modes = snap.start_grid.modes(cal.pts, snap.rob)
+    modes = yield from snap.start_grid.modes(cal.pts, snap.rob)
     if modes and modes[0].crossing_deg >= cfg.init_min_crossing_deg and cfg.calibrate_noise:
-        cal.fit([m.mean for m in modes[:2]], True)
+        yield from cal.fit([m.mean for m in modes[:2]], True)
         if cal.noise is not None:
-            modes = find_modes(cal.pts, snap.robust(cal.outlier, True), by_density=True)
+            modes = yield from modes_in_pieces(cal.pts, snap.robust(cal.outlier, True), True)
     if not modes:
         return cal.result([], why="no crossing of bearings in front of the antennas")
     best = modes[0]

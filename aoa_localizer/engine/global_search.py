@@ -336,12 +336,17 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
     rays), so the start ranks by density; once the prior is proper, mass is the right order."""
     if len(pts) < 2:
         return []
+    return modes_from_grid(*grid_score(pts, rob), pts, rob, by_density)
+
+
+def grid_score(pts: Points, rob: Robust) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """find_modes' coarse part: the polar grid's cells (A, R, 2) and radius (R,) laid for `pts`, and its score (A, R)
+    over at most _MAX_GRID_POINTS of them, each bearing widened by the cell's size."""
     coarse = pts
     if len(pts) > _MAX_GRID_POINTS:
         coarse = pts.take(np.linspace(0, len(pts) - 1, _MAX_GRID_POINTS).round().astype(int))
     _, _, cells, radius = polar_grid(coarse)
-    score = log_posterior(cells, coarse, coarse_robust(rob), cell_widening(cells, radius, coarse))
-    return modes_from_grid(cells, radius, score, pts, rob, by_density)
+    return cells, radius, log_posterior(cells, coarse, coarse_robust(rob), cell_widening(cells, radius, coarse))
 
 
 def coarse_robust(rob: Robust) -> Robust:

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from aoa_localizer.engine.checks import CheckResult, search_start
+from aoa_localizer.engine.checks import CheckResult, search_start, start_search
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode
@@ -70,11 +70,11 @@ class Initiator:
         snap = t.snapshot()
         snap.start_grid = self.start_grid
         job = partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
-        future = None if inline else t.scheduler.submit(job)
-        if future is None:
+        if inline:
             return self.apply_start(job(), snap.groups)
-        t.job = PendingJob(future, None, snap.groups)
-        return False
+        steps = start_search(snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
+        t.job = PendingJob(t.scheduler.start(job, steps, len(snap.rows)), None, snap.groups)
+        return t.collect()  # a sliced search small enough to finish in its first call starts the filter now
 
     def apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
         """Start the filter from a start search's modes over the points held now (a background search's snapshot

@@ -1,11 +1,12 @@
 """Where a Localizer's deferred work runs and what it owes, in one place.
 
-A track defers two kinds of work. Its jobs (start searches and global checks) run in the call (`reproducible`: a seed
-repeats a run) or in the check worker's process (`realtime`: the node's), their result applied at the track's next
-point or by `idle()`. Under `realtime` the Metropolis-Hastings moves of a step are owed instead of made in it (a
-resampling's sweeps, a worker check's move on its modes): the scheduler keeps the debt of each filter and makes the
-moves when the caller has time: `idle()` one, `catch_up()` all of them, else each following point one. Any of these
-moves keeps the posterior invariant, so when it is made changes no law.
+A track defers two kinds of work. Its jobs (start searches and global checks) run a few pieces per point
+(`reproducible`: a seed repeats a run; slices.py) or in the check worker's process (`realtime`: the node's), their
+result applied at the track's next point once finished (a worker's also by `idle()`). Under `realtime` the
+Metropolis-Hastings moves of a step are owed instead of made in it (a resampling's sweeps, a worker check's move on
+its modes): the scheduler keeps the debt of each filter and makes the moves when the caller has time: `idle()` one,
+`catch_up()` all of them, else each following point one. Any of these moves keeps the posterior invariant, so when
+it is made changes no law.
 """
 from __future__ import annotations
 
@@ -18,8 +19,9 @@ from weakref import WeakKeyDictionary
 
 import numpy as np
 
-from aoa_localizer.engine.checks import CheckWorker
+from aoa_localizer.engine.checks import CheckResult, CheckWorker
 from aoa_localizer.engine.rejections import Reason
+from aoa_localizer.engine.slices import SlicedJob, Steps
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
 
@@ -62,10 +64,15 @@ class Scheduler:
         """The worker's failed jobs in a row (0 inline)."""
         return self.worker.failures if self.worker is not None else 0
 
-    def submit(self, job) -> Future | None:
-        """The job handed to the worker (its future); None inline, or when the worker cannot take it (then the
-        caller runs it)."""
-        return None if self.worker is None else self.worker.submit(job)
+    def start(self, whole: Callable[[], CheckResult], steps: Steps[CheckResult], points: int) -> Future | SlicedJob:
+        """A job over `points` points: `whole` handed to the worker (its future); inline, or when the worker cannot
+        take it, its `steps` made a few pieces per point (slices.py), the first call's pieces now."""
+        future = None if self.worker is None else self.worker.submit(whole)
+        if future is not None:
+            return future
+        job = SlicedJob(steps, points)
+        job.advance()
+        return job
 
     def finished(self, tracks: Iterable[EmitterTrack]) -> list[EmitterTrack]:
         """The tracks whose job finished, its result applied now, that have a new estimate."""
@@ -142,7 +149,7 @@ class Scheduler:
     def wait(self, tracks: Iterable[EmitterTrack]) -> None:
         """Wait until the worker has finished the tracks' jobs (their results are applied at each one's next point,
         as live)."""
-        wait([t.job.future for t in tracks if t.job is not None])
+        wait([t.job.future for t in tracks if t.job is not None and isinstance(t.job.future, Future)])
 
     def close(self) -> None:
         """Stop the worker (a job running finishes; its result is dropped)."""

@@ -26,6 +26,7 @@ from aoa_localizer.engine.global_search import (
     polar_grid,
     summed_log_densities,
 )
+from aoa_localizer.engine.slices import Steps
 
 _REGRID = 2.0  # points this many times farther from the grid's centre than when it was laid: a new grid
 
@@ -54,13 +55,18 @@ class StartGrid:
         one)."""
         return self.cells.size > 0 and extent_from(self.centre, pts) <= _REGRID * self.extent
 
-    def modes(self, pts: Points, rob: Robust) -> list[Mode]:
+    def modes(self, pts: Points, rob: Robust) -> Steps[list[Mode]]:
         """find_modes(pts, rob, by_density=True) on this grid, its score made from the kept sums plus the points that
-        came since; the grid laid (again) around the points first when they are not within it."""
+        came since; the grid laid (again) around the points first when they are not within it. In two pieces
+        (slices.py): the score, then the refinement of its best cells."""
         if not self.covers(pts):
             self.centre, self.extent, self.cells, self.radius = polar_grid(pts)
             self.rows, self.key, self.sums = np.zeros((0, 5)), (), 0.0
-        return modes_from_grid(self.cells, self.radius, self.score(pts, rob), pts, rob, by_density=True)
+        score = self.score(pts, rob)
+        yield
+        modes = modes_from_grid(self.cells, self.radius, score, pts, rob, by_density=True)
+        yield
+        return modes
 
     def score(self, pts: Points, rob: Robust) -> np.ndarray:
         """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size."""

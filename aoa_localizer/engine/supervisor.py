@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from aoa_localizer.engine.checks import CheckResult, refined, run_check
+from aoa_localizer.engine.checks import CheckResult, check, refined, run_check
 from aoa_localizer.engine.clock_check import ClockHint
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.global_search import Robust, find_modes, inlier_share, log_posterior
@@ -88,16 +88,18 @@ class Supervisor:
             f.rejuvenate(ALARM_SWEEPS, t.proposal)
 
     def global_check(self, inline: bool = False):
-        """Noise calibration, emitter-moved test, global search, MH move or re-start: inline, or its expensive part
-        handed to the worker (applied at a later point by the track's collect)."""
+        """Noise calibration, emitter-moved test, global search, MH move or re-start: whole here (`inline`), or its
+        expensive part handed to the worker or made a few pieces per point (applied by the track's collect once
+        finished: here when it finished in its first call)."""
         t = self.track
         self.last_search_point = t.points_seen
         snap = t.snapshot()
-        future = None if inline else t.scheduler.submit(partial(run_check, snap))
-        if future is None:
+        if inline:
             self.apply_check(run_check(snap), snap.groups)
-        else:
-            t.job = PendingJob(future, t.running, snap.groups)
+            return
+        t.job = PendingJob(t.scheduler.start(partial(run_check, snap), check(snap), len(snap.rows)), t.running,
+                           snap.groups)
+        t.collect()
 
     def apply_check(self, res: CheckResult, groups: list[list[Reading]]):
         """The cheap part of a global check, on the current cloud and points: re-weight by the fitted noise,

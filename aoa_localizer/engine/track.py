@@ -91,6 +91,8 @@ class EmitterTrack:
         """One closed group of readings; True when the filter took it (or started) and has a new estimate."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
+        if self.job is not None:
+            self.job.advance()
         self.collect()  # a background job's findings first: they may change the noise the point is made with
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept

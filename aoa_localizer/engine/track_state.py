@@ -6,6 +6,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from enum import Enum
 
+from aoa_localizer.engine.slices import SlicedJob
 from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters.base import ParticleFilter
 
@@ -50,12 +51,18 @@ class WindowEntry:
 
 @dataclass
 class PendingJob:
-    """A job running in the check worker: a start search (`filter` None) or a global check for `filter`, with the
-    reading groups of its snapshot (the originals: the worker's copies come back as points in their order)."""
+    """A job running in the check worker, or made a few pieces per point: a start search (`filter` None) or a global
+    check for `filter`, with the reading groups of its snapshot (the originals: the worker's copies come back as
+    points in their order)."""
 
-    future: Future
+    future: Future | SlicedJob
     filter: ParticleFilter | None
     groups: list[list[Reading]]
+
+    def advance(self) -> None:
+        """A point came: a sliced job makes its pieces for it (a worker's goes on by itself)."""
+        if isinstance(self.future, SlicedJob):
+            self.future.advance()
 
     @property
     def is_start(self) -> bool:
