@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine import global_search, start_grid
-from aoa_localizer.engine.global_search import Points, Robust, find_modes, refine
+from aoa_localizer.engine.global_search import Points, Robust, find_modes, log_posterior, refine
 from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.slices import run_whole
 from aoa_localizer.engine.start_grid import StartGrid
@@ -58,6 +58,24 @@ def test_refine_skips_the_steps_of_starts_that_stopped_and_ends_where_every_step
     assert np.hypot(*(got[0][4] - [150.0, 900.0])) < 50.0  # the start next to the source ends at it
 
 
+def score_of(grid: StartGrid, pts: Points, rob: Robust) -> np.ndarray:
+    """StartGrid.score, every piece made."""
+    return run_whole(grid.score(pts, rob))
+
+
+def counting(monkeypatch) -> list[int]:
+    """How many points each of the start grid's sums is made over, in the order made."""
+    scored: list[int] = []
+    real = start_grid.grid_sums
+
+    def grid_sums(cells, radius, pts, rob):
+        scored.append(len(pts))
+        return (yield from real(cells, radius, pts, rob))
+
+    monkeypatch.setattr(start_grid, "grid_sums", grid_sums)
+    return scored
+
+
 @pytest.mark.parametrize("latent", [False, True])
 def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_does(monkeypatch, latent):
     """The start grid's score made from its kept sums plus the points that came since matches the score of all the
@@ -66,17 +84,19 @@ def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_doe
     pts = _points(np.random.default_rng(5))
     rob = Robust(0.05, 3.0, grid=NoiseGrid.weak(2.0) if latent else None)
     grid = StartGrid.around(pts.take(slice(0, 10)))
-    scored = []
-    summed = start_grid.summed_log_densities
-    monkeypatch.setattr(start_grid, "summed_log_densities", lambda x, p, *a: scored.append(len(p)) or summed(x, p, *a))
+    scored = counting(monkeypatch)
     for k in (10, 11, 20, 30):
-        score = grid.score(pts.take(slice(0, k)), rob)
-        fresh = replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0).score(pts.take(slice(0, k)), rob)
+        held = pts.take(slice(0, k))
+        score = score_of(grid, held, rob)
+        fresh = score_of(replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0), held, rob)
         np.testing.assert_allclose(score, fresh, rtol=0.0, atol=1e-9)
+        coarse = global_search.coarse_robust(rob)  # all the points in one piece, as find_modes scored before pieces
+        whole = log_posterior(grid.cells, held, coarse, global_search.cell_widening(grid.cells, grid.radius, held))
+        np.testing.assert_allclose(score, whole, rtol=0.0, atol=1e-9)
     assert scored[::2] == [10, 1, 9, 10]  # each fresh score took all k points
     remade = replace(pts, sigma=2.0 * pts.sigma)
-    grid.score(remade, rob)
-    grid.score(pts, replace(rob, gps_sigma_m=10.0))
+    score_of(grid, remade, rob)
+    score_of(grid, pts, replace(rob, gps_sigma_m=10.0))
     assert scored[-2:] == [30, 30]
     assert grid.covers(pts.take(slice(0, 13))) and not grid.covers(pts)  # laid for 10 points: twice their reach
     laid = StartGrid.around(pts)
@@ -94,14 +114,12 @@ def test_a_start_grid_takes_off_the_points_a_window_dropped(monkeypatch):
     assert not grid.covers(pts)
     run_whole(grid.modes(pts.take(slice(0, 20)), rob))
     assert grid.covers(pts.take(slice(0, 20)))
-    scored = []
-    summed = start_grid.summed_log_densities
-    monkeypatch.setattr(start_grid, "summed_log_densities", lambda x, p, *a: scored.append(len(p)) or summed(x, p, *a))
+    scored = counting(monkeypatch)
     window = pts.take(slice(5, 24))  # 5 dropped, 4 new
-    score = grid.score(window, rob)
+    score = score_of(grid, window, rob)
     assert scored == [5, 4]
-    fresh = replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0).score(window, rob)
+    fresh = score_of(replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0), window, rob)
     np.testing.assert_allclose(score, fresh, rtol=0.0, atol=1e-9)
     scored.clear()
-    grid.score(pts.take(slice(16, 26)), rob)  # 11 of 19 dropped: afresh
+    score_of(grid, pts.take(slice(16, 26)), rob)  # 11 of 19 dropped: afresh
     assert scored == [10]

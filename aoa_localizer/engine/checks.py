@@ -34,9 +34,8 @@ from aoa_localizer.engine.global_search import (
     Mode,
     Points,
     Robust,
-    grid_score,
     log_posterior,
-    modes_from_grid,
+    modes_in_pieces,
     refine,
     residuals,
 )
@@ -74,6 +73,7 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     quality, base, heading_var = c.quality, c.sigma, c.heading_sigma**2
     at_readings = shifted(Points(c.east, c.north, c.theta, base), offset)
     configured = batch.points(None, offset)
+    yield
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
     narrow = yield from modes_in_pieces(configured, Robust(eps, cfg.gps_sigma_m), by_density)
 
@@ -246,6 +246,7 @@ def run_check(snap: Snapshot) -> CheckResult:
 def check(snap: Snapshot) -> Steps[CheckResult]:
     """The expensive part of a global check over the snapshot (nothing outside it is read or changed), in pieces."""
     cal = _Calibrated(snap)
+    yield
     if snap.cfg.calibrate_noise and snap.best_particle is not None:
         start = refined(snap.best_particle, cal.pts, snap.rob)
         yield
@@ -256,17 +257,6 @@ def check(snap: Snapshot) -> Steps[CheckResult]:
     if modes:
         hint = yield from best_shift(pts, snap.velocity(), modes[0].mean, rob)
     return cal.result(modes, hint)
-
-
-def modes_in_pieces(pts: Points, rob: Robust, by_density: bool) -> Steps[list[Mode]]:
-    """find_modes in two pieces: the grid's score, then the refinement of its best cells."""
-    if len(pts) < 2:
-        return []
-    grid = grid_score(pts, rob)
-    yield
-    modes = modes_from_grid(*grid, pts, rob, by_density)
-    yield
-    return modes
 
 
 def ellipse_and_reach(mean: np.ndarray, cov: np.ndarray, east: np.ndarray, north: np.ndarray) -> tuple[float, float]:
@@ -291,6 +281,7 @@ def start_search(snap: Snapshot, min_inliers: int, max_ellipse_range_share: floa
     `final`: the end of data, where nearly parallel bearings still give their (radio-range bounded) posterior. In
     pieces (slices.py)."""
     cfg, cal = snap.cfg, _Calibrated(snap)
+    yield
     if len(cal.pts) < 2:
         return cal.result([], why="no crossing of bearings in front of the antennas")
     # The grid of the search before, with its sums, while the points stay within it (start_grid.py)

@@ -29,7 +29,7 @@ class ClockHint:
 def best_shift(pts: Points, velocity: np.ndarray, x0: np.ndarray, rob: Robust) -> Steps[ClockHint | None]:
     """The shift (to a quarter second, COARSE_S then FINE_S) that fits best when it beats no shift by MIN_GAIN, else
     None. `velocity` (K, 2) is the vehicle's east/north velocity at each point, `x0` the emitter estimate the fits
-    start from. In pieces (slices.py): the coarse shifts, then each finer step."""
+    start from. In pieces (slices.py): a fit each."""
     if len(pts) < 3 or float(np.median(np.hypot(velocity[:, 0], velocity[:, 1]))) < MIN_SPEED_MPS:
         return None
     scores: dict[float, float] = {}
@@ -42,11 +42,15 @@ def best_shift(pts: Points, velocity: np.ndarray, x0: np.ndarray, rob: Robust) -
             scores[shift] = float(log_posterior(x, moved, rob))
         return scores[shift]
 
-    best = max(COARSE_S.tolist(), key=score)
-    yield
-    for step in FINE_S:
-        best = max((best - step, best, best + step), key=score)
+    for shift in COARSE_S.tolist():
+        score(shift)
         yield
+    best = max(COARSE_S.tolist(), key=score)
+    for step in FINE_S:
+        for shift in (best - step, best + step):
+            score(shift)
+            yield
+        best = max((best - step, best, best + step), key=score)
     gain = scores[best] - scores[0.0]
     if best == 0.0 or not gain >= MIN_GAIN:
         return None

@@ -17,13 +17,14 @@ import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
+from aoa_localizer.engine.slices import PIECE_EVALUATIONS, Steps, run_whole
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 # Grid: azimuth cells, log-range cells, and the range span relative to the track's extent.
 _N_AZ, _N_R = 72, 44
 _R_MIN_FACTOR, _R_MAX_FACTOR = 0.01, 200.0
 _R_MIN_M, _R_MAX_M = 1.0, 5000.0
-_MAX_GRID_POINTS = 120  # the coarse score is smoothed anyway: at most this many points, evenly spread
+_MAX_GRID_POINTS = 120
 _MAX_STARTS = 6  # local maxima refined
 # Widening of the bearings' variance by the cell size, annealed to zero over the refinement.
 _ANNEAL = (1.0, 0.3, 0.1, 0.03, 0.01, 0.0)
@@ -251,12 +252,19 @@ def _local_maxima(score: np.ndarray) -> np.ndarray:
     return idx[np.argsort(-score.ravel()[idx])]
 
 
-def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
+def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """IRLS Gauss-Newton from each start (M, 2), annealing the widening radius (M,) to zero.
 
     Returns means (M, 2), covariances (M, 2, 2) (the Laplace approximation, inverse of the EM-weighted
     information plus the prior's precision) and EM inlier weights (M, K).
     """
+    return run_whole(refine_in_pieces(starts, widen, pts, rob))
+
+
+def refine_in_pieces(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust
+                     ) -> Steps[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """refine, a piece per annealing level (slices.py)."""
     x = np.array(starts, float)
     widen = np.asarray(widen, float)
     prec = rob.prior_prec if rob.prior_prec is not None else np.zeros((2, 2))
@@ -272,6 +280,7 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust):
             moving = moving[still]
             if not moving.size:
                 break
+        yield
     _, grad, w, gamma = linearised(x, pts, rob)
     info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-12 * np.eye(2)
     return x, inverse_2x2(info), gamma
@@ -334,19 +343,33 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
     `by_density`: highest posterior density first. Under a flat prior (before the start) a far, poorly
     determined mode gains Laplace mass from its sheer size (the bearing-only posterior is improper along the
     rays), so the start ranks by density; once the prior is proper, mass is the right order."""
+    return run_whole(modes_in_pieces(pts, rob, by_density))
+
+
+def modes_in_pieces(pts: Points, rob: Robust, by_density: bool) -> Steps[list[Mode]]:
+    """find_modes in pieces (slices.py): the grid's score's, then the refinement's."""
     if len(pts) < 2:
         return []
-    return modes_from_grid(*grid_score(pts, rob), pts, rob, by_density)
-
-
-def grid_score(pts: Points, rob: Robust) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """find_modes' coarse part: the polar grid's cells (A, R, 2) and radius (R,) laid for `pts`, and its score (A, R)
-    over at most _MAX_GRID_POINTS of them, each bearing widened by the cell's size."""
     coarse = pts
-    if len(pts) > _MAX_GRID_POINTS:
+    if len(pts) > _MAX_GRID_POINTS:  # the coarse score is smoothed anyway: at most this many points, evenly spread
         coarse = pts.take(np.linspace(0, len(pts) - 1, _MAX_GRID_POINTS).round().astype(int))
     _, _, cells, radius = polar_grid(coarse)
-    return cells, radius, log_posterior(cells, coarse, coarse_robust(rob), cell_widening(cells, radius, coarse))
+    scored = coarse_robust(rob)
+    sums = yield from grid_sums(cells, radius, coarse, scored)
+    return (yield from modes_from_grid(cells, radius, from_sums(sums, cells, scored), pts, rob, by_density))
+
+
+def grid_sums(cells: np.ndarray, radius: np.ndarray, pts: Points, rob: Robust) -> Steps[np.ndarray]:
+    """summed_log_densities at a polar grid's cells (A, R, 2) of radius (R,) over `pts`, each bearing widened by the
+    cell's size: a piece per PIECE_EVALUATIONS densities (sums over sets of points add)."""
+    per_point = cells.shape[0] * cells.shape[1] * (1 if rob.grid is None else rob.grid.scale.size)
+    step = max(1, PIECE_EVALUATIONS // per_point)
+    sums: np.ndarray | float = 0.0
+    for lo in range(0, len(pts), step):
+        part = pts.take(slice(lo, lo + step))
+        sums = sums + summed_log_densities(cells, part, rob, cell_widening(cells, radius, part))
+        yield
+    return np.asarray(sums)
 
 
 def coarse_robust(rob: Robust) -> Robust:
@@ -355,14 +378,14 @@ def coarse_robust(rob: Robust) -> Robust:
 
 
 def modes_from_grid(cells: np.ndarray, radius: np.ndarray, score: np.ndarray, pts: Points, rob: Robust,
-                    by_density: bool) -> list[Mode]:
+                    by_density: bool) -> Steps[list[Mode]]:
     """find_modes from a polar grid's cells (A, R, 2), radius (R,) and coarse score (A, R): its best local maxima
-    refined over `pts`, distinct, ordered as find_modes orders them."""
+    refined over `pts`, distinct, ordered as find_modes orders them. In pieces: the refinement's (slices.py)."""
     top = _local_maxima(score)[:_MAX_STARTS]
     if top.size == 0:
         return []
     a_idx, r_idx = np.unravel_index(top, score.shape)
-    means, covs, gamma = refine(cells[a_idx, r_idx], radius[r_idx], pts, rob)
+    means, covs, gamma = yield from refine_in_pieces(cells[a_idx, r_idx], radius[r_idx], pts, rob)
     lp = log_posterior(means, pts, rob)
     modes: list[Mode] = []
     for m in np.argsort(-lp):

@@ -10,10 +10,13 @@ from typing import Generic, TypeVar
 T = TypeVar("T")
 Steps = Generator[None, None, T]  # yields after each piece of work, returns the result
 
-# Points' worth of work one call makes of a job: a piece costs about as much as one pass over its points (a
-# Gauss-Newton refinement, an EM fit, a grid's scores), so a job over K points makes max(1, SLICE_POINTS // K) pieces
-# per call: a small job finishes in the call that starts it, one over hundreds of points is spread over a few dozen.
-SLICE_POINTS = 200
+# A piece (an annealing level of a refinement, an EM fit, a grid's score, one stamp shift's fit) costs about as
+# much as a pass over PIECE_POINTS points plus one over its K points, so a job makes
+# max(1, PIECES_PER_CALL // (1 + K / PIECE_POINTS)) pieces per call: the same share of work at any size, never the
+# whole job in one call.
+PIECE_POINTS = 100
+PIECES_PER_CALL = 12
+PIECE_EVALUATIONS = 50_000  # bearing densities a grid's score makes per piece (a millisecond or two)
 
 
 def run_whole(steps: Steps[T]) -> T:
@@ -30,9 +33,9 @@ class SlicedJob(Generic[T]):
     makes the pieces left). An exception a piece raises is kept and raised by `result`, as a Future's is."""
 
     def __init__(self, steps: Steps[T], points: int):
-        """`points`: how many points the job works over (the pieces per call: SLICE_POINTS // points)."""
+        """`points`: how many points the job works over (what a piece costs)."""
         self._steps = steps
-        self.pieces = max(1, SLICE_POINTS // max(points, 1))
+        self.pieces = max(1, int(PIECES_PER_CALL / (1.0 + points / PIECE_POINTS)))
         self._done = False
         self._value: T | None = None
         self._error: BaseException | None = None

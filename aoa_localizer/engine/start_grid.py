@@ -18,13 +18,12 @@ from aoa_localizer.engine.global_search import (
     Mode,
     Points,
     Robust,
-    cell_widening,
     coarse_robust,
     extent_from,
     from_sums,
+    grid_sums,
     modes_from_grid,
     polar_grid,
-    summed_log_densities,
 )
 from aoa_localizer.engine.slices import Steps
 
@@ -57,19 +56,17 @@ class StartGrid:
 
     def modes(self, pts: Points, rob: Robust) -> Steps[list[Mode]]:
         """find_modes(pts, rob, by_density=True) on this grid, its score made from the kept sums plus the points that
-        came since; the grid laid (again) around the points first when they are not within it. In two pieces
-        (slices.py): the score, then the refinement of its best cells."""
+        came since; the grid laid (again) around the points first when they are not within it. In pieces (slices.py):
+        the score, then the refinement's."""
         if not self.covers(pts):
             self.centre, self.extent, self.cells, self.radius = polar_grid(pts)
             self.rows, self.key, self.sums = np.zeros((0, 5)), (), 0.0
-        score = self.score(pts, rob)
-        yield
-        modes = modes_from_grid(self.cells, self.radius, score, pts, rob, by_density=True)
-        yield
-        return modes
+        score = yield from self.score(pts, rob)
+        return (yield from modes_from_grid(self.cells, self.radius, score, pts, rob, by_density=True))
 
-    def score(self, pts: Points, rob: Robust) -> np.ndarray:
-        """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size."""
+    def score(self, pts: Points, rob: Robust) -> Steps[np.ndarray]:
+        """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size; in pieces
+        (grid_sums')."""
         coarse = coarse_robust(rob)
         rows = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
         key = _key(coarse)
@@ -79,14 +76,11 @@ class StartGrid:
         if dropped is not None:
             sums, done = self.sums, len(self.rows) - dropped
             if dropped:
-                sums = sums - self._summed(Points.of(self.rows[:dropped]), coarse)
+                sums = sums - (yield from grid_sums(self.cells, self.radius, Points.of(self.rows[:dropped]), coarse))
         if done < len(rows):
-            sums = sums + self._summed(pts.take(slice(done, None)), coarse)
+            sums = sums + (yield from grid_sums(self.cells, self.radius, pts.take(slice(done, None)), coarse))
         self.rows, self.key, self.sums = rows, key, sums  # together: a search that failed leaves the last ones
         return from_sums(np.asarray(sums), self.cells, coarse)
-
-    def _summed(self, pts: Points, coarse: Robust) -> np.ndarray:
-        return summed_log_densities(self.cells, pts, coarse, cell_widening(self.cells, self.radius, pts))
 
 
 def _dropped(summed: np.ndarray, rows: np.ndarray) -> int | None:
