@@ -185,8 +185,8 @@ def test_a_bag_cut_inside_its_only_chunk_keeps_every_complete_message(tmp_path, 
     result = run_bag(bag, {}, loc, estimates.append)
     assert result.damage and "recovered from inside the damaged part" in result.damage
     assert result.messages > 0.75 * share * whole  # the messages before the cut (the file also holds outputs)
-    if share >= 0.5:
-        assert len(estimates) > 20
+    if share >= 0.5:  # the start search is spread over the points after it (slices.py): its first few lack one
+        assert len(estimates) > 15
 
 
 def test_salvage_keeps_an_intact_file_whole_and_refuses_a_foreign_one():
