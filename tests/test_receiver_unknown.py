@@ -18,6 +18,7 @@ from aoa_localizer.engine.global_search import Points, Robust, log_posterior
 from aoa_localizer.engine.offset import joint_optimum
 from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
 from aoa_localizer.engine.scenarios import robustness_cells, simulate
+from aoa_localizer.engine.slices import run_whole
 from aoa_localizer.engine.surveys import DATUM, Survey, hand_held, least_squares_fix, locate_survey
 from aoa_localizer.tools import locate
 
@@ -172,7 +173,7 @@ def test_the_joint_optimum_finds_a_constant_offset_on_a_drive_with_a_turn():
     theta = np.arctan2(truth[1] - north, truth[0] - east) + math.radians(20) + math.radians(1) * rng.standard_normal(40)
     pts = Points(east, north, theta, np.full(40, math.radians(1.0)))
     rob = Robust(0.05)
-    b, x, lp = joint_optimum(pts, np.array([400.0, 400.0]), rob)
+    b, x, lp = run_whole(joint_optimum(pts, np.array([400.0, 400.0]), rob))
     assert math.degrees(b) == pytest.approx(20.0, abs=1.0)
     assert np.hypot(*(x - truth)) < 15.0
     assert lp > float(log_posterior(refined(x, pts, rob), pts, rob)) + 100

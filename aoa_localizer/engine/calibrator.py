@@ -13,10 +13,11 @@ import numpy as np
 
 from aoa_localizer.engine.checks import fit_noise
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.course import courses, turned
 from aoa_localizer.engine.global_search import residuals
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.point_batch import Built, PointBatch, offset_point, sigmas
-from aoa_localizer.engine.preprocess import make_point
+from aoa_localizer.engine.preprocess import columns, make_point
 from aoa_localizer.engine.receiver import NoiseGrid
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.slices import run_whole
@@ -42,6 +43,9 @@ class Calibrator:
         # (None: known, or calibrated)
         self.grid: NoiseGrid | None = None
         self.offset = 0.0  # a constant bearing offset the data determined (ENU rad, offset.py), taken off every point
+        # the bearings turn with the vehicle: each is turned by its course before the offset (course.py)
+        self.course = False
+        self.held_course = math.nan  # the course the newest point's readings ended on
         if cfg.noise == "unknown" and cfg.likelihood == "mixture":
             self.grid = NoiseGrid.for_config(cfg)
         self._summary: tuple[NoiseModel, int, float, dict] | None = None  # (model, fits, share, summary)
@@ -52,6 +56,8 @@ class Calibrator:
 
     def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         """The point of `readings` under the calibrated noise model (the readings' own sigmas until calibrated)."""
+        if self.course:
+            readings, self.held_course = turned(readings, self.held_course)
         made = make_point(readings, self.cfg, self.sigmas(readings) if self.cfg.calibrate_noise else None)
         return offset_point(made, self.offset)
 
@@ -81,22 +87,35 @@ class Calibrator:
         fit = run_whole(fit_noise(batch, self.noise, t.robust(), candidates, by_density))
         if fit is None:
             return False
-        noise, at, offset = fit
-        self.apply(noise, at, {}, offset)
+        self.apply(fit.noise, fit.at, {}, fit.offset, fit.batch.course)
         return True
 
-    def apply(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]], offset: float):
-        """Adopt `noise` and the bearing `offset` (fitted at the place `at`): rebuild the kept points with them
-        (`built`: points already made with them, by their group's identity), re-estimate the point outlier share,
-        re-weight the cloud by the change of posterior (a changed offset moves the posterior: the check's re-start
-        test that follows finds the new place)."""
+    def apply(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]], offset: float,
+              course: bool = False):
+        """Adopt `noise`, the bearing `offset` and `course` (bearings turned by the vehicle's course), fitted at the
+        place `at`: rebuild the kept points with them (`built`: points already made with them, by their group's
+        identity), re-estimate the point outlier share, re-weight the cloud by the change of posterior (a changed
+        offset moves the posterior: the check's re-start test that follows finds the new place)."""
         t = self.track
         self.noise = noise
+        window_courses = self._window_courses() if course else None
+        if course and not self.course:
+            self.course = True
+            self.offset = offset
+            t.events["course_learned"] += 1
+            log.warning("the bearings turn with the vehicle: they look measured from its forward axis, not from "
+                        "north; learned, and each is turned by the vehicle's course (%s)", self.offset_advice())
         if offset != self.offset:
             self.offset = offset
             t.events["offset_learned"] += 1
-            log.warning("the bearings look %+.1f deg off the true bearings: learned, and taken off every bearing (%s)",
-                        self.offset_deg, self.offset_advice())
+            if self.course:
+                log.warning("the bearings turned by the vehicle's course look %+.1f deg off: learned (%s)",
+                            self.offset_deg, self.offset_advice())
+            else:
+                log.warning("the bearings look %+.1f deg off the true bearings: learned, and taken off every bearing "
+                            "(%s)", self.offset_deg, self.offset_advice())
+        if window_courses is not None and window_courses.size:
+            self.held_course = float(window_courses[0])
         f = t.filter  # None while waiting to start: only the points are rebuilt
         old = f.log_target(f.x) if f is not None else None
         rebuilt: deque[WindowEntry] = deque()
@@ -110,6 +129,8 @@ class Calibrator:
         if delta:
             t.reject(Reason.POINT_OUTLIER, delta)
         t.window = rebuilt
+        if window_courses is not None and window_courses.size:
+            self.held_course = float(window_courses[-1])
         pts = t.points()
         self.outlier_prob = point_outlier_prob(residuals(at, pts), pts.sigma, self.outlier_prob)
         t.events["recalibrated"] += 1
@@ -123,6 +144,13 @@ class Calibrator:
                 f.resample()
                 f.rejuvenate(_CALIBRATION_SWEEPS, t.proposal)
 
+    def _window_courses(self) -> np.ndarray:
+        """The vehicle's course at each of the window's readings, in turn (course.py)."""
+        cols = [columns(e.readings) for e in self.track.window]
+        if not cols:
+            return np.zeros(0)
+        return courses(np.concatenate([c.v_east for c in cols]), np.concatenate([c.v_north for c in cols]))
+
     @property
     def offset_deg(self) -> float:
         """The learned offset as azimuth degrees: true azimuth = read azimuth + this."""
@@ -131,6 +159,11 @@ class Calibrator:
     def offset_advice(self) -> str:
         """The setting that would take the learned offset off at the receiver, as a question."""
         cfg = self.cfg
+        if self.course:
+            mount = self.offset_deg - 90.0 + (cfg.magnetic_declination_deg
+                                              if cfg.bearing_reference == "magnetic_north" else 0.0)
+            return (f"set bearing_reference to vehicle, heading_source to track (or imu) and mount_offset_deg to "
+                    f"{(mount + 180.0) % 360.0 - 180.0:.1f}?")
         if cfg.bearing_reference == "vehicle":
             return f"set mount_offset_deg to {cfg.mount_offset_deg + self.offset_deg:.1f}?"
         if cfg.bearing_reference == "magnetic_north":

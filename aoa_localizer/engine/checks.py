@@ -28,6 +28,7 @@ import numpy as np
 
 from aoa_localizer.engine.clock_check import ClockHint, best_shift
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.course import moved
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.global_search import (
@@ -36,12 +37,13 @@ from aoa_localizer.engine.global_search import (
     Robust,
     log_posterior,
     modes_in_pieces,
+    point_log_densities,
     refine,
     residuals,
 )
 from aoa_localizer.engine.memory import keep_freed_memory
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
-from aoa_localizer.engine.offset import PRIOR_LOG_ODDS, joint_optimum, shifted
+from aoa_localizer.engine.offset import ALL_OFFSETS_DEG, PRIOR_LOG_ODDS, joint_optimum, shifted
 from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.point_batch import Built, PointBatch, points_of
 from aoa_localizer.engine.preprocess import Columns, Group, columns, group_size
@@ -58,24 +60,103 @@ def refined(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
 
 
 def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: list[np.ndarray], by_density: bool,
-              offset: float = 0.0) -> Steps[tuple[NoiseModel, np.ndarray, float] | None]:
+              offset: float = 0.0, try_course: bool = False) -> Steps[Fit | None]:
     """Position and noise jointly: at each candidate place, and at the best mode under the configured noise, EM
     fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins (a wrong place
     explained by a wide noise loses to the right place with the right noise), unless its core is hollow (a place
     between two sources, whose readings cluster either side of it). Then, with `learn_offset`, a constant bearing
     offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
-    reference's prior log odds. Returns (noise, place, offset); None when the readings are too few for a fit. In
-    pieces (slices.py): each EM fit, each refinement, the search under the configured noise, the offset's optimum."""
+    reference's prior log odds; and, with `try_course`, for a north reference on a moving vehicle, the bearings turned
+    by its course (course.py) with an offset of their own, adopted when they gain as much again over the best of
+    north and explain more than an emitter that moved. None when
+    the readings are too few for a fit. In pieces (slices.py): each EM fit, each refinement, the search under the
+    configured noise, each offset's optimum."""
     cfg, c = batch.cfg, batch.cols
     if c.theta.size < 2:
         return None
     rob = replace(rob, grid=None)  # each trial noise is taken as it is
-    quality, base, heading_var = c.quality, c.sigma, c.heading_sigma**2
-    at_readings = shifted(Points(c.east, c.north, c.theta, base), offset)
+    joint = _joint(batch, noise, rob, offset)
     configured = batch.points(None, offset)
     yield
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
     narrow = yield from modes_in_pieces(configured, Robust(eps, cfg.gps_sigma_m), by_density)
+    best = None
+    for x in list(candidates) + [m.mean for m in narrow[:1]]:
+        fit = yield from joint(x, offset)
+        if fit is None:
+            return None
+        # a fit whose core is hollow explains the readings by a noise they do not have: any other wins over it
+        if best is None or (not fit[1].hollow, fit[0]) > (not best[1].hollow, best[0]):
+            best = fit
+    if best is None:
+        return None
+    ll, trial, x = best
+    out = Fit(trial, x, offset, batch)
+    if not cfg.learn_offset:
+        return out
+    found = yield from _offset_fit(batch.points(trial, offset), x, rob, offset, joint)
+    # a first offset must beat the bearing reference's prior odds; one already learned is refined by any gain
+    needed = 0.0 if offset else PRIOR_LOG_ODDS[cfg.bearing_reference]
+    if found is not None and found[0] > ll + needed:
+        ll, out = found[0], Fit(found[1], found[2], found[3], batch)
+    if try_course and not batch.course and cfg.bearing_reference != "vehicle" and moved(c.v_east, c.v_north):
+        turned = PointBatch(batch.groups, cfg, course=True)
+        on_course = yield from _offset_fit(turned.points(out.noise, 0.0), out.at, rob, 0.0,
+                                           _joint(turned, noise, rob, 0.0), ALL_OFFSETS_DEG)
+        if on_course is not None and on_course[0] > ll + PRIOR_LOG_ODDS[cfg.bearing_reference]:
+            course_fit = Fit(on_course[1], on_course[2], on_course[3], turned)
+            if not (yield from _moved_explains_more(out, course_fit, rob)):
+                out = course_fit
+    return out
+
+
+def _moved_explains_more(north: Fit, course: Fit, rob: Robust) -> Steps[bool]:
+    """Whether an emitter that moved explains the points read from north at least as well as the bearings turned
+    by the course do, by their robust log posteriors, the move's extra coordinates charged log K (BIC): both bend
+    the bearings at one moment, and a single turn cannot tell them apart by itself. The move is placed where the
+    vehicle turned most, each part's place found by its global search; then the move goes to the point that
+    explains the points best under those two places, and each place is refined on its part."""
+    c, of, k = north.batch.cols, north.batch.of, north.batch.sizes.size
+    if k < 6:
+        return False
+    heading = np.arctan2(np.bincount(of, c.v_north, k), np.bincount(of, c.v_east, k))
+    cut = int(np.argmax(np.abs(wrap_pi(np.diff(heading[1:-1])))) + 2)  # at least two points either side
+    pts = north.batch.points(north.noise, north.offset)
+    places = []
+    for part in (pts.take(np.arange(cut)), pts.take(np.arange(cut, k))):
+        modes = yield from modes_in_pieces(part, rob, True)
+        places.append(modes[0].mean if modes else refined(north.at, part, rob))
+    before, after = (np.cumsum(point_log_densities(x, pts, rob)) for x in places)
+    # the old place up to the move, the new one from it on; at least two points either side
+    cut = int(np.argmax(before[1:-2] + after[-1] - after[1:-2])) + 2
+    yield
+    split = 0.0
+    for x, part in zip(places, (pts.take(np.arange(cut)), pts.take(np.arange(cut, k))), strict=True):
+        split += float(log_posterior(refined(x, part, rob), part, rob))
+    course_pts = course.batch.points(course.noise, course.offset)
+    one = float(log_posterior(refined(course.at, course_pts, rob), course_pts, rob))
+    return split - math.log(k) >= one
+
+
+@dataclass
+class Fit:
+    """A noise fit: the noise, the place it was fitted at, the bearing offset (rad) and the points' readings as the
+    fit reads them (`batch.course`: turned by the vehicle's course)."""
+
+    noise: NoiseModel
+    at: np.ndarray
+    offset: float
+    batch: PointBatch
+
+
+JointFit = Callable[[np.ndarray, float], Steps[tuple[float, NoiseModel, np.ndarray] | None]]
+
+
+def _joint(batch: PointBatch, noise: NoiseModel, rob: Robust, offset: float) -> JointFit:
+    """The joint fit at a place x and offset b over the batch's readings (`offset`: the one its points carry)."""
+    c = batch.cols
+    quality, base, heading_var = c.quality, c.sigma, c.heading_sigma**2
+    at_readings = shifted(Points(c.east, c.north, c.theta, base), offset)
 
     def joint(x: np.ndarray, b: float) -> Steps[tuple[float, NoiseModel, np.ndarray] | None]:
         """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
@@ -89,33 +170,14 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
             yield
         return ll, trial, x
 
-    best = None
-    for x in list(candidates) + [m.mean for m in narrow[:1]]:
-        fit = yield from joint(x, offset)
-        if fit is None:
-            return None
-        # a fit whose core is hollow explains the readings by a noise they do not have: any other wins over it
-        if best is None or (not fit[1].hollow, fit[0]) > (not best[1].hollow, best[0]):
-            best = fit
-    if best is None:
-        return None
-    ll, trial, x = best
-    if cfg.learn_offset:
-        found = yield from _offset_fit(batch.points(trial, offset), x, rob, offset, joint)
-        # a first offset must beat the bearing reference's prior odds; one already learned is refined by any gain
-        needed = 0.0 if offset else PRIOR_LOG_ODDS[cfg.bearing_reference]
-        if found is not None and found[0] > ll + needed:
-            return found[1], found[2], found[3]
-    return trial, x, offset
+    return joint
 
 
-def _offset_fit(pts: Points, x: np.ndarray, rob: Robust, offset: float,
-                joint: Callable[[np.ndarray, float], Steps[tuple[float, NoiseModel, np.ndarray] | None]]
-                ) -> Steps[tuple[float, NoiseModel, np.ndarray, float] | None]:
+def _offset_fit(pts: Points, x: np.ndarray, rob: Robust, offset: float, joint: JointFit,
+                starts_deg: np.ndarray | None = None) -> Steps[tuple[float, NoiseModel, np.ndarray, float] | None]:
     """The joint (place, offset) optimum from x (offset.py) with the noise fitted again there: (log likelihood,
     noise, place, offset); None when the optimum is the current offset, or its fit's core is hollow."""
-    b, x_b, _ = joint_optimum(pts, x, rob)
-    yield
+    b, x_b, _ = yield from joint_optimum(pts, x, rob, starts_deg)
     if not b:
         return None
     total = float(wrap_pi(offset + b))
@@ -138,6 +200,7 @@ class Snapshot:
     best_particle: np.ndarray | None = None  # None before the start
     mode_means: list[np.ndarray] = field(default_factory=list)
     offset: float = 0.0  # the bearing offset learned so far (rad, offset.py)
+    course: bool = False  # the bearings are read as turned by the vehicle's course (course.py)
     start_grid: StartGrid | None = None  # a start search's grid and sums from the search before (start_grid.py)
 
     def __getstate__(self) -> dict:
@@ -183,6 +246,7 @@ class CheckResult:
     modes: list[Mode]
     hint: ClockHint | None = None
     offset: float = 0.0  # the bearing offset the fit found (rad; the snapshot's when no fit was made)
+    course: bool = False  # the fit reads the bearings turned by the vehicle's course (the snapshot's without a fit)
     why: str = ""  # a start search without a usable mode, or a best mode not determined enough to start from: why
     searched: int = 0  # points in the snapshot
     determined: bool = True  # a start search: the best mode is determined enough to start the filter from
@@ -194,26 +258,26 @@ class _Calibrated:
 
     def __init__(self, snap: Snapshot):
         self.snap, self.pts, self.outlier = snap, Points.of(snap.rows), snap.outlier_prob
-        self.batch = PointBatch(snap.groups, snap.cfg)
+        self.before = self.batch = PointBatch(snap.groups, snap.cfg, snap.course)  # as the snapshot reads them
         self.noise: NoiseModel | None = None
         self.at: np.ndarray | None = None
         self.built: list[Built] = []
         self.offset = snap.offset
 
-    def fit(self, candidates: list[np.ndarray], by_density: bool) -> Steps[None]:
+    def fit(self, candidates: list[np.ndarray], by_density: bool, try_course: bool = False) -> Steps[None]:
         snap = self.snap
-        fit = yield from fit_noise(self.batch, snap.noise, snap.rob, candidates, by_density, snap.offset)
+        fit = yield from fit_noise(self.before, snap.noise, snap.rob, candidates, by_density, snap.offset, try_course)
         if fit is not None:
-            self.noise, self.at, self.offset = fit
+            self.noise, self.at, self.offset, self.batch = fit.noise, fit.at, fit.offset, fit.batch
             self._rebuild()
             yield
             if self.offset != snap.offset and (yield from self._stamp_shift_explains_more()):
-                self.offset = snap.offset
+                self.offset, self.batch = snap.offset, self.before
                 self._rebuild()
                 yield
 
     def _rebuild(self):
-        """The points and their outlier share under the fitted noise and offset."""
+        """The points and their outlier share under the fitted noise, offset and reading of the bearings."""
         self.built = self.batch.built(self.noise, self.offset)
         self.pts = points_of([p for p, _ in self.built])
         self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.snap.outlier_prob)
@@ -225,7 +289,7 @@ class _Calibrated:
         snap, at = self.snap, self.at
         assert at is not None  # called after a fit
         rob = snap.robust(self.outlier, True)
-        before = self.batch.points(self.noise, snap.offset)
+        before = self.before.points(self.noise, snap.offset)
         hint = yield from best_shift(before, snap.velocity(), at, rob)
         if hint is None:
             return False
@@ -234,8 +298,8 @@ class _Calibrated:
 
     def result(self, modes: list[Mode], hint: ClockHint | None = None, why: str = "",
                determined: bool = True) -> CheckResult:
-        return CheckResult(self.noise, self.at, self.built, modes, hint, self.offset, why, len(self.snap.rows),
-                           determined, self.snap.start_grid)
+        return CheckResult(self.noise, self.at, self.built, modes, hint, self.offset, self.batch.course, why,
+                           len(self.snap.rows), determined, self.snap.start_grid)
 
 
 def run_check(snap: Snapshot) -> CheckResult:
@@ -250,7 +314,8 @@ def check(snap: Snapshot) -> Steps[CheckResult]:
     if snap.cfg.calibrate_noise and snap.best_particle is not None:
         start = refined(snap.best_particle, cal.pts, snap.rob)
         yield
-        yield from cal.fit([start] + snap.mode_means, False)
+        # the course needs a track's worth of points and turns: a global check tries it, a start search does not
+        yield from cal.fit([start] + snap.mode_means, False, try_course=True)
     pts, rob = cal.pts, snap.robust(cal.outlier, cal.noise is not None)
     modes = yield from modes_in_pieces(pts, rob, False)
     hint = None

@@ -187,13 +187,18 @@ def summed_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) ->
     summed, per latent-noise hypothesis (..., H) under rob.grid, else (...). Sums over two sets of points add."""
     if rob.grid is not None:
         return latent_log_densities(x, pts, rob, widen2)
+    return point_log_densities(x, pts, rob, widen2).sum(axis=-1)
+
+
+def point_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> np.ndarray:
+    """Each point's bearing log density at x (..., K), the noise taken as it is (rob.grid not read)."""
     resid, _, _, r2 = _residuals(x, pts)
     gps_var = pts.gps_var(rob)
     var = pts.sigma**2 + widen2
     if np.any(gps_var):
         var = var + gps_var / np.maximum(r2, 1.0)
     ll, _ = _terms(resid, var, rob.outlier_prob)
-    return ll.sum(axis=-1)
+    return ll
 
 
 def from_sums(sums: np.ndarray, x: np.ndarray, rob: Robust) -> np.ndarray:

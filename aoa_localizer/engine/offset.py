@@ -17,8 +17,11 @@ import numpy as np
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.global_search import Points, Robust, linearised, log_posterior
+from aoa_localizer.engine.slices import Steps
 
 _STARTS_DEG = np.arange(-90.0, 91.0, 15.0)  # offsets the joint search starts from, around the current one
+STARTS_PER_PIECE = _STARTS_DEG.size  # the starts around the current offset are one piece, as an EM fit is
+ALL_OFFSETS_DEG = np.arange(-180.0, 180.0, 15.0)  # the starts where any offset is as likely (an array's mount)
 _ITERATIONS = 30
 # How sure each bearing_reference makes us that there is no offset: the log-likelihood gain (nats) a learned
 # offset must bring. True north from a DF is usually right; a magnetic reference often lacks its declination;
@@ -73,15 +76,20 @@ def shifted(pts: Points, offset: float) -> Points:
     return Points(pts.east, pts.north, wrap_pi(pts.theta - offset), pts.sigma, pts.gps)
 
 
-def joint_optimum(pts: Points, x0: np.ndarray, rob: Robust) -> tuple[float, np.ndarray, float]:
+def joint_optimum(pts: Points, x0: np.ndarray, rob: Robust,
+                  starts_deg: np.ndarray | None = None) -> Steps[tuple[float, np.ndarray, float]]:
     """The best (offset, place, log posterior) of the points with an unknown constant offset: damped Gauss-Newton in
     (east, north, offset) with the mixture's EM weights, from starts every 15 deg (the offset's likelihood has a
-    mode per way of lining the bearings up)."""
+    mode per way of lining the bearings up): within 90 deg of the current one unless `starts_deg` says. In pieces
+    (slices.py) of up to STARTS_PER_PIECE starts."""
     best = (0.0, np.asarray(x0, float), -math.inf)
-    for start in np.radians(_STARTS_DEG):
-        b, x, lp = _gauss_newton(pts, np.asarray(x0, float), float(start), rob)
+    for i, start in enumerate(np.radians(_STARTS_DEG if starts_deg is None else starts_deg).tolist()):
+        if i and i % STARTS_PER_PIECE == 0:
+            yield
+        b, x, lp = _gauss_newton(pts, np.asarray(x0, float), start, rob)
         if np.isfinite(lp) and lp > best[2] + 1e-9:
             best = (b, x, lp)
+    yield
     return best
 
 

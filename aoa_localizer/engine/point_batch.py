@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.course import courses, turned_group
 from aoa_localizer.engine.geodesy import wrap_pi, wrap_pi_float
 from aoa_localizer.engine.global_search import Points
 from aoa_localizer.engine.noise import NoiseModel
@@ -16,6 +17,7 @@ from aoa_localizer.engine.preprocess import (
     SMALL_POINT,
     TIE_RAD,
     Columns,
+    Group,
     columns,
     group_size,
     make_point,
@@ -57,9 +59,12 @@ class PointBatch:
     """The readings of many observation points as flat arrays, with what does not depend on the noise (each
     reading's distance from its point's circular median) worked out once."""
 
-    def __init__(self, groups: Sequence[list[Reading]], cfg: LocalizerConfig):
-        self.groups, self.cfg = groups, cfg
-        cols = [columns(g) for g in groups]
+    def __init__(self, groups: Sequence[list[Reading]], cfg: LocalizerConfig, course: bool = False):
+        """`course`: each bearing turned by the vehicle's course (course.py), for bearings from its forward axis."""
+        self.cfg, self.course = cfg, course
+        if course:
+            groups = _turned([columns(g) for g in groups])
+        self.groups, cols = groups, [columns(g) for g in groups]
         self.sizes = np.array([c.stamp.size for c in cols], int)
         self.of = np.repeat(np.arange(len(cols)), self.sizes)  # each reading's point
         # Made element by element, not concatenated: the noise fit's sums are the same to the last bit as before the
@@ -124,6 +129,16 @@ class PointBatch:
         rows = zip(*(f[name].tolist() for name in _POINT_FIELDS), strict=True)
         masks = np.split(keep, np.cumsum(self.sizes)[:-1]) if self.sizes.size else []
         return [(ObservationPoint(*row), mask) for row, mask in zip(rows, masks, strict=True)]
+
+
+def _turned(cols: list[Columns]) -> list[Group]:
+    """Each group's readings (fields only) with their bearings turned by the vehicle's course, held over slow
+    readings across the groups in turn (course.py)."""
+    if not cols:
+        return []
+    turn = np.split(courses(np.concatenate([c.v_east for c in cols]), np.concatenate([c.v_north for c in cols])),
+                    np.cumsum([c.stamp.size for c in cols])[:-1])
+    return [turned_group(c, t) for c, t in zip(cols, turn, strict=True)]
 
 
 _POINT_FIELDS = ("stamp", "east", "north", "theta", "sigma", "n_readings", "gps_sigma")  # ObservationPoint's order

@@ -185,7 +185,7 @@ class EmitterTrack:
         c = self.calibration
         return Snapshot(self.cfg, [e.readings for e in self.window], rows_of([e.point for e in self.window]),
                         c.noise.copy(), c.outlier_prob, self.robust(), best, [m.mean.copy() for m in self.modes[:1]],
-                        c.offset)
+                        c.offset, c.course)
 
     def collect(self, wait: bool = False) -> bool:
         """Apply the worker's result once it is ready (`wait`: wait for it); True when one was applied. A result for
@@ -218,7 +218,7 @@ class EmitterTrack:
     def apply_fit(self, res: CheckResult, groups: list[list[Reading]]):
         """A search's noise and offset fit, if it made one, adopted by the calibrator."""
         if res.noise is not None and res.at is not None:
-            self.calibration.apply(res.noise, res.at, _by_group(groups, res.built), res.offset)
+            self.calibration.apply(res.noise, res.at, _by_group(groups, res.built), res.offset, res.course)
 
     # -- what the track holds -------------------------------------------------------------------------
     @property

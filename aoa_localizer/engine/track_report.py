@@ -97,7 +97,10 @@ def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) 
     if wild > _SUSPECT_WILD_SHARE:
         warnings.append(f"{100 * wild:.0f} % of the bearings look wild: a bearing offset or reference set wrong "
                         "(bearing_reference, mount_offset_deg, magnetic_declination_deg), or heavy multipath")
-    if c.offset:
+    if c.course:
+        warnings.append("the bearings turn with the vehicle: they look measured from its forward axis, not from north; "
+                        f"learned, and each is turned by the vehicle's course: {c.offset_advice()}")
+    elif c.offset:
         warnings.append(f"the bearings look {c.offset_deg:+.1f} deg off the true bearings (true azimuth = read "
                         f"azimuth {c.offset_deg:+.1f} deg), learned and corrected: {c.offset_advice()}")
     if warnings:
