@@ -13,7 +13,7 @@ import numpy as np
 
 from aoa_localizer.engine.checks import fit_noise
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.course import courses, turned
+from aoa_localizer.engine.course import group_courses, turned
 from aoa_localizer.engine.global_search import residuals
 from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.point_batch import Built, PointBatch, offset_point, sigmas
@@ -98,7 +98,7 @@ class Calibrator:
         offset moves the posterior: the check's re-start test that follows finds the new place)."""
         t = self.track
         self.noise = noise
-        window_courses = self._window_courses() if course else None
+        window_courses = group_courses([columns(e.readings) for e in t.window]) if course else None
         if course and not self.course:
             self.course = True
             self.offset = offset
@@ -143,13 +143,6 @@ class Calibrator:
             if f.ess() < self.cfg.ess_threshold * f.n:
                 f.resample()
                 f.rejuvenate(_CALIBRATION_SWEEPS, t.proposal)
-
-    def _window_courses(self) -> np.ndarray:
-        """The vehicle's course at each of the window's readings, in turn (course.py)."""
-        cols = [columns(e.readings) for e in self.track.window]
-        if not cols:
-            return np.zeros(0)
-        return courses(np.concatenate([c.v_east for c in cols]), np.concatenate([c.v_north for c in cols]))
 
     @property
     def offset_deg(self) -> float:

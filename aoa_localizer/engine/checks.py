@@ -68,9 +68,8 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
     reference's prior log odds; and, with `try_course`, for a north reference on a moving vehicle, the bearings turned
     by its course (course.py) with an offset of their own, adopted when they gain as much again over the best of
-    north and explain more than an emitter that moved. None when
-    the readings are too few for a fit. In pieces (slices.py): each EM fit, each refinement, the search under the
-    configured noise, each offset's optimum."""
+    north and explain more than an emitter that moved. None when the readings are too few for a fit. In pieces
+    (slices.py): each EM fit, each refinement, the search under the configured noise, each offset's optimum."""
     cfg, c = batch.cfg, batch.cols
     if c.theta.size < 2:
         return None

@@ -5,10 +5,12 @@ line up again up to a constant, the array's mount, which the learned offset then
 this reading of the bearings when it explains them far better than north with an offset (checks.fit_noise).
 
 A reading taken while the vehicle was slower than MIN_SPEED_MPS has no course of its own: it holds the course
-before it (the first moving reading's, before any), as `heading_hold_s` does for a configured vehicle reference."""
+before it (the first moving reading's, before any), with no time limit (a configured vehicle reference holds a
+heading for `heading_hold_s`): here the fit over the whole drive decides whether the re-reading stands."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -35,6 +37,13 @@ def courses(v_east: np.ndarray, v_north: np.ndarray, held: float = math.nan) -> 
     last = np.maximum.accumulate(np.where(fast, np.arange(fast.size), -1))
     before = held if not math.isnan(held) else float(own[np.argmax(fast)])
     return np.where(last >= 0, own[np.maximum(last, 0)], before)
+
+
+def group_courses(cols: Sequence[Columns]) -> np.ndarray:
+    """The course at each reading of these groups' readings (fields), in turn (courses)."""
+    if not cols:
+        return np.zeros(0)
+    return courses(np.concatenate([c.v_east for c in cols]), np.concatenate([c.v_north for c in cols]))
 
 
 def turned_group(cols: Columns, turn: np.ndarray) -> Group:

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.course import courses, turned_group
+from aoa_localizer.engine.course import group_courses, turned_group
 from aoa_localizer.engine.geodesy import wrap_pi, wrap_pi_float
 from aoa_localizer.engine.global_search import Points
 from aoa_localizer.engine.noise import NoiseModel
@@ -134,10 +134,7 @@ class PointBatch:
 def _turned(cols: list[Columns]) -> list[Group]:
     """Each group's readings (fields only) with their bearings turned by the vehicle's course, held over slow
     readings across the groups in turn (course.py)."""
-    if not cols:
-        return []
-    turn = np.split(courses(np.concatenate([c.v_east for c in cols]), np.concatenate([c.v_north for c in cols])),
-                    np.cumsum([c.stamp.size for c in cols])[:-1])
+    turn = np.split(group_courses(cols), np.cumsum([c.stamp.size for c in cols])[:-1]) if cols else []
     return [turned_group(c, t) for c, t in zip(cols, turn, strict=True)]
 
 
