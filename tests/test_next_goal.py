@@ -76,17 +76,24 @@ def test_a_goal_drive_keeps_to_its_track_until_given_a_goal_then_steps_towards_i
 
 @pytest.mark.slow
 def test_a_vehicle_following_the_goal_gets_the_ellipse_under_50_m_sooner_with_the_truth_inside():
-    """Closed loop on a straight road 1500 m south of the emitter with a 5 deg receiver: following the goal once
-    there is an estimate, the 95 % ellipse's semi-major axis gets under 50 m after a shorter drive than keeping to
-    the road, and the ellipse then holds the emitter."""
+    """Closed loop on a straight road 1500 m south of the emitter with a 5 deg receiver, five data seeds: following
+    the goal once there is an estimate, the 95 % ellipse's semi-major axis gets under 50 m after a shorter drive than
+    keeping to the road, at the median (a seed's early, poorly determined start can lead one drive astray a while),
+    and the ellipse then holds the emitter (at 95 %: at most one of five outside)."""
     sc = replace(SCENARIOS["homing"], track=((0.0, 0.0), (4000.0, 0.0)), points=81, sigma_rad=math.radians(5.0))
-    driven = {}
-    for follow in (False, True):
-        drive, loc = GoalDrive(sc, 0), Localizer(LocalizerConfig(seed=0))
-        for est in closed_loop(drive, loc, 500.0, follow):
-            if est is not None and ellipse_axes(est.cov)[0] < 50.0:
-                driven[follow] = drive.odometer_m
-                break
-        loc.close()
-    assert inside_ellipse((sc.emitter[0] - est.east, sc.emitter[1] - est.north), est.cov)
-    assert driven[True] < 0.9 * driven.get(False, math.inf)
+    driven: dict[bool, list[float]] = {False: [], True: []}
+    outside = 0
+    for seed in range(5):
+        for follow in (False, True):
+            drive, loc = GoalDrive(sc, seed), Localizer(LocalizerConfig(seed=seed))
+            reached = math.inf  # the road ends before the ellipse is under 50 m
+            for est in closed_loop(drive, loc, 500.0, follow):
+                if est is not None and ellipse_axes(est.cov)[0] < 50.0:
+                    reached = drive.odometer_m
+                    break
+            loc.close()
+            driven[follow].append(reached)
+            if follow:
+                outside += not inside_ellipse((sc.emitter[0] - est.east, sc.emitter[1] - est.north), est.cov)
+    assert max(driven[True]) < math.inf and outside <= 1
+    assert np.median(driven[True]) < 0.9 * np.median(driven[False])

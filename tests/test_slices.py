@@ -1,5 +1,5 @@
-"""Jobs in pieces (slices.py): how many pieces a call makes, a piece's exception, a sliced check's result against the
-whole one, and a reproducible run that no idle call and no clock can change."""
+"""Jobs in pieces (slices.py): how many pieces a call makes by their metered cost, a piece's exception, a sliced
+check's result against the whole one, and a reproducible run that no idle call and no clock can change."""
 import logging
 
 import numpy as np
@@ -13,35 +13,60 @@ from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scenarios import simulate
 from aoa_localizer.engine.slices import SlicedJob, run_whole
 
+PIECE_COST = slices.Cost(0.0, 1.0)  # a piece that charges its size in microseconds
 
-def counted(made: list[int], pieces: int, fail_at: int = -1) -> slices.Steps[str]:
-    """`pieces` pieces, each noted in `made`; the one numbered `fail_at` raises."""
+
+def counted(made: list[int], pieces: int, fail_at: int = -1, cost_us: float = 0.0) -> slices.Steps[str]:
+    """`pieces` pieces, each noted in `made` and charging `cost_us`; the one numbered `fail_at` raises."""
     for i in range(pieces):
         if i == fail_at:
             raise ValueError("piece failed")
         made.append(i)
+        slices.charge(PIECE_COST, int(cost_us))
         yield
     return "result"
 
 
-@pytest.mark.parametrize(("points", "per_call"), [(0, 12), (20, 10), (100, 6), (236, 3), (1200, 1), (5000, 1)])
-def test_a_job_makes_the_pieces_its_points_allow_per_call(points, per_call):
-    """max(1, 12 // (1 + K / 100)) pieces per call, by hand: 12 / 1.2 = 10, 12 / 2 = 6, 12 / 3.36 = 3.57."""
+@pytest.mark.parametrize(("cost_us", "per_call"), [(0.0, 42), (880.0, 5), (1880.0, 3), (2380.0, 2), (6000.0, 1)])
+def test_a_job_makes_pieces_until_their_metered_cost_reaches_the_call_budget(cost_us, per_call):
+    """Pieces of (cost + PIECE_US) each until the call's budget, 5000 us here, is reached, the last one crossing
+    it, by hand: 1000 us a piece is 5 pieces; 2000 is 3 (6000 after the third); 2500 is 2; a piece over the budget
+    is one a call; free pieces cost PIECE_US = 120 us each, 42 of them (5040 us)."""
+    assert slices.PIECE_US == 120.0
     made: list[int] = []
-    job = SlicedJob(counted(made, 25), points)
-    assert job.pieces == per_call
+    job = SlicedJob(counted(made, 100, cost_us=cost_us), 5000.0)
     job.advance()
-    assert len(made) == min(per_call, 25) and not job.done()
+    assert len(made) == per_call and not job.done()
     job.advance()
-    assert len(made) == min(2 * per_call, 25)
-    assert job.result() == "result" and made == list(range(25)) and job.done()
+    assert len(made) == 2 * per_call
+    assert job.result() == "result" and made == list(range(100)) and job.done()
     job.advance()  # nothing left to make
-    assert made == list(range(25))
+    assert made == list(range(100))
+
+
+def test_the_jobs_of_one_call_share_its_budget():
+    """Inside one_call a second job gets what the first left (at least one piece); outside, each its own."""
+    first, second = [], []
+    with slices.one_call():
+        SlicedJob(counted(first, 60, cost_us=880.0), 5000.0).advance()
+        SlicedJob(counted(second, 60, cost_us=880.0), 5000.0).advance()
+    assert (len(first), len(second)) == (5, 1)
+    first.clear()
+    second.clear()
+    SlicedJob(counted(first, 60, cost_us=880.0), 5000.0).advance()
+    SlicedJob(counted(second, 60, cost_us=880.0), 5000.0).advance()
+    assert (len(first), len(second)) == (5, 5)
+
+
+def test_the_meter_charges_a_kernel_by_its_model():
+    before = slices.spent()
+    slices.charge(slices.Cost(10.0, 0.5), 40)
+    assert slices.spent() - before == pytest.approx(30.0, abs=1e-9)
 
 
 def test_a_piece_that_raises_ends_the_job_and_its_result_raises():
     made: list[int] = []
-    job = SlicedJob(counted(made, 10, fail_at=3), 5000)
+    job = SlicedJob(counted(made, 10, fail_at=3, cost_us=6000.0), 5000.0)  # one piece a call
     for _ in range(3):
         job.advance()
     assert not job.done()
@@ -61,13 +86,16 @@ def test_a_check_made_a_piece_at_a_time_finds_what_the_whole_check_finds():
         loc.feed(event)
     snap = track_of(loc).snapshot()
     whole = checks.run_check(snap)
-    job = SlicedJob(checks.check(snap), 10**6)
-    calls = 0
-    while not job.done():
-        job.advance()
-        calls += 1
-    sliced = job.result()
-    assert calls > 20  # many pieces, one per call
+    pieces = 0
+    steps = checks.check(snap)
+    while True:
+        try:
+            next(steps)
+            pieces += 1
+        except StopIteration as stop:
+            sliced = stop.value
+            break
+    assert pieces > 20  # many pieces
     assert [m.mean.tolist() for m in sliced.modes] == [m.mean.tolist() for m in whole.modes]
     assert sliced.noise is not None and whole.noise is not None
     assert sliced.noise.k.tolist() == whole.noise.k.tolist()

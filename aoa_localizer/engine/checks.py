@@ -100,6 +100,7 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
         ll, out = found[0], Fit(found[1], found[2], found[3], batch)
     if try_course and not batch.course and cfg.bearing_reference != "vehicle" and moved(c.v_east, c.v_north):
         turned = PointBatch(batch.groups, cfg, course=True)
+        yield
         on_course = yield from _offset_fit(turned.points(out.noise, 0.0), out.at, rob, 0.0,
                                            _joint(turned, noise, rob, 0.0), ALL_OFFSETS_DEG)
         if on_course is not None and on_course[0] > ll + PRIOR_LOG_ODDS[cfg.bearing_reference]:
@@ -161,7 +162,7 @@ def _joint(batch: PointBatch, noise: NoiseModel, rob: Robust, offset: float) -> 
         """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
         trial, ll, readings = noise.copy(), float("nan"), shifted(at_readings, b - offset)
         for _ in range(2):
-            ll = trial.fit(residuals(x, readings), quality, base, heading_var)
+            ll = yield from trial.fit_in_pieces(residuals(x, readings), quality, base, heading_var)
             yield
             if not np.isfinite(ll):
                 return None

@@ -17,7 +17,7 @@ import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
-from aoa_localizer.engine.slices import PIECE_EVALUATIONS, Steps, run_whole
+from aoa_localizer.engine.slices import PIECE_EVALUATIONS, RESIDUALS, Steps, charge, run_whole
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 # Grid: azimuth cells, log-range cells, and the range span relative to the track's extent.
@@ -103,6 +103,7 @@ def _residuals(x: np.ndarray, pts: Points):
     dy = x[..., None, 1] - pts.north
     c, s = pts.cos, pts.sin
     resid = np.arctan2(dx * s - dy * c, dx * c + dy * s)
+    charge(RESIDUALS, resid.size)
     return resid, dx, dy, np.maximum(dx * dx + dy * dy, 1e-6)
 
 

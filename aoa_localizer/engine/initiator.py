@@ -17,6 +17,7 @@ from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import ModeProposal, importance_sample
+from aoa_localizer.engine.slices import START_BUDGET_US
 from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.track_state import PendingJob
 from aoa_localizer.engine.triangulation import initial_particles
@@ -73,7 +74,7 @@ class Initiator:
         if inline:
             return self.apply_start(job(), snap.groups)
         steps = start_search(snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
-        t.job = PendingJob(t.scheduler.start(job, steps, len(snap.rows)), None, snap.groups)
+        t.job = PendingJob(t.scheduler.start(job, steps, START_BUDGET_US), None, snap.groups)
         return t.collect()  # a sliced search small enough to finish in its first call starts the filter now
 
     def apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:

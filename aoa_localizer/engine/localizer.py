@@ -14,6 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
+from aoa_localizer.engine import slices
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -397,11 +398,15 @@ class Localizer:
 
     # -- estimates --------------------------------------------------------------------------------
     def _use(self, closed: Closed) -> Estimate | None:
-        """The channels' tracks take the closed points in order; returns the newest estimate they made."""
+        """The channels' tracks take the closed points in order, the points of one track within one call's budget
+        for its jobs (slices.py; each track its own, so a channel's run never depends on another's); returns the
+        newest estimate they made."""
         estimate = None
+        calls: dict[int, slices.Call] = {}
         for channel, readings in closed:
             track = channel.track
-            took = track.add(readings)
+            with slices.one_call(calls.setdefault(id(track), slices.Call())):
+                took = track.add(readings)
             if self.intake.observer is not None:
                 self.intake.observer.on_point(readings, track.last_kept)
             if took:

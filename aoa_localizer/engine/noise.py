@@ -17,6 +17,7 @@ import bisect
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
+from aoa_localizer.engine.slices import EM_STEP, Steps, charge, run_whole
 
 BAND_EDGES = np.arange(40.0, 101.0, 10.0)  # quality bands; below 40 joins the first, NaN has its own
 N_BANDS = BAND_EDGES.size - 1
@@ -88,13 +89,19 @@ class NoiseModel:
         residual has besides the receiver's (the heading a relative bearing was turned by), so it is not
         blamed on the receiver. Returns the log likelihood of the readings under the fitted model (NaN, nothing
         changed, with too few readings)."""
+        return run_whole(self.fit_in_pieces(resid, quality, base_sigma, known_var))
+
+    def fit_in_pieces(self, resid: np.ndarray, quality: np.ndarray, base_sigma: np.ndarray,
+                      known_var: np.ndarray | None = None) -> Steps[float]:
+        """fit, a piece per EM iteration (slices.py)."""
         resid, base_sigma = np.asarray(resid, float), np.asarray(base_sigma, float)
         known = np.zeros(resid.size) if known_var is None else np.asarray(known_var, float)
         ok = np.isfinite(resid) & np.isfinite(base_sigma) & (base_sigma > 0) & np.isfinite(known)
         if ok.sum() < _MIN_READINGS:
             return float("nan")
         resid, base_sigma, band = resid[ok], base_sigma[ok], band_of(np.asarray(quality, float)[ok])
-        ll, k2, eps, w, self.hollow = _em(resid, base_sigma, known[ok], band, self._starts(resid / base_sigma))
+        ll, k2, eps, w, self.hollow = yield from _em_in_pieces(resid, base_sigma, known[ok], band,
+                                                               self._starts(resid / base_sigma))
         self.k = np.sqrt(k2)
         self.reading_outlier_prob = eps
         self.readings = w
@@ -126,13 +133,20 @@ class NoiseModel:
 
 
 def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,
-        tol: float = _EM_TOL):
+        tol: float = _EM_TOL) -> tuple[float, np.ndarray, float, np.ndarray, bool]:
+    """_em_in_pieces, whole."""
+    return run_whole(_em_in_pieces(resid, base_sigma, known_var, band, k0, tol))
+
+
+def _em_in_pieces(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,
+                  tol: float = _EM_TOL) -> Steps[tuple[float, np.ndarray, float, np.ndarray, bool]]:
     """EM from each starting scale in k0 (S,), all at once. Returns the best run's (log likelihood, k^2 per band,
     outlier rate, inlier weight per band, whether its core is hollow); a run with a hollow core is the best only
     when every run's is. A residual's variance is k^2 base_sigma^2 + known_var; the M-step takes the known part
     off each squared residual (a moment step: unbiased, and exact EM when it is 0). Runs that reach one another
     (within _EM_MERGE) go on as one, and EM stops once no parameter moves by more than `tol` (0: every iteration,
-    every run): the starts mostly meet within a few iterations, and the rest would repeat the same run."""
+    every run): the starts mostly meet within a few iterations, and the rest would repeat the same run. A piece per
+    iteration (slices.py)."""
     z2_all, z2_known = (resid / base_sigma) ** 2, known_var / base_sigma**2
     z2 = z2_all - z2_known
     onehot = np.zeros((resid.size, N_BANDS + 1))
@@ -152,6 +166,7 @@ def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: 
             break
         if tol > 0.0:
             k2, eps = _distinct_runs(k2, eps)
+        yield
     gamma, dens = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
     ll = np.log(dens).sum(axis=1)
     hollow = _hollow(gamma, z2_all / (k2[:, band] + z2_known))
@@ -179,6 +194,7 @@ def _responsibilities(resid, base_sigma, known_var, k2_per_reading, eps):
     """Inlier weights and mixture densities of the readings (S, n) under each run's scales and outlier rate."""
     var = k2_per_reading * base_sigma**2 + known_var
     g = (1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var)
+    charge(EM_STEP, g.size)
     dens = g + eps / TWO_PI
     return g / dens, dens
 

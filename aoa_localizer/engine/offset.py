@@ -20,7 +20,6 @@ from aoa_localizer.engine.global_search import Points, Robust, linearised, log_p
 from aoa_localizer.engine.slices import Steps
 
 _STARTS_DEG = np.arange(-90.0, 91.0, 15.0)  # offsets the joint search starts from, around the current one
-STARTS_PER_PIECE = _STARTS_DEG.size  # the starts around the current offset are one piece, as an EM fit is
 ALL_OFFSETS_DEG = np.arange(-180.0, 180.0, 15.0)  # the starts where any offset is as likely (an array's mount)
 _ITERATIONS = 30
 # How sure each bearing_reference makes us that there is no offset: the log-likelihood gain (nats) a learned
@@ -80,11 +79,11 @@ def joint_optimum(pts: Points, x0: np.ndarray, rob: Robust,
                   starts_deg: np.ndarray | None = None) -> Steps[tuple[float, np.ndarray, float]]:
     """The best (offset, place, log posterior) of the points with an unknown constant offset: damped Gauss-Newton in
     (east, north, offset) with the mixture's EM weights, from starts every 15 deg (the offset's likelihood has a
-    mode per way of lining the bearings up): within 90 deg of the current one unless `starts_deg` says. In pieces
-    (slices.py) of up to STARTS_PER_PIECE starts."""
+    mode per way of lining the bearings up): within 90 deg of the current one unless `starts_deg` says. A piece per
+    start (slices.py)."""
     best = (0.0, np.asarray(x0, float), -math.inf)
     for i, start in enumerate(np.radians(_STARTS_DEG if starts_deg is None else starts_deg).tolist()):
-        if i and i % STARTS_PER_PIECE == 0:
+        if i:
             yield
         b, x, lp = _gauss_newton(pts, np.asarray(x0, float), start, rob)
         if np.isfinite(lp) and lp > best[2] + 1e-9:

@@ -22,6 +22,7 @@ from aoa_localizer.engine.preprocess import (
     group_size,
     make_point,
 )
+from aoa_localizer.engine.slices import BATCH_MADE, POINTS_MADE, charge
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readings it kept
@@ -72,6 +73,7 @@ class PointBatch:
         self.cols = Columns(*(np.array([v for c in cols for v in getattr(c, name).tolist()], float)
                               for name in Columns._fields))
         self.off_median = self._off_median(cols)
+        charge(BATCH_MADE, (1 + course) * (self.of.size + 4 * self.sizes.size))  # turning them is a pass of its own
 
     def _off_median(self, cols: list[Columns]) -> np.ndarray:
         """Each reading's angular distance from its point's circular median; 0 where the gate does not apply
@@ -94,6 +96,7 @@ class PointBatch:
         """The points' fields under `noise` (None: the configured sigmas) with `offset` (rad) taken off, and the
         mask of the readings kept."""
         cfg, c, of, k = self.cfg, self.cols, self.of, self.sizes.size
+        charge(POINTS_MADE, c.theta.size)
         own = c.sigma
         sigma = own if noise is None else own * noise.scale(c.quality)
         # the gate is never stricter than the configured sigma (make_point_arrays says why)

@@ -17,6 +17,7 @@ import numpy as np
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.preprocess import reading_sigma
+from aoa_localizer.engine.slices import DENSITIES, charge
 
 SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers
 _N_SCALES = 8  # a factor 1.9 apart: the marginal over the sigma is smooth, and each hypothesis costs a pass
@@ -119,6 +120,7 @@ def _gauss(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarr
     resid2 = np.square(resid)
     nd = len(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
     v = np.square(grid.distinct[0]).reshape((-1,) + (1,) * nd) * var + extra_var
+    charge(DENSITIES, v.size)
     return np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v), v
 
 

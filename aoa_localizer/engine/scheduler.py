@@ -64,13 +64,14 @@ class Scheduler:
         """The worker's failed jobs in a row (0 inline)."""
         return self.worker.failures if self.worker is not None else 0
 
-    def start(self, whole: Callable[[], CheckResult], steps: Steps[CheckResult], points: int) -> Future | SlicedJob:
-        """A job over `points` points: `whole` handed to the worker (its future); inline, or when the worker cannot
-        take it, its `steps` made a few pieces per point (slices.py), the first call's pieces now."""
+    def start(self, whole: Callable[[], CheckResult], steps: Steps[CheckResult], budget_us: float
+              ) -> Future | SlicedJob:
+        """A job: `whole` handed to the worker (its future); inline, or when the worker cannot take it, its `steps`
+        made a few pieces per point, up to `budget_us` a call (slices.py), the first call's pieces now."""
         future = None if self.worker is None else self.worker.submit(whole)
         if future is not None:
             return future
-        job = SlicedJob(steps, points)
+        job = SlicedJob(steps, budget_us)
         job.advance()
         return job
 

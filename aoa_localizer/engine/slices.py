@@ -1,22 +1,74 @@
 """Work cut into pieces: a generator that yields after each piece and returns its result, run whole (in the check
-worker, at the end of data) or a fixed number of pieces per point (`scheduling: reproducible`), so no single call
-carries a whole global check and a seed still repeats a run: how far a job has got depends on the points alone,
-never on the clock."""
+worker, at the end of data) or a few pieces per point (`scheduling: reproducible`), so no single call carries a
+whole global check and a seed still repeats a run. A call makes pieces until their metered cost reaches the job's
+budget: the kernels that do a job's work charge what they cost by a model of their size (`charge`), so how
+far a job has got depends on the points alone, never on the clock."""
 from __future__ import annotations
 
-from collections.abc import Generator
+import threading
+from collections.abc import Generator, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 T = TypeVar("T")
 Steps = Generator[None, None, T]  # yields after each piece of work, returns the result
 
-# A piece (an annealing level of a refinement, an EM fit, a grid's score, one stamp shift's fit) costs about as
-# much as a pass over PIECE_POINTS points plus one over its K points, so a job makes
-# max(1, PIECES_PER_CALL // (1 + K / PIECE_POINTS)) pieces per call: the same share of work at any size, never the
-# whole job in one call.
-PIECE_POINTS = 100
-PIECES_PER_CALL = 12
+
+@dataclass(frozen=True)
+class Cost:
+    """A kernel's cost model: microseconds per call and per element it makes (least squares over the public
+    scenarios' pieces on the development machine; only their ratios matter)."""
+
+    per_call: float
+    per_element: float
+
+
+RESIDUALS = Cost(58.0, 0.033)  # global_search: residuals of places against points, and what a step makes of them
+DENSITIES = Cost(35.0, 0.014)  # receiver: the latent noise's densities per hypothesis
+EM_STEP = Cost(145.0, 0.013)  # noise: an EM iteration's responsibilities over runs x readings
+POINTS_MADE = Cost(0.0, 0.38)  # point_batch: every point remade from its readings
+BATCH_MADE = Cost(0.0, 0.8)  # point_batch: a batch's readings gathered (elements: readings + 4 per point), per pass
+PIECE_US = 120.0  # what a piece costs besides the metered kernels
+# A call's pieces: the piece that reaches its budget is the call's last. A global check shares its call with the
+# filter's step and the sweeps it owes; a start search comes before there is a filter, so it may take more.
+CHECK_BUDGET_US = 5000.0
+START_BUDGET_US = 9000.0
 PIECE_EVALUATIONS = 50_000  # bearing densities a grid's score makes per piece (a millisecond or two)
+
+_meter = threading.local()  # a thread's own, so Localizers in other threads never move a job's pieces
+
+
+def charge(cost: Cost, elements: int) -> None:
+    """Count what a kernel call over `elements` elements cost."""
+    _meter.spent = spent() + cost.per_call + cost.per_element * elements
+
+
+def spent() -> float:
+    """The metered cost so far in this thread (microseconds, by the models)."""
+    return getattr(_meter, "spent", 0.0)
+
+
+class Call:
+    """What the pieces made in one call have cost so far."""
+
+    def __init__(self) -> None:
+        self.start, self.pieces = spent(), 0
+
+    def over(self, budget_us: float) -> bool:
+        return spent() - self.start + PIECE_US * self.pieces >= budget_us
+
+
+@contextmanager
+def one_call(call: Call | None = None) -> Iterator[None]:
+    """The jobs advanced inside share one budget, `call`'s if given (a point that finishes one job and starts the
+    next; a track's points closed by one input); outside, each advance has its own."""
+    outer = getattr(_meter, "call", None)
+    _meter.call = outer or call or Call()
+    try:
+        yield
+    finally:
+        _meter.call = outer
 
 
 def run_whole(steps: Steps[T]) -> T:
@@ -32,20 +84,21 @@ class SlicedJob(Generic[T]):
     """A job run a few pieces at a time by `advance` (what a Future's `done` and `result` are to the track: `result`
     makes the pieces left). An exception a piece raises is kept and raised by `result`, as a Future's is."""
 
-    def __init__(self, steps: Steps[T], points: int):
-        """`points`: how many points the job works over (what a piece costs)."""
-        self._steps = steps
-        self.pieces = max(1, int(PIECES_PER_CALL / (1.0 + points / PIECE_POINTS)))
+    def __init__(self, steps: Steps[T], budget_us: float):
+        """`budget_us`: the metered cost a call's pieces may reach."""
+        self._steps, self.budget_us = steps, budget_us
         self._done = False
         self._value: T | None = None
         self._error: BaseException | None = None
 
     def advance(self) -> None:
-        """One call's pieces (none once done)."""
-        for _ in range(self.pieces):
-            if self._done:
-                return
+        """One call's pieces: at least one, until the call's cost reaches the budget (none once done)."""
+        call = getattr(_meter, "call", None) or Call()
+        made = 0
+        while not self._done and not (made and call.over(self.budget_us)):
             self._next()
+            made += 1
+            call.pieces += 1
 
     def _next(self) -> None:
         try:

@@ -18,6 +18,7 @@ from aoa_localizer.engine.global_search import Robust, find_modes, inlier_share,
 from aoa_localizer.engine.initiator import MIN_INLIERS, START_SWEEPS
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal, importance_sample
+from aoa_localizer.engine.slices import CHECK_BUDGET_US
 from aoa_localizer.engine.track_state import PendingJob
 from aoa_localizer.engine.types import Reading
 
@@ -97,7 +98,7 @@ class Supervisor:
         if inline:
             self.apply_check(run_check(snap), snap.groups)
             return
-        t.job = PendingJob(t.scheduler.start(partial(run_check, snap), check(snap), len(snap.rows)), t.running,
+        t.job = PendingJob(t.scheduler.start(partial(run_check, snap), check(snap), CHECK_BUDGET_US), t.running,
                            snap.groups)
         t.collect()
 
