@@ -15,6 +15,7 @@ from aoa_localizer.engine.noise import NoiseModel
 from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.safety import HealthMonitor, ModeProposal
 from aoa_localizer.engine.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
+from aoa_localizer.engine.slices import run_whole
 from aoa_localizer.engine.track_report import merge_overlapping
 from aoa_localizer.filters.moves import independence_from
 
@@ -289,9 +290,9 @@ def test_em_that_merges_its_runs_and_stops_when_converged_finds_what_every_run_t
     responsibilities = noise_module._responsibilities
     monkeypatch.setattr(noise_module, "_responsibilities",
                         lambda *a: work.append(a[3].shape[0]) or responsibilities(*a))
-    fast = noise_module._em(resid, base, np.zeros(q.size), band, starts)
+    fast = run_whole(noise_module._em_in_pieces(resid, base, np.zeros(q.size), band, starts))
     fast_work, work[:] = sum(work), []
-    plain = noise_module._em(resid, base, np.zeros(q.size), band, starts, tol=0.0)
+    plain = run_whole(noise_module._em_in_pieces(resid, base, np.zeros(q.size), band, starts, tol=0.0))
     assert all(n == starts.size for n in work)  # every run, to the end (or to a fixed point to the last bit)
     assert fast_work < sum(work) / 2
     assert fast[0] == pytest.approx(plain[0], rel=1e-6)

@@ -132,12 +132,6 @@ class NoiseModel:
         return {"sigma_deg": sig, "reading_outlier_prob": round(self.reading_outlier_prob, 4), "fits": self.fits}
 
 
-def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,
-        tol: float = _EM_TOL) -> tuple[float, np.ndarray, float, np.ndarray, bool]:
-    """_em_in_pieces, whole."""
-    return run_whole(_em_in_pieces(resid, base_sigma, known_var, band, k0, tol))
-
-
 def _em_in_pieces(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,
                   tol: float = _EM_TOL) -> Steps[tuple[float, np.ndarray, float, np.ndarray, bool]]:
     """EM from each starting scale in k0 (S,), all at once. Returns the best run's (log likelihood, k^2 per band,

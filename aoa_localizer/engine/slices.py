@@ -56,6 +56,7 @@ class Call:
         self.start, self.pieces = spent(), 0
 
     def over(self, budget_us: float) -> bool:
+        """Whether the call's pieces have reached `budget_us`."""
         return spent() - self.start + PIECE_US * self.pieces >= budget_us
 
 
