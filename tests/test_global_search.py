@@ -83,7 +83,7 @@ def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_doe
     summed again from all of them, and on a grid laid for the same points the modes are find_modes'."""
     pts = _points(np.random.default_rng(5))
     rob = Robust(0.05, 3.0, grid=NoiseGrid.weak(2.0) if latent else None)
-    grid = StartGrid.around(pts.take(slice(0, 10)))
+    grid = StartGrid(*global_search.polar_grid(pts.take(slice(0, 10))))  # laid as find_modes lays one
     scored = counting(monkeypatch)
     for k in (10, 11, 20, 30):
         held = pts.take(slice(0, k))
@@ -99,7 +99,7 @@ def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_doe
     score_of(grid, pts, replace(rob, gps_sigma_m=10.0))
     assert scored[-2:] == [30, 30]
     assert grid.covers(pts.take(slice(0, 13))) and not grid.covers(pts)  # laid for 10 points: twice their reach
-    laid = StartGrid.around(pts)
+    laid = StartGrid(*global_search.polar_grid(pts))
     assert [m.mean.tolist() for m in run_whole(laid.modes(pts, rob))] == \
         [m.mean.tolist() for m in find_modes(pts, rob, by_density=True)]
 

@@ -136,7 +136,7 @@ class Calibrator:
         t.events["recalibrated"] += 1
         self.grid = None  # the readings calibrated the noise: from now on it is taken as fitted
         if f is not None:
-            t.model.history.data = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
+            t.model.history.data = pts.rows()
             t.model.lik.outlier_prob = self.lik_outlier_prob
             t.model.grid = None
             f.reweight(f.log_target(f.x) - old)  # old is set whenever f is

@@ -56,6 +56,10 @@ class Points:
         rows = np.asarray(rows, float).reshape(-1, 5)
         return cls(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4])
 
+    def rows(self) -> np.ndarray:
+        """The (K, 5) array `of` reads."""
+        return np.column_stack([self.east, self.north, self.theta, self.sigma, self.gps])
+
     def __len__(self) -> int:
         return self.east.size
 

@@ -44,11 +44,6 @@ class StartGrid:
     key: tuple = ()
     sums: np.ndarray | float = 0.0
 
-    @classmethod
-    def around(cls, pts: Points) -> StartGrid:
-        """A grid laid for `pts`, as find_modes lays one (nothing summed yet)."""
-        return cls(*polar_grid(pts))
-
     def covers(self, pts: Points) -> bool:
         """Whether the grid is laid and the points stay close enough to its centre for its cells (else lay a new
         one)."""
@@ -68,7 +63,7 @@ class StartGrid:
         """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size; in pieces
         (grid_sums')."""
         coarse = coarse_robust(rob)
-        rows = np.column_stack([pts.east, pts.north, pts.theta, pts.sigma, pts.gps])
+        rows = pts.rows()
         key = _key(coarse)
         sums: np.ndarray | float = 0.0
         done = 0

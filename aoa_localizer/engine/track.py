@@ -22,7 +22,6 @@ from typing import cast
 
 import numpy as np
 
-from aoa_localizer.engine import slices
 from aoa_localizer.engine.calibrator import Calibrator
 from aoa_localizer.engine.checks import CheckResult, Snapshot
 from aoa_localizer.engine.config import LocalizerConfig
@@ -89,11 +88,8 @@ class EmitterTrack:
 
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:
-        """One closed group of readings; True when the filter took it (or started) and has a new estimate."""
-        with slices.one_call():
-            return self._add(readings)
-
-    def _add(self, readings: list[Reading]) -> bool:
+        """One closed group of readings; True when the filter took it (or started) and has a new estimate. Its
+        jobs' pieces are made within the call's budget (the Localizer opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
         if self.job is not None:
