@@ -120,6 +120,53 @@ def test_mcmc_moves_keep_the_target_distribution():
     assert np.cov(f.x.T) == pytest.approx(cov, rel=0.12, abs=10)
 
 
+class ScaleMixture:
+    """A static posterior that is a marginal over two noise hypotheses: x | h ~ N(MEAN, s_h^2 COV), h = 0 or 1
+    with equal prior, so the marginal's covariance is the mean of s_h^2 times COV and its tails are s_1's."""
+
+    dim = 2
+    scales = np.array([0.5, 2.0])
+    mean, cov = np.array([100.0, -50.0]), np.array([[400.0, 150.0], [150.0, 100.0]])
+    history: list = []
+
+    def set_prior(self, mean, cov):
+        pass
+
+    def hypotheses_log_joint(self, x):
+        d = x - self.mean
+        q = np.einsum("ni,ij,nj->n", d, np.linalg.inv(self.cov), d)
+        return -0.5 * q[:, None] / self.scales**2 - 2.0 * np.log(self.scales)
+
+    def log_posterior_given(self, x, h):
+        return self.hypotheses_log_joint(x)[np.arange(len(x)), h]
+
+    def log_posterior(self, x):
+        return np.logaddexp.reduce(self.hypotheses_log_joint(x), axis=1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algorithm", ["afsa", "espf", "gfapf", "agapf", "sir"])
+def test_mcmc_moves_on_place_and_noise_together_keep_the_marginal(algorithm):
+    """A latent noise: the sweeps draw each particle's hypothesis, then move it given that one; a cloud of the
+    marginal stays one (covariance, and the share in the heavy tail), where moving every particle under one
+    hypothesis, or losing whose hypothesis is whose, would not."""
+    model = ScaleMixture()
+    cfg = LocalizerConfig(seed=5, num_particles=4000, algorithm=algorithm)
+    f = make_filter(cfg, np.random.default_rng(5), model)
+    rng = np.random.default_rng(6)
+    h = rng.integers(0, 2, 4000)
+    f.initialise(model.mean + rng.multivariate_normal(np.zeros(2), model.cov, 4000) * model.scales[h][:, None])
+    f.spread = np.mean(model.scales**2) * model.cov
+    for _ in range(5):
+        f.move(f.sweeps)
+    assert 0.1 < f.acceptance < 0.95
+    assert f.x.mean(axis=0) == pytest.approx(model.mean, abs=2.5)
+    assert np.cov(f.x.T) == pytest.approx(np.mean(model.scales**2) * model.cov, rel=0.12, abs=15)
+    d = f.x - model.mean
+    far = np.einsum("ni,ij,nj->n", d, np.linalg.inv(model.cov), d) > 9.0  # beyond 3 sigma: only h = 1 gets there
+    assert np.mean(far) == pytest.approx(0.5 * math.exp(-9.0 / 8.0), abs=0.025)
+
+
 @pytest.mark.slow
 def test_mcmc_moves_pull_a_misplaced_school_towards_the_posterior():
     f = _filter(n=500)

@@ -12,7 +12,7 @@ PREC = np.linalg.inv(COV)
 N, SWEEPS = 4000, 25
 
 
-def log_target(x):
+def log_target(x, of=None):
     d = x - MEAN
     return -0.5 * np.einsum("ni,ij,nj->n", d, PREC, d)
 
@@ -110,3 +110,56 @@ def test_one_acceptance_rule_for_every_move():
     target, prop_target = np.array([-np.inf, 0.0]), np.array([0.0, -np.inf])
     kept, kept_target, n = moves.accept(x, target, prop, prop_target, prop_target - target, rng)
     assert kept.tolist() == [[1.0, 1.0], [0.0, 0.0]] and kept_target.tolist() == [0.0, 0.0] and n == 1
+
+
+SCALES = np.array([0.5, 1.5])  # each particle's own target: N(MEAN, s^2 COV) with s by its label
+
+
+def labelled_target(labels):
+    def target(x, of=None):
+        s = SCALES[labels if of is None else labels[of]]
+        return log_target(x) / s**2
+    return target
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(MOVES))
+def test_each_particle_keeps_its_own_target_when_the_targets_differ(name):
+    """A target per particle (a noise hypothesis drawn for each before a sweep): every move asks for the target
+    of the particle whose move each row is, so each labelled half of the cloud keeps its own law; a move that
+    mixed up whose row is whose would pull both halves to something in between."""
+    rng = np.random.default_rng(3)
+    labels = np.arange(N) % 2
+    x = MEAN + (rng.multivariate_normal(np.zeros(2), COV, N) * SCALES[labels][:, None])
+    target = labelled_target(labels)
+    t = target(x)
+    for _ in range(SWEEPS):
+        x, t, _ = LABELLED[name](x, t, rng, target)
+    assert np.allclose(t, target(x))
+    for label, s in enumerate(SCALES):
+        part = x[labels == label]
+        assert np.allclose(part.mean(axis=0), MEAN, atol=0.2 * s), (label, part.mean(axis=0))
+        assert np.allclose(np.cov(part.T), s**2 * COV, rtol=0.15, atol=0.05), (label, np.cov(part.T))
+
+
+LABELLED = {
+    "de_mc": lambda x, t, rng, lt: moves.de_mc(x, t, lt, rng, gamma=1.19, cr=0.9, jitter=0.01 * np.eye(2)),
+    "sbx_pairs": lambda x, t, rng, lt: moves.pair_scale(x, t, lt, rng, lambda m: sbx_scale(rng, m, 2.0)),
+    "arithmetic_pairs": lambda x, t, rng, lt: moves.pair_scale(x, t, lt, rng, arithmetic_scale(rng)),
+    "swarm_drift": lambda x, t, rng, lt: moves.drift(x, t, lt, rng, swarm_mean(0.5, 1.5), CHOL),
+    "multiple_try": lambda x, t, rng, lt: moves.multiple_try(x, t, lt, rng, 5, CHOL),
+}
+
+
+def test_a_categorical_draw_per_row_follows_its_weights():
+    """The Gibbs draw of a noise hypothesis: each row's index in proportion to exp(row); a row with no finite
+    weight draws uniformly, and an impossible index is never drawn."""
+    rng = np.random.default_rng(8)
+    with np.errstate(divide="ignore"):
+        logw = np.log(np.array([[0.2, 0.5, 0.3], [0.0, 1.0, 0.0]])) + np.array([[-800.0], [5.0]])
+    drawn = moves.categorical(np.repeat(logw, 20000, axis=0), rng)
+    first = np.bincount(drawn[:20000], minlength=3) / 20000
+    assert np.allclose(first, [0.2, 0.5, 0.3], atol=0.015), first
+    assert set(drawn[20000:].tolist()) == {1}
+    none = moves.categorical(np.full((9000, 3), -np.inf), rng)
+    assert np.allclose(np.bincount(none, minlength=3) / 9000, 1 / 3, atol=0.02)

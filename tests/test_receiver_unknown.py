@@ -277,3 +277,28 @@ def test_a_points_weight_under_the_latent_noise_from_running_sums_matches_the_fu
         reused = k in (1, 2, 3, 4, 5, 6, 8)
         assert seen == ([1] if reused else [len(h) - 1, 1]), (k, seen)
     assert np.ptp(w) > 1.0  # the weights tell the particles apart: the comparison is not between constants
+
+
+def test_the_joint_with_the_noise_hypothesis_given_one_is_its_column_and_sums_to_the_marginal():
+    """Moves on place and noise together read the joint per hypothesis and given one: the given value is the
+    joint's column for each row (the same operations, so to the last bits), and the log-sum-exp over hypotheses
+    is the marginal the filter publishes, with antenna noise, a Gaussian prior and the reach prior on."""
+    from aoa_localizer.engine.emitter_model import EmitterModel
+    from aoa_localizer.engine.types import ObservationPoint
+
+    model = EmitterModel(LocalizerConfig(gps_sigma_m=3.0))
+    model.grid = NoiseGrid.weak(2.0)
+    model.reach = (300.0, 500.0, 2000.0)
+    model.set_prior([350.0, 850.0], np.diag([1e4, 2e4]))
+    rng = np.random.default_rng(21)
+    for k in range(9):
+        theta = math.atan2(900.0 - 60.0 * k, 400.0 - 3.0 * k * k) + rng.normal(0.0, 0.04)
+        model.observe(ObservationPoint(float(k), 60.0 * k, 3.0 * k * k, theta, 0.03, 3, gps_sigma=1.0 + k % 2))
+    x = rng.normal([400.0, 900.0], 200.0, (40, 2))
+    joint = model.hypotheses_log_joint(x)
+    assert joint.shape == (40, model.grid.scale.size)
+    h = rng.integers(0, model.grid.scale.size, 40)
+    np.testing.assert_allclose(model.log_posterior_given(x, h), joint[np.arange(40), h], rtol=1e-13, atol=1e-9)
+    np.testing.assert_allclose(np.logaddexp.reduce(joint, axis=1), model.log_posterior(x), rtol=1e-12)
+    model.grid = None
+    assert model.hypotheses_log_joint(x) is None

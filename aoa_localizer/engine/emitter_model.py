@@ -7,7 +7,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.global_search import Points, Robust, latent_log_densities, log_posterior, reach_log_prior
+from aoa_localizer.engine.global_search import (
+    Points,
+    Robust,
+    hypotheses_log_joint,
+    latent_log_densities,
+    log_posterior,
+    log_posterior_given,
+    reach_log_prior,
+)
 from aoa_localizer.engine.likelihood import BearingLikelihood
 from aoa_localizer.engine.receiver import NoiseGrid, log_sum
 from aoa_localizer.engine.types import ObservationPoint
@@ -113,8 +121,21 @@ class EmitterModel(StateSpaceModel):
 
     def _latent_posterior(self, x, h: np.ndarray) -> np.ndarray:
         """The log posterior over the points h with the noise marginalised over the grid: the global search's."""
-        rob = Robust(0.0, math.sqrt(self.lik.gps_var), self.prior_mean, self.prior_prec, self.grid, self.reach)
-        return log_posterior(np.asarray(x, float), Points.of(h), rob)
+        return log_posterior(np.asarray(x, float), Points.of(h), self._latent())
+
+    def _latent(self) -> Robust:
+        return Robust(0.0, math.sqrt(self.lik.gps_var), self.prior_mean, self.prior_prec, self.grid, self.reach)
+
+    def hypotheses_log_joint(self, x: np.ndarray) -> np.ndarray | None:
+        """log p(x, h | kept points) per noise hypothesis h, (N, H); None while the noise is taken as known."""
+        if self.grid is None:
+            return None
+        return hypotheses_log_joint(np.asarray(x, float), Points.of(self.history.data), self._latent())
+
+    def log_posterior_given(self, x: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """log p(x, h | kept points) at each row of x (M, 2) with its own hypothesis h (M,): hypotheses_log_joint's
+        column, made at the cost of one hypothesis."""
+        return log_posterior_given(np.asarray(x, float), Points.of(self.history.data), self._latent(), h)
 
     def usable(self, p: ObservationPoint) -> bool:
         return math.isfinite(p.theta) and p.sigma > 0 and math.isfinite(p.east) and math.isfinite(p.north)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
-from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
+from aoa_localizer.engine.receiver import NoiseGrid, em_weights, given_log_densities, log_densities, log_sum
 from aoa_localizer.engine.slices import PIECE_EVALUATIONS, RESIDUALS, Steps, charge, run_whole
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
@@ -219,6 +219,23 @@ def latent_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) ->
     gps_var = pts.gps_var(rob)
     extra = widen2 + gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else widen2
     return log_densities(resid, pts.sigma**2, extra, rob.grid)
+
+
+def hypotheses_log_joint(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
+    """Under the latent noise: log p(x, h | points) per hypothesis h, (M, H) for x (M, 2), up to log_posterior's
+    constant (its log-sum-exp over h is log_posterior): what a Gibbs draw of each particle's hypothesis needs."""
+    assert rob.grid is not None
+    return latent_log_densities(x, pts, rob) + rob.grid.log_prior + np.asarray(_prior(x, rob))[..., None]
+
+
+def log_posterior_given(x: np.ndarray, pts: Points, rob: Robust, h: np.ndarray) -> np.ndarray:
+    """hypotheses_log_joint's column h[i] at each row x[i] (M, 2): the posterior of x given its noise hypothesis,
+    for moves on the posterior of place and noise together."""
+    assert rob.grid is not None
+    resid, _, _, r2 = _residuals(x, pts)
+    gps_var = pts.gps_var(rob)
+    extra = gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else 0.0
+    return given_log_densities(resid, pts.sigma**2, extra, rob.grid, h) + rob.grid.log_prior[h] + _prior(x, rob)
 
 
 def extent_from(centre: np.ndarray, pts: Points) -> float:

@@ -87,6 +87,18 @@ def log_densities(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
     return np.moveaxis(np.log(mix, out=mix).sum(axis=-1), 0, -1)
 
 
+def given_log_densities(resid, var, extra_var, grid: NoiseGrid, h: np.ndarray) -> np.ndarray:
+    """log_densities' column h[i] for each row i of resid (M, K): the points' log densities given one hypothesis per
+    row, each made by the same operations (so the same numbers), at the cost of one hypothesis instead of all."""
+    resid2 = np.square(resid)
+    v = np.square(grid.scale[h])[:, None] * var + extra_var
+    charge(DENSITIES, v.size)
+    mix = np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v)
+    mix *= (1.0 - grid.outlier[h])[:, None]
+    mix += (grid.outlier[h] / TWO_PI)[:, None]
+    return np.log(mix, out=mix).sum(axis=-1)
+
+
 def log_sum(densities: np.ndarray, grid: NoiseGrid) -> np.ndarray:
     """The marginal log sum_h prior_h prod_k p(resid_k | h) from log_densities' per-hypothesis sums (..., H)."""
     return _joint(densities, grid)[0]

@@ -4,7 +4,7 @@ estimate and covariance, over any StateSpaceModel (the emitter problem, or a pap
 One `update(z)` is one measurement: propose (by default: predict with the model's transition) -> weight
 -> `after_weight` hook -> resample when `should_resample()` -> `after_resample` hook. A filter module overrides
 these steps (propose, after_weight, should_resample, resample, after_resample, predict) and, when it keeps state
-that depends on the whole posterior (AFSA's cached targets), initialise, invalidate and targets_known.
+that depends on the whole posterior, initialise and invalidate.
 A filter names the model capabilities it needs in `needs` (models/base.py); `make_filter` checks them.
 The robustness layer's moves (log_target, rejuvenate, reweight, replace_cloud) need a StaticPosterior model.
 """
@@ -177,8 +177,9 @@ class ParticleFilter:
         return cast(StaticPosterior, self.model)
 
     # -- moves on the posterior over all kept points (models with a `log_posterior`: the emitter) -----------
-    def log_target(self, x: np.ndarray) -> np.ndarray:
-        """The posterior the safety moves keep invariant: the model's, over its kept points."""
+    def log_target(self, x: np.ndarray, of: np.ndarray | None = None) -> np.ndarray:
+        """The posterior the safety moves keep invariant: the model's, over its kept points (the same for every
+        particle, so `of`, whose moves the rows are, is not read)."""
         return self.posterior_model.log_posterior(x)
 
     def rejuvenate(self, sweeps: int, proposal=None):
@@ -194,7 +195,7 @@ class ParticleFilter:
         if proposal is not None:
             self.x, target, a = moves.independence_from(self.x, target, self.log_target, self.rng, proposal)
             accepted, tried = accepted + a, tried + self.n
-        self.targets_known(target)
+        self.invalidate()
         return accepted / max(tried, 1)
 
     def reweight(self, log_ratio: np.ndarray):
@@ -213,10 +214,6 @@ class ParticleFilter:
 
     def invalidate(self):
         """The particles or the target changed outside the filter's own step: drop cached values."""
-
-    def targets_known(self, target: np.ndarray):
-        """The particles moved outside the filter's step, and `target` is their log posterior now."""
-        self.invalidate()
 
     # -- hooks ----------------------------------------------------------------------------------
     def after_weight(self, z):

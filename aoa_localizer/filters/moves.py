@@ -5,6 +5,10 @@ Population moves (a DE difference, a swarm's centre, a central dust) read other 
 of the cloud at a time while the other half stays fixed: for the moving half the fixed half is a constant, so
 each kernel is an ordinary MH kernel on a particle and the sweep keeps the joint law of independent draws of
 pi (the red-black scheme of ensemble samplers). Every function returns (x, target, accepted count).
+
+A target may differ per particle (a particle's own noise hypothesis, drawn before the sweep): every move tells
+`log_target` whose move each row it asks about is (`of`: particle indices; None: the particles in order), and
+each particle's kernel keeps its own target.
 """
 from __future__ import annotations
 
@@ -13,14 +17,31 @@ from typing import Protocol
 
 import numpy as np
 
-LogTarget = Callable[[np.ndarray], np.ndarray]
 RW_SCALE = 2.38 / 2**0.5  # the optimal random-walk scale in 2-D (Roberts, Gelman, Gilks 1997), in cloud sigmas
 SPREAD_FLOOR_M2 = 1e-2  # added to a cloud's covariance before its Cholesky factor: moves stay alive in a collapse
+
+
+class LogTarget(Protocol):
+    """The log target at rows y (M, d), row i being a move of particle of[i] (None: the particles in order)."""
+
+    def __call__(self, y: np.ndarray, of: np.ndarray | None = None, /) -> np.ndarray: ...
 
 
 def cloud_chol(cov: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """Cholesky factor of scale^2 times a cloud's covariance, floored: the scale of every move built on the cloud."""
     return scale * np.linalg.cholesky(cov + SPREAD_FLOOR_M2 * np.eye(len(cov)))
+
+
+def categorical(log_weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One index per row of log_weights (M, H), drawn in proportion to exp(row); a row with no finite weight draws
+    uniformly (its particle is impossible whatever it draws)."""
+    top = np.max(log_weights, axis=1, keepdims=True)
+    finite = np.isfinite(top)
+    w = np.exp(log_weights - np.where(finite, top, 0.0))
+    w[~finite[:, 0]] = 1.0
+    cum = np.cumsum(w, axis=1)
+    u = rng.random(log_weights.shape[0]) * cum[:, -1]
+    return np.minimum((cum <= u[:, None]).sum(axis=1), log_weights.shape[1] - 1)
 
 
 def halves(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -110,7 +131,7 @@ def de_mc(x, target, log_target: LogTarget, rng: np.random.Generator, gamma: flo
         mask[np.arange(part.size), rng.integers(0, d, size=part.size)] = True
         step = np.where(mask, gamma * (x[other[r1]] - x[other[r2]]), 0.0)
         prop = x[part] + step + rng.standard_normal((part.size, d)) @ jitter.T
-        prop_target = log_target(prop)
+        prop_target = log_target(prop, part)
         x[part], target[part], a = accept(x[part], target[part], prop, prop_target, prop_target - target[part], rng)
         accepted += a
     return x, target, accepted
@@ -128,7 +149,7 @@ def drift(x, target, log_target: LogTarget, rng: np.random.Generator, mean_of: C
         mean = mean_of(xs, others, target[other])
         prop = mean + rng.standard_normal(xs.shape) @ chol.T
         back = mean_of(prop, others, target[other])
-        prop_target = log_target(prop)
+        prop_target = log_target(prop, part)
         log_ratio = (prop_target - target[part] + gauss_log_kernel(xs, back, chol)
                      - gauss_log_kernel(prop, mean, chol))
         x[part], target[part], a = accept(xs, target[part], prop, prop_target, log_ratio, rng)
@@ -151,7 +172,7 @@ def pair_scale(x, target, log_target: LogTarget, rng: np.random.Generator, draw_
     half = 0.5 * (x[i] - x[j])
     m = 0.5 * (x[i] + x[j])
     c1, c2 = m + s[:, None] * half, m - s[:, None] * half
-    t1, t2 = log_target(c1), log_target(c2)
+    t1, t2 = log_target(c1, i), log_target(c2, j)
     log_ratio = d * np.log(np.abs(s)) + t1 + t2 - target[i] - target[j]
     if log_attempt is not None:
         forward = log_attempt(target[i], target[j])
@@ -169,7 +190,7 @@ def multiple_try(x, target, log_target: LogTarget, rng: np.random.Generator, tri
     itself; accept with sum pi(looks) / sum pi(references)."""
     n, d = x.shape
     looks = x[:, None, :] + rng.standard_normal((n, tries, d)) @ chol.T
-    look_t = log_target(looks.reshape(-1, d)).reshape(n, tries)
+    look_t = log_target(looks.reshape(-1, d), np.repeat(np.arange(n), tries)).reshape(n, tries)
     finite = np.isfinite(look_t).any(axis=1)
     top = np.where(finite, np.max(np.where(np.isfinite(look_t), look_t, -np.inf), axis=1), 0.0)
     w = np.exp(np.where(np.isfinite(look_t), look_t, -np.inf) - top[:, None])
@@ -178,7 +199,7 @@ def multiple_try(x, target, log_target: LogTarget, rng: np.random.Generator, tri
     pick = np.minimum((cum < rng.random(n)[:, None]).sum(axis=1), tries - 1)
     y, y_t = looks[np.arange(n), pick], look_t[np.arange(n), pick]
     refs = y[:, None, :] + rng.standard_normal((n, tries - 1, d)) @ chol.T
-    ref_t = log_target(refs.reshape(-1, d)).reshape(n, tries - 1)
+    ref_t = log_target(refs.reshape(-1, d), np.repeat(np.arange(n), tries - 1)).reshape(n, tries - 1)
     ref_all = np.concatenate([ref_t, target[:, None]], axis=1)
     ref_w = np.exp(np.where(np.isfinite(ref_all), ref_all, -np.inf) - top[:, None]).sum(axis=1)
     with np.errstate(divide="ignore"):

@@ -5,15 +5,19 @@ likelihood, the cloud is resampled when its effective sample size falls under th
 `move_sweeps` sweeps of the paper's operator (its MoveKernel), made a Metropolis-Hastings move on the posterior over
 all kept points (moves.py), restore diversity without changing the law. The weighted cloud stays a sample of the
 posterior, so its covariance is an honest ellipse, whatever operator a paper brings. One ResampleMove class serves
-every algorithm: a filter module gives only its kernel.
+every algorithm: a filter module gives only its kernel. While the receiver's noise is latent (a marginal over
+hypotheses), the sweeps run on the joint of place and hypothesis (a Gibbs draw of each particle's, then the
+operator given it), whose looks cost one hypothesis each.
 """
 from __future__ import annotations
+
+from typing import cast
 
 import numpy as np
 
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.base import ParticleFilter
-from aoa_localizer.models.base import StaticPosterior
+from aoa_localizer.models.base import LatentNoise, StaticPosterior
 
 
 class MoveKernel:
@@ -54,6 +58,7 @@ class ResampleMove(ParticleFilter):
         # current posterior invariant, so when it is made changes no law.
         self.deferred = False
         self.last_z = None  # the newest point, for sweeps made after it
+        self._given: np.ndarray | None = None  # each particle's noise hypothesis during a sweep that drew them
 
     def predict(self):
         """The emitter does not move: no process noise (the moves keep the cloud diverse)."""
@@ -88,13 +93,47 @@ class ResampleMove(ParticleFilter):
         self._sweeps(count, self.last_z)
 
     def _sweeps(self, count: int, z):
+        joint = self.model.hypotheses_log_joint(self.x) if isinstance(self.model, LatentNoise) else None
+        if joint is not None:
+            self._sweeps_with_noise(count, z, joint)
+            return
         target = self.log_target(self.x)
         accepted = tried = 0
         for _ in range(count):
             self.x, target, a, t = self.sweep(target, z)
             accepted, tried = accepted + a, tried + t
         self.acceptance = accepted / max(tried, 1)
-        self.targets_known(target)
+        self.invalidate()
+
+    def _sweeps_with_noise(self, count: int, z, joint: np.ndarray):
+        """The sweeps on the posterior of place and noise hypothesis together, whose marginal in the place is the
+        filter's target: each draws every particle's hypothesis given its place (Gibbs, from `joint`, the (N, H)
+        log joint at the particles), then moves the places given their hypotheses, a look costing one hypothesis
+        instead of all. The draws and the moves each keep the joint, so the places stay a sample of the marginal."""
+        model = cast(LatentNoise, self.model)
+        rows = np.arange(self.n)
+        accepted = tried = 0
+        for _ in range(count):
+            self._given = moves.categorical(joint, self.rng)
+            try:
+                x, _, a, t = self.sweep(joint[rows, self._given], z)
+            finally:
+                self._given = None
+            moved = np.any(x != self.x, axis=1)
+            self.x, joint = x, joint.copy()
+            if moved.any():
+                joint[moved] = model.hypotheses_log_joint(x[moved])
+            accepted, tried = accepted + a, tried + t
+        self.acceptance = accepted / max(tried, 1)
+        self.invalidate()
+
+    def log_target(self, x: np.ndarray, of: np.ndarray | None = None) -> np.ndarray:
+        """The posterior the moves keep invariant; while a sweep holds each particle's noise hypothesis, the joint
+        of place and hypothesis, each row at the hypothesis of the particle `of` names (None: in order)."""
+        if self._given is None:
+            return super().log_target(x, of)
+        given = self._given if of is None else self._given[of]
+        return cast(LatentNoise, self.model).log_posterior_given(x, given)
 
     def sweep(self, target: np.ndarray, z) -> tuple[np.ndarray, np.ndarray, int, int]:
         """One sweep of the kernel: (particles, their log posterior, moves accepted, moves tried)."""

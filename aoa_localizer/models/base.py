@@ -41,6 +41,17 @@ class StaticPosterior(Protocol):
 
 
 @runtime_checkable
+class LatentNoise(Protocol):
+    """A StaticPosterior that is a marginal over discrete noise hypotheses h: its joint with h can be evaluated per
+    hypothesis and given one, so moves can be made on place and hypothesis together (a Gibbs draw of h, then moves
+    of x given it) at the cost of one hypothesis per look instead of all."""
+
+    def hypotheses_log_joint(self, x: np.ndarray) -> np.ndarray | None: ...
+
+    def log_posterior_given(self, x: np.ndarray, h: np.ndarray) -> np.ndarray: ...
+
+
+@runtime_checkable
 class TransitionDensity(Protocol):
     """log p(x_k | x_{k-1}) can be evaluated (a proposal other than the transition needs it in its weight)."""
 
