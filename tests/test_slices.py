@@ -45,17 +45,30 @@ def test_a_job_makes_pieces_until_their_metered_cost_reaches_the_call_budget(cos
 
 
 def test_the_jobs_of_one_call_share_its_budget():
-    """Inside one_call a second job gets what the first left (at least one piece); outside, each its own."""
+    """Inside one_call a second job gets what the first left (nothing: the call already made its piece and spent
+    its budget); outside, each its own."""
     first, second = [], []
     with slices.one_call():
         SlicedJob(counted(first, 60, cost_us=880.0), 5000.0).advance()
         SlicedJob(counted(second, 60, cost_us=880.0), 5000.0).advance()
-    assert (len(first), len(second)) == (5, 1)
+    assert (len(first), len(second)) == (5, 0)
     first.clear()
     second.clear()
     SlicedJob(counted(first, 60, cost_us=880.0), 5000.0).advance()
     SlicedJob(counted(second, 60, cost_us=880.0), 5000.0).advance()
     assert (len(first), len(second)) == (5, 5)
+
+
+def test_the_filters_step_spends_the_calls_budget_before_the_job():
+    """The step's metered cost counts: after a step that cost 3000 us, a job's pieces of 1000 us (880 metered and
+    PIECE_US) reach the 5000 us budget at the second (not the fifth); after a step that cost more than the budget,
+    still one, so a job never stalls behind dear steps."""
+    for step_us, pieces in ((3000.0, 2), (12000.0, 1)):
+        made: list[int] = []
+        with slices.one_call(slices.Call()):
+            slices.charge(slices.Cost(step_us, 0.0), 0)
+            SlicedJob(counted(made, 60, cost_us=880.0), 5000.0).advance()
+        assert len(made) == pieces, (step_us, made)
 
 
 def test_the_meter_charges_a_kernel_by_its_model():

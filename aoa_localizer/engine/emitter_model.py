@@ -18,6 +18,7 @@ from aoa_localizer.engine.global_search import (
 )
 from aoa_localizer.engine.likelihood import BearingLikelihood
 from aoa_localizer.engine.receiver import NoiseGrid, log_sum
+from aoa_localizer.engine.slices import LOOKS, charge
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.models.base import StateSpaceModel
 
@@ -154,4 +155,5 @@ class EmitterModel(StateSpaceModel):
             lp = lp + reach_log_prior(x, self.reach)
         if len(h):
             lp = lp + self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3], h[:, 4]).sum(axis=-1)
+            charge(LOOKS, x.size // 2 * len(h))
         return lp

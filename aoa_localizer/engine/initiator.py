@@ -39,7 +39,9 @@ MIN_INLIERS = 3  # a start mode must explain at least this many points
 MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
 _PROVISIONAL_PARTICLES = 1000
 _START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
-_STALE_MIN, _STALE_SHARE = 2, 5  # a start search's result is stale once the points grew by more than max(2, 1/5)
+# A start search's result is stale once the points grew by more than max(4, a half) while it ran: its modes still
+# propose for a few more points (the importance weights are over all held), not for many times its points
+_STALE_MIN, _STALE_SHARE = 4, 2
 
 
 class Initiator:

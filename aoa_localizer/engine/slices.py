@@ -1,8 +1,8 @@
 """Work cut into pieces: a generator that yields after each piece and returns its result, run whole (in the check
 worker, at the end of data) or a few pieces per point (`scheduling: reproducible`), so no single call carries a
-whole global check and a seed still repeats a run. A call makes pieces until their metered cost reaches the job's
-budget: the kernels that do a job's work charge what they cost by a model of their size (`charge`), so how
-far a job has got depends on the points alone, never on the clock."""
+whole global check and a seed still repeats a run. After the filter's step, a call makes pieces until the metered
+cost of the step and the pieces reaches the job's budget: the kernels charge what they cost by a model of their
+size (`charge`), so how far a job has got depends on the points alone, never on the clock."""
 from __future__ import annotations
 
 import threading
@@ -27,11 +27,12 @@ class Cost:
 RESIDUALS = Cost(58.0, 0.033)  # global_search: residuals of places against points, and what a step makes of them
 DENSITIES = Cost(35.0, 0.014)  # receiver: the latent noise's densities per hypothesis
 EM_STEP = Cost(145.0, 0.013)  # noise: an EM iteration's responsibilities over runs x readings
+LOOKS = Cost(245.0, 0.014)  # emitter_model: the posterior at a move's looks, the move's own work included
 POINTS_MADE = Cost(0.0, 0.38)  # point_batch: every point remade from its readings
 BATCH_MADE = Cost(0.0, 0.8)  # point_batch: a batch's readings gathered (elements: readings + 4 per point), per pass
 PIECE_US = 120.0  # what a piece costs besides the metered kernels
 # A call's pieces: the piece that reaches its budget is the call's last. A global check shares its call with the
-# filter's step and the sweeps it owes; a start search comes before there is a filter, so it may take more.
+# filter's step and the sweeps it makes; a start search comes before there is a filter, so it may take more.
 CHECK_BUDGET_US = 5000.0
 START_BUDGET_US = 9000.0
 PIECE_EVALUATIONS = 50_000  # bearing densities a grid's score makes per piece (a millisecond or two)
@@ -93,12 +94,11 @@ class SlicedJob(Generic[T]):
         self._error: BaseException | None = None
 
     def advance(self) -> None:
-        """One call's pieces: at least one, until the call's cost reaches the budget (none once done)."""
+        """Pieces until the call's cost, the filter's step included, reaches the budget; at least one per call, so a
+        job goes on however dear the steps are (none once done)."""
         call = getattr(_meter, "call", None) or Call()
-        made = 0
-        while not self._done and not (made and call.over(self.budget_us)):
+        while not self._done and not (call.pieces and call.over(self.budget_us)):
             self._next()
-            made += 1
             call.pieces += 1
 
     def _next(self) -> None:

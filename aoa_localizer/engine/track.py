@@ -89,12 +89,11 @@ class EmitterTrack:
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:
         """One closed group of readings; True when the filter took it (or started) and has a new estimate. Its
-        jobs' pieces are made within the call's budget (the Localizer opens it: slices.one_call)."""
+        job's pieces come after the filter's step, within what the step left of the call's budget (the Localizer
+        opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
-        if self.job is not None:
-            self.job.advance()
-        self.collect()  # a background job's findings first: they may change the noise the point is made with
+        self.collect()  # a job's findings first: they may change the noise the point is made with
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
@@ -106,6 +105,10 @@ class EmitterTrack:
             took = self.initiator.try_start()
         else:
             took = self.update(entry, owed_before)
+        if self.job is not None:
+            self.job.advance()
+            if self.collect():  # one that finished now is applied now, as at a point
+                took = self.estimating
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took
 
