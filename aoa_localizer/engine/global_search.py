@@ -215,10 +215,16 @@ def latent_log_densities(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) ->
     """Under the latent noise (rob.grid): sum over the points of each bearing's log density per hypothesis at x,
     (..., H) (receiver.log_densities); log_posterior is their log_sum plus the prior on x."""
     assert rob.grid is not None
+    resid, extra = _unscaled(x, pts, rob, widen2)
+    return log_densities(resid, pts.sigma**2, extra, rob.grid)
+
+
+def _unscaled(x: np.ndarray, pts: Points, rob: Robust, widen2=0.0) -> tuple[np.ndarray, np.ndarray | float]:
+    """The residuals at x (..., K) and the part of each bearing's variance a noise hypothesis does not scale: the
+    antenna position's, seen from x, plus `widen2`."""
     resid, _, _, r2 = _residuals(x, pts)
     gps_var = pts.gps_var(rob)
-    extra = widen2 + gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else widen2
-    return log_densities(resid, pts.sigma**2, extra, rob.grid)
+    return resid, (widen2 + gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else widen2)
 
 
 def hypotheses_log_joint(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
@@ -232,9 +238,7 @@ def log_posterior_given(x: np.ndarray, pts: Points, rob: Robust, h: np.ndarray) 
     """hypotheses_log_joint's column h[i] at each row x[i] (M, 2): the posterior of x given its noise hypothesis,
     for moves on the posterior of place and noise together."""
     assert rob.grid is not None
-    resid, _, _, r2 = _residuals(x, pts)
-    gps_var = pts.gps_var(rob)
-    extra = gps_var / np.maximum(r2, 1.0) if np.any(gps_var) else 0.0
+    resid, extra = _unscaled(x, pts, rob)
     return given_log_densities(resid, pts.sigma**2, extra, rob.grid, h) + rob.grid.log_prior[h] + _prior(x, rob)
 
 

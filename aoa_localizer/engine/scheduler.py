@@ -1,12 +1,12 @@
 """Where a Localizer's deferred work runs and what it owes, in one place.
 
 A track defers two kinds of work. Its jobs (start searches and global checks) run a few pieces per point
-(`reproducible`: a seed repeats a run; slices.py) or in the check worker's process (`realtime`: the node's), their
-result applied at the track's next point once finished (a worker's also by `idle()`). Under `realtime` the
-Metropolis-Hastings moves of a step are owed instead of made in it (a resampling's sweeps, a worker check's move on
-its modes): the scheduler keeps the debt of each filter and makes the moves when the caller has time: `idle()` one,
-`catch_up()` all of them, else each following point one. Any of these moves keeps the posterior invariant, so when
-it is made changes no law.
+(`reproducible`: a seed repeats a run; slices.py), their result applied in the call that made the last piece, or in
+the check worker's process (`realtime`: the node's), their result applied at the track's next point or by
+`idle()`. Under `realtime` the Metropolis-Hastings moves of a step are owed instead of made in it (a resampling's
+sweeps, a worker check's move on its modes): the scheduler keeps the debt of each filter and makes the moves when
+the caller has time: `idle()` one, `catch_up()` all of them, else each following point one. Any of these moves keeps
+the posterior invariant, so when it is made changes no law.
 """
 from __future__ import annotations
 

@@ -113,16 +113,18 @@ class ResampleMove(ParticleFilter):
         model = cast(LatentNoise, self.model)
         rows = np.arange(self.n)
         accepted = tried = 0
-        for _ in range(count):
+        joint_at = self.x
+        for sweep in range(count):
+            if sweep:  # the joint again where the last sweep moved a particle
+                moved = np.any(self.x != joint_at, axis=1)
+                if moved.any():
+                    joint[moved] = model.hypotheses_log_joint(self.x[moved])
+                joint_at = self.x
             self._given = moves.categorical(joint, self.rng)
             try:
-                x, _, a, t = self.sweep(joint[rows, self._given], z)
+                self.x, _, a, t = self.sweep(joint[rows, self._given], z)
             finally:
                 self._given = None
-            moved = np.any(x != self.x, axis=1)
-            self.x, joint = x, joint.copy()
-            if moved.any():
-                joint[moved] = model.hypotheses_log_joint(x[moved])
             accepted, tried = accepted + a, tried + t
         self.acceptance = accepted / max(tried, 1)
         self.invalidate()
