@@ -4,6 +4,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from aoa_localizer.engine import emitter_model, slices
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.likelihood import (
@@ -219,65 +220,109 @@ def test_a_filter_refuses_a_model_without_the_capability_it_needs():
             make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), GrowthModel())
 
 
+def _counting_filter(realtime, sweep_cost_us=0.0):
+    """A scheduler and a 200-particle filter it took, whose sweeps are counted in `made` (each metered at
+    `sweep_cost_us`, the model's own looks unmetered)."""
+    scheduler = Scheduler(realtime, lambda reason: None)
+    f = _filter(n=200)
+    scheduler.take(f)
+    made = []
+    real = f.sweep
+
+    def sweep(target, z):
+        made.append(1)
+        slices.charge(slices.Cost(sweep_cost_us, 0.0), 0)
+        return real(target, z)
+
+    f.sweep = sweep
+    rng = np.random.default_rng(0)
+    f.initialise(rng.normal(0.0, 10.0, (200, 2)), [0, 0], np.eye(2) * 1e6)
+    f.spread = np.eye(2) * 100.0
+    return scheduler, f, made
+
+
+def _vague(k):
+    """A point that barely informs (sigma 1 rad): no resampling."""
+    return ObservationPoint(float(k), 500.0, 500.0, 0.0, 1.0, 1)
+
+
+def _resampled(scheduler, f):
+    """The end of a step that resampled, as update() makes it."""
+    f.resample()
+    f.resampled = True
+    f.after_resample(_vague(-1))
+    scheduler.stepped(f)
+
+
+def _point(scheduler, f, k):
+    assert f.update(_vague(k)) and not f.resampled
+    scheduler.stepped(f)
+
+
 def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_next_points():
     """Under `realtime` the scheduler takes a resampling's sweeps as owed: none at the resampling, then one at each
     following point until all `sweeps` are made, unless move_one() (between points) made them first; a resampling
-    that comes before the debt is paid pays it, so no cloud gets fewer sweeps than without the spreading. Inline:
-    all at once, nothing owed."""
-    def filter_counting(realtime):
-        scheduler = Scheduler(realtime, lambda reason: None)
-        f = _filter(n=200)
-        scheduler.take(f)
-        made = []
-        real = f.sweep
-        f.sweep = lambda target, z, made=made, real=real: made.append(1) or real(target, z)
-        rng = np.random.default_rng(0)
-        f.initialise(rng.normal(0.0, 10.0, (200, 2)), [0, 0], np.eye(2) * 1e6)
-        f.spread = np.eye(2) * 100.0
-        return scheduler, f, made
-
-    def vague(k):  # a point that barely informs (sigma 1 rad): no resampling
-        return ObservationPoint(float(k), 500.0, 500.0, 0.0, 1.0, 1)
-
-    def resampled(scheduler, f):  # the end of a step that resampled, as update() makes it
-        f.resample()
-        f.resampled = True
-        f.after_resample(vague(-1))
-        scheduler.stepped(f)
-
-    def point(scheduler, f, k):
-        assert f.update(vague(k)) and not f.resampled
-        scheduler.stepped(f)
-
-    for realtime, expected in ((False, [5, 0, 0, 0, 0, 0, 0]), (True, [0, 1, 1, 1, 1, 1, 0])):
-        scheduler, f, made = filter_counting(realtime)
-        counts = []
-        resampled(scheduler, f)
-        counts.append(len(made))
-        for k in range(6):
-            made.clear()
-            point(scheduler, f, k)
-            counts.append(len(made))
-        assert counts == expected, realtime
+    that comes before the debt is paid pays it, so no cloud gets fewer sweeps than without the spreading."""
+    scheduler, f, made = _counting_filter(True)
+    counts = []
+    _resampled(scheduler, f)
+    counts.append(len(made))
+    for k in range(6):
         made.clear()
-        resampled(scheduler, f)  # realtime: none now, 5 owed
-        resampled(scheduler, f)  # resampled again before the debt is paid: the 5 owed now, 5 more owed
-        assert len(made) == (5 if realtime else 10) and scheduler.debt(f).sweeps == (5 if realtime else 0)
+        _point(scheduler, f, k)
+        counts.append(len(made))
+    assert counts == [0, 1, 1, 1, 1, 1, 0]
+    made.clear()
+    _resampled(scheduler, f)  # none now, 5 owed
+    _resampled(scheduler, f)  # resampled again before the debt is paid: the 5 owed now, 5 more owed
+    assert len(made) == 5 and scheduler.debt(f).sweeps == 5
 
-    scheduler, f, made = filter_counting(True)
+    scheduler, f, made = _counting_filter(True)
     track = SimpleNamespace(filter=f, supervisor=SimpleNamespace(move_on_modes=lambda: True))
-    point(scheduler, f, 0)
+    _point(scheduler, f, 0)
     assert not scheduler.move_one([track]) and not made  # nothing owed
-    resampled(scheduler, f)
+    _resampled(scheduler, f)
     assert scheduler.move_one([track]) and scheduler.move_one([track]) and len(made) == 2  # one per call
     assert scheduler.owed(track) == 3
     made.clear()
-    point(scheduler, f, 1)
+    _point(scheduler, f, 1)
     assert len(made) == 1 and scheduler.owed(track) == 2  # the next point makes one of the rest
     made.clear()
     scheduler.owe_modes(f)
     assert scheduler.owed(track) == 3 and scheduler.move_one([track]) and not made  # the modes' move first
     assert scheduler.debt(_filter(n=200)).sweeps == 0  # a new filter owes nothing
+
+
+def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_points(monkeypatch):
+    """Under `reproducible` a call makes the owed sweeps while its metered cost and one more sweep's stay under
+    SWEEP_BUDGET_US, at least one a point; the rest at the points that follow. A resampling before the debt is paid
+    owes its own sweeps instead. move_one() (idle time) makes none: a reproducible run follows its points alone.
+    settle() makes the rest."""
+    monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)  # only the test's cost is metered
+    sweep_us = 1500.0  # 5000 us holds three (4500), not four
+    scheduler, f, made = _counting_filter(False, sweep_us)
+    counts = []
+    _resampled(scheduler, f)
+    counts.append(len(made))
+    for k in range(3):
+        made.clear()
+        _point(scheduler, f, k)
+        counts.append(len(made))
+    assert counts == [3, 2, 0, 0]
+
+    made.clear()
+    with slices.one_call():
+        slices.charge(slices.Cost(4000.0, 0.0), 0)  # a dear step: the sweep it must make, and no other
+        _resampled(scheduler, f)
+    assert len(made) == 1 and scheduler.debt(f).sweeps == 4
+    made.clear()
+    _resampled(scheduler, f)  # the new resampling's five replace the 4 left: three of them now
+    assert len(made) == 3 and scheduler.debt(f).sweeps == 2
+    track = SimpleNamespace(filter=f, supervisor=SimpleNamespace(move_on_modes=lambda: True))
+    made.clear()
+    assert not scheduler.move_one([track]) and not made and scheduler.owed(track) == 2
+    scheduler.settle(track)
+    assert len(made) == 2 and scheduler.owed(track) == 0
 
 
 def test_the_cloud_summary_is_made_once_per_cloud_and_follows_a_replaced_cloud():

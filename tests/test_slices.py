@@ -27,11 +27,11 @@ def counted(made: list[int], pieces: int, fail_at: int = -1, cost_us: float = 0.
     return "result"
 
 
-@pytest.mark.parametrize(("cost_us", "per_call"), [(0.0, 42), (880.0, 5), (1880.0, 3), (2380.0, 2), (6000.0, 1)])
-def test_a_job_makes_pieces_until_their_metered_cost_reaches_the_call_budget(cost_us, per_call):
-    """Pieces of (cost + PIECE_US) each until the call's budget, 5000 us here, is reached, the last one crossing
-    it, by hand: 1000 us a piece is 5 pieces; 2000 is 3 (6000 after the third); 2500 is 2; a piece over the budget
-    is one a call; free pieces cost PIECE_US = 120 us each, 42 of them (5040 us)."""
+@pytest.mark.parametrize(("cost_us", "per_call"), [(0.0, 41), (880.0, 4), (1880.0, 2), (2380.0, 1), (6000.0, 1)])
+def test_a_job_makes_pieces_while_their_metered_cost_stays_under_the_call_budget(cost_us, per_call):
+    """Pieces of (cost + PIECE_US) each while the call's cost with one more stays under its budget, 5000 us here,
+    by hand: 1000 us a piece is 4 pieces (a fifth would reach 5000); 2000 is 2; 2500 is 1; a piece over the budget
+    is one a call; free pieces cost PIECE_US = 120 us each, 41 of them (4920 us: a 42nd would end at 5040)."""
     assert slices.PIECE_US == 120.0
     made: list[int] = []
     job = SlicedJob(counted(made, 100, cost_us=cost_us), 5000.0)
@@ -45,25 +45,25 @@ def test_a_job_makes_pieces_until_their_metered_cost_reaches_the_call_budget(cos
 
 
 def test_the_jobs_of_one_call_share_its_budget():
-    """Inside one_call a second job gets what the first left (nothing: the call already made its piece and spent
-    its budget); outside, each its own."""
+    """Inside one_call a second job gets what the first left (4000 of 5000 us spent: one piece of 1000); outside,
+    each its own."""
     first, second = [], []
     with slices.one_call():
         SlicedJob(counted(first, 60, cost_us=880.0), 5000.0).advance()
         SlicedJob(counted(second, 60, cost_us=880.0), 5000.0).advance()
-    assert (len(first), len(second)) == (5, 0)
+    assert (len(first), len(second)) == (4, 1)
     first.clear()
     second.clear()
     SlicedJob(counted(first, 60, cost_us=880.0), 5000.0).advance()
     SlicedJob(counted(second, 60, cost_us=880.0), 5000.0).advance()
-    assert (len(first), len(second)) == (5, 5)
+    assert (len(first), len(second)) == (4, 4)
 
 
 def test_the_filters_step_spends_the_calls_budget_before_the_job():
-    """The step's metered cost counts: after a step that cost 3000 us, a job's pieces of 1000 us (880 metered and
-    PIECE_US) reach the 5000 us budget at the second (not the fifth); after a step that cost more than the budget,
-    still one, so a job never stalls behind dear steps."""
-    for step_us, pieces in ((3000.0, 2), (12000.0, 1)):
+    """The step's metered cost counts: after a step that cost 2000 us, a job's pieces of 1000 us (880 metered and
+    PIECE_US) stop at the second, as a third would reach the 5000 us budget; after a step that cost more than the
+    budget, still one, so a job never stalls behind dear steps."""
+    for step_us, pieces in ((2000.0, 2), (12000.0, 1)):
         made: list[int] = []
         with slices.one_call(slices.Call()):
             slices.charge(slices.Cost(step_us, 0.0), 0)

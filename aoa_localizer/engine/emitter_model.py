@@ -135,7 +135,8 @@ class EmitterModel(StateSpaceModel):
 
     def log_posterior_given(self, x: np.ndarray, h: np.ndarray) -> np.ndarray:
         """log p(x, h | kept points) at each row of x (M, 2) with its own hypothesis h (M,): hypotheses_log_joint's
-        column, made at the cost of one hypothesis."""
+        column, made at the cost of one hypothesis (its kernels metered, and the move's own work as a look's)."""
+        charge(LOOKS, 0)
         return log_posterior_given(np.asarray(x, float), Points.of(self.history.data), self._latent(), h)
 
     def usable(self, p: ObservationPoint) -> bool:

@@ -16,7 +16,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.safety import ModeProposal, importance_sample
+from aoa_localizer.engine.safety import ModeProposal, importance_sample, weighted_sample
 from aoa_localizer.engine.slices import START_BUDGET_US
 from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.track_state import PendingJob
@@ -37,7 +37,7 @@ PRIOR_MIN_SIGMA_M = 100.0
 START_SWEEPS = 3  # random-walk MH sweeps that spread the importance sample's duplicates
 MIN_INLIERS = 3  # a start mode must explain at least this many points
 MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
-_PROVISIONAL_PARTICLES = 1000
+_PROVISIONAL_PARTICLES = 2000
 _START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
 # A start search's result is stale once the points grew by more than max(4, a half) while it ran: its modes still
 # propose for a few more points (the importance weights are over all held), not for many times its points
@@ -134,10 +134,16 @@ class Initiator:
             model.observe(e.point)
         f.k = len(t.window)
         t.proposal = ModeProposal(modes, t.broad_sigma(best.mean))
-        particles = importance_sample(f.log_target, t.proposal, f.n, t.rng)
-        f.initialise(particles, best.mean, sigma**2 * np.eye(2))
-        if start:
-            self.start_cloud = f.x.copy()
+        if not start:
+            # A provisional sample is read, never stepped: the draws keep their importance weights (no resampling
+            # and no moves to spread duplicates), one look a particle
+            particles, logw = weighted_sample(f.log_target, t.proposal, f.n, t.rng)
+            f.initialise(particles, best.mean, sigma**2 * np.eye(2))
+            if np.isfinite(logw.max()):
+                f.logw = logw - logw.max()
+            return f
+        f.initialise(importance_sample(f.log_target, t.proposal, f.n, t.rng), best.mean, sigma**2 * np.eye(2))
+        self.start_cloud = f.x.copy()
         f.rejuvenate(START_SWEEPS, t.proposal)
         return f
 

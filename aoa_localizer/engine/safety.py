@@ -106,11 +106,18 @@ class ModeProposal:
         return np.logaddexp.reduce(parts, axis=0)
 
 
+def weighted_sample(log_target, proposal: ModeProposal, n: int, rng: np.random.Generator
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """n draws from q and their log weights pi / q (unnormalised; -inf where pi is not finite): a weighted sample of
+    the posterior."""
+    y = proposal.sample(n, rng)
+    lw = log_target(y) - proposal.logpdf(y)
+    return y, np.where(np.isfinite(lw), lw, -np.inf)
+
+
 def importance_sample(log_target, proposal: ModeProposal, n: int, rng: np.random.Generator, draws_per_particle=8):
     """N particles drawn from q and resampled by pi / q (systematic): a sample of the posterior, modes in
     proportion to their mass. Duplicates are left for the MH sweeps that follow to spread."""
-    y = proposal.sample(draws_per_particle * n, rng)
-    lw = log_target(y) - proposal.logpdf(y)
-    lw = np.where(np.isfinite(lw), lw, -np.inf)
+    y, lw = weighted_sample(log_target, proposal, draws_per_particle * n, rng)
     w = np.exp(lw - lw.max())
     return y[systematic(w / w.sum(), rng)[:n]] if w.sum() > 0 else y[:n]

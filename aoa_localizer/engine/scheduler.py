@@ -3,10 +3,12 @@
 A track defers two kinds of work. Its jobs (start searches and global checks) run a few pieces per point
 (`reproducible`: a seed repeats a run; slices.py), their result applied in the call that made the last piece, or in
 the check worker's process (`realtime`: the node's), their result applied at the track's next point or by
-`idle()`. Under `realtime` the Metropolis-Hastings moves of a step are owed instead of made in it (a resampling's
-sweeps, a worker check's move on its modes): the scheduler keeps the debt of each filter and makes the moves when
-the caller has time: `idle()` one, `catch_up()` all of them, else each following point one. Any of these moves keeps
-the posterior invariant, so when it is made changes no law.
+`idle()`. A resampling's Metropolis-Hastings sweeps are owed instead of made in its step: the scheduler keeps the
+debt of each filter. Under `reproducible` a call makes them while its metered cost stays within SWEEP_BUDGET_US
+(slices.py: by the points alone, never the clock), at least one a point, and the rest at the points that follow;
+under `realtime` the caller makes them when it has time (`idle()` one, `catch_up()` all of them, else each
+following point one), and a worker check's move on its modes is owed too. Any of these moves keeps the posterior
+invariant, so when it is made changes no law.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ import numpy as np
 
 from aoa_localizer.engine.checks import CheckResult, CheckWorker
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.slices import SlicedJob, Steps
+from aoa_localizer.engine.slices import SWEEP_BUDGET_US, Call, SlicedJob, Steps, current_call, spent
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
 
@@ -81,8 +83,8 @@ class Scheduler:
 
     # -- the moves owed ------------------------------------------------------------------------------
     def take(self, f: ParticleFilter) -> None:
-        """A new filter: under `realtime` its resamplings' sweeps are owed, not made in its step (a bounded step)."""
-        if self.realtime and isinstance(f, ResampleMove):
+        """A new filter: its resamplings' sweeps are owed, not made in its step (a bounded step)."""
+        if isinstance(f, ResampleMove):
             f.deferred = True
 
     def debt(self, f: ParticleFilter | None) -> Debt:
@@ -96,19 +98,45 @@ class Scheduler:
         self.debt(f).modes = True
 
     def stepped(self, f: ParticleFilter) -> None:
-        """After `f` took a point: a new resampling's sweeps become owed, and the sweeps still owed from the one
-        before are made now (resamplings that come faster than the debt is paid get all their sweeps, as when they
-        are made in the step: the cloud would otherwise collapse onto a few copies); without a resampling the point
-        makes SWEEPS_PER_POINT of them."""
+        """After `f` took a point: a new resampling's sweeps become owed, then the point makes some of the debt.
+        `realtime`: the sweeps still owed from the resampling before are made now (resamplings that come faster than
+        the caller's idle time pays get all their sweeps: the cloud would otherwise collapse onto a few copies), none
+        of the new one's, and without a resampling SWEEPS_PER_POINT of them. `reproducible`: as many as the call's
+        budget holds, at least one; a resampling's own sweeps replace what is left of the one before (a bounded
+        call: each resampling still gets at least one at once and the rest while no other comes)."""
         if not isinstance(f, ResampleMove) or not f.deferred:
             return
         debt = self.debt(f)
+        if not self.realtime:
+            if f.resampled:
+                debt.sweeps = f.sweeps
+            self._sweep_within_budget(f, debt, current_call())
+            return
         if f.resampled:
             made, debt.sweeps = debt.sweeps, f.sweeps
         else:
             made = min(debt.sweeps, SWEEPS_PER_POINT)
             debt.sweeps -= made
         if made:
+            f.move(made)
+
+    @staticmethod
+    def _sweep_within_budget(f: ResampleMove, debt: Debt, call: Call) -> None:
+        """The owed sweeps one at a time, at least one, while the call's metered cost with the last sweep's once
+        more stays under SWEEP_BUDGET_US."""
+        last = 0.0
+        while debt.sweeps and (not last or call.cost() + last < SWEEP_BUDGET_US):
+            before = spent()
+            debt.sweeps -= 1
+            f.move(1)
+            last = spent() - before
+
+    def settle(self, track: EmitterTrack) -> None:
+        """Every sweep the track's filter owes, made now (the end of data)."""
+        f = track.filter
+        debt = self.debt(f)
+        if debt.sweeps and isinstance(f, ResampleMove):
+            made, debt.sweeps = debt.sweeps, 0
             f.move(made)
 
     def pay_modes(self, track: EmitterTrack) -> bool:
@@ -121,12 +149,15 @@ class Scheduler:
         return track.supervisor.move_on_modes()
 
     def owed(self, track: EmitterTrack) -> int:
-        """Moves the track's filter owes (0 inline)."""
+        """Moves the track's filter owes."""
         return int(self.debt(track.filter))
 
     def move_one(self, tracks: Iterable[EmitterTrack]) -> bool:
-        """One owed move, for the track owing the most (the modes' move before the sweeps); False when none was owed
-        (or it failed: counted)."""
+        """Between points (`realtime`): one owed move, for the track owing the most (the modes' move before the
+        sweeps); False when none was owed (or it failed: counted), and always under `reproducible`, whose moves
+        follow its points alone."""
+        if not self.realtime:
+            return False
         owing = max(tracks, key=self.owed, default=None)
         if owing is None or not self.owed(owing):
             return False

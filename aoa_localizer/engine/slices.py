@@ -34,7 +34,9 @@ PIECE_US = 120.0  # what a piece costs besides the metered kernels
 # A call's pieces: the piece that reaches its budget is the call's last. A global check shares its call with the
 # filter's step and the sweeps it makes; a start search comes before there is a filter, so it may take more.
 CHECK_BUDGET_US = 5000.0
-START_BUDGET_US = 9000.0
+START_BUDGET_US = 8000.0
+# A resampling's sweeps made in a call, the step included: the rest are owed to the following points (scheduler.py)
+SWEEP_BUDGET_US = 5000.0
 PIECE_EVALUATIONS = 50_000  # bearing densities a grid's score makes per piece (a millisecond or two)
 
 _meter = threading.local()  # a thread's own, so Localizers in other threads never move a job's pieces
@@ -56,9 +58,14 @@ class Call:
     def __init__(self) -> None:
         self.start, self.pieces = spent(), 0
 
-    def over(self, budget_us: float) -> bool:
-        """Whether the call's pieces have reached `budget_us`."""
-        return spent() - self.start + PIECE_US * self.pieces >= budget_us
+    def cost(self) -> float:
+        """The call's metered cost so far (microseconds, by the models), its pieces' own cost included."""
+        return spent() - self.start + PIECE_US * self.pieces
+
+
+def current_call() -> Call:
+    """The call open in this thread (one_call), or a new one that starts now."""
+    return getattr(_meter, "call", None) or Call()
 
 
 @contextmanager
@@ -94,12 +101,14 @@ class SlicedJob(Generic[T]):
         self._error: BaseException | None = None
 
     def advance(self) -> None:
-        """Pieces until the call's cost, the filter's step included, reaches the budget; at least one per call, so a
-        job goes on however dear the steps are (none once done)."""
-        call = getattr(_meter, "call", None) or Call()
-        while not self._done and not (call.pieces and call.over(self.budget_us)):
+        """Pieces while the call's cost, the filter's step included, with the last piece's once more stays under the
+        budget; at least one per call, so a job goes on however dear the steps are (none once done)."""
+        call, last = current_call(), 0.0
+        while not self._done and not (call.pieces and call.cost() + last >= self.budget_us):
+            before = call.cost()
             self._next()
             call.pieces += 1
+            last = call.cost() - before
 
     def _next(self) -> None:
         try:

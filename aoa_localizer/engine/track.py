@@ -171,6 +171,7 @@ class EmitterTrack:
         changed = False
         while self.job is not None:  # a stale start search is run again, over all the points: wait for that too
             changed = self.collect(wait=True) or changed
+        self.scheduler.settle(self)
         if self.filter is None:  # the end of data: the best estimate the points allow, never "collecting"
             self.initiator.next_start_try = 0
             changed = self.initiator.try_start(inline=True, final=True) or changed
