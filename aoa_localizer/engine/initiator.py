@@ -120,11 +120,11 @@ class Initiator:
 
     def _sample_posterior(self, modes: list[Mode], start: bool = False) -> ParticleFilter:
         """A filter holding every point waiting for a start and an importance sample of their posterior from the
-        modes (MH sweeps after it), with a broad Gaussian prior at the best mode that keeps the posterior proper.
-        `start`: the filter's start (its importance sample kept as `start_cloud`)."""
+        modes, with a broad Gaussian prior at the best mode that keeps the posterior proper. `start`: the filter's
+        start (resampled, then MH sweeps; kept as `start_cloud`); else a provisional sample (weighted)."""
         t, best = self.track, modes[0]
         sigma = _prior_sigma(best.mean, t.window[-1].point)
-        # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (few points: cheap)
+        # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (a look each)
         f = self.new_filter(None if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES))
         model = cast(EmitterModel, f.model)
         model.set_prior(best.mean, sigma**2 * np.eye(2))

@@ -4,7 +4,7 @@ A track defers two kinds of work. Its jobs (start searches and global checks) ru
 (`reproducible`: a seed repeats a run; slices.py), their result applied in the call that made the last piece, or in
 the check worker's process (`realtime`: the node's), their result applied at the track's next point or by
 `idle()`. A resampling's Metropolis-Hastings sweeps are owed instead of made in its step: the scheduler keeps the
-debt of each filter. Under `reproducible` a call makes them while its metered cost stays within SWEEP_BUDGET_US
+debt of each filter. Under `reproducible` a call makes them while its metered cost stays under SWEEP_BUDGET_US
 (slices.py: by the points alone, never the clock), at least one a point, and the rest at the points that follow;
 under `realtime` the caller makes them when it has time (`idle()` one, `catch_up()` all of them, else each
 following point one), and a worker check's move on its modes is owed too. Any of these moves keeps the posterior
