@@ -259,26 +259,36 @@ def _point(scheduler, f, k):
     scheduler.stepped(f)
 
 
+def _sweeps_per_call(scheduler, f, made, points):
+    """Sweeps made at a resampling, then at each of `points` points without one."""
+    counts = []
+    _resampled(scheduler, f)
+    counts.append(len(made))
+    for k in range(points):
+        made.clear()
+        _point(scheduler, f, k)
+        counts.append(len(made))
+    return counts
+
+
+def _track(f):
+    """What the scheduler reads of a track: its filter, and a supervisor whose move on the modes succeeds."""
+    return SimpleNamespace(filter=f, supervisor=SimpleNamespace(move_on_modes=lambda: True))
+
+
 def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_next_points():
     """Under `realtime` the scheduler takes a resampling's sweeps as owed: none at the resampling, then one at each
     following point until all `sweeps` are made, unless move_one() (between points) made them first; a resampling
     that comes before the debt is paid pays it, so no cloud gets fewer sweeps than without the spreading."""
     scheduler, f, made = _counting_filter(True)
-    counts = []
-    _resampled(scheduler, f)
-    counts.append(len(made))
-    for k in range(6):
-        made.clear()
-        _point(scheduler, f, k)
-        counts.append(len(made))
-    assert counts == [0, 1, 1, 1, 1, 1, 0]
+    assert _sweeps_per_call(scheduler, f, made, 6) == [0, 1, 1, 1, 1, 1, 0]
     made.clear()
     _resampled(scheduler, f)  # none now, 5 owed
     _resampled(scheduler, f)  # resampled again before the debt is paid: the 5 owed now, 5 more owed
     assert len(made) == 5 and scheduler.debt(f).sweeps == 5
 
     scheduler, f, made = _counting_filter(True)
-    track = SimpleNamespace(filter=f, supervisor=SimpleNamespace(move_on_modes=lambda: True))
+    track = _track(f)
     _point(scheduler, f, 0)
     assert not scheduler.move_one([track]) and not made  # nothing owed
     _resampled(scheduler, f)
@@ -301,14 +311,7 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
     monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)  # only the test's cost is metered
     sweep_us = 1500.0  # 5000 us holds three (4500), not four
     scheduler, f, made = _counting_filter(False, sweep_us)
-    counts = []
-    _resampled(scheduler, f)
-    counts.append(len(made))
-    for k in range(3):
-        made.clear()
-        _point(scheduler, f, k)
-        counts.append(len(made))
-    assert counts == [3, 2, 0, 0]
+    assert _sweeps_per_call(scheduler, f, made, 3) == [3, 2, 0, 0]
 
     made.clear()
     with slices.one_call():
@@ -318,7 +321,7 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
     made.clear()
     _resampled(scheduler, f)  # the new resampling's five replace the 4 left: three of them now
     assert len(made) == 3 and scheduler.debt(f).sweeps == 2
-    track = SimpleNamespace(filter=f, supervisor=SimpleNamespace(move_on_modes=lambda: True))
+    track = _track(f)
     made.clear()
     assert not scheduler.move_one([track]) and not made and scheduler.owed(track) == 2
     scheduler.settle(track)
