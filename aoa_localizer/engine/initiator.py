@@ -15,8 +15,9 @@ from aoa_localizer.engine.checks import CheckResult, search_start, start_search
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode
+from aoa_localizer.engine.grid_proposal import Blend
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.safety import ModeProposal, importance_sample, weighted_sample
+from aoa_localizer.engine.safety import ModeProposal, Proposal, importance_sample, weighted_sample
 from aoa_localizer.engine.slices import START_BUDGET_US
 from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.track_state import PendingJob
@@ -136,8 +137,11 @@ class Initiator:
         t.proposal = ModeProposal(modes, t.broad_sigma(best.mean))
         if not start:
             # A provisional sample is read, never stepped: the draws keep their importance weights (no resampling
-            # and no moves to spread duplicates), one look a particle
-            particles, logw = weighted_sample(f.log_target, t.proposal, f.n, t.rng)
+            # and no moves to spread duplicates), one look a particle. Half come from the start search's grid,
+            # which reaches the far end of rays that the modes' Laplace laws do not (grid_proposal.py).
+            grid = self.start_grid.proposal() if self.start_grid is not None else None
+            proposal: Proposal = t.proposal if grid is None else Blend([t.proposal, grid], [0.5, 0.5])
+            particles, logw = weighted_sample(f.log_target, proposal, f.n, t.rng)
             f.initialise(particles, best.mean, sigma**2 * np.eye(2))
             if np.isfinite(logw.max()):
                 f.logw = logw - logw.max()

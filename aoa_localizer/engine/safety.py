@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import Protocol
 
 import numpy as np
 from scipy.special import gammaln
@@ -106,7 +107,15 @@ class ModeProposal:
         return np.logaddexp.reduce(parts, axis=0)
 
 
-def weighted_sample(log_target, proposal: ModeProposal, n: int, rng: np.random.Generator
+class Proposal(Protocol):
+    """An importance proposal: draws, and their exact log density."""
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray: ...
+
+    def logpdf(self, x: np.ndarray) -> np.ndarray: ...
+
+
+def weighted_sample(log_target, proposal: Proposal, n: int, rng: np.random.Generator
                     ) -> tuple[np.ndarray, np.ndarray]:
     """n draws from q and their log weights pi / q (unnormalised; -inf where pi is not finite): a weighted sample of
     the posterior."""

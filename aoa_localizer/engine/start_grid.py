@@ -25,6 +25,7 @@ from aoa_localizer.engine.global_search import (
     modes_from_grid,
     polar_grid,
 )
+from aoa_localizer.engine.grid_proposal import GridProposal
 from aoa_localizer.engine.slices import Steps
 
 _REGRID = 2.0  # points this many times farther from the grid's centre than when it was laid: a new grid
@@ -43,6 +44,7 @@ class StartGrid:
     rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))
     key: tuple = ()
     sums: np.ndarray | float = 0.0
+    last_score: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # the last search's score (A, R)
 
     def covers(self, pts: Points) -> bool:
         """Whether the grid is laid and the points stay close enough to its centre for its cells (else lay a new
@@ -75,7 +77,15 @@ class StartGrid:
         if done < len(rows):
             sums = sums + (yield from grid_sums(self.cells, self.radius, pts.take(slice(done, None)), coarse))
         self.rows, self.key, self.sums = rows, key, sums  # together: a search that failed leaves the last ones
-        return from_sums(np.asarray(sums), self.cells, coarse)
+        self.last_score = from_sums(np.asarray(sums), self.cells, coarse)
+        return self.last_score
+
+    def proposal(self) -> GridProposal | None:
+        """An importance proposal from the last search's score (grid_proposal.py); None before a search."""
+        if self.last_score.shape != self.cells.shape[:2] or not self.last_score.size:
+            return None
+        log_r = np.log(np.hypot(*(self.cells[0] - self.centre).T))
+        return GridProposal.usable(self.centre, log_r, self.last_score)
 
 
 def _dropped(summed: np.ndarray, rows: np.ndarray) -> int | None:
