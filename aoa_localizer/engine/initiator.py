@@ -121,14 +121,17 @@ class Initiator:
 
     def _sample_posterior(self, modes: list[Mode], start: bool = False) -> ParticleFilter:
         """A filter holding every point waiting for a start and an importance sample of their posterior from the
-        modes, with a broad Gaussian prior at the best mode that keeps the posterior proper. `start`: the filter's
-        start (resampled, then MH sweeps; kept as `start_cloud`); else a provisional sample (weighted)."""
+        modes. `start`: the filter's start (resampled, then MH sweeps; kept as `start_cloud`), with a broad Gaussian
+        prior at the best mode besides the radio-range prior; else a provisional sample (weighted) of the posterior
+        the start search scored, under the radio-range prior alone: a Gaussian at an undetermined mode near the
+        antennas (10 times its few metres of range) would cut off the far end of its ray."""
         t, best = self.track, modes[0]
         sigma = _prior_sigma(best.mean, t.window[-1].point)
         # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (a look each)
         f = self.new_filter(None if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES))
         model = cast(EmitterModel, f.model)
-        model.set_prior(best.mean, sigma**2 * np.eye(2))
+        if start:
+            model.set_prior(best.mean, sigma**2 * np.eye(2))
         model.reach = t.reach()
         model.lik.outlier_prob = t.calibration.lik_outlier_prob
         for e in t.window:
@@ -142,7 +145,7 @@ class Initiator:
             grid = self.start_grid.proposal() if self.start_grid is not None else None
             proposal: Proposal = t.proposal if grid is None else Blend([t.proposal, grid], [0.5, 0.5])
             particles, logw = weighted_sample(f.log_target, proposal, f.n, t.rng)
-            f.initialise(particles, best.mean, sigma**2 * np.eye(2))
+            f.initialise(particles)
             if np.isfinite(logw.max()):
                 f.logw = logw - logw.max()
             return f
