@@ -12,7 +12,7 @@ from aoa_localizer.engine.likelihood import (
     gaussian_loglik,
     mixture_loglik,
 )
-from aoa_localizer.engine.scheduler import Scheduler
+from aoa_localizer.engine.scheduler import SWEEP_PART, Scheduler
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters import REGISTRY, make_filter
 from aoa_localizer.filters.afsa import AfsaMoves, uniform_disc
@@ -220,23 +220,23 @@ def test_a_filter_refuses_a_model_without_the_capability_it_needs():
             make_filter(LocalizerConfig(algorithm=algorithm), np.random.default_rng(0), GrowthModel())
 
 
-def _counting_filter(realtime, sweep_cost_us=0.0):
-    """A scheduler and a 200-particle filter it took, whose sweeps are counted in `made` (each metered at
-    `sweep_cost_us`, the model's own looks unmetered)."""
+def _counting_filter(realtime, sweep_cost_us=0.0, n=200):
+    """A scheduler and an n-particle filter it took, whose sweeps are counted in `made`, each as the particles it
+    moved (each metered at `sweep_cost_us`, the model's own looks unmetered)."""
     scheduler = Scheduler(realtime, lambda reason: None)
-    f = _filter(n=200)
+    f = _filter(n=n)
     scheduler.take(f)
     made = []
     real = f.sweep
 
     def sweep(target, z):
-        made.append(1)
+        made.append(f.n)
         slices.charge(slices.Cost(sweep_cost_us, 0.0), 0)
         return real(target, z)
 
     f.sweep = sweep
     rng = np.random.default_rng(0)
-    f.initialise(rng.normal(0.0, 10.0, (200, 2)), [0, 0], np.eye(2) * 1e6)
+    f.initialise(rng.normal(0.0, 10.0, (n, 2)), [0, 0], np.eye(2) * 1e6)
     f.spread = np.eye(2) * 100.0
     return scheduler, f, made
 
@@ -310,7 +310,7 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
     settle() makes the rest."""
     monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)  # only the test's cost is metered
     sweep_us = 1500.0  # 5000 us holds three (4500), not four
-    scheduler, f, made = _counting_filter(False, sweep_us)
+    scheduler, f, made = _counting_filter(False, sweep_us, n=SWEEP_PART)  # whole sweeps
     assert _sweeps_per_call(scheduler, f, made, 3) == [3, 2, 0, 0]
 
     made.clear()
@@ -326,6 +326,40 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
     assert not scheduler.move_one([track]) and not made and scheduler.owed(track) == 2
     scheduler.settle(track)
     assert len(made) == 2 and scheduler.owed(track) == 0
+
+
+def test_reproducible_sweeps_of_a_large_cloud_are_made_a_part_at_a_time(monkeypatch):
+    """Under `reproducible` a cloud of more than SWEEP_PART particles is swept SWEEP_PART particles at a time (the
+    budget counts the parts): a sweep's parts are a permutation of the cloud, and a part leaves every other
+    particle as it was. settle() makes the rest as whole sweeps."""
+    monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)
+    scheduler, f, made = _counting_filter(False, 1500.0, n=250)
+    parts = []
+    real_move = f.move
+
+    def move(count, part=None):
+        parts.append(None if part is None else np.array(part))
+        before = f.x.copy()
+        real_move(count, part)
+        if part is not None:
+            rest = np.setdiff1d(np.arange(f.n), part)
+            assert np.array_equal(f.x[rest], before[rest])
+
+    f.move = move
+    _resampled(scheduler, f)
+    assert made == [100, 100, 50] and scheduler.debt(f).sweeps == 4  # the first sweep, whole, in three parts
+    assert np.array_equal(np.sort(np.concatenate(parts)), np.arange(250))
+    made.clear()
+    with slices.one_call():
+        slices.charge(slices.Cost(4000.0, 0.0), 0)  # a dear step: one part
+        _point(scheduler, f, 0)
+    assert made == [100] and scheduler.debt(f).sweeps == 4 and scheduler.debt(f).at == 100
+    made.clear()
+    _point(scheduler, f, 1)  # the sweep goes on where it stopped, then the next begins
+    assert made == [100, 50, 100] and scheduler.debt(f).sweeps == 3 and scheduler.debt(f).at == 100
+    made.clear()
+    scheduler.settle(_track(f))
+    assert made == [250, 250, 250] and scheduler.owed(_track(f)) == 0
 
 
 def test_the_cloud_summary_is_made_once_per_cloud_and_follows_a_replaced_cloud():

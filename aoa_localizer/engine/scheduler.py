@@ -33,6 +33,9 @@ if TYPE_CHECKING:  # the tracks take the scheduler: the type only, for the check
 log = logging.getLogger("aoa_localizer")
 
 SWEEPS_PER_POINT = 1  # owed sweeps a point makes when the caller gave no time for them
+# Under `reproducible` a larger cloud's sweep is made this many particles at a time (a random order per sweep), so
+# one sweep of a thousand particles over hundreds of points does not take a call by itself
+SWEEP_PART = 100
 
 
 @dataclass
@@ -41,6 +44,9 @@ class Debt:
 
     modes: bool = False
     sweeps: int = 0
+    # the sweep being made a part at a time: its order of the particles and how many of them have moved
+    order: np.ndarray | None = None
+    at: int = 0
 
     def __int__(self) -> int:
         return int(self.modes) + self.sweeps
@@ -109,7 +115,7 @@ class Scheduler:
         debt = self.debt(f)
         if not self.realtime:
             if f.resampled:
-                debt.sweeps = f.sweeps
+                debt.sweeps, debt.order, debt.at = f.sweeps, None, 0
             self._sweep_within_budget(f, debt, current_call())
             return
         if f.resampled:
@@ -123,12 +129,20 @@ class Scheduler:
     @staticmethod
     def _sweep_within_budget(f: ResampleMove, debt: Debt, call: Call) -> None:
         """The owed sweeps one at a time, at least one, while the call's metered cost with the last sweep's once
-        more stays under SWEEP_BUDGET_US."""
+        more stays under SWEEP_BUDGET_US; a cloud of more than SWEEP_PART particles a part of a sweep at a time."""
         last = 0.0
         while debt.sweeps and (not last or call.cost() + last < SWEEP_BUDGET_US):
             before = spent()
-            debt.sweeps -= 1
-            f.move(1)
+            if f.n <= SWEEP_PART:
+                f.move(1)
+                debt.sweeps -= 1
+            else:
+                if debt.order is None:
+                    debt.order, debt.at = f.rng.permutation(f.n), 0
+                f.move(1, debt.order[debt.at:debt.at + SWEEP_PART])
+                debt.at += SWEEP_PART
+                if debt.at >= f.n:
+                    debt.sweeps, debt.order = debt.sweeps - 1, None
             last = spent() - before
 
     def settle(self, track: EmitterTrack) -> None:
@@ -136,7 +150,7 @@ class Scheduler:
         f = track.filter
         debt = self.debt(f)
         if debt.sweeps and isinstance(f, ResampleMove):
-            made, debt.sweeps = debt.sweeps, 0
+            made, debt.sweeps, debt.order, debt.at = debt.sweeps, 0, None, 0  # a sweep made in parts is made whole
             f.move(made)
 
     def pay_modes(self, track: EmitterTrack) -> bool:

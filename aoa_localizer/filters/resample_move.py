@@ -87,10 +87,23 @@ class ResampleMove(ParticleFilter):
             self.last_z = z
         return ok
 
-    def move(self, count: int):
+    def move(self, count: int, part: np.ndarray | None = None):
         """`count` sweeps of the filter's operator on the posterior, given the newest point (None before one); the
-        weights (equal after a resampling) stay."""
-        self._sweeps(count, self.last_z)
+        weights (equal after a resampling) stay. `part`: only these particles move (indices; the operator sees them
+        as its cloud): each particle's move keeps the posterior invariant whichever others move, so a sweep can be
+        made a part at a time."""
+        if part is None:
+            self._sweeps(count, self.last_z)
+            return
+        cloud, n = self.x, self.n
+        self.x, self.n = cloud[part], len(part)
+        try:
+            self._sweeps(count, self.last_z)
+            moved = self.x
+        finally:
+            self.x, self.n = cloud.copy(), n
+        self.x[part] = moved
+        self.invalidate()
 
     def _sweeps(self, count: int, z):
         joint = self.model.hypotheses_log_joint(self.x) if isinstance(self.model, LatentNoise) else None
