@@ -74,8 +74,8 @@ def test_the_documented_program_modules_are_thin_entry_points():
 
 def test_the_launcher_refuses_unknown_or_malformed_parameters_before_starting_anything(cli, tmp_path):
     """ROS-package issue: `-p num_particle=5`, `--vehicle-param nosuch=1` ran with defaults and exit 0, `-p
-    num_particles` exited 1, a missing params file gave a traceback. Each is refused now, exit 2, with the
-    nearest known name."""
+    num_particles` exited 1, a missing params file gave a traceback; `--speedup -3` started the graph and then
+    failed in the vehicle. Each is refused now, exit 2, with the nearest known name or the range."""
     from aoa_localizer.ros.launch import main
 
     cases = [(["-p", "num_particle=5"], "num_particle: unknown parameter; did you mean num_particles?"),
@@ -87,7 +87,11 @@ def test_the_launcher_refuses_unknown_or_malformed_parameters_before_starting_an
              (["--vehicle-param", "bearing_encoding=pose", "-p", "bearing_encoding=df_record"],
               "the node would receive nothing"),
              (["--bag", tmp_path, "--vehicle-param", "wild_share=0.1"], "not --bag"),
-             (["--data-seed", "-1"], "a seed is an integer >= 0, got -1")]
+             (["--data-seed", "-1"], "a seed is an integer >= 0, got -1"),
+             (["--speedup", "-3"], "argument --speedup: a finite number >= 0, got -3"),
+             (["--duration", "0"], "argument --duration: a finite number > 0, got 0"),
+             (["--timeout", "inf"], "argument --timeout: a finite number > 0, got inf"),
+             (["--domain-id", "300"], "argument --domain-id: an integer in [0, 232], got 300")]
     for args, words in cases:
         res = cli(main, *args)
         assert res.returncode == 2 and words in res.stderr, (args, res.stderr)

@@ -258,6 +258,18 @@ def test_channels_in_a_bag_give_one_line_per_channel_and_json_lines_per_emitter(
         assert f"channel {cid}: estimate: lat" in res.stderr
 
 
+@pytest.mark.parametrize("args, words", [
+    (["--rate", "-1"], "argument --rate: a finite number >= 0, got -1"),
+    (["--max-rate", "0"], "argument --max-rate: a finite number > 0, got 0"),
+    (["--wait", "nan"], "argument --wait: a finite number >= 0, got nan"),
+    (["--rate", "fast"], "argument --rate: a finite number >= 0, got 'fast'"),
+])
+def test_a_replay_rate_or_wait_that_is_no_finite_number_in_range_is_refused(cli, args, words):
+    """A negative rate, a zero message rate or a NaN wait played the bag as if they were sensible (exit 0)."""
+    res = cli(replay_main, ROOT / "bags/urban", *args)
+    assert res.returncode == 2 and words in res.stderr, res.stderr
+
+
 @pytest.mark.slow
 def test_ctrl_c_during_offline_replay_or_report_ends_in_one_line_and_keeps_what_was_written(tmp_path):
     """Ctrl-C mid-run: exit 130 (documented), one line saying what is kept, no traceback; the estimates replay

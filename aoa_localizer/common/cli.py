@@ -4,8 +4,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import shutil
 import sys
+from collections.abc import Callable
 
 import yaml
 
@@ -50,6 +52,38 @@ def seed_value(text: str) -> int:
         raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {value}")
+    return value
+
+
+def finite_number(low: float, low_open: bool = False, high: float = math.inf) -> Callable[[str], float]:
+    """argparse type of a finite number at least `low` (above it when `low_open`) and at most `high`."""
+    where = f"{'(' if low_open else '['}{low:g}, {high:g}]" if math.isfinite(high) else \
+        (f"> {low:g}" if low_open else f">= {low:g}")
+
+    def value(text: str) -> float:
+        try:
+            number = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"a finite number {where}, got {text!r}") from None
+        if not (math.isfinite(number) and (number > low if low_open else number >= low) and number <= high):
+            raise argparse.ArgumentTypeError(f"a finite number {where}, got {text}")
+        return number
+
+    return value
+
+
+def integer_in(low: int, high: int) -> Callable[[str], int]:
+    """argparse type of an integer in [low, high]."""
+
+    def value(text: str) -> int:
+        try:
+            number = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"an integer in [{low}, {high}], got {text!r}") from None
+        if not low <= number <= high:
+            raise argparse.ArgumentTypeError(f"an integer in [{low}, {high}], got {number}")
+        return number
+
     return value
 
 

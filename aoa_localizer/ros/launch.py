@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from aoa_localizer.common.cli import HelpFormatter, seed_value
+from aoa_localizer.common.cli import HelpFormatter, finite_number, integer_in, seed_value
 from aoa_localizer.core.spec import ConfigError, unknown_names
 from aoa_localizer.engine.config import parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
@@ -304,13 +304,14 @@ def parse_args(argv) -> argparse.Namespace:
     parser.add_argument("--scenario", choices=sorted(SCENARIOS) + sorted(FLEETS),
                         help="public scenario to simulate (docs/benchmarks.md, Scenarios; unset: seed); with --bag, "
                         "the scenario whose receiver settings the node gets (unset: the node's defaults)")
-    parser.add_argument("--speedup", type=float, default=10.0, metavar="X", help="simulated seconds per wall second")
-    parser.add_argument("--duration", type=float, metavar="S",
+    parser.add_argument("--speedup", type=finite_number(0.0), default=10.0, metavar="X",
+                        help="simulated seconds per wall second (0: as fast as the vehicle's max_rate_hz)")
+    parser.add_argument("--duration", type=finite_number(0.0, low_open=True), metavar="S",
                         help="simulated seconds to play (unset: the whole scenario)")
     parser.add_argument("--data-seed", type=seed_value, default=0, metavar="N", help="seed of the simulated data")
     parser.add_argument("--bag", type=Path, metavar="DIR",
                         help="replay this bag into the node instead of the simulated vehicle")
-    parser.add_argument("--rate", type=float, default=10.0, metavar="X",
+    parser.add_argument("--rate", type=finite_number(0.0), default=10.0, metavar="X",
                         help="with --bag: replay rate (0: as fast as allowed)")
     parser.add_argument("--record", type=Path, metavar="DIR",
                         help="record every topic into this rosbag2 MCAP bag directory")
@@ -319,10 +320,11 @@ def parse_args(argv) -> argparse.Namespace:
     parser.add_argument("--params-file", type=Path, metavar="YAML", help="node parameters file (ROS 2 YAML)")
     parser.add_argument("--vehicle-param", action="append", default=[], metavar="NAME=VALUE",
                         help="sim_vehicle parameter, e.g. gps_dropout_prob=0.1")
-    parser.add_argument("--domain-id", type=int, metavar="ID",
-                        help="ROS_DOMAIN_ID (unset: random in 1-101, the range ROS recommends)")
-    parser.add_argument("--timeout", type=float, default=600.0, metavar="S", help="wall seconds before giving up")
-    parser.add_argument("--max-ellipse", type=float, default=50.0, metavar="M",
+    parser.add_argument("--domain-id", type=integer_in(0, 232), metavar="ID",
+                        help="ROS_DOMAIN_ID, 0-232 (unset: random in 1-101, the range ROS recommends)")
+    parser.add_argument("--timeout", type=finite_number(0.0, low_open=True), default=600.0, metavar="S",
+                        help="wall seconds before giving up")
+    parser.add_argument("--max-ellipse", type=finite_number(0.0, low_open=True), default=50.0, metavar="M",
                         help="widest 95 %% ellipse (m) called converged")
     parser.add_argument("--result", type=Path, metavar="FILE", help="write the final estimate and verdict as JSON")
     args = parser.parse_args(argv)

@@ -25,6 +25,7 @@ from aoa_localizer.common.cli import (
     bag_stations,
     bag_topics,
     config_from_args,
+    finite_number,
     interrupted,
     setup_logging,
 )
@@ -90,17 +91,18 @@ def main(argv=None) -> int:
     parser.add_argument("bag", help="rosbag2 bag: a directory (MCAP or sqlite3, split, compressed; metadata.yaml "
                         "optional) or one .mcap/.db3 file")
     parser.add_argument("--offline", action="store_true", help="run the engine on the bag without ROS")
-    parser.add_argument("--rate", type=float, default=1.0, help="live: playback rate (0: as fast as --max-rate)")
-    parser.add_argument("--max-rate", type=float, default=400.0, help="live, --rate 0: messages per second")
+    parser.add_argument("--rate", type=finite_number(0.0), default=1.0,
+                        help="live: playback rate (0: as fast as --max-rate)")
+    parser.add_argument("--max-rate", type=finite_number(0.0, low_open=True), default=400.0,
+                        help="live, --rate 0: messages per second")
     parser.add_argument("--remap", action="append", default=[], metavar="FROM:=TO", help="live: rename a topic")
     parser.add_argument("--topics", nargs="+", help="live: play these topics (unset: the fix and bearing topics and "
                         "/sim/truth, /sim/datum; never the bag's recorded node outputs)")
     parser.add_argument("--all-topics", action="store_true", help="live: play every topic of the bag")
     parser.add_argument("--clock", action="store_true", help="live: publish /clock at the bag's log time (for "
                         "nodes with use_sim_time:=true)")
-    parser.add_argument(
-        "--wait", type=float, default=3.0, help="live: seconds to wait for every topic to have a subscriber"
-    )
+    parser.add_argument("--wait", type=finite_number(0.0), default=3.0,
+                        help="live: seconds to wait for every topic to have a subscriber")
     parser.add_argument("--output", default="-", help="offline: JSON-lines file for the estimates (-: stdout)")
     add_topic_args(parser)
     add_engine_args(parser)
