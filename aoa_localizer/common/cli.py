@@ -55,17 +55,16 @@ def seed_value(text: str) -> int:
     return value
 
 
-def finite_number(low: float, low_open: bool = False, high: float = math.inf) -> Callable[[str], float]:
-    """argparse type of a finite number at least `low` (above it when `low_open`) and at most `high`."""
-    where = f"{'(' if low_open else '['}{low:g}, {high:g}]" if math.isfinite(high) else \
-        (f"> {low:g}" if low_open else f">= {low:g}")
+def finite_number(low: float, low_open: bool = False) -> Callable[[str], float]:
+    """argparse type of a finite number at least `low` (above it when `low_open`)."""
+    where = f"> {low:g}" if low_open else f">= {low:g}"
 
     def value(text: str) -> float:
         try:
             number = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"a finite number {where}, got {text!r}") from None
-        if not (math.isfinite(number) and (number > low if low_open else number >= low) and number <= high):
+        if not (math.isfinite(number) and (number > low if low_open else number >= low)):
             raise argparse.ArgumentTypeError(f"a finite number {where}, got {text}")
         return number
 

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
+from aoa_localizer.engine.safety import Proposal
 
 
 class GridProposal:
@@ -61,7 +62,7 @@ class GridProposal:
 class Blend:
     """A mixture of proposals with fixed weights: draws from each in its share, the density of the mixture."""
 
-    def __init__(self, parts: list, weights: list[float]):
+    def __init__(self, parts: list[Proposal], weights: list[float]):
         self.parts = parts
         w = np.asarray(weights, float)
         self.log_w = np.log(w / w.sum())
