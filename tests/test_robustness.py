@@ -229,6 +229,25 @@ def test_independence_moves_keep_a_known_posterior():
     assert np.cov(x.T) == pytest.approx(cov, abs=0.3)
 
 
+def test_an_importance_sample_draws_eight_a_particle_up_to_its_cap():
+    """A start's or re-start's importance sample: 8 draws a particle (800 at the default N = 100), at most 2000 in all
+    for a larger cloud (whose sweeps spread it), never fewer than the particles."""
+    from aoa_localizer.engine.global_search import Mode
+    from aoa_localizer.engine.safety import importance_sample
+
+    prop = ModeProposal([Mode(np.zeros(2), np.eye(2), 0.0, 0.0, 10, 90.0)], broad_sigma_m=20.0)
+    looks = []
+
+    def log_target(x):
+        looks.append(len(x))
+        return -0.5 * np.sum(x * x, axis=1)
+
+    for n, draws in ((100, 800), (250, 2000), (1000, 2000), (5000, 5000)):
+        looks.clear()
+        sample = importance_sample(log_target, prop, n, np.random.default_rng(0))
+        assert sample.shape == (n, 2) and looks == [draws]
+
+
 def test_closed_form_2x2_inverse_equals_numpy():
     from aoa_localizer.engine.global_search import inverse_2x2
 

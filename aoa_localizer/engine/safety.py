@@ -27,6 +27,7 @@ _WIDEN = 1.5  # the Laplace covariance underestimates a bearing posterior's bana
 _DEFENSIVE = 0.1  # share of the broad component
 _MIN_COMPONENT = 0.02  # every kept mode is proposed at least this often
 _KEEP_LOG_MASS = 30.0  # modes more than this many nats below the best are not proposed
+_MAX_DRAWS = 2000  # an importance sample's draws (a look each) beyond 8 a particle of the default N = 100
 
 
 class HealthMonitor:
@@ -124,9 +125,10 @@ def weighted_sample(log_target, proposal: Proposal, n: int, rng: np.random.Gener
     return y, np.where(np.isfinite(lw), lw, -np.inf)
 
 
-def importance_sample(log_target, proposal: ModeProposal, n: int, rng: np.random.Generator, draws_per_particle=8):
+def importance_sample(log_target, proposal: Proposal, n: int, rng: np.random.Generator, draws_per_particle=8):
     """N particles drawn from q and resampled by pi / q (systematic): a sample of the posterior, modes in
-    proportion to their mass. Duplicates are left for the MH sweeps that follow to spread."""
-    y, lw = weighted_sample(log_target, proposal, draws_per_particle * n, rng)
+    proportion to their mass. Duplicates are left for the MH sweeps that follow to spread. `draws_per_particle`
+    draws a particle, at most _MAX_DRAWS in all: a large cloud's diversity comes from its sweeps."""
+    y, lw = weighted_sample(log_target, proposal, min(draws_per_particle * n, max(n, _MAX_DRAWS)), rng)
     w = np.exp(lw - lw.max())
     return y[systematic(w / w.sum(), rng)[:n]] if w.sum() > 0 else y[:n]
