@@ -31,8 +31,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("aoa_localizer")
 
-# Broad Gaussian prior after a data-driven start, in multiples of the range to the start: it only keeps the
-# bearing-only posterior proper (a flat prior has infinite mass along the rays).
+# Broad Gaussian prior after the paper's start (triangulation), in multiples of the range to the start: it only
+# keeps the bearing-only posterior proper (a flat prior has infinite mass along the rays); the global search's start
+# has the radio-range prior instead. The minimum is also the mode proposal's broad component's.
 PRIOR_RANGE_FACTOR = 10.0
 PRIOR_MIN_SIGMA_M = 100.0
 START_SWEEPS = 3  # random-walk MH sweeps that spread the importance sample's duplicates
@@ -121,17 +122,14 @@ class Initiator:
 
     def _sample_posterior(self, modes: list[Mode], start: bool = False) -> ParticleFilter:
         """A filter holding every point waiting for a start and an importance sample of their posterior from the
-        modes. `start`: the filter's start (resampled, then MH sweeps; kept as `start_cloud`), with a broad Gaussian
-        prior at the best mode besides the radio-range prior; else a provisional sample (weighted) of the posterior
-        the start search scored, under the radio-range prior alone: a Gaussian at an undetermined mode near the
-        antennas (10 times its few metres of range) would cut off the far end of its ray."""
+        modes: the posterior the start search scored, the likelihood under the radio-range prior (no Gaussian at the
+        best mode: at a mode by the track, ten times its few metres of range held the cloud there and cut off the
+        far end of its ray). `start`: the filter's start (resampled, then MH sweeps; kept as `start_cloud`); else a
+        provisional sample (weighted)."""
         t, best = self.track, modes[0]
-        sigma = _prior_sigma(best.mean, t.window[-1].point)
         # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (a look each)
         f = self.new_filter(None if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES))
         model = cast(EmitterModel, f.model)
-        if start:
-            model.set_prior(best.mean, sigma**2 * np.eye(2))
         model.reach = t.reach()
         model.lik.outlier_prob = t.calibration.lik_outlier_prob
         for e in t.window:
@@ -149,7 +147,7 @@ class Initiator:
             if np.isfinite(logw.max()):
                 f.logw = logw - logw.max()
             return f
-        f.initialise(importance_sample(f.log_target, t.proposal, f.n, t.rng), best.mean, sigma**2 * np.eye(2))
+        f.initialise(importance_sample(f.log_target, t.proposal, f.n, t.rng))
         self.start_cloud = f.x.copy()
         f.rejuvenate(START_SWEEPS, t.proposal)
         return f

@@ -41,8 +41,10 @@ from aoa_localizer.filters.base import ParticleFilter
 
 log = logging.getLogger("aoa_localizer")
 
-# The radio-range prior's scale: this many times the antennas' spread, at least this many metres.
-_REACH_FACTOR, _REACH_MIN_M = 2.0, 100.0
+# The radio-range prior's scale: this many times the antennas' spread, at least this many metres (a transmitter a
+# DF receiver hears is often kilometres away; at 100 m a short baseline's posterior kept an emitter 1.4 km out along
+# its ray under 3 % of its mass)
+_REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
 _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
 
 
@@ -283,7 +285,7 @@ class EmitterTrack:
         if prior and cfg.prior_east is not None and cfg.prior_north is not None and cfg.prior_sigma_m is not None:
             return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, np.array([cfg.prior_east, cfg.prior_north]),
                           np.eye(2) / cfg.prior_sigma_m**2, c.grid)
-        reach = self.reach() if self.filter is None and prior else None
+        reach = (self.reach() if self.filter is None else self.model.reach) if prior else None
         return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, grid=c.grid, reach=reach)
 
     def reach(self) -> tuple[float, float, float] | None:
