@@ -224,9 +224,11 @@ def test_sample_bag_through_the_live_node_gives_the_offline_estimate(tmp_path, d
     # which moves observation-point boundaries (docs/ros.md; at --rate 0.5 it matched to the last digit).
     assert np.hypot(live["east"] - last["east"], live["north"] - last["north"]) < 0.5
     # The ellipses' size (the product of the semi-axes): here it is nearly a circle, so its two axes are each a
-    # hundred particles' ill-conditioned split of it (0.70 x 0.74 m, or 0.58 x 0.86 m, for the same area).
+    # hundred particles' ill-conditioned split of it (0.70 x 0.74 m, or 0.58 x 0.86 m, for the same area). The live
+    # and the offline run are two Monte Carlo runs of it: over 12 offline filter seeds the size spreads by 10 % (0.39 to
+    # 0.57), and one seed's over another's exceeds 1.28 one time in twenty (at most 1.47), so they agree within 1.5x.
     sizes = [np.sqrt(np.linalg.det(np.array(c))) for c in (live["cov"], last["cov"])]
-    assert np.isclose(sizes[0], sizes[1], rtol=0.25), sizes
+    assert 1 / 1.5 < sizes[0] / sizes[1] < 1.5, sizes
 
 
 def _drive_publishers(node, executor):
