@@ -80,25 +80,54 @@ class RosLogHandler(logging.Handler):
 
 
 class Drain:
-    """Handle the message the executor took, then up to DRAIN_MAX more already queued on `subscription`."""
+    """Handle the message the executor took, then up to DRAIN_MAX more already queued on `subscription`, each after
+    the messages queued on `first` (the station's fixes, with their handler): a DF stream drained ahead of the fixes
+    queued beside it would leave its bearings waiting for fixes that have come, and past 2 x gps_max_gap_s of waiting
+    they are refused as gps_gap (a replay faster than real time lost 100 bearings a burst)."""
 
     subscription: Any = None
+    first: tuple[Any, Callable[[Any, Any], None]] | None = None
 
     def __init__(self, handle: Callable[[Any, Any], None]):
         self.handle = handle
 
     def __call__(self, msg, info):
+        if not self._take_first():
+            return
         self.handle(msg, info)
-        sub = self.subscription
         for _ in range(DRAIN_MAX):
-            try:
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            except InvalidHandle:  # destroyed meanwhile (shutdown)
+            if not self._take_first():
                 return
-            if taken is None:
+            taken = _take(self.subscription)
+            if taken is None or taken is _GONE:
                 return
             self.handle(*taken)
+
+    def _take_first(self) -> bool:
+        """Every message queued on `first`, handled; False when a subscription was destroyed (shutdown)."""
+        if self.first is None:
+            return True
+        sub, handle = self.first
+        for _ in range(DRAIN_MAX):
+            taken = _take(sub)
+            if taken is None:
+                return True
+            if taken is _GONE:
+                return False
+            handle(*taken)
+        return True
+
+
+_GONE = object()  # what _take gives for a subscription destroyed meanwhile
+
+
+def _take(sub) -> Any:
+    """The next message queued on `sub` as (message, info); None when none is; _GONE when `sub` was destroyed."""
+    try:
+        with sub.handle:
+            return sub.handle.take_message(sub.msg_type, sub.raw)
+    except InvalidHandle:  # destroyed meanwhile (shutdown)
+        return _GONE
 
 
 class LocalizerNode(Node):
@@ -166,13 +195,13 @@ class LocalizerNode(Node):
         self.subs: list[tuple[Any, str]] = []  # (subscription, the message type it expects)
         for name in self.station_names:  # relative names: namespaces and remaps apply
             prefix = f"{name}/" if name else ""
-            fix_sub = self.create_subscription(T.NavSatFix, prefix + "gps/fix",
-                                               lambda msg, info, station=name: self.on_fix(msg, station, info),
-                                               sensor, event_callbacks=lost("fixes_lost"))
+            on_fix = lambda msg, info, station=name: self.on_fix(msg, station, info)  # noqa: E731
+            fix_sub = self.create_subscription(T.NavSatFix, prefix + "gps/fix", on_fix, sensor,
+                                               event_callbacks=lost("fixes_lost"))
             on_bearing = self._draining(lambda msg, info, station=name: self.on_bearing(msg, station, info))
             bearing_sub = self.create_subscription(bearing_type, prefix + "df/bearing", on_bearing, sensor,
                                                    event_callbacks=lost("bearings_lost"))
-            on_bearing.subscription = bearing_sub
+            on_bearing.subscription, on_bearing.first = bearing_sub, (fix_sub, on_fix)
             self.subs += [(fix_sub, FIX_TYPE), (bearing_sub, INPUT_TYPES[self.cfg.bearing_encoding])]
             if self.cfg.bearing_reference == "vehicle" and self.cfg.heading_source == "imu":
                 self.create_subscription(T.Imu, prefix + "heading/imu",
