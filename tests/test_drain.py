@@ -3,7 +3,7 @@ the same callback, in order, at most DRAIN_MAX of them, each after the station's
 subscription ends it quietly."""
 from rclpy.exceptions import InvalidHandle
 
-from aoa_localizer.ros.node import DRAIN_MAX, Drain
+from aoa_localizer.ros.node import DRAIN_MAX, FIRST_EVERY, Drain
 
 
 class FakeHandle:
@@ -54,19 +54,31 @@ def test_a_subscription_destroyed_meanwhile_ends_the_drain():
     assert [m for m, _ in drained([("b", {}), ("c", {})], fail_after=1)] == ["first", "b"]
 
 
-def test_the_fixes_queued_beside_the_records_are_handled_before_each_of_them():
+def test_the_fixes_queued_beside_the_records_are_handled_first_and_every_few_records():
     """A burst: DF records ahead of the fixes queued beside them would wait for fixes already come and, past 2 x
-    gps_max_gap_s, be refused as gps_gap. The fixes queued when each record is taken go first."""
+    gps_max_gap_s, be refused as gps_gap. The fixes queued go before the executor's record and before every
+    FIRST_EVERY-th drained one."""
     handled = []
     fixes = [("fix 1", {}), ("fix 2", {})]
-    records = [("b", {}), ("c", {})]
-    drain = Drain(lambda msg, info: handled.append(msg))
+    records = [(f"r{k}", {}) for k in range(1, 2 * FIRST_EVERY + 1)]
+
+    def on_record(msg, info):
+        handled.append(msg)
+        if msg in ("a", f"r{FIRST_EVERY - 1}"):
+            fixes.append((f"fix after {msg}", {}))  # a fix arrives while the drain runs
+
+    def on_fix(msg, info):
+        handled.append(msg)
+        if msg == "fix 2":
+            fixes.append(("fix 3", {}))  # came while fix 2 was handled: the queue is emptied, so it goes first too
+
+    drain = Drain(on_record)
     drain.subscription = FakeSubscription(records)
-    drain.first = (FakeSubscription(fixes), lambda msg, info: (handled.append(msg), fixes.append(("fix 3", {}))
-                                                                if msg == "fix 2" else None))
+    drain.first = (FakeSubscription(fixes), on_fix)
     drain("a", {})
-    # fix 3 came while fix 2 was handled: still taken before record a (the queue is emptied)
-    assert handled == ["fix 1", "fix 2", "fix 3", "a", "b", "c"]
+    rest = [f"r{k}" for k in range(1, 2 * FIRST_EVERY + 1)]
+    assert handled == (["fix 1", "fix 2", "fix 3", "a"] + rest[:FIRST_EVERY - 1]
+                       + ["fix after a", f"fix after r{FIRST_EVERY - 1}"] + rest[FIRST_EVERY - 1:])
 
 
 def test_a_fix_subscription_destroyed_meanwhile_ends_the_drain():
