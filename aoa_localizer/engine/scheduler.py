@@ -44,7 +44,7 @@ class Debt:
 
     modes: bool = False
     sweeps: int = 0
-    # the sweep being made a part at a time: its order of the particles and how many of them have moved
+    # the sweep being made a part at a time: its order of the particles (None: none begun) and how many have moved
     order: np.ndarray | None = None
     at: int = 0
 
@@ -115,7 +115,7 @@ class Scheduler:
         debt = self.debt(f)
         if not self.realtime:
             if f.resampled:
-                debt.sweeps, debt.order, debt.at = f.sweeps, None, 0
+                debt.sweeps, debt.order = f.sweeps, None
             self._sweep_within_budget(f, debt, current_call())
             return
         if f.resampled:
@@ -150,7 +150,7 @@ class Scheduler:
         f = track.filter
         debt = self.debt(f)
         if debt.sweeps and isinstance(f, ResampleMove):
-            made, debt.sweeps, debt.order, debt.at = debt.sweeps, 0, None, 0  # a sweep made in parts is made whole
+            made, debt.sweeps, debt.order = debt.sweeps, 0, None  # a sweep made in parts is made whole
             f.move(made)
 
     def pay_modes(self, track: EmitterTrack) -> bool:

@@ -48,7 +48,7 @@ DATUM_PARAMS = frozenset({"datum_lat", "datum_lon", "datum_alt"})  # the only pa
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
 ENGINE_LOGGER = "aoa_localizer"  # the engine's logger (engine/localizer.py); its modules' are children
-DRAIN_MAX = 100  # DF records handled per executor callback beyond the first (then GPS, timers and services get a turn)
+DRAIN_MAX = 100  # DF records handled per executor callback beyond the first (then timers and services get a turn)
 # The queued fixes are taken before every this many drained records: a record a take of the fix queue cost the node
 # 12 % more CPU at 5000 records/s, and 10 records are at most a second of one channel's stream at 10 Hz
 FIRST_EVERY = 10
