@@ -13,9 +13,9 @@ from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.checks import refined
 from aoa_localizer.engine.crlb import ELLIPSE_95, inside_ellipse, nees
 from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.geodesy import TWO_PI, LocalFrame
-from aoa_localizer.engine.global_search import Points, Robust, log_posterior
-from aoa_localizer.engine.offset import joint_optimum
+from aoa_localizer.engine.geodesy import TWO_PI, LocalFrame, wrap_pi
+from aoa_localizer.engine.global_search import Points, Robust, linearised, log_posterior
+from aoa_localizer.engine.offset import joint_optimum, shifted
 from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
 from aoa_localizer.engine.scenarios import robustness_cells, simulate
 from aoa_localizer.engine.slices import run_whole
@@ -177,6 +177,53 @@ def test_the_joint_optimum_finds_a_constant_offset_on_a_drive_with_a_turn():
     assert math.degrees(b) == pytest.approx(20.0, abs=1.0)
     assert np.hypot(*(x - truth)) < 15.0
     assert lp > float(log_posterior(refined(x, pts, rob), pts, rob)) + 100
+
+
+def one_start(pts: Points, x: np.ndarray, b: float, rob: Robust) -> tuple[float, np.ndarray, float]:
+    """The reference: damped Gauss-Newton in (east, north, offset) from one start, a point at a time in plain numpy
+    (joint_optimum makes every start's path at once)."""
+    lp = float(log_posterior(x, shifted(pts, b), rob))
+    for _ in range(30):
+        r, grad, w, _ = linearised(x, shifted(pts, b), rob)
+        jac = np.column_stack([-grad, -np.ones_like(r)])
+        info = (jac * w[:, None]).T @ jac + 1e-9 * np.eye(3)
+        delta = -np.linalg.solve(info, jac.T @ (w * r))
+        reach = math.hypot(x[0] - pts.east.mean(), x[1] - pts.north.mean()) + 100.0
+        delta *= min(1.0, reach / max(float(np.hypot(delta[0], delta[1])), 1e-300))
+        for step in (1.0, 0.5, 0.25):
+            x_try, b_try = x + step * delta[:2], float(wrap_pi(b + step * delta[2]))
+            lp_try = float(log_posterior(x_try, shifted(pts, b_try), rob))
+            if np.isfinite(lp_try) and lp_try > lp:
+                break
+        else:
+            break
+        done = lp_try - lp < 1e-6
+        x, b, lp = x_try, b_try, lp_try
+        if done:
+            break
+    return b, x, lp
+
+
+@pytest.mark.parametrize("case", range(6))
+def test_the_joint_optimum_of_every_start_at_once_is_the_best_of_one_start_at_a_time(case):
+    """Random drives (some with a turn, some straight, wild bearings, GPS noise), offsets and starts: the optimum
+    made for every start at once is the best of the paths made one start at a time."""
+    rng = np.random.default_rng(case)
+    k = int(rng.integers(8, 60))
+    east = np.cumsum(rng.uniform(0, 40, k))
+    north = np.where(np.arange(k) > k // 2, np.cumsum(rng.uniform(0, 40, k)), 0.0) if case % 2 else np.zeros(k)
+    truth = rng.uniform(-800, 800, 2) + [east.mean(), 300.0]
+    theta = np.arctan2(truth[1] - north, truth[0] - east) + rng.uniform(-0.6, 0.6) + 0.02 * rng.standard_normal(k)
+    theta[rng.random(k) < 0.15] = rng.uniform(-math.pi, math.pi)
+    pts = Points(east, north, wrap_pi(theta), np.full(k, 0.02), np.full(k, 3.0 * (case % 3)))
+    rob = Robust(0.1, 5.0)
+    x0 = truth + rng.normal(0, 200, 2)
+    starts = np.arange(-90.0, 91.0, 15.0) if case < 3 else np.arange(-180.0, 180.0, 15.0)
+    b, x, lp = run_whole(joint_optimum(pts, x0, rob, starts))
+    ref = max((one_start(pts, x0.copy(), math.radians(s), rob) for s in starts), key=lambda r: r[2])
+    assert lp == pytest.approx(ref[2], rel=1e-9, abs=1e-6)
+    assert math.remainder(b - ref[0], 2 * math.pi) == pytest.approx(0.0, abs=1e-6)
+    assert x == pytest.approx(ref[1], rel=1e-6, abs=1e-3)
 
 
 @pytest.mark.slow

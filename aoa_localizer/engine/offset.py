@@ -17,7 +17,7 @@ import numpy as np
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.global_search import Points, Robust, linearised, log_posterior
-from aoa_localizer.engine.slices import Steps
+from aoa_localizer.engine.slices import RESIDUALS, Steps, charge
 
 _STARTS_DEG = np.arange(-90.0, 91.0, 15.0)  # offsets the joint search starts from, around the current one
 ALL_OFFSETS_DEG = np.arange(-180.0, 180.0, 15.0)  # the starts where any offset is as likely (an array's mount)
@@ -70,52 +70,64 @@ def marginalise(pts: Points, x: np.ndarray, rob: Robust, sd: float) -> tuple[np.
     return -g * mean, np.outer(g, g) / info
 
 
-def shifted(pts: Points, offset: float) -> Points:
-    """The points with `offset` (rad) taken off every bearing."""
-    return Points(pts.east, pts.north, wrap_pi(pts.theta - offset), pts.sigma, pts.gps)
+def shifted(pts: Points, offset: float | np.ndarray) -> Points:
+    """The points with `offset` (rad) taken off every bearing; offsets (M, 1) give each of M rows its own."""
+    theta = wrap_pi(pts.theta - offset)
+    charge(RESIDUALS, theta.size)  # the bearings wrapped, their cosines and sines: a residual's work per element
+    return Points(pts.east, pts.north, theta, pts.sigma, pts.gps)
 
 
 def joint_optimum(pts: Points, x0: np.ndarray, rob: Robust,
                   starts_deg: np.ndarray | None = None) -> Steps[tuple[float, np.ndarray, float]]:
     """The best (offset, place, log posterior) of the points with an unknown constant offset: damped Gauss-Newton in
     (east, north, offset) with the mixture's EM weights, from starts every 15 deg (the offset's likelihood has a
-    mode per way of lining the bearings up): within 90 deg of the current one unless `starts_deg` says. A piece per
-    start (slices.py)."""
+    mode per way of lining the bearings up): within 90 deg of the current one unless `starts_deg` says. Every start
+    at once, each on its own path (a test holds them to one start at a time); a piece per iteration (slices.py)."""
+    b = np.radians(_STARTS_DEG if starts_deg is None else starts_deg).astype(float)
+    x = np.repeat(np.asarray(x0, float)[None, :], b.size, axis=0)
+    lp = log_posterior(x, shifted(pts, b[:, None]), rob)
+    active = np.arange(b.size)  # the starts still moving
+    for _ in range(_ITERATIONS):
+        if not active.size:
+            break
+        moved, done = _step(pts, rob, x, b, lp, active)
+        active = active[moved & ~done]
+        yield
     best = (0.0, np.asarray(x0, float), -math.inf)
-    for i, start in enumerate(np.radians(_STARTS_DEG if starts_deg is None else starts_deg).tolist()):
-        if i:
-            yield
-        b, x, lp = _gauss_newton(pts, np.asarray(x0, float), start, rob)
-        if np.isfinite(lp) and lp > best[2] + 1e-9:
-            best = (b, x, lp)
-    yield
+    for i in range(b.size):  # the first of equals, in the starts' order
+        if np.isfinite(lp[i]) and lp[i] > best[2] + 1e-9:
+            best = (float(b[i]), x[i].copy(), float(lp[i]))
     return best
 
 
-def _gauss_newton(pts: Points, x: np.ndarray, b: float, rob: Robust) -> tuple[float, np.ndarray, float]:
-    """(offset, place, log posterior) after damped Gauss-Newton steps from (x, b) with the mixture's EM weights."""
-    lp = float(log_posterior(x, shifted(pts, b), rob))
-    for _ in range(_ITERATIONS):
-        r, grad, w, _ = linearised(x, shifted(pts, b), rob)
-        jac = np.column_stack([-grad, -np.ones_like(r)])  # of the residual theta - b - bearing(x)
-        info = (jac * w[:, None]).T @ jac + 1e-9 * np.eye(3)
-        try:
-            delta = -np.linalg.solve(info, jac.T @ (w * r))
-        except np.linalg.LinAlgError:
+def _step(pts: Points, rob: Robust, x: np.ndarray, b: np.ndarray, lp: np.ndarray, active: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """One damped Gauss-Newton step of the `active` starts, x, b and lp updated in place: the first of the step
+    lengths 1, 1/2, 1/4 that raises the log posterior. (moved, converged: it rose by under 1e-6) per active start;
+    a start that did not move is at its optimum."""
+    xa, ba, lpa = x[active], b[active], lp[active]
+    r, grad, w, _ = linearised(xa, shifted(pts, ba[:, None]), rob)
+    jac = np.concatenate([-grad, -np.ones(r.shape + (1,))], axis=-1)  # of the residual theta - b - bearing(x)
+    info = np.einsum("ak,aki,akj->aij", w, jac, jac) + 1e-9 * np.eye(3)
+    rhs = np.einsum("aki,ak->ai", jac, w * r)
+    solvable = np.isfinite(info).all(axis=(1, 2)) & (np.abs(np.linalg.det(info)) > 0.0)
+    delta = np.zeros((active.size, 3))
+    if solvable.any():
+        delta[solvable] = -np.linalg.solve(info[solvable], rhs[solvable][..., None])[..., 0]
+    reach = np.hypot(xa[:, 0] - pts.east.mean(), xa[:, 1] - pts.north.mean()) + 100.0  # rays are nearly flat
+    delta *= np.minimum(1.0, reach / np.maximum(np.hypot(delta[:, 0], delta[:, 1]), 1e-300))[:, None]
+    moved = np.zeros(active.size, bool)
+    new_lp = lpa.copy()
+    for step in (1.0, 0.5, 0.25):
+        todo = np.flatnonzero(solvable & ~moved)
+        if not todo.size:
             break
-        reach = math.hypot(x[0] - pts.east.mean(), x[1] - pts.north.mean()) + 100.0  # rays are nearly flat
-        delta *= min(1.0, reach / max(float(np.hypot(delta[0], delta[1])), 1e-300))
-        for step in (1.0, 0.5, 0.25):
-            x_try, b_try = x + step * delta[:2], float(wrap_pi(b + step * delta[2]))
-            lp_try = float(log_posterior(x_try, shifted(pts, b_try), rob))
-            if np.isfinite(lp_try) and lp_try > lp:
-                break
-        else:
-            break
-        done = lp_try - lp < 1e-6
-        x, b, lp = x_try, b_try, lp_try
-        if done:
-            break
-    return b, x, lp
-
+        x_try, b_try = xa[todo] + step * delta[todo, :2], wrap_pi(ba[todo] + step * delta[todo, 2])
+        lp_try = log_posterior(x_try, shifted(pts, b_try[:, None]), rob)
+        up = np.isfinite(lp_try) & (lp_try > lpa[todo])
+        took = todo[up]
+        x[active[took]], b[active[took]], new_lp[took] = x_try[up], b_try[up], lp_try[up]
+        moved[took] = True
+    lp[active] = new_lp
+    return moved, new_lp - lpa < 1e-6
 
