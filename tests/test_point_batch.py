@@ -3,11 +3,14 @@ import math
 
 import numpy as np
 import pytest
+from conftest import track_of
 
-from aoa_localizer import LocalizerConfig
+from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer.engine.evaluation import scenario_config
 from aoa_localizer.engine.noise import NoiseModel
 from aoa_localizer.engine.point_batch import PointBatch, offset_point, sigmas
-from aoa_localizer.engine.preprocess import Group, make_point
+from aoa_localizer.engine.preprocess import Group, columns, make_point
+from aoa_localizer.engine.scenarios import simulate
 from aoa_localizer.engine.types import Reading
 
 FIELDS = ("stamp", "east", "north", "theta", "sigma", "n_readings", "gps_sigma")
@@ -25,7 +28,8 @@ def groups(rng: np.random.Generator) -> list[Group]:
         quality[rng.random(size) < 0.2] = np.nan
         out.append(Group(Reading(float(100 + i), float((t + math.pi) % (2 * math.pi) - math.pi), float(q),
                                  float(rng.uniform(0.005, 0.05)), float(rng.uniform(-1e3, 1e3)),
-                                 float(rng.uniform(-1e3, 1e3)), float(rng.uniform(0, 5)), 0.0, 0.0,
+                                 float(rng.uniform(-1e3, 1e3)), float(rng.uniform(0, 5)), float(rng.normal(0, 10)),
+                                 float(rng.normal(0, 10)),
                                  float(rng.uniform(0, 0.01)))
                          for i, (t, q) in enumerate(zip(theta, quality, strict=True))))
     return out
@@ -62,8 +66,28 @@ def test_the_batch_remakes_each_point_as_make_point_does(weighting, noise, offse
         assert (pts.east[k], pts.north[k], pts.theta[k], pts.sigma[k], pts.gps[k]) == (
             point.east, point.north, point.theta, point.sigma, point.gps_sigma)
     assert gated > 0  # the gate was exercised
+    velocity = [[columns(g).v_east.mean(), columns(g).v_north.mean()] for g in gs]
+    assert batch.velocity() == pytest.approx(np.array(velocity), rel=1e-12, abs=1e-12)
 
 
 def test_an_empty_batch_has_no_points():
     batch = PointBatch([], LocalizerConfig())
     assert batch.built(None) == [] and len(batch.points(fitted(), 0.2)) == 0
+
+
+def test_a_calibration_remakes_the_points_after_its_snapshot_as_make_does():
+    """A check's result rebuilds the track's points: those it did not make (they came after its snapshot) are made
+    together as a batch, and each is the point the calibrator's make() gives under the new noise and offset."""
+    data = simulate("seed", 1)
+    loc = Localizer(scenario_config(data, LocalizerConfig(seed=1)))
+    for event in list(data.inputs())[:200]:
+        loc.feed(event)
+    track = track_of(loc)
+    cal = track.calibration
+    cal.apply(fitted(), np.array([100.0, 200.0]), {}, 0.05)  # none made by a check: all as a batch
+    assert len(track.window) > 10
+    for entry in track.window:
+        ref, ref_kept = cal.make(entry.readings)
+        for name in FIELDS:
+            assert getattr(entry.point, name) == pytest.approx(getattr(ref, name), rel=1e-12, abs=1e-12), name
+        assert entry.gated == int((~ref_kept).sum())

@@ -118,6 +118,12 @@ class Calibrator:
             self.held_course = float(window_courses[0])
         f = t.filter  # None while waiting to start: only the points are rebuilt
         old = f.log_target(f.x) if f is not None else None
+        built = dict(built)
+        late = [e.readings for e in t.window if (b := built.get(id(e.readings))) is None or b[0] is not e.readings]
+        if late and not self.course:  # (turned by the course, each point holds the course from the one before)
+            # The points that came after the check's snapshot, made together: one by one, 46 of them took 5 ms
+            batch = PointBatch(late, self.cfg).built(self.noise if self.cfg.calibrate_noise else None, self.offset)
+            built.update((id(g), (g, b)) for g, b in zip(late, batch, strict=True))
         rebuilt: deque[WindowEntry] = deque()
         delta = 0
         for entry in t.window:

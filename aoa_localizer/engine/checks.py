@@ -221,11 +221,6 @@ class Snapshot:
             groups.append(g)
         self.__dict__.update(state, groups=groups)
 
-    def velocity(self) -> np.ndarray:
-        """The vehicle's mean east/north velocity over each point's readings (K, 2), m/s (made where the check
-        runs: the worker, when there is one)."""
-        return np.array([[c.v_east.mean(), c.v_north.mean()] for c in map(columns, self.groups)]).reshape(-1, 2)
-
     def robust(self, outlier_prob: float, fitted: bool) -> Robust:
         """The snapshot's robust posterior with another point outlier share (the likelihood's, as the track's);
         `fitted`: after a noise fit, which ends the noise's latent hypotheses."""
@@ -290,7 +285,7 @@ class _Calibrated:
         assert at is not None  # called after a fit
         rob = snap.robust(self.outlier, True)
         before = self.before.points(self.noise, snap.offset)
-        hint = yield from best_shift(before, snap.velocity(), at, rob)
+        hint = yield from best_shift(before, self.before.velocity(), at, rob)
         if hint is None:
             return False
         shifted_best = float(log_posterior(refined(at, before, rob), before, rob)) + hint.gain
@@ -320,7 +315,7 @@ def check(snap: Snapshot) -> Steps[CheckResult]:
     modes = yield from modes_in_pieces(pts, rob, False)
     hint = None
     if modes:
-        hint = yield from best_shift(pts, snap.velocity(), modes[0].mean, rob)
+        hint = yield from best_shift(pts, cal.before.velocity(), modes[0].mean, rob)
     return cal.result(modes, hint)
 
 

@@ -117,6 +117,13 @@ class PointBatch:
                       n_readings=np.bincount(of, keep, k).astype(int), gps_sigma=mean_of(c.gps_sigma))
         return fields, keep
 
+    def velocity(self) -> np.ndarray:
+        """The vehicle's mean east/north velocity over each point's readings (K, 2), m/s."""
+        k = self.sizes.size
+        sizes = np.maximum(self.sizes, 1)
+        return np.column_stack([np.bincount(self.of, self.cols.v_east, k) / sizes,
+                                np.bincount(self.of, self.cols.v_north, k) / sizes])
+
     def points(self, noise: NoiseModel | None, offset: float = 0.0) -> Points:
         """The points as the global search reads them."""
         if self.cfg.point_weighting == "paper":
