@@ -305,9 +305,9 @@ def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_ne
 
 def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_points(monkeypatch):
     """Under `reproducible` a call makes the owed sweeps while its metered cost and one more sweep's stay under
-    SWEEP_BUDGET_US, at least one a point; the rest at the points that follow. A resampling before the debt is paid
-    owes its own sweeps instead. move_one() (idle time) makes none: a reproducible run follows its points alone.
-    settle() makes the rest."""
+    SWEEP_BUDGET_US, at least one a call unless a job's pieces came first; the rest at the points that follow. A
+    resampling before the debt is paid owes its own sweeps instead. move_one() (idle time) makes none: a
+    reproducible run follows its points alone. settle() makes the rest."""
     monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)  # only the test's cost is metered
     sweep_us = 1500.0  # 5000 us holds three (4500), not four
     scheduler, f, made = _counting_filter(False, sweep_us, n=SWEEP_PART)  # whole sweeps
@@ -319,7 +319,17 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
         _resampled(scheduler, f)
     assert len(made) == 1 and scheduler.debt(f).sweeps == 4
     made.clear()
-    _resampled(scheduler, f)  # the new resampling's five replace the 4 left: three of them now
+    with slices.one_call():  # two points closed by one input: the first spends the budget (3 sweeps, 4500 us) ...
+        _resampled(scheduler, f)
+        _resampled(scheduler, f)  # ... the second's five are owed (a sweep a call, not one a point)
+    assert len(made) == 3 and scheduler.debt(f).sweeps == 5
+    made.clear()
+    with slices.one_call(slices.Call()):  # a job's pieces came first in the call and spent 4000 us: none now
+        slices.charge(slices.Cost(4000.0, 0.0), 0)
+        slices.current_call().pieces = 1
+        _resampled(scheduler, f)
+    assert not made and scheduler.debt(f).sweeps == 5
+    _resampled(scheduler, f)  # the new resampling's five replace the 5 left: three of them now
     assert len(made) == 3 and scheduler.debt(f).sweeps == 2
     track = _track(f)
     made.clear()

@@ -97,28 +97,34 @@ class Initiator:
         self.searched_again = False
         t.apply_fit(res, groups)
         modes = res.modes
-        if not modes or not res.determined:
-            t.status = f"waiting for geometry: {res.why}"
-            # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later);
-            # at once when enough came while the worker searched: the stream may have ended, and no later point
-            # would ask again (the live node kept emitters of its last seconds without an estimate).
-            self.next_start_try = res.searched + min(_START_RETRY_MAX, max(1, res.searched // 10))
-            if len(t.window) >= self.next_start_try:
-                self.try_start()
-            if not modes:
-                return False
-            # Proper but not determined: publish a sample of the posterior (wide, honest), not nothing.
-            t.provisional = self._sample_posterior(modes)
-            t.status = f"poorly determined: {res.why}"
-        else:
+        if modes and res.determined:
             t.provisional, self.start_grid = None, None
             t.filter = self._sample_posterior(modes, start=True)
             self._started(f"global search: best of {len(modes)} mode(s), {modes[0].inliers} of {len(t.window)} "
                           "points agree")
+            self._hold(modes)
+            return True
+        t.status = f"waiting for geometry: {res.why}"
+        if modes:
+            # Proper but not determined: publish a sample of the posterior (wide, honest), not nothing. Made before
+            # the next search starts, so that search's first pieces count this sample in the call's budget.
+            t.provisional = self._sample_posterior(modes)
+            t.status = f"poorly determined: {res.why}"
+            self._hold(modes)
+        # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later); at
+        # once when enough came while the worker searched: the stream may have ended, and no later point would ask
+        # again (the live node kept emitters of its last seconds without an estimate).
+        self.next_start_try = res.searched + min(_START_RETRY_MAX, max(1, res.searched // 10))
+        searched_again = len(t.window) >= self.next_start_try and self.try_start()
+        return searched_again or bool(modes)
+
+    def _hold(self, modes: list[Mode]):
+        """The track's modes and its estimate's points: every point waiting (none before: a start, or a provisional
+        sample, holds all)."""
+        t = self.track
         t.modes = modes
-        t.points_used = len(t.window)  # (none before: a start, or a provisional sample, holds all)
+        t.points_used = len(t.window)
         t.bearings_used = sum(e.used for e in t.window)
-        return True
 
     def _sample_posterior(self, modes: list[Mode], start: bool = False) -> ParticleFilter:
         """A filter holding every point waiting for a start and an importance sample of their posterior from the

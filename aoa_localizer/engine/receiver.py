@@ -130,9 +130,9 @@ def _terms(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarr
 def _gauss(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarray]:
     """Each point's Gaussian density and variance under each distinct scale of the grid: (scales, ..., K) each."""
     resid2 = np.square(resid)
-    nd = len(np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var)))
-    v = np.square(grid.distinct[0]).reshape((-1,) + (1,) * nd) * var + extra_var
-    charge(DENSITIES, v.size)
+    shape = np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var))
+    v = np.square(grid.distinct[0]).reshape((-1,) + (1,) * len(shape)) * var + extra_var
+    charge(DENSITIES, grid.scale.size * math.prod(shape))  # what the callers make: a mixture per hypothesis
     return np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v), v
 
 

@@ -47,6 +47,7 @@ class Debt:
     # the sweep being made a part at a time: its order of the particles (None: none begun) and how many have moved
     order: np.ndarray | None = None
     at: int = 0
+    sweep_us: float = 0.0  # the metered cost of its last sweep (or part of one): what the next will cost
 
     def __int__(self) -> int:
         return int(self.modes) + self.sweeps
@@ -108,8 +109,9 @@ class Scheduler:
         `realtime`: the sweeps still owed from the resampling before are made now (resamplings that come faster than
         the caller's idle time pays get all their sweeps: the cloud would otherwise collapse onto a few copies), none
         of the new one's, and without a resampling SWEEPS_PER_POINT of them. `reproducible`: as many as the call's
-        budget holds, at least one; a resampling's own sweeps replace what is left of the one before (a bounded
-        call: each resampling still gets at least one at once and the rest while no other comes)."""
+        budget holds, at least one a call; a resampling's own sweeps replace what is left of the one before (a
+        bounded call: each resampling still gets at least one at once, unless an earlier point of the same call made
+        one or a job's pieces, and the rest while no other comes)."""
         if not isinstance(f, ResampleMove) or not f.deferred:
             return
         debt = self.debt(f)
@@ -128,10 +130,13 @@ class Scheduler:
 
     @staticmethod
     def _sweep_within_budget(f: ResampleMove, debt: Debt, call: Call) -> None:
-        """The owed sweeps one at a time, at least one, while the call's metered cost with the last sweep's once
-        more stays under SWEEP_BUDGET_US; a cloud of more than SWEEP_PART particles a part of a sweep at a time."""
-        last = 0.0
-        while debt.sweeps and (not last or call.cost() + last < SWEEP_BUDGET_US):
+        """The owed sweeps one at a time while the call's metered cost with one more sweep's stays under
+        SWEEP_BUDGET_US, at least one when nothing else was made in the call (a second point the same input closes,
+        or one whose first point made a job's pieces, owes its sweeps when the call spent the budget); a cloud of more
+        than SWEEP_PART particles a part of a sweep at a time."""
+        first = not (call.swept or call.pieces)
+        while debt.sweeps and (first or call.cost() + debt.sweep_us < SWEEP_BUDGET_US):
+            first, call.swept = False, True
             before = spent()
             if f.n <= SWEEP_PART:
                 f.move(1)
@@ -143,7 +148,7 @@ class Scheduler:
                 debt.at += SWEEP_PART
                 if debt.at >= f.n:
                     debt.sweeps, debt.order = debt.sweeps - 1, None
-            last = spent() - before
+            debt.sweep_us = spent() - before
 
     def settle(self, track: EmitterTrack) -> None:
         """Every sweep the track's filter owes, made now (the end of data)."""

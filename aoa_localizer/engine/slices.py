@@ -24,17 +24,18 @@ class Cost:
     per_element: float
 
 
-RESIDUALS = Cost(58.0, 0.033)  # global_search: residuals of places against points, and what a step makes of them
-DENSITIES = Cost(35.0, 0.014)  # receiver: the latent noise's densities per hypothesis
-EM_STEP = Cost(145.0, 0.013)  # noise: an EM iteration's responsibilities over runs x readings
-LOOKS = Cost(245.0, 0.014)  # emitter_model: the posterior at a move's looks, the move's own work included
-POINTS_MADE = Cost(0.0, 0.38)  # point_batch: every point remade from its readings
-BATCH_MADE = Cost(0.0, 0.8)  # point_batch: a batch's readings gathered (elements: readings + 4 per point), per pass
-PIECE_US = 120.0  # what a piece costs besides the metered kernels
-# A call's pieces: the piece that reaches its budget is the call's last. A global check shares its call with the
-# filter's step and the sweeps it makes; a start search comes before there is a filter, so it may take more.
-CHECK_BUDGET_US = 5000.0
-START_BUDGET_US = 8000.0
+RESIDUALS = Cost(51.0, 0.036)  # global_search: residuals of places against points, and what a step makes of them
+DENSITIES = Cost(45.0, 0.012)  # receiver: the latent noise's densities per hypothesis
+EM_STEP = Cost(71.0, 0.017)  # noise: an EM iteration's responsibilities over runs x readings
+LOOKS = Cost(185.0, 0.021)  # emitter_model: the posterior at a move's looks, the move's own work included
+POINTS_MADE = Cost(135.0, 0.13)  # point_batch: every point remade from its readings
+BATCH_MADE = Cost(117.0, 0.95)  # point_batch: a batch's readings gathered (elements: readings + 4 per point), per pass
+PIECE_US = 71.0  # what a piece costs besides the metered kernels
+# A call's pieces: the piece that reaches its budget is the call's last, and may overrun it by its own cost. A
+# global check shares its call with the filter's step and the sweeps it makes; a start search comes before there
+# is a filter, so it may take more (its result waits for the next point once it spent half: SlicedJob.advance).
+CHECK_BUDGET_US = 4000.0
+START_BUDGET_US = 6000.0
 # A resampling's sweeps made in a call, the step included: the rest are owed to the following points (scheduler.py)
 SWEEP_BUDGET_US = 5000.0
 PIECE_EVALUATIONS = 50_000  # bearing densities a grid's score makes per piece (a millisecond or two)
@@ -57,6 +58,7 @@ class Call:
 
     def __init__(self) -> None:
         self.start, self.pieces = spent(), 0
+        self.swept = False  # a resampling's sweep (or part of one) was made in the call
 
     def cost(self) -> float:
         """The call's metered cost so far (microseconds, by the models), its pieces' own cost included."""
@@ -97,18 +99,27 @@ class SlicedJob(Generic[T]):
         """`budget_us`: the metered cost a call's pieces may reach."""
         self._steps, self.budget_us = steps, budget_us
         self._done = False
+        self._held = False  # finished in a call that had spent half its budget: done() at the next point
         self._value: T | None = None
         self._error: BaseException | None = None
 
     def advance(self) -> None:
         """Pieces while the call's cost, the filter's step included, with the last piece's once more stays under the
         budget; at least one per call, so a job goes on however dear the steps are (none once done)."""
-        call, last = current_call(), 0.0
+        call, last, was_done = current_call(), 0.0, self._done
         while not self._done and not (call.pieces and call.cost() + last >= self.budget_us):
             before = call.cost()
             self._next()
             call.pieces += 1
             last = call.cost() - before
+        # Applying a result costs about as much as a piece or two (a start's sample and sweeps, a check's points
+        # rebuilt and cloud re-weighted): after half the budget, it waits for the next point, as a worker's does.
+        if self._done and not was_done:
+            self._held = call.cost() >= 0.5 * self.budget_us
+
+    def release(self) -> None:
+        """A new point came: a result held back from the call that finished it is ready."""
+        self._held = False
 
     def _next(self) -> None:
         try:
@@ -119,7 +130,7 @@ class SlicedJob(Generic[T]):
             self._done, self._error = True, exc
 
     def done(self) -> bool:
-        return self._done
+        return self._done and not self._held
 
     def result(self) -> T:
         """The job's result, its pieces left made first; the exception a piece raised, if one did."""

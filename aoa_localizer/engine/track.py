@@ -95,7 +95,9 @@ class EmitterTrack:
         opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
-        self.collect()  # a job's findings first: they may change the noise the point is made with
+        if self.job is not None:
+            self.job.release()
+        applied = self.collect()  # a job's findings first: they may change the noise the point is made with
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
@@ -104,7 +106,8 @@ class EmitterTrack:
         self.points_seen += 1
         if self.filter is None:
             self.window.append(entry)
-            took = self.initiator.try_start()
+            # (a provisional sample applied above is a new estimate even when no search finishes now)
+            took = self.initiator.try_start() or (applied and self.estimating)
         else:
             took = self.update(entry, owed_before)
         if self.job is not None:

@@ -64,6 +64,11 @@ class PendingJob:
         if isinstance(self.future, SlicedJob):
             self.future.advance()
 
+    def release(self) -> None:
+        """A point came: a sliced job's result held back from the call that finished it is ready (slices.py)."""
+        if isinstance(self.future, SlicedJob):
+            self.future.release()
+
     @property
     def is_start(self) -> bool:
         return self.filter is None
