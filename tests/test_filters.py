@@ -305,9 +305,9 @@ def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_ne
 
 def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_points(monkeypatch):
     """Under `reproducible` a call makes the owed sweeps while its metered cost and one more sweep's stay under
-    SWEEP_BUDGET_US, at least one a call unless a job's pieces came first; the rest at the points that follow. A
-    resampling before the debt is paid owes its own sweeps instead. move_one() (idle time) makes none: a
-    reproducible run follows its points alone. settle() makes the rest."""
+    SWEEP_BUDGET_US, at least one a call unless a job's pieces came first or the call spent half the budget; the rest
+    at the points that follow. A resampling before the debt is paid owes its own sweeps instead. move_one() (idle
+    time) makes none: a reproducible run follows its points alone. settle() makes the rest."""
     monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)  # only the test's cost is metered
     sweep_us = 1500.0  # 5000 us holds three (4500), not four
     scheduler, f, made = _counting_filter(False, sweep_us, n=SWEEP_PART)  # whole sweeps
@@ -315,7 +315,11 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
 
     made.clear()
     with slices.one_call():
-        slices.charge(slices.Cost(4000.0, 0.0), 0)  # a dear step: the sweep it must make, and no other
+        slices.charge(slices.Cost(3600.0, 0.0), 0)  # a step over half the budget, a sweep would pass it: none
+        _resampled(scheduler, f)
+    assert not made and scheduler.debt(f).sweeps == 5
+    with slices.one_call():
+        slices.charge(slices.Cost(2000.0, 0.0), 0)  # a dear step: the sweep it must make, and no other
         _resampled(scheduler, f)
     assert len(made) == 1 and scheduler.debt(f).sweeps == 4
     made.clear()
@@ -361,7 +365,7 @@ def test_reproducible_sweeps_of_a_large_cloud_are_made_a_part_at_a_time(monkeypa
     assert np.array_equal(np.sort(np.concatenate(parts)), np.arange(250))
     made.clear()
     with slices.one_call():
-        slices.charge(slices.Cost(4000.0, 0.0), 0)  # a dear step: one part
+        slices.charge(slices.Cost(2000.0, 0.0), 0)  # a dear step: one part
         _point(scheduler, f, 0)
     assert made == [100] and scheduler.debt(f).sweeps == 4 and scheduler.debt(f).at == 100
     made.clear()

@@ -110,8 +110,8 @@ class Scheduler:
         the caller's idle time pays get all their sweeps: the cloud would otherwise collapse onto a few copies), none
         of the new one's, and without a resampling SWEEPS_PER_POINT of them. `reproducible`: as many as the call's
         budget holds, at least one a call; a resampling's own sweeps replace what is left of the one before (a
-        bounded call: each resampling still gets at least one at once, unless an earlier point of the same call made
-        one or a job's pieces, and the rest while no other comes)."""
+        bounded call: each resampling still gets at least one at once, unless the call already made one or a job's
+        pieces or spent half its budget, and the rest while no other comes)."""
         if not isinstance(f, ResampleMove) or not f.deferred:
             return
         debt = self.debt(f)
@@ -131,10 +131,10 @@ class Scheduler:
     @staticmethod
     def _sweep_within_budget(f: ResampleMove, debt: Debt, call: Call) -> None:
         """The owed sweeps one at a time while the call's metered cost with one more sweep's stays under
-        SWEEP_BUDGET_US, at least one when nothing else was made in the call (a second point the same input closes,
-        or one whose first point made a job's pieces, owes its sweeps when the call spent the budget); a cloud of more
-        than SWEEP_PART particles a part of a sweep at a time."""
-        first = not (call.swept or call.pieces)
+        SWEEP_BUDGET_US; at least one when the call made no sweep and no job's pieces yet and spent under half the
+        budget (a second point of one input, or a point after a job's pieces or a check's result applied, owes them
+        when the call is spent); a cloud of more than SWEEP_PART particles a part of a sweep at a time."""
+        first = not (call.swept or call.pieces) and call.cost() < 0.5 * SWEEP_BUDGET_US
         while debt.sweeps and (first or call.cost() + debt.sweep_us < SWEEP_BUDGET_US):
             first, call.swept = False, True
             before = spent()

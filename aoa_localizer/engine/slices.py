@@ -38,7 +38,7 @@ CHECK_BUDGET_US = 4000.0
 START_BUDGET_US = 6000.0
 # A resampling's sweeps made in a call, the step included: the rest are owed to the following points (scheduler.py)
 SWEEP_BUDGET_US = 5000.0
-PIECE_EVALUATIONS = 50_000  # bearing densities a grid's score makes per piece (a millisecond or two)
+PIECE_EVALUATIONS = 30_000  # bearing densities a grid's score makes per piece (a millisecond or two)
 
 _meter = threading.local()  # a thread's own, so Localizers in other threads never move a job's pieces
 

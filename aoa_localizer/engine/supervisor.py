@@ -1,7 +1,7 @@
 """What keeps a running filter honest on messy data: the health of each new point (the share the cloud explains
 only as outliers, against the calibrated rate); global checks on a growing schedule and on alarm (noise calibration,
 global search, then the modes' MH move or a re-start from a far better mode), inline or in the check worker; moves
-at every point while in alarm; and the emitter-moved test."""
+at every point while in alarm (unless a check is being made in the calls); and the emitter-moved test."""
 from __future__ import annotations
 
 import logging
@@ -55,7 +55,8 @@ class Supervisor:
         self.next_search = max(2 * points, self.cfg.init_bearings)
 
     def watch(self, logw_before: np.ndarray):
-        """Health of the newest point, scheduled and alarm-driven global checks, moves while in alarm."""
+        """Health of the newest point, scheduled and alarm-driven global checks, moves while in alarm and no check is
+        being made in the calls."""
         t, cfg = self.track, self.cfg
         f, n = t.running, len(t.window)
         if not cfg.global_safety:
@@ -86,7 +87,9 @@ class Supervisor:
                 self.next_search = min(int(math.ceil(n * _SEARCH_GROWTH)), n + _SEARCH_EVERY_MAX)
             self.global_check()
         elif alarm:
-            f.rejuvenate(ALARM_SWEEPS, t.proposal)
+            # (one while a check is made in the calls: two left it a piece a point, and an emitter that moved was
+            # noticed 40 points late)
+            f.rejuvenate(1 if t.job is not None and t.job.in_calls else ALARM_SWEEPS, t.proposal)
 
     def global_check(self, inline: bool = False):
         """Noise calibration, emitter-moved test, global search, MH move or re-start: whole here (`inline`), or its

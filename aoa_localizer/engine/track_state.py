@@ -70,5 +70,10 @@ class PendingJob:
             self.future.release()
 
     @property
+    def in_calls(self) -> bool:
+        """Made a few pieces per point (not in the worker)."""
+        return isinstance(self.future, SlicedJob)
+
+    @property
     def is_start(self) -> bool:
         return self.filter is None
