@@ -169,12 +169,14 @@ def test_fuzzed_first_fixes_and_stamps_never_raise():
 def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
     """Finding 9: passing 10 m from the emitter with 3 m GPS noise, the ellipse used to shrink far below the
     error (the antenna's own position error was ignored). With each NavSatFix's covariance (sigma_m) the 95 %
-    ellipse holds the truth in most runs; without it, in few."""
+    ellipse holds the truth in most runs; without it, the median run's NEES is over twice the 95 % bound (measured:
+    about 17, with 3 of 8 runs inside, and 4 of 8 after a change in the scheduling: a count of the runs inside was
+    too close to call)."""
     from aoa_localizer.engine.scenarios import Scenario
 
     sc = Scenario("close", (1200.0, 800.0), ((0.0, 0.0), (1200.0, 790.0), (2400.0, 0.0)), points=40,
                   readings_per_point=3, quality=(90.0, 90.0), gps_noise_m=3.0, dwell_s=3.0)
-    inside = {True: 0, False: 0}
+    values: dict[bool, list[float]] = {True: [], False: []}
     for r in range(8):
         data = simulate(sc, r)
         for with_cov in (True, False):
@@ -187,8 +189,8 @@ def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
             loc.flush()
             east, north = loc.frame.to_enu(*data.frame.to_geodetic(*data.emitter_enu)[:2])
             err = np.array([loc.estimate.east - east, loc.estimate.north - north])
-            inside[with_cov] += float(err @ np.linalg.solve(loc.estimate.cov, err)) <= 5.991
-    assert inside[True] >= 6 and inside[False] <= 3, inside
+            values[with_cov].append(float(err @ np.linalg.solve(loc.estimate.cov, err)))
+    assert sum(v <= 5.991 for v in values[True]) >= 6 and np.median(values[False]) > 2 * 5.991, values
 
 
 @pytest.mark.slow
