@@ -1,13 +1,17 @@
 """Provisional estimates (a posterior proper but not determined enough to start from): a sample of the posterior the
 start search scored, its ellipse holding the truth where the bearings leave the range open."""
+from copy import deepcopy
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer.engine import initiator
+from aoa_localizer.engine.checks import search_start
 from aoa_localizer.engine.crlb import ELLIPSE_95, nees
 from aoa_localizer.engine.evaluation import scenario_config
+from aoa_localizer.engine.initiator import MAX_ELLIPSE_RANGE_SHARE, MIN_INLIERS
 from aoa_localizer.engine.scenarios import SCENARIOS, robustness_cells, simulate
 from aoa_localizer.engine.track_state import TrackState
 
@@ -64,3 +68,39 @@ def test_a_start_from_a_mode_by_the_road_does_not_hold_the_filter_there():
     data = simulate(replace(SCENARIOS["straight"], emitter=(7000.0, 300.0), filter_overrides={}, wild_share=0.2), 9)
     res = run(data, LocalizerConfig(seed=9))
     assert res.scores["inside95"], res.scores
+
+
+def test_the_provisional_sample_is_made_in_the_start_searchs_pieces(monkeypatch):
+    """`wild20` seed 1: the first search whose best mode is not determined draws the provisional sample (max(N, 2000)
+    weighted draws) in its last pieces, over the points it searched, the same to the bit as the search made whole;
+    the track publishes those draws as they are (no look at the posterior when the search is applied: 3-8 ms in
+    that call, the node's callback under `realtime`)."""
+    searched, applied = [], []
+    real_search = initiator.start_search
+
+    def search(snap, *args):
+        searched.append(deepcopy(snap))  # as the search gets it
+        return real_search(snap, *args)
+
+    monkeypatch.setattr(initiator, "start_search", search)
+    data = simulate(robustness_cells()["wild20"], 1)
+    loc = Localizer(scenario_config(data, LocalizerConfig(seed=1)))
+    track = loc.channels.default.track
+    real_apply = track.initiator.apply_start
+
+    def apply(res, groups):
+        applied.append(res)
+        return real_apply(res, groups)
+
+    monkeypatch.setattr(track.initiator, "apply_start", apply)
+    for event in data.inputs():
+        loc.feed(event)
+        if track.state is TrackState.PROVISIONAL:
+            break
+    res = next(r for r in applied if r.sample is not None)
+    x, logw = res.sample
+    assert x.shape == (2000, 2) and np.isfinite(logw).sum() > 1000
+    assert np.array_equal(track.provisional.x, x) and track.provisional.k == res.searched == track.points_used
+    snap = next(s for s in reversed(searched) if len(s.rows) == res.searched)
+    whole = search_start(snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE)  # the track's was made a few pieces a point
+    assert np.array_equal(whole.sample[0], x) and np.array_equal(whole.sample[1], logw)

@@ -47,6 +47,7 @@ from aoa_localizer.engine.offset import ALL_OFFSETS_DEG, PRIOR_LOG_ODDS, joint_o
 from aoa_localizer.engine.parent_death import die_with_parent
 from aoa_localizer.engine.point_batch import Built, PointBatch, points_of
 from aoa_localizer.engine.preprocess import Columns, Group, columns, group_size
+from aoa_localizer.engine.provisional import DRAWS, provisional_sample
 from aoa_localizer.engine.slices import Steps, run_whole
 from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.types import Reading
@@ -202,6 +203,7 @@ class Snapshot:
     offset: float = 0.0  # the bearing offset learned so far (rad, offset.py)
     course: bool = False  # the bearings are read as turned by the vehicle's course (course.py)
     start_grid: StartGrid | None = None  # a start search's grid and sums from the search before (start_grid.py)
+    sample_seed: int = 0  # a start search's provisional sample draws with this seed (provisional.py)
 
     def __getstate__(self) -> dict:
         """For the worker process: the readings' fields as one array and the group sizes (a list of Reading
@@ -246,6 +248,9 @@ class CheckResult:
     searched: int = 0  # points in the snapshot
     determined: bool = True  # a start search: the best mode is determined enough to start the filter from
     start_grid: StartGrid | None = None  # a start search: its grid and sums, for the next one
+    # a start search whose best mode is not determined: a weighted sample of the posterior it searched (places,
+    # log weights; provisional.py)
+    sample: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class _Calibrated:
@@ -295,6 +300,16 @@ class _Calibrated:
                determined: bool = True) -> CheckResult:
         return CheckResult(self.noise, self.at, self.built, modes, hint, self.offset, self.batch.course, why,
                            len(self.snap.rows), determined, self.snap.start_grid)
+
+    def provisional(self, modes: list[Mode], why: str) -> Steps[CheckResult]:
+        """A start search's result whose best mode is not determined: its modes, why, and a weighted sample of the
+        posterior it searched (the radio-range prior's, under the fitted noise when it made a fit)."""
+        snap = self.snap
+        rob = snap.rob if self.noise is None else replace(snap.robust(self.outlier, True), reach=snap.rob.reach)
+        rng = np.random.default_rng(snap.sample_seed)
+        sample = yield from provisional_sample(modes, self.pts, rob, snap.start_grid,
+                                               max(snap.cfg.num_particles, DRAWS), rng)
+        return replace(self.result(modes, why=why, determined=False), sample=sample)
 
 
 def run_check(snap: Snapshot) -> CheckResult:
@@ -356,14 +371,14 @@ def start_search(snap: Snapshot, min_inliers: int, max_ellipse_range_share: floa
     best = modes[0]
     if best.crossing_deg < cfg.init_min_crossing_deg:
         why = f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < {cfg.init_min_crossing_deg:g} deg"
-        return cal.result(modes if final else [], why=why, determined=False)
+        return (yield from cal.provisional(modes, why)) if final else cal.result([], why=why, determined=False)
     if best.inliers < min_inliers:
-        return cal.result(modes, why=f"the best place explains only {best.inliers} points (needs {min_inliers})",
-                          determined=False)
+        return (yield from cal.provisional(modes, f"the best place explains only {best.inliers} points (needs "
+                                                  f"{min_inliers})"))
     size, reach = ellipse_and_reach(best.mean, best.cov, cal.pts.east, cal.pts.north)
     if size > max_ellipse_range_share * reach:
-        return cal.result(modes, why=f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m from "
-                          "the track", determined=False)
+        return (yield from cal.provisional(modes, f"position not determined yet: 95 % ellipse {size:.0f} m at "
+                                                  f"{reach:.0f} m from the track"))
     return cal.result(modes)
 
 

@@ -15,9 +15,8 @@ from aoa_localizer.engine.checks import CheckResult, search_start, start_search
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode
-from aoa_localizer.engine.grid_proposal import Blend
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.safety import ModeProposal, Proposal, importance_sample, weighted_sample
+from aoa_localizer.engine.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.slices import START_BUDGET_US
 from aoa_localizer.engine.start_grid import StartGrid
 from aoa_localizer.engine.track_state import PendingJob
@@ -39,7 +38,6 @@ PRIOR_MIN_SIGMA_M = 100.0
 START_SWEEPS = 3  # random-walk MH sweeps that spread the importance sample's duplicates
 MIN_INLIERS = 3  # a start mode must explain at least this many points
 MAX_ELLIPSE_RANGE_SHARE = 0.5  # a start mode's 95 % semi-major axis must be under this share of its range
-_PROVISIONAL_PARTICLES = 2000
 _START_RETRY_MAX = 5  # most points between two start attempts that found no determined mode
 # A start search's result is stale once the points grew by more than max(4, a half) while it ran: its modes still
 # propose for a few more points (the importance weights are over all held), not for many times its points
@@ -73,7 +71,7 @@ class Initiator:
         if not final and (len(t.window) < self.next_start_try or t.job is not None):
             return False
         snap = t.snapshot()
-        snap.start_grid = self.start_grid
+        snap.start_grid, snap.sample_seed = self.start_grid, int(t.rng.integers(2**63))
         job = partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
         if inline:
             return self.apply_start(job(), snap.groups)
@@ -99,18 +97,17 @@ class Initiator:
         modes = res.modes
         if modes and res.determined:
             t.provisional, self.start_grid = None, None
-            t.filter = self._sample_posterior(modes, start=True)
+            t.filter = self._sample_posterior(modes)
             self._started(f"global search: best of {len(modes)} mode(s), {modes[0].inliers} of {len(t.window)} "
                           "points agree")
             self._hold(modes)
             return True
         t.status = f"waiting for geometry: {res.why}"
-        if modes:
-            # Proper but not determined: publish a sample of the posterior (wide, honest), not nothing. Made before
-            # the next search starts, so that search's first pieces count this sample in the call's budget.
-            t.provisional = self._sample_posterior(modes)
+        if modes and res.sample is not None:
+            # Proper but not determined: publish the search's sample of the posterior (wide, honest), not nothing
+            t.provisional = self._provisional(modes, res.sample, res.searched)
             t.status = f"poorly determined: {res.why}"
-            self._hold(modes)
+            self._hold(modes, groups)
         # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later); at
         # once when enough came while the worker searched: the stream may have ended, and no later point would ask
         # again (the live node kept emitters of its last seconds without an estimate).
@@ -118,44 +115,54 @@ class Initiator:
         searched_again = len(t.window) >= self.next_start_try and self.try_start()
         return searched_again or bool(modes)
 
-    def _hold(self, modes: list[Mode]):
-        """The track's modes and its estimate's points: every point waiting (none before: a start, or a provisional
-        sample, holds all)."""
+    def _hold(self, modes: list[Mode], searched: list[list[Reading]] | None = None):
+        """The track's modes and its estimate's points: every point waiting (none before: a start holds all), or
+        those of them the search drew a provisional sample over (`searched`: their readings)."""
         t = self.track
         t.modes = modes
-        t.points_used = len(t.window)
-        t.bearings_used = sum(e.used for e in t.window)
+        held = list(t.window)
+        if searched is not None:
+            ids = {id(g) for g in searched}
+            held = [e for e in held if id(e.readings) in ids]
+        t.points_used = len(held)
+        t.bearings_used = sum(e.used for e in held)
 
-    def _sample_posterior(self, modes: list[Mode], start: bool = False) -> ParticleFilter:
-        """A filter holding every point waiting for a start and an importance sample of their posterior from the
-        modes: the posterior the start search scored, the likelihood under the radio-range prior (no Gaussian at the
-        best mode: at a mode by the track, ten times its few metres of range held the cloud there and cut off the
-        far end of its ray). `start`: the filter's start (resampled, then MH sweeps; kept as `start_cloud`); else a
-        provisional sample (weighted)."""
-        t, best = self.track, modes[0]
-        # A provisional sample's ellipse is read off its tails: at least _PROVISIONAL_PARTICLES (a look each)
-        f = self.new_filter(None if start else max(self.cfg.num_particles, _PROVISIONAL_PARTICLES))
+    def _holding_points(self, modes: list[Mode], particles: int | None = None
+                        ) -> tuple[ParticleFilter, ModeProposal]:
+        """A new filter whose model holds every point waiting for a start, on the posterior the start search scored:
+        the likelihood under the radio-range prior (no Gaussian at the best mode: at a mode by the track, ten times
+        its few metres of range held the cloud there and cut off the far end of its ray); and the modes' proposal,
+        the track's from now on."""
+        t = self.track
+        f = self.new_filter(particles)
         model = cast(EmitterModel, f.model)
         model.reach = t.reach()
         model.lik.outlier_prob = t.calibration.lik_outlier_prob
         for e in t.window:
             model.observe(e.point)
         f.k = len(t.window)
-        t.proposal = ModeProposal(modes, t.broad_sigma(best.mean))
-        if not start:
-            # A provisional sample is read, never stepped: the draws keep their importance weights (no resampling
-            # and no moves to spread duplicates), one look a particle. Half come from the start search's grid,
-            # which reaches the far end of rays that the modes' Laplace laws do not (grid_proposal.py).
-            grid = self.start_grid.proposal() if self.start_grid is not None else None
-            proposal: Proposal = t.proposal if grid is None else Blend([t.proposal, grid], [0.5, 0.5])
-            particles, logw = weighted_sample(f.log_target, proposal, f.n, t.rng)
-            f.initialise(particles)
-            if np.isfinite(logw.max()):
-                f.logw = logw - logw.max()
-            return f
-        f.initialise(importance_sample(f.log_target, t.proposal, f.n, t.rng))
+        t.proposal = proposal = ModeProposal(modes, t.broad_sigma(modes[0].mean))
+        return f, proposal
+
+    def _sample_posterior(self, modes: list[Mode]) -> ParticleFilter:
+        """The filter's start: an importance sample of the posterior from the modes, resampled, then MH sweeps (kept
+        as `start_cloud`)."""
+        t = self.track
+        f, proposal = self._holding_points(modes)
+        f.initialise(importance_sample(f.log_target, proposal, f.n, t.rng))
         self.start_cloud = f.x.copy()
-        f.rejuvenate(START_SWEEPS, t.proposal)
+        f.rejuvenate(START_SWEEPS, proposal)
+        return f
+
+    def _provisional(self, modes: list[Mode], sample: tuple[np.ndarray, np.ndarray], searched: int) -> ParticleFilter:
+        """A provisional sample: the start search's weighted draws (provisional.py), read, never stepped (no
+        resampling and no moves to spread duplicates), over the `searched` points it drew them for."""
+        particles, logw = sample
+        f, _ = self._holding_points(modes, max(self.cfg.num_particles, len(particles)))
+        f.initialise(particles)
+        if np.isfinite(logw.max()):
+            f.logw = logw - logw.max()
+        f.k = searched
         return f
 
     def _from_triangulation(self) -> bool:

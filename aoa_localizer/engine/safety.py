@@ -18,7 +18,7 @@ import numpy as np
 from scipy.special import gammaln
 from scipy.stats import binom
 
-from aoa_localizer.engine.global_search import Mode
+from aoa_localizer.engine.global_search import Mode, Points
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.resampling import systematic
 
@@ -77,6 +77,15 @@ def _t_logpdf(x: np.ndarray, mean: np.ndarray, chol: np.ndarray, logdet: float) 
     nu = _T_DOF
     return (gammaln((nu + 2) / 2) - gammaln(nu / 2) - math.log(nu * math.pi) - 0.5 * logdet
             - (nu + 2) / 2 * np.log1p(m2 / nu))
+
+
+BROAD_MIN_SIGMA_M = 100.0  # the mode proposal's broad component is at least this wide
+
+
+def broad_sigma(centre: np.ndarray, pts: Points) -> float:
+    """The mode proposal's broad component: as wide as the farthest point from `centre` (at least
+    BROAD_MIN_SIGMA_M)."""
+    return float(max(BROAD_MIN_SIGMA_M, np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
 
 
 class ModeProposal:

@@ -27,11 +27,11 @@ from aoa_localizer.engine.checks import CheckResult, Snapshot
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.emitter_model import EmitterModel
 from aoa_localizer.engine.global_search import Mode, Points, Robust, find_modes
-from aoa_localizer.engine.initiator import PRIOR_MIN_SIGMA_M, Initiator
+from aoa_localizer.engine.initiator import Initiator
 from aoa_localizer.engine.offset import marginalise, prior_sd
 from aoa_localizer.engine.point_batch import Built, points_of, rows_of
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.safety import ModeProposal
+from aoa_localizer.engine.safety import ModeProposal, broad_sigma
 from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.supervisor import Supervisor
 from aoa_localizer.engine.track_report import cloud_estimate
@@ -303,8 +303,7 @@ class EmitterTrack:
 
     def broad_sigma(self, centre: np.ndarray) -> float:
         """The mode proposal's broad component: as wide as the farthest point held from `centre`."""
-        pts = self.points()
-        return float(max(PRIOR_MIN_SIGMA_M, np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
+        return broad_sigma(centre, self.points())
 
     # -- estimates ------------------------------------------------------------------------------------
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,36 @@
+"""A provisional sample: the weighted importance sample published while the posterior is proper but its best place is
+not determined enough to start the filter. Made by the start search that found it not determined, as the search's
+last pieces (in the worker, or a few pieces per point), over the points it searched: made by the track on applying
+the search, its 2000 looks under the latent noise took 3-8 ms in that call (the node's callback, under `realtime`)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from aoa_localizer.engine.global_search import Mode, Points, Robust, log_posterior
+from aoa_localizer.engine.grid_proposal import Blend
+from aoa_localizer.engine.safety import ModeProposal, Proposal, broad_sigma
+from aoa_localizer.engine.slices import Steps
+from aoa_localizer.engine.start_grid import StartGrid
+
+DRAWS = 2000  # at least this many draws, one look each: the ellipse is read off the sample's tails
+_PIECE_DRAWS = 250  # draws whose posterior a piece makes
+
+
+def provisional_sample(modes: list[Mode], pts: Points, rob: Robust, grid: StartGrid | None, draws: int,
+                       rng: np.random.Generator) -> Steps[tuple[np.ndarray, np.ndarray]]:
+    """`draws` places and their log importance weights (unnormalised; -inf where the posterior is not finite) under
+    the robust posterior over `pts`: half from the modes' Student-t laws with a broad one, half from the search's
+    grid, which reaches the far end of rays that the modes' Laplace laws do not (grid_proposal.py). The draws keep
+    their weights: a provisional sample is read, never stepped. In pieces (slices.py): _PIECE_DRAWS draws each."""
+    modal = ModeProposal(modes, broad_sigma(modes[0].mean, pts))
+    cells = grid.proposal() if grid is not None else None
+    proposal: Proposal = modal if cells is None else Blend([modal, cells], [0.5, 0.5])
+    x = proposal.sample(draws, rng)
+    logw = np.empty(draws)
+    for lo in range(0, draws, _PIECE_DRAWS):
+        part = x[lo:lo + _PIECE_DRAWS]
+        logw[lo:lo + _PIECE_DRAWS] = log_posterior(part, pts, rob) - proposal.logpdf(part)
+        yield
+    return x, np.where(np.isfinite(logw), logw, -math.inf)
