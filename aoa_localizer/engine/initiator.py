@@ -53,6 +53,8 @@ class Initiator:
         self.start_cloud: np.ndarray | None = None  # the particles of the latest start
         self.searched_again = False  # the pending start search was made again because the one before was stale
         self.start_grid: StartGrid | None = None  # the last start search's grid and sums (start_grid.py)
+        # The provisional samples' seeds: a stream of their own, so drawing them leaves the filter's stream as it is
+        self.sample_seeds = track.rng.spawn(1)[0]
 
     def try_start(self, inline: bool = False, final: bool = False) -> bool:
         """Start the filter once the points allow (`inline`: the start search here, even with a worker; `final`: the
@@ -71,7 +73,7 @@ class Initiator:
         if not final and (len(t.window) < self.next_start_try or t.job is not None):
             return False
         snap = t.snapshot()
-        snap.start_grid, snap.sample_seed = self.start_grid, int(t.rng.integers(2**63))
+        snap.start_grid, snap.sample_seed = self.start_grid, int(self.sample_seeds.integers(2**63))
         job = partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
         if inline:
             return self.apply_start(job(), snap.groups)
