@@ -169,9 +169,9 @@ def test_fuzzed_first_fixes_and_stamps_never_raise():
 def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
     """Finding 9: passing 10 m from the emitter with 3 m GPS noise, the ellipse used to shrink far below the
     error (the antenna's own position error was ignored). With each NavSatFix's covariance (sigma_m) the 95 %
-    ellipse holds the truth in most runs; without it, the median run's NEES is over twice the 95 % bound (measured:
-    about 17, with 3 of 8 runs inside, and 4 of 8 after a change in the scheduling: a count of the runs inside was
-    too close to call)."""
+    ellipse holds the truth in most runs (8 of 8 measured); without it, most runs lie outside their ellipse: the
+    median run's NEES is over the 95 % bound (9.9-21 measured over filter seeds and numpy versions; a count of the
+    runs inside, 3 or 4 of 8, was too close to call)."""
     from aoa_localizer.engine.scenarios import Scenario
 
     sc = Scenario("close", (1200.0, 800.0), ((0.0, 0.0), (1200.0, 790.0), (2400.0, 0.0)), points=40,
@@ -190,7 +190,7 @@ def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
             east, north = loc.frame.to_enu(*data.frame.to_geodetic(*data.emitter_enu)[:2])
             err = np.array([loc.estimate.east - east, loc.estimate.north - north])
             values[with_cov].append(float(err @ np.linalg.solve(loc.estimate.cov, err)))
-    assert sum(v <= 5.991 for v in values[True]) >= 6 and np.median(values[False]) > 2 * 5.991, values
+    assert sum(v <= 5.991 for v in values[True]) >= 6 and np.median(values[False]) > 5.991, values
 
 
 @pytest.mark.slow
