@@ -1,7 +1,7 @@
 """A provisional sample: the weighted importance sample published while the posterior is proper but its best place is
 not determined enough to start the filter. Made by the start search that found it not determined, as the search's
 last pieces (in the worker, or a few pieces per point), over the points it searched: made by the track on applying
-the search, its 2000 looks under the latent noise took 3-8 ms in that call (the node's callback, under `realtime`)."""
+the search, its looks under the latent noise came on top of that call (the node's callback, under `realtime`)."""
 from __future__ import annotations
 
 import math

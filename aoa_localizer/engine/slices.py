@@ -18,14 +18,14 @@ Steps = Generator[None, None, T]  # yields after each piece of work, returns the
 @dataclass(frozen=True)
 class Cost:
     """A kernel's cost model: microseconds per call and per element it makes (least squares over the public
-    scenarios' pieces on the development machine; only their ratios matter)."""
+    scenarios' pieces and provisional samples on the development machine; only their ratios matter)."""
 
     per_call: float
     per_element: float
 
 
 RESIDUALS = Cost(51.0, 0.036)  # global_search: residuals of places against points, and what a step makes of them
-DENSITIES = Cost(45.0, 0.012)  # receiver: the latent noise's densities per hypothesis
+DENSITIES = Cost(45.0, 0.012)  # receiver: the latent noise's densities, an element per hypothesis, place and point
 EM_STEP = Cost(71.0, 0.017)  # noise: an EM iteration's responsibilities over runs x readings
 LOOKS = Cost(185.0, 0.021)  # emitter_model: the posterior at a move's looks, the move's own work included
 POINTS_MADE = Cost(135.0, 0.13)  # point_batch: every point remade from its readings

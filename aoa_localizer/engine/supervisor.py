@@ -88,7 +88,7 @@ class Supervisor:
             self.global_check()
         elif alarm:
             # (one while a check is made in the calls: two left it a piece a point, and an emitter that moved was
-            # noticed 40 points late)
+            # noticed late)
             f.rejuvenate(1 if t.job is not None and t.job.in_calls else ALARM_SWEEPS, t.proposal)
 
     def global_check(self, inline: bool = False):
