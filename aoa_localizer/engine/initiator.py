@@ -32,7 +32,7 @@ log = logging.getLogger("aoa_localizer")
 
 # Broad Gaussian prior after the paper's start (triangulation), in multiples of the range to the start: it only
 # keeps the bearing-only posterior proper (a flat prior has infinite mass along the rays); the global search's start
-# has the radio-range prior instead. The minimum is also the mode proposal's broad component's.
+# has the radio-range prior instead.
 PRIOR_RANGE_FACTOR = 10.0
 PRIOR_MIN_SIGMA_M = 100.0
 START_SWEEPS = 3  # random-walk MH sweeps that spread the importance sample's duplicates
@@ -143,7 +143,7 @@ class Initiator:
         for e in t.window:
             model.observe(e.point)
         f.k = len(t.window)
-        t.proposal = proposal = ModeProposal(modes, t.broad_sigma(modes[0].mean))
+        t.proposal = proposal = ModeProposal.over(modes, t.points())
         return f, proposal
 
     def _sample_posterior(self, modes: list[Mode]) -> ParticleFilter:

@@ -4,13 +4,11 @@ last pieces (in the worker, or a few pieces per point), over the points it searc
 the search, its looks under the latent noise came on top of that call (the node's callback, under `realtime`)."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from aoa_localizer.engine.global_search import Mode, Points, Robust, log_posterior
 from aoa_localizer.engine.grid_proposal import Blend
-from aoa_localizer.engine.safety import ModeProposal, Proposal, broad_sigma
+from aoa_localizer.engine.safety import ModeProposal, Proposal, log_weights
 from aoa_localizer.engine.slices import Steps
 from aoa_localizer.engine.start_grid import StartGrid
 
@@ -24,13 +22,13 @@ def provisional_sample(modes: list[Mode], pts: Points, rob: Robust, grid: StartG
     the robust posterior over `pts`: half from the modes' Student-t laws with a broad one, half from the search's
     grid, which reaches the far end of rays that the modes' Laplace laws do not (grid_proposal.py). The draws keep
     their weights: a provisional sample is read, never stepped. In pieces (slices.py): _PIECE_DRAWS draws each."""
-    modal = ModeProposal(modes, broad_sigma(modes[0].mean, pts))
+    modal = ModeProposal.over(modes, pts)
     cells = grid.proposal() if grid is not None else None
     proposal: Proposal = modal if cells is None else Blend([modal, cells], [0.5, 0.5])
     x = proposal.sample(draws, rng)
     logw = np.empty(draws)
     for lo in range(0, draws, _PIECE_DRAWS):
-        part = x[lo:lo + _PIECE_DRAWS]
-        logw[lo:lo + _PIECE_DRAWS] = log_posterior(part, pts, rob) - proposal.logpdf(part)
+        logw[lo:lo + _PIECE_DRAWS] = log_weights(lambda y: log_posterior(y, pts, rob), proposal,
+                                                 x[lo:lo + _PIECE_DRAWS])
         yield
-    return x, np.where(np.isfinite(logw), logw, -math.inf)
+    return x, logw

@@ -28,6 +28,7 @@ _DEFENSIVE = 0.1  # share of the broad component
 _MIN_COMPONENT = 0.02  # every kept mode is proposed at least this often
 _KEEP_LOG_MASS = 30.0  # modes more than this many nats below the best are not proposed
 _MAX_DRAWS = 2000  # an importance sample's draws (a look each) beyond 8 a particle of the default N = 100
+_BROAD_MIN_SIGMA_M = 100.0  # the mode proposal's broad component is at least this wide
 
 
 class HealthMonitor:
@@ -79,15 +80,6 @@ def _t_logpdf(x: np.ndarray, mean: np.ndarray, chol: np.ndarray, logdet: float) 
             - (nu + 2) / 2 * np.log1p(m2 / nu))
 
 
-BROAD_MIN_SIGMA_M = 100.0  # the mode proposal's broad component is at least this wide
-
-
-def broad_sigma(centre: np.ndarray, pts: Points) -> float:
-    """The mode proposal's broad component: as wide as the farthest point from `centre` (at least
-    BROAD_MIN_SIGMA_M)."""
-    return float(max(BROAD_MIN_SIGMA_M, np.max(np.hypot(pts.east - centre[0], pts.north - centre[1]))))
-
-
 class ModeProposal:
     """Independence proposal q(x): a mixture of bivariate Student-t laws at the modes, plus a broad one."""
 
@@ -101,6 +93,14 @@ class ModeProposal:
         covs = [_WIDEN**2 * m.cov for m in kept] + [broad_sigma_m**2 * np.eye(2)]
         self.chols = [np.linalg.cholesky(c + 1e-9 * np.eye(2)) for c in covs]
         self.logdets = [2 * float(np.sum(np.log(np.diag(c)))) for c in self.chols]
+
+    @classmethod
+    def over(cls, modes: list[Mode], pts: Points) -> ModeProposal:
+        """The proposal for the posterior over `pts`: its broad component as wide as the farthest point from the
+        best mode (at least _BROAD_MIN_SIGMA_M)."""
+        centre = modes[0].mean
+        far = float(np.max(np.hypot(pts.east - centre[0], pts.north - centre[1])))
+        return cls(modes, max(_BROAD_MIN_SIGMA_M, far))
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         comp = rng.choice(len(self.weights), size=n, p=self.weights)
@@ -130,8 +130,13 @@ def weighted_sample(log_target, proposal: Proposal, n: int, rng: np.random.Gener
     """n draws from q and their log weights pi / q (unnormalised; -inf where pi is not finite): a weighted sample of
     the posterior."""
     y = proposal.sample(n, rng)
+    return y, log_weights(log_target, proposal, y)
+
+
+def log_weights(log_target, proposal: Proposal, y: np.ndarray) -> np.ndarray:
+    """The log importance weights pi / q of draws y from q (unnormalised; -inf where pi is not finite)."""
     lw = log_target(y) - proposal.logpdf(y)
-    return y, np.where(np.isfinite(lw), lw, -np.inf)
+    return np.where(np.isfinite(lw), lw, -np.inf)
 
 
 def importance_sample(log_target, proposal: Proposal, n: int, rng: np.random.Generator, draws_per_particle=8):

@@ -118,7 +118,7 @@ class Supervisor:
         f = t.running
         t.modes = modes
         self.clock_hint = res.hint
-        t.proposal = ModeProposal(modes, t.broad_sigma(modes[0].mean))
+        t.proposal = ModeProposal.over(modes, t.points())
         best_particle = float(np.max(f.log_target(f.x)))
         best_mode = modes[0].log_post
         if res.searched != len(t.window):  # a worker's check: the mode scored over the points held now

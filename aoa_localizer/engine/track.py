@@ -31,7 +31,7 @@ from aoa_localizer.engine.initiator import Initiator
 from aoa_localizer.engine.offset import marginalise, prior_sd
 from aoa_localizer.engine.point_batch import Built, points_of, rows_of
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.safety import ModeProposal, broad_sigma
+from aoa_localizer.engine.safety import ModeProposal
 from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.supervisor import Supervisor
 from aoa_localizer.engine.track_report import cloud_estimate
@@ -300,10 +300,6 @@ class EmitterTrack:
         centre = pos.mean(axis=0)
         spread = float(np.max(np.hypot(*(pos - centre).T)))
         return float(centre[0]), float(centre[1]), max(_REACH_MIN_M, _REACH_FACTOR * spread)
-
-    def broad_sigma(self, centre: np.ndarray) -> float:
-        """The mode proposal's broad component: as wide as the farthest point held from `centre`."""
-        return broad_sigma(centre, self.points())
 
     # -- estimates ------------------------------------------------------------------------------------
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
