@@ -93,10 +93,9 @@ def test_three_bearings_10_deg_off_give_a_wide_honest_estimate_at_the_end_of_dat
 @pytest.mark.slow
 def test_hand_held_surveys_every_transmitter_located_with_an_honest_ellipse_near_least_squares():
     """30 hand-held surveys (3-5 bearings at 20-30 deg): every transmitter gets an estimate, at least 24 of the 95 %
-    ellipses hold it, and the median error is within a quarter of least squares' on the same bearings. It was at or
-    under least squares' until stop 47's radio-range prior (on 200 surveys now 126 m against 108 m, and on these 30
-    95-122 m against 115 m as the filter's random stream changes: docs/benchmarks.md); the bound catches any further
-    loss."""
+    ellipses hold it, and the median error is at or under least squares' on the same bearings (89-91 m against 115 m
+    over six of the filter's random streams). The posterior's tails along the rays dragged the mean out: published
+    as the mean, 95-122 m."""
     rng = np.random.default_rng(11)
     errors, ls, inside = [], [], 0
     for i in range(30):
@@ -108,7 +107,7 @@ def test_hand_held_surveys_every_transmitter_located_with_an_honest_ellipse_near
         fix = least_squares_fix(s.stations, s.azimuth_deg)
         ls.append(np.inf if fix is None else np.hypot(*fix))
         inside += inside_ellipse(e, est.cov)
-    assert np.median(errors) <= 1.25 * np.median(ls)
+    assert np.median(errors) <= np.median(ls)
     assert inside >= 24  # 80 % of 30: the benchmark measures 98-100 % on 200
 
 

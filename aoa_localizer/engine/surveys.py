@@ -99,10 +99,15 @@ def locate_bearings(bearings: list[SiteBearing], cfg: LocalizerConfig) -> tuple[
 
 def locate_survey(survey: Survey, cfg: LocalizerConfig | None = None) -> Estimate | None:
     """A simulated survey's end-of-data estimate (datum DATUM; the survey program's defaults unless `cfg`)."""
+    return locate_survey_with(survey, cfg)[0]
+
+
+def locate_survey_with(survey: Survey, cfg: LocalizerConfig | None = None) -> tuple[Estimate | None, Localizer]:
+    """locate_survey, with the closed Localizer that made the estimate."""
     frame = LocalFrame(*DATUM)
     bearings = []
     for i, ((e, n), az, t) in enumerate(zip(survey.stations, survey.azimuth_deg, survey.stamps, strict=True)):
         lat, lon, _ = frame.to_geodetic(e, n)
         bearings.append(SiteBearing(f"s{i}", float(t), float(lat), float(lon), float(az)))
     cfg = (cfg or survey_config()).with_changes(datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2])
-    return locate_bearings(bearings, cfg)[0]
+    return locate_bearings(bearings, cfg)

@@ -34,7 +34,7 @@ from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.safety import ModeProposal
 from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.supervisor import Supervisor
-from aoa_localizer.engine.track_report import cloud_estimate
+from aoa_localizer.engine.track_report import cloud_estimate, spatial_median, wide_for_range
 from aoa_localizer.engine.track_state import PendingJob, TrackState, TrackStatus, WindowEntry
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
@@ -303,9 +303,16 @@ class EmitterTrack:
 
     # -- estimates ------------------------------------------------------------------------------------
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """The published mean and covariance: the cloud's (track_report.cloud_estimate), marginalised over the
-        residual bearing offset the points cannot tell from a place (offset.marginalise)."""
-        mean, cov = self.filter.estimate() if self.filter is not None else cloud_estimate(self.cloud, self.modes[0])
+        """The published place and covariance, marginalised over the residual bearing offset the points cannot tell
+        from a place (offset.marginalise): a running filter's mean and covariance, or where its ellipse is wide for
+        the range (its tails along the rays drag the mean out), its spatial median with the ellipse holding 95 % of
+        the cloud; a provisional sample's highest-density place (its best mode) with that ellipse."""
+        if self.filter is None:
+            mean, cov = cloud_estimate(self.cloud, self.modes[0].mean)
+        else:
+            mean, cov = self.filter.estimate()
+            if wide_for_range(self, mean, cov)[0]:
+                mean, cov = cloud_estimate(self.filter, spatial_median(self.filter.x, self.filter.weights))
         sd = math.inf if self.calibration.offset else prior_sd(self.cfg)
         if sd == 0.0:
             return mean, cov

@@ -9,7 +9,6 @@ import numpy as np
 
 from aoa_localizer.engine.checks import ellipse_and_reach
 from aoa_localizer.engine.crlb import ELLIPSE_95
-from aoa_localizer.engine.global_search import Mode
 from aoa_localizer.engine.initiator import MAX_ELLIPSE_RANGE_SHARE
 from aoa_localizer.filters.base import ParticleFilter
 
@@ -20,13 +19,14 @@ _ELLIPSE_MASS = 0.95  # the share of the posterior a provisional estimate's ELLI
 _MODE_MIN_MASS = 0.01  # modes reported
 _SUSPECT_WILD_SHARE = 0.4  # more bearings than this unexplained: the model does not fit (state `suspect`)
 _AMBIGUOUS_MASS = 0.2  # a second mode this heavy leaves the estimate poorly determined
+_MEDIAN_MAX_STEPS, _MEDIAN_TOL_M = 100, 1e-3  # Weiszfeld's iteration: it stops when a step is under a millimetre
+_MEDIAN_MIN_DISTANCE_M = 1e-6  # a particle at the iterate weighs as if this far (its own weight is then dominant)
 
 
-def cloud_estimate(f: ParticleFilter, best: Mode) -> tuple[np.ndarray, np.ndarray]:
-    """A provisional sample's estimate: the posterior's highest-density place (the best mode: with few bearings the
-    posterior's tails along the rays drag its mean far out) with the cloud's second moment about it, scaled so the
-    95 % ellipse holds 95 % of the cloud."""
-    centre = best.mean.copy()
+def cloud_estimate(f: ParticleFilter, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A wide posterior's estimate: `centre` (a place its tails along the rays do not drag out, as they drag its mean)
+    with the cloud's second moment about it, scaled so the 95 % ellipse holds 95 % of the cloud."""
+    centre = np.array(centre, float)
     w, d = f.weights, f.x - centre
     cov = (w[:, None] * d).T @ d
     try:
@@ -36,6 +36,27 @@ def cloud_estimate(f: ParticleFilter, best: Mode) -> tuple[np.ndarray, np.ndarra
     order = np.argsort(d2)
     at = min(int(np.searchsorted(np.cumsum(w[order]), _ELLIPSE_MASS)), len(order) - 1)
     return centre, cov * max(float(d2[order][at]), 1e-12) / ELLIPSE_95
+
+
+def spatial_median(x: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The weighted cloud's spatial (geometric) median, the place of least expected distance to the emitter
+    (Weiszfeld's iteration from the mean): the mean for a symmetric cloud, and unmoved by a tail along a ray."""
+    m = w @ x
+    for _ in range(_MEDIAN_MAX_STEPS):
+        inv = w / np.maximum(np.hypot(x[:, 0] - m[0], x[:, 1] - m[1]), _MEDIAN_MIN_DISTANCE_M)
+        step = (inv @ x) / inv.sum() - m
+        m = m + step
+        if math.hypot(step[0], step[1]) < _MEDIAN_TOL_M:
+            break
+    return m
+
+
+def wide_for_range(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, float, float]:
+    """(whether the 95 % ellipse's semi-major axis is over MAX_ELLIPSE_RANGE_SHARE of the range from the track, the
+    semi-major axis, the range)."""
+    h = track.model.history.data
+    size, reach = ellipse_and_reach(mean, cov, h[:, 0], h[:, 1])
+    return size > MAX_ELLIPSE_RANGE_SHARE * reach, size, reach
 
 
 def mode_masses(track: EmitterTrack) -> list[tuple[float, float, float]]:
@@ -108,9 +129,8 @@ def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) 
     if track.filter is None:
         why = track.status.removeprefix("poorly determined: ").removeprefix("waiting for geometry: ")
         return "poorly_determined", [f"few or poorly crossing bearings: {why}"]
-    h = track.model.history.data
-    size, reach = ellipse_and_reach(mean, cov, h[:, 0], h[:, 1])
-    if size > MAX_ELLIPSE_RANGE_SHARE * reach:
+    wide, size, reach = wide_for_range(track, mean, cov)
+    if wide:
         return "poorly_determined", [f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]
     if len(modes) > 1 and modes[1][2] >= _AMBIGUOUS_MASS:
         return "poorly_determined", [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
