@@ -224,11 +224,11 @@ class Snapshot:
         self.__dict__.update(state, groups=groups)
 
     def robust(self, outlier_prob: float, fitted: bool) -> Robust:
-        """The snapshot's robust posterior with another point outlier share (the likelihood's, as the track's);
-        `fitted`: after a noise fit, which ends the noise's latent hypotheses."""
+        """The snapshot's robust posterior (its priors, the radio-range prior among them) with another point outlier
+        share (the likelihood's, as the track's); `fitted`: after a noise fit, which ends the noise's latent
+        hypotheses."""
         eps = outlier_prob if self.cfg.likelihood == "mixture" else 0.0
-        return Robust(eps, self.rob.gps_sigma_m, self.rob.prior_mean, self.rob.prior_prec,
-                      None if fitted else self.rob.grid)
+        return replace(self.rob, outlier_prob=eps, grid=None if fitted else self.rob.grid)
 
 
 @dataclass
@@ -305,7 +305,7 @@ class _Calibrated:
         """A start search's result whose best mode is not determined: its modes, why, and a weighted sample of the
         posterior it searched (the radio-range prior's, under the fitted noise when it made a fit)."""
         snap = self.snap
-        rob = snap.rob if self.noise is None else replace(snap.robust(self.outlier, True), reach=snap.rob.reach)
+        rob = snap.rob if self.noise is None else snap.robust(self.outlier, True)
         rng = np.random.default_rng(snap.sample_seed)
         sample = yield from provisional_sample(modes, self.pts, rob, snap.start_grid,
                                                max(snap.cfg.num_particles, DRAWS), rng)
