@@ -344,3 +344,21 @@ def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeyp
     assert t.initiator.apply_start(res, snap.groups) and t.filter is not None  # stale again: used
     assert t.points_used == len(t.window)
     loc.close()
+
+
+@pytest.mark.slow
+def test_a_checks_modes_are_scored_on_the_filters_own_posterior():
+    """The end of data's check over every point: its best mode's log posterior is the track's own at that place (the
+    radio-range prior included), so the re-start test compares the modes and the particles on one posterior."""
+    from aoa_localizer.engine.global_search import log_posterior
+
+    data = simulate("seed", 1)
+    loc = Localizer(scenario_config(data, LocalizerConfig(seed=1)))
+    play(loc, data)
+    loc.flush()
+    loc.finish()
+    t = track_of(loc)
+    assert t.filter is not None and t.robust().reach is not None
+    best = t.modes[0]
+    assert best.log_post == pytest.approx(float(log_posterior(best.mean, t.points(), t.robust())), abs=1e-6)
+    loc.close()
