@@ -11,6 +11,7 @@ import argparse
 import math
 import sys
 import time
+import timeit
 
 import numpy as np
 
@@ -49,13 +50,7 @@ def kernel_source(x, east, north, cos, sin, sigma2, gps_var, distinct, which, ou
 
 def fastest_us(call, reps: int) -> float:
     """The fastest of five loops of `reps` calls, per call (microseconds)."""
-    best = math.inf
-    for _ in range(5):
-        t0 = time.perf_counter()
-        for _ in range(reps):
-            call()
-        best = min(best, (time.perf_counter() - t0) / reps)
-    return best * 1e6
+    return min(timeit.repeat(call, number=reps, repeat=5)) / reps * 1e6
 
 
 def main(argv=None) -> int:

@@ -1,7 +1,7 @@
 """A provisional sample: the weighted importance sample published while the posterior is proper but its best place is
 not determined enough to start the filter. Made by the start search that found it not determined, as the search's
-last pieces (in the worker, or a few pieces per point), over the points it searched: made by the track on applying
-the search, its looks under the latent noise came on top of that call (the node's callback, under `realtime`)."""
+last pieces (in the worker, or a few pieces per point), over the points it searched, so that its looks under the
+latent noise never fall into the call that applies the search (the node's callback, under `realtime`)."""
 from __future__ import annotations
 
 import numpy as np
