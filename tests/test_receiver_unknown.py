@@ -167,6 +167,41 @@ def test_locate_refuses_a_csv_without_its_columns(tmp_path, cli):
     assert res.returncode == 2 and "azimuth_deg" in res.stderr
 
 
+def test_locate_names_the_renames_for_columns_it_seems_to_hold_under_other_names(tmp_path, cli):
+    path = tmp_path / "other.csv"
+    path.write_text("Timestamp,Latitude,Longitude,Bearing,station\n1,46.5,-84.3,40,a\n")
+    res = cli(locate.main, path)
+    assert res.returncode == 2
+    assert "rename timestamp -> time, latitude -> lat, longitude -> lon, bearing -> azimuth_deg" in res.stderr
+
+
+def _survey_csv(delimiter: str, decimal: str, header: str = "time,lat,lon,azimuth_deg,station") -> str:
+    frame, survey = LocalFrame(*DATUM), _three_station_survey()
+    lines = [header.replace(",", delimiter)]
+    for i, ((e, n), az) in enumerate(zip(survey.stations, survey.azimuth_deg, strict=True)):
+        lat, lon, _ = frame.to_geodetic(e, n)
+        fields = [f"{1.7e9 + 600.5 * i:.1f}", f"{lat:.7f}", f"{lon:.7f}", f"{az:.1f}", f"obs{i}"]
+        lines.append(delimiter.join(f.replace(".", decimal) for f in fields))
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize(("delimiter", "decimal", "header"), [
+    (";", ",", "time,lat,lon,azimuth_deg,station"),  # a spreadsheet's export where decimals take commas
+    ("\t", ".", "time,lat,lon,azimuth_deg,station"),
+    (",", ".", "Time,LAT,Lon,Azimuth_Deg,Station"),
+])
+def test_locate_reads_semicolons_with_decimal_commas_tabs_and_any_case_as_the_plain_csv(tmp_path, cli, delimiter,
+                                                                                       decimal, header):
+    out = {}
+    for name, text in (("plain", _survey_csv(",", ".")), ("other", _survey_csv(delimiter, decimal, header))):
+        path = tmp_path / f"{name}.csv"
+        path.write_text(text)
+        res = cli(locate.main, path, "--output", tmp_path / f"{name}.jsonl", "--seed", 2)
+        assert res.returncode == 0 and not res.stderr, res.stderr
+        out[name] = json.loads((tmp_path / f"{name}.jsonl").read_text())
+    assert out["other"] == out["plain"] and out["plain"]["bearings_used"] == 3
+
+
 def test_the_joint_optimum_finds_a_constant_offset_on_a_drive_with_a_turn():
     """An L-shaped drive, bearings 1 deg noisy and all 20 deg off (ENU): the joint (place, offset) optimum finds
     both; the place alone cannot explain them."""

@@ -1,11 +1,13 @@
 """Locate emitters from bearings taken by hand or from fixed sites (wildlife telemetry, fox hunting, DF masts).
 
-The CSV has a header row. Columns: `time` (ISO 8601 with a UTC offset, or epoch seconds), `lat`, `lon` (WGS84;
-or projected `x`, `y` with --crs EPSG:NNNN), `azimuth_deg` (clockwise from true north, unless -p bearing_reference
-says otherwise); optional `quality` (0-100), `sigma_deg` (that bearing's own standard deviation), `station` (a
-name, for the messages) and `id` (one emitter per id; no id: one emitter). Each row is a bearing taken at its own
-place. A bad row is reported with its line number and skipped, never used. The engine runs its defaults with
-2000 particles (a survey's few bearings make that cheap; --particles to change).
+The CSV has a header row (its names in any case). Columns: `time` (ISO 8601 with a UTC offset, or epoch seconds),
+`lat`, `lon` (WGS84; or projected `x`, `y` with --crs EPSG:NNNN), `azimuth_deg` (clockwise from true north, unless
+-p bearing_reference says otherwise); optional `quality` (0-100), `sigma_deg` (that bearing's own standard
+deviation), `station` (a name, for the messages) and `id` (one emitter per id; no id: one emitter). Each row is a
+bearing taken at its own place. Fields are separated by commas, or by semicolons or tabs (a spreadsheet's export in
+a locale that writes decimal commas: then 46,5 is read as 46.5). A bad row is reported with its line number and
+skipped, never used. The engine runs its defaults with 2000 particles (a survey's few bearings make that cheap;
+--particles to change).
 
 Output: one JSON line per id (--output), a table on stdout, and with --report DIR a map, KML and GeoJSON of every
 id. Exit codes: 0 every id located; 1 some id has no estimate (the reason is printed); 2 unreadable input or bad
@@ -48,10 +50,10 @@ class Row:
     id: str
 
 
-def _stamp(text: str) -> float:
+def _stamp(text: str, decimal_comma: bool = False) -> float:
     """Epoch seconds from epoch seconds or ISO 8601 with an offset (a time without one is ambiguous: refused)."""
     try:
-        return float(text)
+        return float(text.replace(",", ".") if decimal_comma else text)
     except ValueError:
         pass
     when = datetime.datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
@@ -60,13 +62,13 @@ def _stamp(text: str) -> float:
     return when.timestamp()
 
 
-def _number(row: dict, name: str, required: bool = True) -> float:
+def _number(row: dict, name: str, required: bool = True, decimal_comma: bool = False) -> float:
     text = (row.get(name) or "").strip()
     if not text:
         if required:
             raise ValueError(f"no {name}")
         return float("nan")
-    value = float(text)
+    value = float(text.replace(",", ".") if decimal_comma else text)
     if not math.isfinite(value):
         raise ValueError(f"{name} is not a finite number ({text!r})")
     return value
@@ -87,32 +89,56 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
             raise ValueError(f"--crs {crs}: {exc}") from exc
     rows, bad = [], []
     with open(path, newline="", encoding="utf-8-sig") as fh:
-        reader = csv.DictReader(fh)
-        header = {name.strip() for name in reader.fieldnames or []}
+        delimiter = _delimiter(fh.readline())
+        fh.seek(0)
+        reader = csv.DictReader(fh, delimiter=delimiter)
+        header = {name.strip().lower() for name in reader.fieldnames or []}  # `Lat` is `lat`
         position = ("x", "y") if to_wgs84 else ("lat", "lon")
         missing = [c for c in ("time", *position, "azimuth_deg") if c not in header]
         if missing:
             raise ValueError(f"{path}: the header lacks column(s) {', '.join(missing)} "
-                             f"(has: {', '.join(sorted(header))})")
+                             f"(has: {', '.join(sorted(header))}){_renames(header, missing)}")
+        comma = delimiter != ","  # a locale whose lists take semicolons writes decimal commas
         for record in reader:
             line = reader.line_num
-            row = {k.strip(): v for k, v in record.items() if k is not None}
+            row = {k.strip().lower(): v for k, v in record.items() if k is not None}
             try:
-                stamp = _stamp(row.get("time") or "")
+                stamp = _stamp(row.get("time") or "", comma)
                 if to_wgs84:
-                    lon, lat = to_wgs84.transform(_number(row, "x"), _number(row, "y"))
+                    lon, lat = to_wgs84.transform(_number(row, "x", True, comma), _number(row, "y", True, comma))
                 else:
-                    lat, lon = _number(row, "lat"), _number(row, "lon")
+                    lat, lon = _number(row, "lat", True, comma), _number(row, "lon", True, comma)
                 if not (abs(lat) <= 90 and abs(lon) <= 180):
                     raise ValueError(f"position {lat}, {lon} is not a latitude and longitude")
-                quality, sigma = _number(row, "quality", False), _number(row, "sigma_deg", False)
+                quality = _number(row, "quality", False, comma)
+                sigma = _number(row, "sigma_deg", False, comma)
                 if not math.isnan(sigma) and sigma <= 0:
                     raise ValueError(f"sigma_deg must be positive, got {sigma}")
-                rows.append(Row(line, stamp, lat, lon, _number(row, "azimuth_deg"), quality, sigma,
+                rows.append(Row(line, stamp, lat, lon, _number(row, "azimuth_deg", True, comma), quality, sigma,
                                 (row.get("station") or "").strip(), (row.get("id") or "").strip()))
             except ValueError as exc:
                 bad.append(f"{path}:{line}: {exc}; row skipped")
     return rows, bad
+
+
+def _delimiter(header: str) -> str:
+    """The header's field separator: a comma, unless the header has none and has semicolons or tabs."""
+    if "," in header:
+        return ","
+    return next((d for d in (";", "\t") if d in header), ",")
+
+
+# Names other programs give our columns: suggested in the error, never assumed (a hand compass's "bearing" is often
+# magnetic, and "time" without an offset is refused anyway)
+_OTHER_NAMES = {"lat": ("latitude",), "lon": ("longitude", "long", "lng"), "x": ("easting",), "y": ("northing",),
+                "azimuth_deg": ("azimuth", "bearing", "bearing_deg", "az", "heading"),
+                "time": ("timestamp", "datetime", "date_time", "utc", "stamp")}
+
+
+def _renames(header: set[str], missing: list[str]) -> str:
+    """A hint for the columns missing from `header` that it seems to hold under other names."""
+    hints = [f"{other} -> {name}" for name in missing for other in _OTHER_NAMES.get(name, ()) if other in header]
+    return f"; if they hold what this program reads, rename {', '.join(hints)}" if hints else ""
 
 
 def locate(rows: list[Row], cfg, datum: tuple[float, float]) -> tuple[Estimate | None, Localizer]:
