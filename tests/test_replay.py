@@ -2,6 +2,7 @@
 import json
 import math
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -270,11 +271,17 @@ def test_a_replay_rate_or_wait_that_is_no_finite_number_in_range_is_refused(cli,
     assert res.returncode == 2 and words in res.stderr, res.stderr
 
 
+def _ctrl_c_as_at_a_terminal():
+    """In the child before it runs: SIGINT at its default, as a program started at a terminal has it. A suite run as
+    a script's background job starts its children with SIGINT ignored (POSIX), which Python keeps (a nohup'd
+    program is not to be stopped by Ctrl-C), and the run would end uninterrupted with exit 0."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.slow
 def test_ctrl_c_during_offline_replay_or_report_ends_in_one_line_and_keeps_what_was_written(tmp_path):
     """Ctrl-C mid-run: exit 130 (documented), one line saying what is kept, no traceback; the estimates replay
     already wrote stay in its output, each a whole JSON line."""
-    import signal
     import time
 
     out, err_file = tmp_path / "est.jsonl", tmp_path / "stderr.txt"
@@ -296,7 +303,7 @@ def test_ctrl_c_during_offline_replay_or_report_ends_in_one_line_and_keeps_what_
         started = time.monotonic()
         with err_file.open("w") as err_sink:
             p = subprocess.Popen([sys.executable, "-m", *map(str, args)], stdout=subprocess.DEVNULL, stderr=err_sink,
-                                 text=True)
+                                 text=True, preexec_fn=_ctrl_c_as_at_a_terminal)
             while not ready(time.monotonic()) and p.poll() is None and time.monotonic() < started + 60:
                 time.sleep(0.05)
             p.send_signal(signal.SIGINT)
