@@ -11,6 +11,13 @@ Robustness section (`--section robustness`): the cells of scenarios.robustness_c
 default configuration, and the robust batch maximum-likelihood reference (`batch-ml`). Columns: RMSE over the
 oracle CRLB of the inlier readings, gross failures (> 10x CRLB), runs without an estimate, NEES, 95 % ellipse
 coverage, time per run. `--jobs` runs cells in parallel processes.
+
+Geometry section (`--section geometry`): the cells of scenarios.geometry_cells(), geometries unlike the public
+scenarios' (a pass 30 m from the emitter, with and without a turn before it, an emitter 8 km off the road, a slow
+walk with a 5 deg DF, a loop around the emitter, an emitter behind the start), scored as the robustness cells are,
+beside `oracle-ml`: least squares over every inlier reading at the antenna's true place with its true sigma (no
+points, GPS or clocks), the estimate the readings alone allow. `-p NAME=VALUE` changes the configuration of these
+two sections (e.g. `-p obs_max_range_share=0`).
 """
 from __future__ import annotations
 
@@ -27,14 +34,17 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import least_squares
 from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import particles_peers  # noqa: E402
 
 from aoa_localizer import LocalizerConfig  # noqa: E402
-from aoa_localizer.engine.evaluation import LARGE_ERROR_M, run, run_batch_ml  # noqa: E402
-from aoa_localizer.engine.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
+from aoa_localizer.engine.crlb import crlb_rmse  # noqa: E402
+from aoa_localizer.engine.evaluation import LARGE_ERROR_M, final_scores, run, run_batch_ml  # noqa: E402
+from aoa_localizer.engine.geodesy import azimuth_to_enu  # noqa: E402
+from aoa_localizer.engine.scenarios import SCENARIOS, geometry_cells, robustness_cells, simulate  # noqa: E402
 from aoa_localizer.filters import REGISTRY  # noqa: E402
 
 logging.getLogger("aoa_localizer").setLevel(logging.ERROR)  # per-run first-rejection notes would flood the table
@@ -192,23 +202,44 @@ def print_tables(results):
 
 
 ROBUST_FILTERS = (*REGISTRY, "batch-ml")
+ORACLE = "oracle-ml"  # the geometry section's yardstick (oracle_ml)
 GROSS_FACTOR = 10.0
+CELLS = {"robustness": robustness_cells, "geometry": geometry_cells}  # the sections scored cell by cell
 
 
 def robust_task(task):
-    """One (cell, run, filter): the final estimate's scores and the run's wall time."""
-    cell, r, fname, scheduling = task
+    """One (section, cell, run, filter): the final estimate's scores and the run's wall time."""
+    section, cell, r, fname, scheduling, changes = task
     logging.getLogger("aoa_localizer").setLevel(logging.ERROR)
     warnings.simplefilter("ignore")  # numpy RuntimeWarnings of diverging peers must not break the progress bar
-    data = simulate(robustness_cells()[cell], r)
-    cfg = LocalizerConfig(seed=10000 + r, scheduling=scheduling)
+    data = simulate(CELLS[section]()[cell], r)
+    cfg = LocalizerConfig(seed=10000 + r, scheduling=scheduling).with_changes(**changes)
     if fname == "batch-ml":
         return cell, fname, run_batch_ml(data, cfg)
+    if fname == ORACLE:
+        return cell, fname, oracle_ml(data)
     res = run(data, cfg.with_changes(algorithm=fname))
     s = res.scores
     out = {k: s[k] for k in ("converged", "crlb", "error", "nees", "inside95") if k in s}
     out["wall_s"] = res.wall_s
     return cell, fname, out
+
+
+def oracle_ml(data) -> dict:
+    """Least squares over the inlier readings at the antennas' true places with their true sigmas, from the truth,
+    scored as a final estimate (its covariance the Gauss-Newton inverse at the optimum); wall time 0."""
+    inlier = ~data.wild
+    places, sigma = data.sensor_enu[inlier], data.sigma[inlier]
+    north = data.frame.north_angle(*data.frame.to_geodetic(places[:, 0], places[:, 1])[:2])
+    theta = azimuth_to_enu(data.bearings[inlier, 1], north)
+
+    def residuals(x):
+        return np.angle(np.exp(1j * (theta - np.arctan2(x[1] - places[:, 1], x[0] - places[:, 0])))) / sigma
+
+    fit = least_squares(residuals, data.emitter_enu)
+    cov = np.linalg.inv(fit.jac.T @ fit.jac)
+    bound = crlb_rmse(data.emitter_enu, places, sigma)
+    return {**final_scores(fit.x - data.emitter_enu, cov, bound), "wall_s": 0.0}
 
 
 def robust_aggregate(rows: list[dict]) -> dict:
@@ -232,11 +263,12 @@ def robust_aggregate(rows: list[dict]) -> dict:
     return out
 
 
-def bench_robustness(runs: int, filters, jobs: int, scheduling: str = "reproducible") -> dict:
-    cells = list(robustness_cells())
-    tasks = [(c, r, f, scheduling) for c in cells for r in range(runs) for f in filters]
+def bench_robustness(runs: int, filters, jobs: int, scheduling: str = "reproducible", section: str = "robustness",
+                     changes: dict | None = None) -> dict:
+    cells = list(CELLS[section]())
+    tasks = [(section, c, r, f, scheduling, changes or {}) for c in cells for r in range(runs) for f in filters]
     rows = {c: {f: [] for f in filters} for c in cells}
-    with tqdm(total=len(tasks), unit="run", file=sys.stderr, desc="robustness") as bar:
+    with tqdm(total=len(tasks), unit="run", file=sys.stderr, desc=section) as bar:
         if jobs > 1:
             with multiprocessing.get_context("spawn").Pool(jobs) as pool:
                 for cell, fname, out in pool.imap_unordered(robust_task, tasks, chunksize=4):
@@ -250,7 +282,7 @@ def bench_robustness(runs: int, filters, jobs: int, scheduling: str = "reproduci
     return {c: {f: robust_aggregate(v) for f, v in by.items()} for c, by in rows.items()}
 
 
-def print_robustness(results: dict):
+def print_robustness(results: dict, section: str = "robustness"):
     cols = [
         ("rmse_over_crlb", "RMSE/CRLB", "{:.2f}"),
         ("median_over_crlb", "median/CRLB", "{:.2f}"),
@@ -264,7 +296,7 @@ def print_robustness(results: dict):
     ]
     filters = list(next(iter(results.values())))
     for fname in filters:
-        print(f"\n## robustness: {fname}")
+        print(f"\n## {section}: {fname}")
         print("| cell | " + " | ".join(c[1] for c in cols) + " |")
         print("|---" * (len(cols) + 1) + "|")
         for cell, by in results.items():
@@ -289,9 +321,9 @@ def main(argv=None):
     parser.add_argument("--plot", metavar="DIR", help="write RMSE-against-step plots with the CRLB, one per scenario")
     parser.add_argument(
         "--section",
-        choices=("public", "robustness", "all"),
+        choices=("public", "robustness", "geometry", "all"),
         default="all",
-        help="public scenarios, robustness cells, or both (default)",
+        help="public scenarios, robustness cells, or both (default); geometry: our own geometries' cells",
     )
     parser.add_argument(
         "--scheduling",
@@ -304,10 +336,14 @@ def main(argv=None):
         "--jobs",
         type=int,
         default=os.cpu_count() or 1,
-        help="parallel processes for the robustness section (default: the cores)",
+        help="parallel processes for the robustness and geometry sections (default: the cores)",
     )
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="robustness and geometry sections: a LocalizerConfig change (numbers read as floats)")
     args = parser.parse_args(argv)
-    if args.section == "robustness":
+    if args.param and args.section not in CELLS:
+        parser.error("-p applies to --section robustness or geometry")
+    if args.section in CELLS:
         return robustness_main(args)
     with_peers = particles_peers.AVAILABLE and not args.no_peers
     if not particles_peers.AVAILABLE and not args.no_peers:
@@ -357,11 +393,25 @@ def main(argv=None):
         Path(args.json).write_text(json.dumps({"meta": meta, "results": results, "robustness": robust}, indent=1))
 
 
+def _changes(items: list[str]) -> dict:
+    """-p NAME=VALUE items as LocalizerConfig changes (a value that reads as a number is one)."""
+    changes: dict = {}
+    for item in items:
+        name, _, text = item.partition("=")
+        try:
+            changes[name] = float(text)
+        except ValueError:
+            changes[name] = text
+    return changes
+
+
 def robustness_main(args):
     t0 = time.time()
     filters = [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"]
-    robust = bench_robustness(args.runs, filters, args.jobs, args.scheduling)
-    print_robustness(robust)
+    if args.section == "geometry":
+        filters.append(ORACLE)
+    robust = bench_robustness(args.runs, filters, args.jobs, args.scheduling, args.section, _changes(args.param))
+    print_robustness(robust, args.section)
     meta = {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "machine": platform.platform(),
@@ -370,11 +420,12 @@ def robustness_main(args):
         "numpy": np.__version__,
         "runs": args.runs,
         "jobs": args.jobs,
+        "changes": _changes(args.param),
         "wall_s": round(time.time() - t0, 1),
     }
     print(f"\n{args.runs} runs per cell, {meta['wall_s']} s, {meta['machine']}, {meta['cores']} cores, {meta['date']}")
     if args.json:
-        Path(args.json).write_text(json.dumps({"meta": meta, "robustness": robust}, indent=1))
+        Path(args.json).write_text(json.dumps({"meta": meta, args.section: robust}, indent=1))
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.preprocess import (
     SMALL_POINT,
     Group,
@@ -17,7 +18,7 @@ from aoa_localizer.engine.preprocess import (
     reading_sigma,
     recursive_corrected_mean,
 )
-from aoa_localizer.engine.types import Reading
+from aoa_localizer.engine.types import Estimate, Reading
 
 
 def test_quality_weight_eq20_by_hand():
@@ -105,6 +106,30 @@ def test_point_builder_closes_on_time_distance_and_count():
     b.add(_reading(1, t=1.8, e=20.0))
     assert [len(g) for g in b.add(_reading(1, t=1.9, e=20.0))] == [3]  # full at 3 readings
     assert b.flush() is None
+
+
+def test_a_point_spans_at_most_a_share_of_its_range_to_the_channels_estimate():
+    """Readings 2 m apart: 10 m points far from the estimate (or without one), a reading a point within 40 m of it
+    (5 % of 30 m is 1.5 m); `obs_max_range_share: 0` keeps 10 m points everywhere."""
+    def sizes(cfg, emitter):
+        b = PointBuilder(cfg)
+        b.emitter = emitter
+        closed = [len(g) for i in range(12) for g in b.add(_reading(1, t=0.1 * i, e=2.0 * i))]
+        return closed + [len(b.flush() or [])]
+
+    cfg = LocalizerConfig()
+    assert sizes(cfg, None) == [6, 6] == sizes(cfg, (5000.0, 0.0))  # 10 m: the 7th reading is 12 m from the 1st
+    assert sizes(cfg, (10.0, 30.0)) == [1] * 12
+    assert sizes(cfg.with_changes(obs_max_range_share=0.0), (10.0, 30.0)) == [6, 6]
+
+
+def test_a_channels_builders_take_its_estimates_place():
+    loc = Localizer(LocalizerConfig(seed=1))
+    channel = loc.channels.default
+    channel.builder("car")
+    channel.published(Estimate(0.0, 120.0, -40.0, 39.0, 117.0, np.eye(2), 3, 3, 100.0, "afsa"))
+    assert channel.builders["car"].emitter == (120.0, -40.0)
+    assert channel.builder("mast").emitter == (120.0, -40.0)  # a station heard later starts with it too
 
 
 def random_group(rng, n):

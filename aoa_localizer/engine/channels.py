@@ -49,7 +49,20 @@ class Channel:
         b = self.builders.get(station)
         if b is None:
             b = self.builders[station] = PointBuilder(self.cfg, self.first_point)
+            b.emitter = self._place()
         return b
+
+    def published(self, estimate: Estimate):
+        """The channel's new estimate: kept, and its place given to the builders (a point's span follows its
+        range)."""
+        self.estimate = estimate
+        place = self._place()
+        for b in self.builders.values():
+            b.emitter = place
+
+    def _place(self) -> tuple[float, float] | None:
+        est = self.estimate
+        return None if est is None else (est.east, est.north)
 
 
 class Channels:

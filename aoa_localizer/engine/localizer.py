@@ -433,7 +433,8 @@ class Localizer:
                             noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,
                             channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
                             end_of_data=end_of_data)
-        channel.estimate = self.estimate = estimate
+        channel.published(estimate)
+        self.estimate = estimate
         self.latest = channel
         if self.on_estimate is not None:
             self.on_estimate(estimate)

@@ -238,14 +238,18 @@ def columns(readings: list[Reading]) -> Columns:
 
 class PointBuilder:
     """Groups readings into observation points: a point closes when the next reading is more than
-    `obs_max_duration_s` later or `obs_max_distance_m` away from its first reading, when it holds
-    `obs_max_readings`, or on flush(). `first` (0-1] scales those limits for the first point (and the first after a
-    flush): channels that share stamps then close their points at different readings instead of all in one scan."""
+    `obs_max_duration_s` later or `obs_max_distance_m` away from its first reading (or `obs_max_range_share` of the
+    first reading's range to `emitter`, the channel's estimate: a bearing is nearly linear across a point only while
+    the point is small against its range, and a pass close by sweeps it by more than the wild-reading gate), when it
+    holds `obs_max_readings`, or on flush(). `first` (0-1] scales those limits for the first point (and the first
+    after a flush): channels that share stamps then close their points at different readings instead of all in one
+    scan."""
 
     def __init__(self, cfg: LocalizerConfig, first: float = 1.0):
         self.cfg, self.first = cfg, first
         self.scale = first
         self.readings: list[Reading] = []
+        self.emitter: tuple[float, float] | None = None  # the channel's estimate (ENU m), once it has one
 
     def add(self, r: Reading) -> list[list[Reading]]:
         """Add a reading; returns the readings of each point it closed (zero, one or two)."""
@@ -253,8 +257,12 @@ class PointBuilder:
         cfg, scale = self.cfg, self.scale
         if self.readings:
             first = self.readings[0]
+            span = cfg.obs_max_distance_m
+            if self.emitter is not None and cfg.obs_max_range_share > 0.0:
+                reach = math.hypot(first.east - self.emitter[0], first.north - self.emitter[1])
+                span = min(span, cfg.obs_max_range_share * reach)
             too_late = r.stamp - first.stamp > scale * cfg.obs_max_duration_s
-            too_far = math.hypot(r.east - first.east, r.north - first.north) > scale * cfg.obs_max_distance_m
+            too_far = math.hypot(r.east - first.east, r.north - first.north) > scale * span
             if too_late or too_far:
                 closed.append(self._take())
         self.readings.append(r)

@@ -107,6 +107,34 @@ def robustness_cells() -> dict[str, Scenario]:
     return cells
 
 
+_LOOP = tuple((300.0 * math.cos(a), 300.0 * math.sin(a)) for a in np.linspace(0.0, 2.0 * math.pi, 30))
+
+
+def geometry_cells() -> dict[str, Scenario]:
+    """Geometries unlike the public scenarios', each driven on without stops and read with the default
+    configuration (constant noise, not told): a pass 30 m from the emitter on a straight road (the bearings swing
+    180 deg in seconds, before any estimate), the same pass after a turn (an estimate before the pass), an emitter
+    8 km off a 5 km road, a walk around a block at 1.5 m/s with a 5 deg hand-held DF at 1 Hz, a loop around the
+    emitter, and an emitter behind the start that the vehicle drives away from."""
+    drive = replace(SCENARIOS["seed"], points=0, quality=(80.0, 80.0))
+    return {
+        "close_pass": replace(drive, name="close_pass", emitter=(1000.0, 30.0), track=((0, 0), (2000, 0)),
+                              sigma_rad=math.radians(2.0), df_rate_hz=5.0),
+        "turn_then_pass": replace(drive, name="turn_then_pass", emitter=(1000.0, 30.0),
+                                  track=((300, -600), (300, 0), (2000, 0)), sigma_rad=math.radians(2.0),
+                                  df_rate_hz=5.0),
+        "far_side": replace(drive, name="far_side", emitter=(2500.0, 8000.0), track=((0, 0), (5000, 0)),
+                            sigma_rad=math.radians(1.0), speed=20.0, df_rate_hz=2.0),
+        "walk": replace(drive, name="walk", emitter=(400.0, 300.0),
+                        track=((0, 0), (200, 0), (200, 200), (0, 200), (0, 0)), speed=1.5, df_rate_hz=1.0,
+                        sigma_rad=math.radians(5.0)),
+        "loop_around": replace(drive, name="loop_around", emitter=(50.0, -80.0), track=_LOOP,
+                               sigma_rad=math.radians(3.0), df_rate_hz=2.0),
+        "behind": replace(drive, name="behind", emitter=(-600.0, 150.0), track=((0, 0), (1500, 0), (1500, 600)),
+                          sigma_rad=math.radians(2.0), df_rate_hz=2.0),
+    }
+
+
 @dataclass
 class ScenarioData:
     """One simulated run: public inputs plus the truth."""
