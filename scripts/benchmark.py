@@ -41,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import particles_peers  # noqa: E402
 
 from aoa_localizer import LocalizerConfig  # noqa: E402
+from aoa_localizer.core.spec import ConfigError  # noqa: E402
 from aoa_localizer.engine.crlb import crlb_rmse  # noqa: E402
 from aoa_localizer.engine.evaluation import LARGE_ERROR_M, final_scores, run, run_batch_ml  # noqa: E402
 from aoa_localizer.engine.geodesy import azimuth_to_enu  # noqa: E402
@@ -343,6 +344,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.param and args.section not in CELLS:
         parser.error("-p applies to --section robustness or geometry")
+    try:
+        LocalizerConfig().with_changes(**_changes(args.param))
+    except ConfigError as exc:
+        parser.error(str(exc))
     if args.section in CELLS:
         return robustness_main(args)
     with_peers = particles_peers.AVAILABLE and not args.no_peers
