@@ -130,6 +130,8 @@ def test_a_channels_builders_take_its_estimates_place():
     channel.published(Estimate(0.0, 120.0, -40.0, 39.0, 117.0, np.eye(2), 3, 3, 100.0, "afsa"))
     assert channel.builders["car"].emitter == (120.0, -40.0)
     assert channel.builder("mast").emitter == (120.0, -40.0)  # a station heard later starts with it too
+    channel.published(Estimate(0.0, 5.0, 5.0, 39.0, 117.0, np.eye(2), 3, 3, 100.0, "afsa", state="poorly_determined"))
+    assert channel.builders["car"].emitter is None  # a provisional or wide place: the configured span
 
 
 def random_group(rng, n):

@@ -61,8 +61,10 @@ class Channel:
             b.emitter = place
 
     def _place(self) -> tuple[float, float] | None:
+        """The estimate's place, once it is determined: a wide or provisional one's may lie by the road, and would
+        cut points small for nothing."""
         est = self.estimate
-        return None if est is None else (est.east, est.north)
+        return None if est is None or est.state == "poorly_determined" else (est.east, est.north)
 
 
 class Channels:

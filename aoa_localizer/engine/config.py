@@ -85,8 +85,8 @@ class LocalizerConfig(GroupAccess):
     obs_max_duration_s: float = param(2.0, "longest span of one observation point (s)", low=1e-3, high=3600.0)
     obs_max_distance_m: float = param(10.0, "longest distance covered by one observation point (m)", low=0.0, high=1e5)
     obs_max_range_share: float = param(
-        0.05, "longest distance covered by one observation point as a share of its range to the emitter's estimate "
-        "(a pass close by sweeps the bearing across a point; 0: off)", low=0.0, high=1.0
+        0.05, "longest distance covered by one observation point as a share of its range to the emitter's estimate, "
+        "once that is determined (a pass close by sweeps the bearing across a point; 0: off)", low=0.0, high=1.0
     )
     obs_max_readings: int = param(50, "most readings in one observation point", low=1, high=100_000)
     df_correlation: float = param(

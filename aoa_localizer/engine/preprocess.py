@@ -239,11 +239,11 @@ def columns(readings: list[Reading]) -> Columns:
 class PointBuilder:
     """Groups readings into observation points: a point closes when the next reading is more than
     `obs_max_duration_s` later or `obs_max_distance_m` away from its first reading (or `obs_max_range_share` of the
-    first reading's range to `emitter`, the channel's estimate: a bearing is nearly linear across a point only while
-    the point is small against its range, and a pass close by sweeps it by more than the wild-reading gate), when it
-    holds `obs_max_readings`, or on flush(). `first` (0-1] scales those limits for the first point (and the first
-    after a flush): channels that share stamps then close their points at different readings instead of all in one
-    scan."""
+    first reading's range to `emitter`, the channel's determined estimate: a bearing is nearly linear across a point
+    only while the point is small against its range, and a pass close by sweeps it by more than the wild-reading
+    gate), when it holds `obs_max_readings`, or on flush(). `first` (0-1] scales those limits for the first point (and
+    the first after a flush): channels that share stamps then close their points at different readings instead of all
+    in one scan."""
 
     def __init__(self, cfg: LocalizerConfig, first: float = 1.0):
         self.cfg, self.first = cfg, first
