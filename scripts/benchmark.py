@@ -41,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import particles_peers  # noqa: E402
 
 from aoa_localizer import LocalizerConfig  # noqa: E402
+from aoa_localizer.common.cli import param_changes  # noqa: E402
 from aoa_localizer.core.spec import ConfigError  # noqa: E402
 from aoa_localizer.engine.crlb import crlb_rmse  # noqa: E402
 from aoa_localizer.engine.evaluation import LARGE_ERROR_M, final_scores, run, run_batch_ml  # noqa: E402
@@ -340,12 +341,12 @@ def main(argv=None):
         help="parallel processes for the robustness and geometry sections (default: the cores)",
     )
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE",
-                        help="robustness and geometry sections: a LocalizerConfig change (numbers read as floats)")
+                        help="robustness and geometry sections: a LocalizerConfig change (as the programs' -p)")
     args = parser.parse_args(argv)
     if args.param and args.section not in CELLS:
         parser.error("-p applies to --section robustness or geometry")
     try:
-        LocalizerConfig().with_changes(**_changes(args.param))
+        LocalizerConfig().with_changes(**param_changes(args.param))
     except ConfigError as exc:
         parser.error(str(exc))
     if args.section in CELLS:
@@ -398,24 +399,12 @@ def main(argv=None):
         Path(args.json).write_text(json.dumps({"meta": meta, "results": results, "robustness": robust}, indent=1))
 
 
-def _changes(items: list[str]) -> dict:
-    """-p NAME=VALUE items as LocalizerConfig changes (a value that reads as a number is one)."""
-    changes: dict = {}
-    for item in items:
-        name, _, text = item.partition("=")
-        try:
-            changes[name] = float(text)
-        except ValueError:
-            changes[name] = text
-    return changes
-
-
 def robustness_main(args):
     t0 = time.time()
     filters = [f for f in ROBUST_FILTERS if f in args.filters or f == "batch-ml"]
     if args.section == "geometry":
         filters.append(ORACLE)
-    robust = bench_robustness(args.runs, filters, args.jobs, args.scheduling, args.section, _changes(args.param))
+    robust = bench_robustness(args.runs, filters, args.jobs, args.scheduling, args.section, param_changes(args.param))
     print_robustness(robust, args.section)
     meta = {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
@@ -425,7 +414,7 @@ def robustness_main(args):
         "numpy": np.__version__,
         "runs": args.runs,
         "jobs": args.jobs,
-        "changes": _changes(args.param),
+        "changes": param_changes(args.param),
         "wall_s": round(time.time() - t0, 1),
     }
     print(f"\n{args.runs} runs per cell, {meta['wall_s']} s, {meta['machine']}, {meta['cores']} cores, {meta['date']}")

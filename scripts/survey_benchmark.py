@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from aoa_localizer.common.cli import param_changes
+from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.surveys import hand_held, least_squares_fix, locate_survey, survey_config
@@ -72,15 +74,13 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=1, help="seed of the simulated surveys")
     parser.add_argument("--lenth", type=int, metavar="SEEDS", help="run Lenth's example over this many seeds instead")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME=VALUE",
-                        help="a LocalizerConfig change (e.g. noise=fixed); values are read as floats where they parse")
+                        help="a LocalizerConfig change (e.g. noise=fixed), as the programs' -p")
     args = parser.parse_args(argv)
-    changes = {}
-    for item in args.param:
-        name, _, text = item.partition("=")
-        try:
-            changes[name] = float(text)
-        except ValueError:
-            changes[name] = text
+    try:
+        changes = param_changes(args.param)
+        survey_config(**changes)
+    except ConfigError as exc:
+        parser.error(str(exc))
     if args.lenth:
         lenth(args.lenth, changes)
     else:

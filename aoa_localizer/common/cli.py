@@ -168,15 +168,23 @@ def load_params_file(path: str) -> dict:
     return data
 
 
-def config_from_args(args, base: LocalizerConfig | None = None) -> LocalizerConfig:
-    """The config the options describe (file, then -p, then the short options); raises ConfigError. Every
-    value given is checked, also one a later option overrides (a wrong -p is never silently dropped)."""
-    changes = load_params_file(args.params_file) if args.params_file else {}
-    for item in args.param:
+def param_changes(items: list[str]) -> dict:
+    """`-p NAME=VALUE` items as config changes, each value read as JSON where it parses (numbers, booleans) and as
+    text otherwise; raises ConfigError for an item without `=`."""
+    changes = {}
+    for item in items:
         name, sep, text = item.partition("=")
         if not sep:
             raise ConfigError(f"-p takes NAME=VALUE, got {item!r}")
         changes[name.strip()] = _value(text.strip())
+    return changes
+
+
+def config_from_args(args, base: LocalizerConfig | None = None) -> LocalizerConfig:
+    """The config the options describe (file, then -p, then the short options); raises ConfigError. Every
+    value given is checked, also one a later option overrides (a wrong -p is never silently dropped)."""
+    changes = load_params_file(args.params_file) if args.params_file else {}
+    changes.update(param_changes(args.param))
     cfg = (base or LocalizerConfig()).with_changes(**changes)
     short = {name: value for name, value in (("algorithm", args.algorithm), ("num_particles", args.particles),
                                              ("seed", args.seed)) if value is not None}
