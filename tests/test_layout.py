@@ -11,11 +11,12 @@ import aoa_localizer
 
 # CONTRIBUTING's layers, bottom first: a package imports only packages below it (and itself); the modules at the
 # package's top (entry points, the public API) may import any.
-LAYERS = ["core", "models", "filters", "engine", "common", "reporting", "ros", "tools"]
+LAYERS = ["core", "models", "filters", "engine", "pooled", "common", "reporting", "ros", "tools"]
 
 ROS_FREE = ["aoa_localizer", "aoa_localizer.engine.localizer", "aoa_localizer.engine.evaluation",
             "aoa_localizer.filters", "aoa_localizer.models", "aoa_localizer.reporting.report",
             "aoa_localizer.tools.replay", "aoa_localizer.tools.simulate", "aoa_localizer.tools.param_docs",
+            "aoa_localizer.tools.locate", "aoa_localizer.pooled",
             "aoa_localizer.ros.node_params", "msgs_adapters.bag", "msgs_adapters.fields"]
 
 

@@ -31,6 +31,8 @@ from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.surveys import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
 from aoa_localizer.engine.types import Estimate
+from aoa_localizer.pooled import SurveyReading, locate_pooled
+from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES
 
 PROG = "python -m aoa_localizer.locate"
 
@@ -48,6 +50,7 @@ class Row:
     sigma_deg: float
     station: str
     id: str
+    receiver: str = ""
 
 
 def _stamp(text: str, decimal_comma: bool = False) -> float:
@@ -114,8 +117,9 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
                 sigma = _number(row, "sigma_deg", False, comma)
                 if not math.isnan(sigma) and sigma <= 0:
                     raise ValueError(f"sigma_deg must be positive, got {sigma}")
+                receiver = (row.get("receiver") or row.get("observer") or "").strip()
                 rows.append(Row(line, stamp, lat, lon, _number(row, "azimuth_deg", True, comma), quality, sigma,
-                                (row.get("station") or "").strip(), (row.get("id") or "").strip()))
+                                (row.get("station") or "").strip(), (row.get("id") or "").strip(), receiver))
             except ValueError as exc:
                 bad.append(f"{path}:{line}: {exc}; row skipped")
     return rows, bad
@@ -154,8 +158,10 @@ def record(ident: str, est: Estimate, rows: int) -> dict:
             "bearings_used": est.bearings_used, "bearings_given": rows, "modes": est.to_json_dict()["modes"]}
 
 
-def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):
-    """map.png (bearings, estimates, 95 % ellipses), emitter.kml and emitter.geojson of every id."""
+def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]],
+                 regions: dict | None = None):
+    """map.png (bearings, estimates, 95 % ellipses, and the 95 % highest-density regions where given: channel ->
+    level -> rings of (lat, lon)), emitter.kml and emitter.geojson of every id."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -167,14 +173,17 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
 
     out.mkdir(parents=True, exist_ok=True)
     named = [replace(est, channel=ident or "default") for ident, (est, _) in found.items()]
-    (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}), indent=1))
-    (out / "emitter.kml").write_text(kml(frame, named, {}))
+    (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}, regions), indent=1))
+    (out / "emitter.kml").write_text(kml(frame, named, {}, regions))
     fig, ax = plt.subplots(figsize=(8, 8))
     for (ident, (est, rows)), colour in zip(found.items(), plt.rcParams["axes.prop_cycle"].by_key()["color"] * 99,
                                             strict=False):
         ring = ellipse_points((est.east, est.north), est.cov)
         ax.plot(ring[:, 0], ring[:, 1], color=colour, label=f"{ident or 'emitter'} ({est.state})")
         ax.plot(est.east, est.north, "+", color=colour, ms=12)
+        for ring in ((regions or {}).get(ident or "default") or {}).get(0.95, []):
+            e, n = frame.to_enu(ring[:, 0], ring[:, 1])
+            ax.fill(e, n, color=colour, alpha=0.15, lw=0)
         reach = 1.5 * max(float(np.max(np.hypot(ring[:, 0] - est.east, ring[:, 1] - est.north))), 50.0)
         for row in rows:
             e, n = frame.to_enu(row.lat, row.lon)
@@ -190,12 +199,94 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
     plt.close(fig)
 
 
+def _filter_run(groups: dict[str, list[Row]], cfg, datum) -> tuple[dict, list[str], int]:
+    """--model filter: each id through its own particle filter (the round-3 engine)."""
+    found: dict[str, tuple[Estimate, list[Row]]] = {}
+    lines, failed = [], 0
+    for ident, group in groups.items():
+        est, loc = locate(group, cfg, datum)
+        if est is None:
+            failed += 1
+            print(f"{ident or '-':<12} no estimate: {loc.status}")
+            continue
+        found[ident] = (est, group)
+        _print_row(ident, est)
+        lines.append(json.dumps(record(ident, est, len(group))))
+    return found, lines, failed
+
+
+def _print_row(ident: str, est: Estimate):
+    a, b, _ = ellipse_axes(est.cov)
+    print(f"{ident or '-':<12} {est.lat:11.6f} {est.lon:12.6f} {a:8.3g} x {b:<8.3g} {est.bearings_used:8d}  "
+          f"{est.state}" + "".join(f"\n{'':<12} {w}" for w in est.warnings))
+
+
+def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class: str):
+    """--model pooled: every id at once, each receiver calibrated over the ids it heard (aoa_localizer.pooled)."""
+    readings = [SurveyReading(row.id, row.lat, row.lon, row.azimuth_deg, row.station, row.receiver, row.sigma_deg)
+                for group in groups.values() for row in group]
+    result = locate_pooled(readings, receiver_class)
+    for warning in result.warnings:
+        print(f"locate: warning: {warning}", file=sys.stderr)
+    found: dict[str, tuple[Estimate, list[Row]]] = {}
+    regions: dict[str, dict] = {}
+    lines, failed = [], 0
+    for ident, group in groups.items():
+        fix = result.fixes.get(ident)
+        if fix is None:
+            failed += 1
+            print(f"{ident or '-':<12} no estimate: {result.refused.get(ident, 'no usable bearing')}")
+            continue
+        east, north = frame.to_enu(fix.lat, fix.lon)
+        est = Estimate(group[-1].stamp, float(east), float(north), fix.lat, fix.lon, fix.cov, fix.readings,
+                       fix.stations, float("nan"), "pooled", modes=[(float(east), float(north), 1.0)],
+                       channel=ident or "default", state=fix.state, warnings=list(fix.warnings))
+        found[ident] = (est, group)
+        regions[est.channel] = fix.hpd
+        _print_row(ident, est)
+        lines.append(json.dumps(pooled_record(ident, est, fix, len(group), result)))
+    for text in receiver_lines(result):
+        print(text)
+    return found, lines, failed, regions
+
+
+def pooled_record(ident: str, est: Estimate, fix, rows: int, result) -> dict:
+    """A JSON line of the pooled model (docs/interface.md, "locate"): the filter's fields and the regions."""
+    out = record(ident, est, rows)
+    group = next((g for g in result.noise if set(fix.receivers) <= set(g["receivers"])), None)
+    out.update({"model": "pooled", "stations": fix.stations, "receivers": fix.receivers,
+                "hpd": {f"{100 * lvl:.0f}": [[[round(float(a), 8), round(float(b), 8)] for a, b in ring]
+                                             for ring in rings] for lvl, rings in fix.hpd.items()},
+                "ellipse_mass": {f"{100 * lvl:.0f}": round(m, 3) for lvl, m in fix.ellipse_mass.items()},
+                "noise": group})
+    return out
+
+
+def receiver_lines(result) -> list[str]:
+    """One line per receiver and per pooled group: what the survey taught about them."""
+    out = []
+    for cal in result.receivers.values():
+        bias = (f"bias {cal.bias_deg:+.1f} +- {cal.bias_sd_deg:.1f} deg (the part the crossings show)"
+                if math.isfinite(cal.bias_deg) else "no bias learned (heard over fewer than 3 ids)")
+        out.append(f"receiver {cal.name}: {cal.emitters} ids, {cal.stations} stations; {bias}")
+    for g in result.noise:
+        out.append(f"station error of {', '.join(g['receivers'][:5])}{' ...' if len(g['receivers']) > 5 else ''}: "
+                   f"{g['scale_deg']:.1f} deg (its own part {g['own_deg_90'][0]:.1f}-{g['own_deg_90'][1]:.1f} "
+                   f"deg at 90 %), wild share {g['wild_share']:.2f}, over {g['emitters']} ids")
+    return out
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__, formatter_class=HelpFormatter)
     parser.add_argument("csv", type=Path, help="the bearings (CSV with a header)")
     parser.add_argument("--output", type=Path, metavar="OUT.jsonl", help="one JSON line per id")
     parser.add_argument("--report", type=Path, metavar="DIR", help="map.png, emitter.kml, emitter.geojson")
     parser.add_argument("--crs", metavar="EPSG:NNNN", help="the CRS of projected x, y columns (instead of lat, lon)")
+    parser.add_argument("--model", choices=("pooled", "filter"), default="pooled",
+                        help="pooled: every id at once on a grid, receivers calibrated jointly (default); filter: "
+                             "each id through its own particle filter (uses quality, --algorithm, --particles, -p)")
+    parser.add_argument("--receiver-class", choices=tuple(RECEIVER_CLASSES), default="unknown",
+                        help="what the receiver is, for the prior on its error (pooled model)")
     add_engine_args(parser, SURVEY_PARTICLES)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
@@ -215,22 +306,14 @@ def main(argv=None) -> int:
     groups: dict[str, list[Row]] = {}
     for row in rows:
         groups.setdefault(row.id, []).append(row)
-    found: dict[str, tuple[Estimate, list[Row]]] = {}
-    lines, failed = [], 0
     print(f"{'id':<12} {'lat':>11} {'lon':>12} {'95% semi-axes (m)':>18} {'bearings':>8}  state")
-    for ident, group in groups.items():
-        est, loc = locate(group, cfg, datum)
-        if est is None:
-            failed += 1
-            print(f"{ident or '-':<12} no estimate: {loc.status}")
-            continue
-        found[ident] = (est, group)
-        a, b, _ = ellipse_axes(est.cov)
-        print(f"{ident or '-':<12} {est.lat:11.6f} {est.lon:12.6f} {a:8.0f} x {b:<8.0f} {est.bearings_used:8d}  "
-              f"{est.state}" + "".join(f"\n{'':<12} {w}" for w in est.warnings))
-        lines.append(json.dumps(record(ident, est, len(group))))
+    regions: dict = {}
+    if args.model == "filter":
+        found, lines, failed = _filter_run(groups, cfg, datum)
+    else:
+        found, lines, failed, regions = _pooled_run(groups, frame, args.receiver_class)
     if args.output:
         args.output.write_text("".join(line + "\n" for line in lines))
     if args.report and found:
-        write_report(args.report, frame, found)
+        write_report(args.report, frame, found, regions)
     return 1 if failed else 0

@@ -1,0 +1,192 @@
+"""One emitter's position posterior on a grid that follows its stations: geometry, likelihood and zooming.
+
+The grid starts at the stations' centroid, 12 prior scales wide, and zooms onto the box that holds the posterior's
+mass until it stops shrinking; the mass each zoom leaves outside is kept in the evidence, so a wide noise
+hypothesis is not favoured or punished by where the grid happens to end. The position prior is a bivariate
+Cauchy at the centroid whose scale is the larger of the stations' spread and the median distance to the bearings'
+crossings: it only keeps the mass of near-parallel rays finite, and scales with the layout.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
+from aoa_localizer.pooled.noise_family import NoiseGrid, log_likelihood, logsumexp
+
+CELLS = 48  # cells a side
+_FIRST_HALF_WIDTH = 12.0  # prior scales: the Cauchy prior holds 92 % within
+_KEEP = 0.9995  # the mass a zoomed box keeps
+_MAX_ZOOMS = 5
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """One emitter's stations in a frame at their centroid: places (K, 2) m, centres (K,) rad from north, their own
+    variance (K,) rad^2, receivers (K,), and the prior's scale (m)."""
+
+    emitter: str
+    frame: LocalFrame
+    xy: np.ndarray
+    centre: np.ndarray
+    var: np.ndarray
+    receivers: tuple
+    names: tuple
+    prior_scale: float
+
+    @property
+    def blocks(self) -> np.ndarray:
+        """Each station's receiver as an index (K,)."""
+        return np.unique(np.array(self.receivers), return_inverse=True)[1]
+
+
+@dataclass(frozen=True)
+class Box:
+    """A grid's centre and half-widths (m)."""
+
+    cx: float
+    cy: float
+    hx: float
+    hy: float
+
+    def cells(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """Cell centres x (G,), y (G,) and a cell's area (m^2)."""
+        dx, dy = 2 * self.hx / CELLS, 2 * self.hy / CELLS
+        x = self.cx - self.hx + dx * (np.arange(CELLS) + 0.5)
+        y = self.cy - self.hy + dy * (np.arange(CELLS) + 0.5)
+        return x, y, dx * dy
+
+
+def crossing_scale(xy: np.ndarray, centre: np.ndarray) -> float:
+    """Median distance from the centroid to the crossings of pairs of bearings ahead of both stations (0: none)."""
+    u = np.column_stack([np.sin(centre), np.cos(centre)])  # each bearing's direction (east, north)
+    dists = []
+    for i in range(len(xy)):
+        for j in range(i + 1, len(xy)):
+            a = np.column_stack([u[i], -u[j]])
+            if abs(np.linalg.det(a)) < 1e-9:
+                continue
+            t = np.linalg.solve(a, xy[j] - xy[i])
+            if t[0] > 0 and t[1] > 0:
+                dists.append(float(np.hypot(*(xy[i] + t[0] * u[i]))))
+    return float(np.median(dists)) if dists else 0.0
+
+
+def prior_scale(xy: np.ndarray, centre: np.ndarray) -> float:
+    """The position prior's scale (m): the larger of the stations' RMS spread and the crossings' distance."""
+    spread = float(np.sqrt(np.mean(np.sum(xy**2, axis=1))))
+    return max(spread, crossing_scale(xy, centre))
+
+
+def first_box(geom: Geometry) -> Box:
+    h = _FIRST_HALF_WIDTH * geom.prior_scale
+    return Box(0.0, 0.0, h, h)
+
+
+def log_prior(x: np.ndarray, y: np.ndarray, scale: float) -> np.ndarray:
+    """log of a bivariate Cauchy at the origin with this scale, on the grid (G*G,) (rows y, columns x)."""
+    r2 = (x[None, :] ** 2 + y[:, None] ** 2).ravel() / scale**2
+    return -math.log(2 * math.pi * scale**2) - 1.5 * np.log1p(r2)
+
+
+def log_joint(geom: Geometry, box: Box, shift: np.ndarray, extra_var: np.ndarray, noise: NoiseGrid) -> np.ndarray:
+    """log p(bearings, position in cell | hypothesis) + log cell area: (H, G*G), rows y, columns x.
+
+    `shift` (K,) rad is subtracted from each station's centre (its receiver's learned bias); `extra_var` (K,)
+    rad^2 is that bias's own uncertainty."""
+    x, y, area = box.cells()
+    gx, gy = np.meshgrid(x, y)
+    gx, gy = gx.ravel(), gy.ravel()
+    pred = np.arctan2(gx[None, :] - geom.xy[:, :1], gy[None, :] - geom.xy[:, 1:])  # (K, C)
+    resid = wrap_pi(geom.centre[:, None] - shift[:, None] - pred)
+    prior = log_prior(x, y, geom.prior_scale) + math.log(area)
+    return log_likelihood(resid, geom.var + extra_var, geom.blocks, noise) + prior[None, :]
+
+
+def mixture(lj: np.ndarray, log_z: np.ndarray, log_w: np.ndarray) -> np.ndarray:
+    """The position posterior over the cells (C,), normalised: sum_h w_h p(cell | bearings, h)."""
+    log_p = logsumexp(lj - log_z[:, None] + log_w[:, None], axis=0)
+    p = np.exp(log_p - log_p.max())
+    return p / p.sum()
+
+
+def mass_box(box: Box, p: np.ndarray) -> Box:
+    """The smallest grid-aligned box holding _KEEP of the cells' mass, two cells wider each side."""
+    order = np.argsort(p)[::-1]
+    keep = order[: int(np.searchsorted(np.cumsum(p[order]), _KEEP)) + 1]
+    rows, cols = np.divmod(keep, CELLS)
+    x, y, _ = box.cells()
+    dx, dy = 2 * box.hx / CELLS, 2 * box.hy / CELLS
+    x0, x1 = x[cols.min()] - 2.5 * dx, x[cols.max()] + 2.5 * dx
+    y0, y1 = y[rows.min()] - 2.5 * dy, y[rows.max()] + 2.5 * dy
+    hx, hy = (x1 - x0) / 2, (y1 - y0) / 2
+    # a box thinner than 1:4 resolves its long side too coarsely for a curved (banana) posterior
+    hx, hy = max(hx, hy / 4), max(hy, hx / 4)
+    return Box((x0 + x1) / 2, (y0 + y1) / 2, hx, hy)
+
+
+def outside(box: Box, inner: Box) -> np.ndarray:
+    """Mask (G*G,) of `box`'s cells whose centres lie outside `inner`."""
+    x, y, _ = box.cells()
+    gx, gy = np.meshgrid(x, y)
+    return ((np.abs(gx - inner.cx) > inner.hx) | (np.abs(gy - inner.cy) > inner.hy)).ravel()
+
+
+@dataclass(frozen=True)
+class Zoomed:
+    """The last grid of a zoom, its log joint (H, C), and each hypothesis's evidence (H,) over every grid."""
+
+    box: Box
+    log_joint: np.ndarray
+    log_z: np.ndarray
+
+
+def zoom(geom: Geometry, shift: np.ndarray, extra_var: np.ndarray, noise: NoiseGrid,
+         log_w: np.ndarray | None, start: Box | None = None) -> Zoomed:
+    """Grids from `start` (12 prior scales) down to the box holding the posterior's mass (under hypothesis weights
+    `log_w`; None: the emitter's own posterior over the hypotheses)."""
+    box = start or first_box(geom)
+    lj = log_joint(geom, box, shift, extra_var, noise)
+    left = np.full(noise.size, -np.inf)  # evidence left outside the zoomed boxes
+    for _ in range(_MAX_ZOOMS):
+        log_z = np.logaddexp(logsumexp(lj, axis=1), left)
+        weights = noise.log_prior + log_z if log_w is None else log_w
+        inner = mass_box(box, mixture(lj, log_z, weights - logsumexp(weights, axis=0)))
+        if inner.hx > 0.5 * box.hx and inner.hy > 0.5 * box.hy:
+            break
+        mask = outside(box, inner)
+        left = np.logaddexp(left, logsumexp(np.where(mask[None, :], lj, -np.inf), axis=1))
+        box = inner
+        lj = log_joint(geom, box, shift, extra_var, noise)
+    return Zoomed(box, lj, np.logaddexp(logsumexp(lj, axis=1), left))
+
+
+def evidence(geom: Geometry, shift: np.ndarray, extra_var: np.ndarray, noise: NoiseGrid) -> tuple[np.ndarray, Box]:
+    """Each hypothesis's log evidence (H,), each band of scales zoomed onto its own posterior (on a grid sized for
+    the wide hypotheses a sharp one's peak falls between cells), and the smallest box holding every band's."""
+    out = np.empty(noise.size)
+    boxes = []
+    for band in noise.bands():
+        z = zoom(geom, shift, extra_var, noise.subset(band), None)
+        out[band] = z.log_z
+        boxes.append(z.box)
+    x0, x1 = min(b.cx - b.hx for b in boxes), max(b.cx + b.hx for b in boxes)
+    y0, y1 = min(b.cy - b.hy for b in boxes), max(b.cy + b.hy for b in boxes)
+    return out, Box((x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) / 2, (y1 - y0) / 2)
+
+
+def widened(box: Box, margin: float) -> Box:
+    """The box with `margin` metres more on every side."""
+    return Box(box.cx, box.cy, box.hx + margin, box.hy + margin)
+
+
+def displaced(box: Box, p: np.ndarray, sigma_m: float) -> np.ndarray:
+    """The posterior of a place whose bearings point at it plus an isotropic Gaussian offset of sigma_m (C,)."""
+    if sigma_m <= 0:
+        return p
+    cells = (sigma_m / (2 * box.hy / CELLS), sigma_m / (2 * box.hx / CELLS))
+    q = ndimage.gaussian_filter(p.reshape(CELLS, CELLS), cells, mode="constant", truncate=4.0).ravel()
+    return q / q.sum()

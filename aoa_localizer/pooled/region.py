@@ -1,0 +1,77 @@
+"""What a grid posterior says: its point, its moments, its highest-density regions and what an ellipse holds.
+
+The point is the spatial median (the place of least expected distance), which a heavy-tailed or banana-shaped
+posterior does not drag along its tails as it drags the mean; the covariance is the moment about it. The 50 % and
+95 % highest-density regions are polygons (they hold the mass whatever the shape), and the mass inside the
+covariance's own 50 % and 95 % ellipses says when those ellipses understate or overstate the posterior.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import contourpy
+import numpy as np
+
+from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.pooled.grid import CELLS, Box
+
+ELLIPSE_50 = 1.3862943611198906  # chi-square(2) 50 % quantile, -2 ln 0.5
+LEVELS = (0.5, 0.95)
+
+
+@dataclass(frozen=True)
+class Region:
+    """A posterior's summary in its grid's frame (m)."""
+
+    point: np.ndarray  # (2,)
+    cov: np.ndarray  # (2, 2) about the point
+    hpd: dict  # level -> list of closed rings (M, 2)
+    ellipse_mass: dict  # level -> the posterior mass inside the covariance's ellipse of that level
+
+
+def spatial_median(xy: np.ndarray, p: np.ndarray, start: np.ndarray, iterations: int = 50) -> np.ndarray:
+    """Weiszfeld's iteration for the weighted spatial median of cells."""
+    m = start.copy()
+    for _ in range(iterations):
+        d = np.maximum(np.hypot(xy[:, 0] - m[0], xy[:, 1] - m[1]), 1e-12 * (1 + np.abs(m).max()))
+        w = p / d
+        new = (w[:, None] * xy).sum(axis=0) / w.sum()
+        if np.hypot(*(new - m)) < 1e-9 * (1 + np.hypot(*m)):
+            return new
+        m = new
+    return m
+
+
+def hpd_level(p: np.ndarray, mass: float) -> float:
+    """The density threshold whose superlevel set holds `mass` of the cells' mass."""
+    srt = np.sort(p)[::-1]
+    return float(srt[min(int(np.searchsorted(np.cumsum(srt), mass)), srt.size - 1)])
+
+
+def hpd_rings(box: Box, p: np.ndarray, mass: float) -> list[np.ndarray]:
+    """Closed polygons around the cells holding `mass` (a zero border closes rings at the grid's edge)."""
+    x, y, _ = box.cells()
+    dx, dy = x[1] - x[0], y[1] - y[0]
+    px = np.concatenate([[x[0] - dx], x, [x[-1] + dx]])
+    py = np.concatenate([[y[0] - dy], y, [y[-1] + dy]])
+    z = np.zeros((CELLS + 2, CELLS + 2))
+    z[1:-1, 1:-1] = p.reshape(CELLS, CELLS)
+    lines = contourpy.contour_generator(px, py, z).lines(hpd_level(p, mass))
+    return [np.asarray(ring, float) for ring in lines if len(ring) >= 4]
+
+
+def summarise(box: Box, p: np.ndarray) -> Region:
+    x, y, _ = box.cells()
+    gx, gy = np.meshgrid(x, y)
+    xy = np.column_stack([gx.ravel(), gy.ravel()])
+    mean = p @ xy
+    point = spatial_median(xy, p, mean)
+    d = xy - point
+    cov = (d * p[:, None]).T @ d
+    cov += np.diag([(2 * box.hx / CELLS) ** 2 / 12, (2 * box.hy / CELLS) ** 2 / 12])  # mass spread within a cell
+    try:
+        d2 = np.einsum("ci,ij,cj->c", d, np.linalg.inv(cov), d)
+        held = {lvl: float(p[d2 <= chi2].sum()) for lvl, chi2 in zip(LEVELS, (ELLIPSE_50, ELLIPSE_95), strict=True)}
+    except np.linalg.LinAlgError:
+        held = {lvl: float("nan") for lvl in LEVELS}
+    return Region(point, cov, {lvl: hpd_rings(box, p, lvl) for lvl in LEVELS}, held)

@@ -1,0 +1,257 @@
+"""Locate every emitter of a survey at once, the receivers calibrated jointly over the emitters they heard.
+
+The model (docs/design.md, "Honest on real bearings"): a station's centre bearing of an emitter is the true
+bearing plus its receiver's bias plus an error of the family in noise_family.py, whose scale, shared part and
+wild share are hypotheses on a grid. Emitters linked by a common receiver form a group: the hypotheses'
+posterior pools the group's evidence, and each emitter's posterior is the mixture of its own posteriors under
+them. A receiver heard over three or more emitters learns its bias (bias.py) and every fix is made again with
+it; an emitter heard by one receiver only gets that receiver's shared, place-like error, a prior no crossing
+can check.
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from aoa_localizer.engine.crlb import ellipse_axes
+from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
+from aoa_localizer.pooled.bias import BIAS_MIN_EMITTERS, Bias, learn_biases, residuals
+from aoa_localizer.pooled.grid import Box, Geometry, displaced, evidence, log_joint, mixture, prior_scale, widened, zoom
+from aoa_localizer.pooled.noise_family import NoiseGrid, expected_error, logsumexp, noise_grid, quantile_of
+from aoa_localizer.pooled.region import LEVELS, Region, summarise
+from aoa_localizer.pooled.stations import Station, SurveyReading, make_stations, pooled_scatter, station_variance
+
+_ROUNDS = 2  # fixes made without biases, then again with the biases the first fixes showed
+_OFF_Z = 3.0  # a station further off than this many of its expected errors is named
+_HELD_LOW, _HELD_HIGH = 0.90, 0.99  # a 95 % ellipse holding mass outside this range is said to mislead
+
+__all__ = ["EmitterFix", "PooledResult", "ReceiverCalibration", "SurveyReading", "locate_pooled"]
+
+
+@dataclass(frozen=True)
+class EmitterFix:
+    """One emitter's estimate: WGS84, the covariance (m^2, east/north at the emitter), its state and warnings,
+    and its highest-density regions (level -> rings of (lat, lon)) with the mass the covariance's ellipses hold."""
+
+    emitter: str
+    lat: float
+    lon: float
+    cov: np.ndarray
+    state: str
+    warnings: list
+    stations: int
+    readings: int
+    receivers: list
+    hpd: dict
+    ellipse_mass: dict
+
+    def semi_axes(self, level: float = 0.95) -> tuple[float, float]:
+        """The covariance's ellipse at this level: semi-major, semi-minor (m)."""
+        a, b, _ = ellipse_axes(self.cov, -2.0 * math.log(1.0 - level))
+        return a, b
+
+
+@dataclass(frozen=True)
+class ReceiverCalibration:
+    """What the survey taught about one receiver: its bias (deg; NaN: not learned) and what it is learned from."""
+
+    name: str
+    bias_deg: float
+    bias_sd_deg: float
+    emitters: int
+    stations: int
+
+
+@dataclass
+class PooledResult:
+    """Every emitter's fix, the ones refused with their reason, the receivers' calibration, each group's pooled
+    noise (docs/interface.md, "locate") and warnings about the input."""
+
+    fixes: dict = field(default_factory=dict)
+    refused: dict = field(default_factory=dict)
+    receivers: dict = field(default_factory=dict)
+    noise: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+
+
+def _geometry(emitter: str, stations: list[Station], scatter: dict[str, float]) -> Geometry | str:
+    """The emitter's geometry in a frame at its stations' centroid, or why it has none."""
+    if len({(s.lat, s.lon) for s in stations}) < 2:
+        return "all its bearings come from one place: a direction, but no range"
+    frame = LocalFrame(float(np.mean([s.lat for s in stations])), float(np.mean([s.lon for s in stations])), 0.0)
+    e, n = frame.to_enu(np.array([s.lat for s in stations]), np.array([s.lon for s in stations]))
+    xy = np.column_stack([e, n])
+    centre = np.array([s.centre for s in stations])
+    var = np.array([station_variance(s, scatter.get(s.receiver, 0.0)) for s in stations])
+    return Geometry(emitter, frame, xy, centre, var, tuple(s.receiver for s in stations),
+                    tuple(s.name for s in stations), prior_scale(xy, centre))
+
+
+def _groups(geoms: dict[str, Geometry]) -> list[list[str]]:
+    """Emitters linked by shared receivers (union-find): each group pools its own noise."""
+    parent = {e: e for e in geoms}
+
+    def root(e: str) -> str:
+        while parent[e] != e:
+            parent[e] = parent[parent[e]]
+            e = parent[e]
+        return e
+
+    first: dict[str, str] = {}
+    for e, g in geoms.items():
+        for r in g.receivers:
+            parent[root(e)] = root(first.setdefault(r, e))
+    groups: dict[str, list[str]] = defaultdict(list)
+    for e in geoms:
+        groups[root(e)].append(e)
+    return list(groups.values())
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """A group's fixes under its pooled hypotheses' weights."""
+
+    log_w: np.ndarray
+    log_z: dict
+    boxes: dict
+    regions: dict
+    biases: dict
+    shifts: dict
+    extra: dict
+
+
+def _solve(geoms: dict[str, Geometry], noise: NoiseGrid) -> _Solved:
+    """Pool the group's evidence over the hypotheses, fix every emitter; then learn the biases and fix again."""
+    shifts = {e: np.zeros(len(g.xy)) for e, g in geoms.items()}
+    extra = {e: np.zeros(len(g.xy)) for e, g in geoms.items()}
+    biases: dict[str, Bias] = {}
+    for round_ in range(_ROUNDS):
+        found = {e: evidence(g, shifts[e], extra[e], noise) for e, g in geoms.items()}
+        log_z = {e: z for e, (z, _) in found.items()}
+        total = noise.log_prior + sum(log_z.values())
+        log_w = total - logsumexp(total, axis=0)
+        zoomed = {e: zoom(g, shifts[e], extra[e], noise, log_w, found[e][1]) for e, g in geoms.items()}
+        regions = {e: summarise(z.box, mixture(z.log_joint, log_z[e], log_w)) for e, z in zoomed.items()}
+        biases = learn_biases(geoms, {e: r.point for e, r in regions.items()})
+        if not biases or round_ == _ROUNDS - 1:
+            break
+        for e, g in geoms.items():
+            for k, r in enumerate(g.receivers):
+                if r in biases:
+                    shifts[e][k], extra[e][k] = biases[r].without[e]
+    return _Solved(log_w, log_z, {e: z.box for e, z in zoomed.items()}, regions, biases, shifts, extra)
+
+
+def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
+    """The region once one receiver's shared, place-like error is added: its bearings of one emitter may all point
+    at a place beside it (scattering by the transmitter, an observer's belief), which no crossing shows; its size
+    is the receiver class's prior, in shares of the range. Stations of several receivers are independent
+    instruments: unchanged."""
+    e, region = geom.emitter, solved.regions[geom.emitter]
+    if len(set(geom.receivers)) > 1 or not np.any(noise.shared_place > 0):
+        return region
+    rng_m = float(np.median(np.hypot(geom.xy[:, 0] - region.point[0], geom.xy[:, 1] - region.point[1])))
+    sigmas = noise.shared_place * rng_m
+    box: Box = widened(solved.boxes[e], 3.0 * float(sigmas.max()))
+    p = mixture(log_joint(geom, box, solved.shifts[e], solved.extra[e], noise), solved.log_z[e], solved.log_w)
+    return summarise(box, np.mean([displaced(box, p, s) for s in sigmas], axis=0))
+
+
+def _noise_summary(noise: NoiseGrid, log_w: np.ndarray, receivers: list[str], emitters: int) -> dict:
+    weights, deg = np.exp(log_w), np.degrees
+    return {"receivers": receivers, "scale_deg": round(float(deg(expected_error(noise, weights))), 2),
+            "own_deg": round(float(deg(quantile_of(noise.tau, weights, 0.5))), 2),
+            "own_deg_90": [round(float(deg(quantile_of(noise.tau, weights, q))), 2) for q in (0.05, 0.95)],
+            "shared_over_own": round(float(weights @ noise.rho), 2),
+            "wild_share": round(float(weights @ noise.wild), 3), "emitters": emitters}
+
+
+def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, scale_deg: float,
+         readings: int) -> EmitterFix:
+    """The published fix: its state, and a warning for each station far off and for a misleading ellipse."""
+    lat, lon, _ = geom.frame.to_geodetic(float(region.point[0]), float(region.point[1]))
+    warnings, state = [], "tracking"
+    resid = np.degrees(wrap_pi(residuals(geom, region.point) - shift))
+    expected = np.sqrt(scale_deg**2 + np.degrees(np.sqrt(geom.var + extra)) ** 2)
+    for name, r, ex in zip(geom.names, resid, expected, strict=True):
+        if abs(r) > _OFF_Z * ex:
+            warnings.append(f"station {name or 'unnamed'}'s bearing is {r:+.0f} deg off the estimate (expected "
+                            f"within +-{ex:.0f}): a reflection, a misread, or a different emitter")
+    a95 = ellipse_axes(region.cov)[0]
+    ranges = np.hypot(geom.xy[:, 0] - region.point[0], geom.xy[:, 1] - region.point[1])
+    if len(geom.xy) < 3:
+        state = "poorly_determined"
+        warnings.append("bearings from two places only: nothing checks their crossing")
+    if a95 > float(np.median(ranges)):
+        state = "poorly_determined"
+        warnings.append(f"the 95 % region ({a95:.3g} m) is wide for the range ({np.median(ranges):.3g} m)")
+    if len(region.hpd[0.95]) > 1:
+        state = "poorly_determined"
+        warnings.append(f"the 95 % region is in {len(region.hpd[0.95])} parts: see `hpd`")
+    held = region.ellipse_mass[0.95]
+    if not _HELD_LOW <= held <= _HELD_HIGH:
+        word = "understates" if held < _HELD_LOW else "overstates"
+        warnings.append(f"the 95 % ellipse {word} the posterior (it holds {100 * held:.0f} %): see `hpd`")
+    hpd = {lvl: [np.column_stack(geom.frame.to_geodetic(ring[:, 0], ring[:, 1])[:2]) for ring in region.hpd[lvl]]
+           for lvl in LEVELS}
+    return EmitterFix(geom.emitter, float(lat), float(lon), region.cov, state, warnings, len(geom.xy), readings,
+                      sorted(set(geom.receivers)), hpd, dict(region.ellipse_mass))
+
+
+def _calibrations(geoms: dict[str, Geometry], biases: dict[str, Bias]) -> dict[str, ReceiverCalibration]:
+    heard: dict[str, set] = defaultdict(set)
+    stations: Counter = Counter()
+    for e, g in geoms.items():
+        for r in g.receivers:
+            heard[r].add(e)
+            stations[r] += 1
+    out = {}
+    for r, emitters in heard.items():
+        bias, var = biases[r].overall if r in biases else (math.nan, math.nan)
+        out[r] = ReceiverCalibration(r, math.degrees(bias), math.degrees(math.sqrt(var)), len(emitters), stations[r])
+    return out
+
+
+def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown") -> PooledResult:
+    """Every emitter's fix from a survey's readings (docs/interface.md, "locate"); a ValueError for an unknown
+    receiver class."""
+    noise = noise_grid(receiver_class)
+    stations, warnings = make_stations(readings)
+    result = PooledResult(warnings=warnings)
+    scatter = pooled_scatter(stations)
+    by_emitter: dict[str, list[Station]] = defaultdict(list)
+    for s in stations:
+        by_emitter[s.emitter].append(s)
+    geoms: dict[str, Geometry] = {}
+    for e, mine in by_emitter.items():
+        g = _geometry(e, mine, scatter)
+        if isinstance(g, str):
+            result.refused[e] = g
+        else:
+            geoms[e] = g
+    counts = Counter(r.emitter for r in readings)
+    for names in _groups(geoms):
+        group = {e: geoms[e] for e in names}
+        solved = _solve(group, noise)
+        summary = _noise_summary(noise, solved.log_w, sorted({r for g in group.values() for r in g.receivers}),
+                                 len(group))
+        result.noise.append(summary)
+        for e, g in group.items():
+            result.fixes[e] = _fix(g, _displaced(g, solved, noise), solved.shifts[e], solved.extra[e],
+                                   summary["scale_deg"], counts[e])
+        result.receivers.update(_calibrations(group, solved.biases))
+    result.warnings += _receiver_warnings(result.receivers)
+    return result
+
+
+def _receiver_warnings(receivers: dict[str, ReceiverCalibration]) -> list[str]:
+    """A word when most receivers are heard too rarely to learn anything of their own (a column of ids)."""
+    few = [c for c in receivers.values() if c.emitters < BIAS_MIN_EMITTERS]
+    if len(receivers) >= 10 and len(few) > len(receivers) / 2:
+        return [f"{len(few)} of {len(receivers)} receivers heard fewer than 3 ids: none of them learns a bias of its "
+                "own (is the `receiver` column what took each bearing?)"]
+    return []
+
