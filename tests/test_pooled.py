@@ -1,0 +1,234 @@
+"""The pooled survey model (aoa_localizer.pooled): its likelihood against scipy, its stations and receivers, any
+scale, biases that repeat, a receiver learned over its emitters, bad input, and real bearings with a truth."""
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.path import Path as MplPath
+from scipy import special, stats
+
+from aoa_localizer.engine.crlb import inside_ellipse
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.pooled import SurveyReading, locate_pooled
+from aoa_localizer.pooled.noise_family import log_likelihood, logsumexp, noise_grid
+from aoa_localizer.pooled.region import ELLIPSE_50
+from aoa_localizer.pooled.stations import make_stations
+from aoa_localizer.tools import locate
+
+REAL = Path(__file__).resolve().parent.parent / "examples" / "real"
+FRAME = LocalFrame(-33.9, 151.2)  # any datum: each emitter is solved in a frame at its own stations
+
+
+def readings_at(points_enu, azimuths, emitter="x", names=None, receiver="", scale=1.0):
+    out = []
+    for i, ((e, n), az) in enumerate(zip(points_enu, azimuths, strict=True)):
+        lat, lon, _ = FRAME.to_geodetic(e * scale, n * scale)
+        out.append(SurveyReading(emitter, lat, lon, float(az) % 360, names[i] if names else f"s{i}", receiver))
+    return out
+
+
+def bearings_to(truth, stations):
+    return np.degrees(np.arctan2(truth[0] - stations[:, 0], truth[1] - stations[:, 1]))
+
+
+def test_logsumexp_is_scipys_including_rows_of_minus_infinity():
+    rng = np.random.default_rng(0)
+    x = rng.normal(0, 300, (5, 7))
+    x[:, 3] = -np.inf
+    got = logsumexp(x, axis=0)
+    assert got[3] == -np.inf
+    assert np.allclose(np.delete(got, 3), np.delete(special.logsumexp(x, axis=0), 3), rtol=1e-12)
+
+
+def test_the_likelihood_is_the_multivariate_normal_with_a_shared_part_and_one_wild_station_summed():
+    """Three stations of one receiver and one of another: the closed form against scipy's normal density with
+    covariance diag(tau^2 + own) + kappa^2 within each receiver, summed over no wild station and each one."""
+    rng = np.random.default_rng(1)
+    noise = noise_grid("unknown")
+    resid = rng.normal(0, 0.2, (4, 3))
+    own = np.array([0.001, 0.0, 0.004, 0.002])
+    blocks = np.array([0, 0, 0, 1])
+    got = log_likelihood(resid, own, blocks, noise)
+    for h in (0, 17, noise.size - 1):
+        tau, kappa2, w = noise.tau[h], (noise.rho[h] * noise.tau[h]) ** 2, noise.wild[h]
+        cov = np.diag(tau**2 + own) + kappa2 * (blocks[:, None] == blocks[None, :])
+        for c in range(resid.shape[1]):
+            terms = [stats.multivariate_normal(np.zeros(4), cov).logpdf(resid[:, c]) + 4 * math.log1p(-w)]
+            for j in range(4):
+                keep = np.arange(4) != j
+                terms.append(stats.multivariate_normal(np.zeros(3), cov[np.ix_(keep, keep)]).logpdf(resid[keep, c])
+                             + 3 * math.log1p(-w) + math.log(w) - math.log(2 * math.pi))
+            assert got[h, c] == pytest.approx(float(special.logsumexp(terms)), abs=1e-4)
+
+
+def test_repeated_readings_at_one_place_are_one_station_and_a_name_at_two_places_is_named():
+    rows = [SurveyReading("a", 1.0, 2.0, az, "mast") for az in (10, 12, 11, 9, 350)]
+    rows += [SurveyReading("a", 1.0, 2.001, 40, "mast"), SurveyReading("a", 1.001, 2.0, 100, "hill")]
+    stations, warnings = make_stations(rows)
+    assert sorted(s.n for s in stations) == [1, 1, 5]
+    five = next(s for s in stations if s.n == 5)
+    assert math.degrees(five.centre) == pytest.approx(10.0, abs=0.01)  # the median, not pulled by 350
+    assert len(warnings) == 1 and "'mast' appears at 2 places" in warnings[0]
+
+
+def test_fixed_sites_are_receivers_of_their_own_and_a_walking_observer_is_one():
+    anchors = [(0.0, 0.0), (0.0, 0.001), (0.001, 0.0)]
+    fixed = [SurveyReading(e, lat, lon, 0.0, f"A{i}") for e in "pq" for i, (lat, lon) in enumerate(anchors)]
+    assert {s.receiver for s in make_stations(fixed)[0]} == {"site A0", "site A1", "site A2"}
+    walked = [SurveyReading("p", 0.0, 0.0, 0.0, "s1"), SurveyReading("q", 0.002, 0.0, 0.0, "s1"),
+              SurveyReading("q", 0.0, 0.002, 0.0, "s2")]
+    assert {s.receiver for s in make_stations(walked)[0]} == {"survey"}
+    named = [SurveyReading("p", 0.0, 0.0, 0.0, "s1", "ann"), SurveyReading("p", 0.0, 0.001, 0.0, "s2", "bob")]
+    assert {s.receiver for s in make_stations(named)[0]} == {"ann", "bob"}
+
+
+@pytest.mark.parametrize("scale", [0.01, 100.0])
+def test_the_same_bearings_on_a_layout_scaled_give_the_estimate_scaled(scale):
+    """A 600 m layout, and the same azimuths on it x0.01 (a room) and x100 (60 km): the estimate and the ellipse
+    scale with it (relative to the layout, within a hundredth of its size)."""
+    rng = np.random.default_rng(2)
+    stations = np.array([[-300.0, 0.0], [250.0, -200.0], [0.0, 300.0], [200.0, 250.0]])
+    az = bearings_to(np.array([40.0, 60.0]), stations) + rng.normal(0, 4, 4)
+    base = locate_pooled(readings_at(stations, az)).fixes["x"]
+    other = locate_pooled(readings_at(stations, az, scale=scale)).fixes["x"]
+    e0, n0 = FRAME.to_enu(base.lat, base.lon)
+    e1, n1 = FRAME.to_enu(other.lat, other.lon)
+    assert math.hypot(e1 / scale - e0, n1 / scale - n0) < 6.0
+    assert other.semi_axes()[0] / scale == pytest.approx(base.semi_axes()[0], rel=0.03)
+    assert other.state == base.state
+
+
+def test_many_readings_from_biased_stations_do_not_shrink_the_ellipse_below_the_biases():
+    """Five fixed stations 1-2 km out, each 6 deg off for all its readings: 300 readings each give an ellipse that
+    still holds the truth and is no smaller than half of what 10 readings give."""
+    rng = np.random.default_rng(3)
+    ang = np.radians([0, 70, 150, 220, 290])
+    stations = np.column_stack([1500 * np.sin(ang), 1500 * np.cos(ang)])
+    truth = np.array([100.0, -200.0])
+    bias = np.array([6.0, -6.0, 6.0, 6.0, -6.0])
+    out = {}
+    for n in (10, 300):
+        pts = np.repeat(stations, n, axis=0)
+        az = np.repeat(bearings_to(truth, stations) + bias, n) + rng.normal(0, 1.0, 5 * n)
+        fix = locate_pooled(readings_at(pts, az, names=[f"s{i // n}" for i in range(5 * n)])).fixes["x"]
+        err = np.array(FRAME.to_enu(fix.lat, fix.lon)) - truth
+        assert inside_ellipse(err, fix.cov), (n, err, fix.cov)
+        out[n] = fix.semi_axes()[0]
+    assert out[300] > 0.5 * out[10]
+
+
+def test_a_receiver_heard_over_many_emitters_learns_its_bias_and_names_none_where_it_cannot():
+    """One walking observer, every azimuth 15 deg clockwise of the truth, 8 emitters each ringed by 3 stations:
+    the bias is learned within 3 deg; a second file with two emitters learns none."""
+    rng = np.random.default_rng(4)
+    rows = []
+    for j in range(8):
+        truth = rng.uniform(-2000, 2000, 2)
+        ang = np.radians([0, 120, 240]) + rng.uniform(0, 2 * np.pi)
+        st = truth + np.column_stack([400 * np.sin(ang), 400 * np.cos(ang)])
+        rows += readings_at(st, bearings_to(truth, st) + 15.0 + rng.normal(0, 2, 3), emitter=f"e{j}")
+    cal = locate_pooled(rows).receivers["survey"]
+    assert cal.emitters == 8 and cal.stations == 24
+    assert cal.bias_deg == pytest.approx(15.0, abs=3.0)
+    few = locate_pooled([r for r in rows if r.emitter in ("e0", "e1")]).receivers["survey"]
+    assert math.isnan(few.bias_deg)
+
+
+def test_a_wild_station_is_named_with_how_far_off_it_is():
+    stations = np.array([[-1000.0, 0.0], [1000.0, 0.0], [0.0, -1000.0], [0.0, 1000.0], [700.0, 700.0],
+                         [-700.0, 700.0]])
+    az = bearings_to(np.zeros(2), stations)
+    az[2] += 70.0
+    fix = locate_pooled(readings_at(stations, az, receiver="net", names=[f"m{i}" for i in range(6)])).fixes["x"]
+    assert any("station m2's bearing is +70 deg off" in w for w in fix.warnings), fix.warnings
+    assert math.hypot(*FRAME.to_enu(fix.lat, fix.lon)) < 50.0
+
+
+def test_bearings_from_one_place_or_a_single_one_are_refused_with_the_reason():
+    one_place = [SurveyReading("a", 1.0, 2.0, az, "s") for az in (10, 20, 30)]
+    single = [SurveyReading("b", 1.0, 2.0, 40.0, "t")]
+    res = locate_pooled(one_place + single)
+    assert not res.fixes
+    assert set(res.refused) == {"a", "b"} and all("one place" in why for why in res.refused.values())
+
+
+def test_the_95_percent_region_of_a_well_determined_fix_is_about_its_ellipse():
+    """Eight stations of independent receivers 2 deg noisy: a near-Gaussian posterior, whose 95 % region's area is
+    within 25 % of the covariance's 95 % ellipse and whose ellipse holds about 95 % of the grid's mass."""
+    rng = np.random.default_rng(5)
+    ang = np.radians(np.arange(0, 360, 45))
+    stations = np.column_stack([3000 * np.sin(ang), 3000 * np.cos(ang)])
+    az = bearings_to(np.zeros(2), stations) + rng.normal(0, 2, 8)
+    fix = locate_pooled(readings_at(stations, az, receiver="", names=[f"m{i}" for i in range(8)])
+                        + readings_at(stations, az, emitter="y", names=[f"m{i}" for i in range(8)])).fixes["x"]
+    (ring,) = fix.hpd[0.95]
+    e, n = FRAME.to_enu(ring[:, 0], ring[:, 1])
+    area = 0.5 * abs(np.dot(e, np.roll(n, 1)) - np.dot(n, np.roll(e, 1)))
+    a, b = fix.semi_axes()
+    assert area == pytest.approx(math.pi * a * b, rel=0.25)
+    assert 0.9 <= fix.ellipse_mass[0.95] <= 0.99
+
+
+def test_locate_reads_a_receiver_column_refuses_an_id_from_one_place_and_writes_the_regions(tmp_path, cli):
+    stations = np.array([[-500.0, 0.0], [400.0, -300.0], [0.0, 500.0]])
+    lines = ["time,lat,lon,azimuth_deg,station,id,observer"]
+    for j, truth in enumerate([(0.0, 0.0), (100.0, 200.0)]):
+        for i, ((e, n), az) in enumerate(zip(stations, bearings_to(np.array(truth), stations), strict=True)):
+            lat, lon, _ = FRAME.to_geodetic(e, n)
+            lines.append(f"{1.7e9 + 600 * i},{lat:.8f},{lon:.8f},{az % 360:.1f},s{i},fox{j},ann")
+    lat, lon, _ = FRAME.to_geodetic(0.0, 0.0)
+    lines += [f"1.7e9,{lat:.8f},{lon:.8f},{az},s9,mast,bob" for az in (10, 12)]
+    path = tmp_path / "survey.csv"
+    path.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out.jsonl"
+    res = cli(locate.main, path, "--output", out, "--report", tmp_path / "rep")
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert "mast" in res.stdout and "no estimate: all its bearings come from one place" in res.stdout
+    got = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [g["id"] for g in got] == ["fox0", "fox1"]
+    assert got[0]["model"] == "pooled" and got[0]["receivers"] == ["ann"] and got[0]["stations"] == 3
+    assert {"50", "95"} == set(got[0]["hpd"]) and got[0]["hpd"]["95"]
+    geo = json.loads((tmp_path / "rep" / "emitter.geojson").read_text())
+    assert sum(f["properties"]["name"].startswith("95 % region") for f in geo["features"]) == 2
+    assert "receiver ann: 2 ids, 6 stations" in res.stdout
+
+
+def test_locate_refuses_an_unknown_receiver_class(tmp_path, cli):
+    path = tmp_path / "s.csv"
+    path.write_text("time,lat,lon,azimuth_deg\n1,0,0,10\n")
+    res = cli(locate.main, path, "--receiver-class", "yagi")
+    assert res.returncode == 2 and "handheld" in res.stderr
+
+
+def _real():
+    rows, bad = locate.read_rows(REAL / "telemetry_observer_a.csv", None)
+    assert not bad
+    with open(REAL / "telemetry_observer_a_truth.csv", newline="") as fh:
+        truth = {r["id"]: (float(r["lat"]), float(r["lon"])) for r in csv.DictReader(fh)}
+    return [SurveyReading(r.id, r.lat, r.lon, r.azimuth_deg, r.station) for r in rows], truth
+
+
+@pytest.mark.slow
+def test_observer_a_real_bearings_every_collar_located_about_as_often_inside_as_the_ellipses_say():
+    """Observer A's 27 collars (CC BY-SA 4.0, examples/real/SOURCES.md), defaults: every collar located, median
+    error at or under least squares' 133 m, the truth inside the 95 % ellipse for 80-100 % and inside the 50 %
+    one for 30-70 % (docs/benchmarks.md has today's figures), the 95 % region inside for as many, and sharpness
+    (95 % semi-major over error) at most 4 at the median."""
+    readings, truth = _real()
+    res = locate_pooled(readings)
+    assert len(res.fixes) == 27 and not res.refused
+    errs, in50, in95, hpd95, sharp = [], 0, 0, 0, []
+    for ident, fix in res.fixes.items():
+        err = np.array(LocalFrame(*truth[ident]).to_enu(fix.lat, fix.lon))
+        errs.append(float(np.hypot(*err)))
+        in50 += inside_ellipse(err, fix.cov, ELLIPSE_50)
+        in95 += inside_ellipse(err, fix.cov)
+        hpd95 += any(MplPath(r[:, ::-1]).contains_point(truth[ident][::-1]) for r in fix.hpd[0.95])
+        sharp.append(fix.semi_axes()[0] / errs[-1])
+    assert np.median(errs) <= 133.0
+    assert 0.8 * 27 <= in95 and 0.8 * 27 <= hpd95
+    assert 0.3 * 27 <= in50 <= 0.7 * 27
+    assert np.median(sharp) <= 4.0
