@@ -109,3 +109,24 @@ def test_stations_keep_their_own_tracks():
     loc.add_bearing(2.5, 10.0, 90.0, station="b")
     (reading,) = loc.channels.default.builder("b").readings
     assert reading.east > 800  # at b's track, 0.01 deg of longitude east of a's
+
+
+def test_a_walking_observer_whose_fix_comes_only_with_each_azimuth_minutes_apart_is_used():
+    """The API as a surveyor feeds it: a fix and an azimuth at each stop, 10-40 min apart. The second fix confirms
+    the first across the pause (a sparse stream), so no fix or bearing is refused and the emitter is located."""
+    frame = LocalFrame(48.35, -53.98)
+    loc = Localizer(LocalizerConfig(seed=1))
+    stops = [(-400.0, 0.0), (0.0, -450.0), (380.0, 60.0), (50.0, 420.0)]
+    stamp = 1.7e9
+    for k, (e, n) in enumerate(stops):
+        stamp += 600.0 * (1 + k)
+        lat, lon, _ = frame.to_geodetic(e, n)
+        loc.add_fix(stamp, lat, lon)
+        loc.add_bearing(stamp, math.degrees(math.atan2(100.0 - e, 50.0 - n)) % 360.0, float("nan"))
+    loc.flush()
+    est = loc.finish() or loc.estimate
+    loc.close()
+    assert not loc.rejected, dict(loc.rejected)
+    assert est is not None and est.bearings_used == 4
+    lat, lon, _ = frame.to_geodetic(100.0, 50.0)
+    assert math.hypot(*LocalFrame(lat, lon).to_enu(est.lat, est.lon)) < 60.0

@@ -125,7 +125,9 @@ class Intake:
             return self.release(st)
         if self.frame is None:
             candidate = st.datum_candidate
-            if candidate is None or not confirms(candidate[:3], (stamp, lat, lon), self.cfg.max_stamp_jump_s):
+            # a sparse stream's next fix (a surveyor's, minutes after the last) confirms across its pause
+            within = math.inf if st.fix_clock.sparse() else self.cfg.max_stamp_jump_s
+            if candidate is None or not confirms(candidate[:3], (stamp, lat, lon), within):
                 if candidate is not None:
                     self.reject(Reason.FIX_UNCONFIRMED)
                 st.datum_candidate = (stamp, lat, lon, alt, sigma_m)
