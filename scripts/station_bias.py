@@ -60,7 +60,8 @@ def main(argv=None) -> int:
     print(f"{'readings':>9} {'in 50 %':>8} {'in 95 %':>8} {'semi-major 95 % (m)':>20} {'error (m)':>10}")
     for j, n in enumerate(args.counts):
         err, in50, in95, a95 = (np.array([r[j][i] for r in rows]) for i in range(4))
-        print(f"{n:>9} {100 * in50.mean():7.0f}% {100 * in95.mean():7.0f}% {np.median(a95):20.0f} {np.median(err):10.0f}")
+        print(f"{n:>9} {100 * in50.mean():7.0f}% {100 * in95.mean():7.0f}% {np.median(a95):20.0f} "
+              f"{np.median(err):10.0f}")
     return 0
 
 
