@@ -43,25 +43,23 @@ def test_logsumexp_is_scipys_including_rows_of_minus_infinity():
     assert np.allclose(np.delete(got, 3), np.delete(special.logsumexp(x, axis=0), 3), rtol=1e-12)
 
 
-def test_the_likelihood_is_the_multivariate_normal_with_a_shared_part_and_one_wild_station_summed():
-    """Three stations of one receiver and one of another: the closed form against scipy's normal density with
-    covariance diag(tau^2 + own) + kappa^2 within each receiver, summed over no wild station and each one."""
+def test_the_likelihood_is_each_stations_normal_density_summed_over_no_wild_station_and_each_one():
+    """Four stations: the closed form against scipy's normal densities, summed over no wild station and each single
+    one (uniform on the circle), with each station's own variance added to tau^2; two stations: no wild term."""
     rng = np.random.default_rng(1)
     noise = noise_grid("unknown")
     resid = rng.normal(0, 0.2, (4, 3))
     own = np.array([0.001, 0.0, 0.004, 0.002])
-    blocks = np.array([0, 0, 0, 1])
-    got = log_likelihood(resid, own, blocks, noise)
+    got = log_likelihood(resid, own, noise)
+    two = log_likelihood(resid[:2], own[:2], noise)
     for h in (0, 17, noise.size - 1):
-        tau, kappa2, w = noise.tau[h], (noise.rho[h] * noise.tau[h]) ** 2, noise.wild[h]
-        cov = np.diag(tau**2 + own) + kappa2 * (blocks[:, None] == blocks[None, :])
+        sd, w = np.sqrt(noise.tau[h] ** 2 + own), noise.wild[h]
         for c in range(resid.shape[1]):
-            terms = [stats.multivariate_normal(np.zeros(4), cov).logpdf(resid[:, c]) + 4 * math.log1p(-w)]
-            for j in range(4):
-                keep = np.arange(4) != j
-                terms.append(stats.multivariate_normal(np.zeros(3), cov[np.ix_(keep, keep)]).logpdf(resid[keep, c])
-                             + 3 * math.log1p(-w) + math.log(w) - math.log(2 * math.pi))
+            dens = stats.norm(0, sd).logpdf(resid[:, c])
+            terms = [dens.sum() + 4 * math.log1p(-w)]
+            terms += [dens.sum() - dens[j] + 3 * math.log1p(-w) + math.log(w / (2 * math.pi)) for j in range(4)]
             assert got[h, c] == pytest.approx(float(special.logsumexp(terms)), abs=1e-4)
+            assert two[h, c] == pytest.approx(float(dens[:2].sum() + 2 * math.log1p(-w)), rel=1e-12)
 
 
 def test_repeated_readings_at_one_place_are_one_station_and_a_name_at_two_places_is_named():

@@ -37,11 +37,6 @@ class Geometry:
     names: tuple
     prior_scale: float
 
-    @property
-    def blocks(self) -> np.ndarray:
-        """Each station's receiver as an index (K,)."""
-        return np.unique(np.array(self.receivers), return_inverse=True)[1]
-
 
 @dataclass(frozen=True)
 class Box:
@@ -103,7 +98,7 @@ def log_joint(geom: Geometry, box: Box, shift: np.ndarray, extra_var: np.ndarray
     pred = np.arctan2(gx[None, :] - geom.xy[:, :1], gy[None, :] - geom.xy[:, 1:])  # (K, C)
     resid = wrap_pi(geom.centre[:, None] - shift[:, None] - pred)
     prior = log_prior(x, y, geom.prior_scale) + math.log(area)
-    return log_likelihood(resid, geom.var + extra_var, geom.blocks, noise) + prior[None, :]
+    return log_likelihood(resid, geom.var + extra_var, noise) + prior[None, :]
 
 
 def mixture(lj: np.ndarray, log_z: np.ndarray, log_w: np.ndarray) -> np.ndarray:

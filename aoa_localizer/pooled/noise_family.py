@@ -1,12 +1,11 @@
-"""The station errors' family and prior: what is shared, what is independent, what is wild.
+"""The station errors' family and prior: each station's own Gaussian error, and a share of wild stations.
 
-The stations' errors for one emitter are jointly Gaussian: each its own part (scale tau, plus its readings'
-scatter) and a part they all share (scale kappa = rho x tau: the emitter's own offset as this receiver hears it,
-a collar's antenna, a day's terrain), so three bearings that cross well cannot prove a sharp receiver when they
-may all be turned alike; and each station is wild (uniform on the circle) with probability w. tau, rho and w lie
-on a grid whose prior is what receivers of a class do; their posterior pools every emitter of a receiver
-(docs/design.md, "Honest on real bearings", compares this family with independent Student-t and Gaussian
-errors on real and simulated bearings).
+A station's centre bearing is off by its own error, Gaussian with a scale tau (plus its readings' scatter),
+independently of the other stations, or it is wild (uniform on the circle) with probability w. tau and w lie on a
+grid whose prior is what receivers of a class do, and their posterior pools every emitter of a receiver, so three
+bearings that happen to cross well cannot prove a sharp receiver while a survey of many emitters learns its own
+(docs/design.md, "Honest on real bearings", compares this family by evidence with a plain Gaussian and with a
+part shared by a receiver's stations, on real and simulated bearings).
 """
 from __future__ import annotations
 
@@ -34,7 +33,6 @@ RECEIVER_CLASSES: dict[str, ReceiverClass] = {
     "indoor": ReceiverClass(10.0, 0.7, (0.0, 0.1)),
 }
 TAU_DEG = np.geomspace(0.2, 50.0, 15)  # a lab array to barely a direction
-RHO = np.array([0.0, 1.0])  # the shared part's scale over the independent one
 WILD = np.array([0.02, 0.12])  # a station's chance of being wild
 SCALE_BANDS = 3  # each band of scales is zoomed onto its own posterior, so a sharp one is resolved
 _LOG_2PI = math.log(2 * math.pi)
@@ -42,10 +40,9 @@ _LOG_2PI = math.log(2 * math.pi)
 
 @dataclass(frozen=True)
 class NoiseGrid:
-    """The (tau, rho, w) hypotheses, flattened, with their log prior."""
+    """The (tau, w) hypotheses, flattened, with their log prior."""
 
     tau: np.ndarray  # (H,) rad
-    rho: np.ndarray  # (H,)
     wild: np.ndarray  # (H,)
     log_prior: np.ndarray  # (H,)
     shared_place: np.ndarray  # (L,) the place-like error's hypotheses, shares of the range
@@ -61,7 +58,7 @@ class NoiseGrid:
         return [np.flatnonzero(band == b) for b in range(count)]
 
     def subset(self, index: np.ndarray) -> NoiseGrid:
-        return NoiseGrid(self.tau[index], self.rho[index], self.wild[index], self.log_prior[index], self.shared_place)
+        return NoiseGrid(self.tau[index], self.wild[index], self.log_prior[index], self.shared_place)
 
 
 def noise_grid(receiver_class: str) -> NoiseGrid:
@@ -70,10 +67,10 @@ def noise_grid(receiver_class: str) -> NoiseGrid:
         raise ValueError(f"receiver_class {receiver_class!r} is not one of {', '.join(RECEIVER_CLASSES)}")
     cls = RECEIVER_CLASSES[receiver_class]
     median, log_sd = cls.scale_deg, cls.log_sd
-    tau_deg, rho, wild = (a.ravel() for a in np.meshgrid(TAU_DEG, RHO, WILD, indexing="ij"))
+    tau_deg, wild = (a.ravel() for a in np.meshgrid(TAU_DEG, WILD, indexing="ij"))
     log_prior = -0.5 * ((np.log(tau_deg) - math.log(median)) / log_sd) ** 2
     log_prior -= logsumexp(log_prior, axis=0)
-    return NoiseGrid(np.radians(tau_deg), rho, wild, log_prior, np.array(cls.shared_place))
+    return NoiseGrid(np.radians(tau_deg), wild, log_prior, np.array(cls.shared_place))
 
 
 def logsumexp(x: np.ndarray, axis: int) -> np.ndarray:
@@ -85,43 +82,24 @@ def logsumexp(x: np.ndarray, axis: int) -> np.ndarray:
         return np.squeeze(m, axis=axis) + np.log(np.sum(np.exp(x - m), axis=axis))
 
 
-def log_likelihood(resid: np.ndarray, own_var: np.ndarray, blocks: np.ndarray, noise: NoiseGrid) -> np.ndarray:
-    """log p(station residuals | hypothesis) for residuals (K, C) rad, each station's own variance (K,) rad^2
-    besides tau^2, and its receiver's index (K,): (H, C). The shared part is shared within a receiver; the sum runs
-    over no wild station and each single one (two wild stations of a handful are left to the shared part and the
-    hypotheses' mixture)."""
+def log_likelihood(resid: np.ndarray, own_var: np.ndarray, noise: NoiseGrid) -> np.ndarray:
+    """log p(station residuals | hypothesis) for residuals (K, C) rad and each station's own variance (K,) rad^2
+    besides tau^2: (H, C). Sums over no wild station and each single one (with three or more stations; two wild
+    stations of a handful are left to the scale's mixture)."""
     k = resid.shape[0]
-    d = noise.tau[:, None] ** 2 + own_var[None, :]  # (H, K)
-    kappa2 = (noise.rho * noise.tau)[:, None] ** 2  # (H, 1)
-    inv, r2 = 1.0 / d, resid**2
-
-    def block(a, s1, s2):
-        """One receiver's -1/2 (quadratic form + log det) beyond its stations' own (Sherman-Morrison)."""
-        c = 1.0 + kappa2 * a
-        return -0.5 * (s2 - kappa2 * s1**2 / c + np.log(c))
-
-    total = -0.5 * (np.log(d).sum(axis=1)[:, None] + k * _LOG_2PI)
-    sums, parts = {}, {}
-    for b in np.unique(blocks):
-        mine = blocks == b
-        sums[b] = (inv[:, mine].sum(axis=1)[:, None], inv[:, mine] @ resid[mine], inv[:, mine] @ r2[mine])
-        parts[b] = block(*sums[b])
-        total = total + parts[b]
+    d = (noise.tau[:, None] ** 2 + own_var[None, :])[:, :, None]  # (H, K, 1)
+    each = -0.5 * (resid[None, :, :] ** 2 / d + np.log(d) + _LOG_2PI)  # (H, K, C)
     log_keep, log_wild = np.log1p(-noise.wild)[:, None], np.log(noise.wild)[:, None]
-    terms = [total + k * log_keep]
-    if k >= 3:
-        for j in range(k):
-            b, ij = blocks[j], inv[:, j][:, None]
-            a, s1, s2 = sums[b]
-            without = block(a - ij, s1 - resid[j][None, :] * ij, s2 - r2[j][None, :] * ij)
-            own = 0.5 * (np.log(d[:, j])[:, None] + _LOG_2PI)
-            terms.append(total - parts[b] + without + own + (k - 1) * log_keep + log_wild - _LOG_2PI)
-    return logsumexp(np.stack(terms).astype(np.float32), axis=0).astype(float)
+    total = each.sum(axis=1) + k * log_keep
+    if k < 3:
+        return total
+    wild = total[None, :, :] - each.transpose(1, 0, 2) - log_keep + log_wild - _LOG_2PI  # (K, H, C)
+    return logsumexp(np.concatenate([total[None], wild]).astype(np.float32), axis=0).astype(float)
 
 
 def expected_error(noise: NoiseGrid, weights: np.ndarray) -> float:
-    """The posterior-mean standard deviation (rad) of one station's error, own and shared parts together."""
-    return float(np.sqrt(weights @ (noise.tau**2 * (1 + noise.rho**2))))
+    """The posterior root-mean-square scale (rad) of one station's error."""
+    return float(np.sqrt(weights @ noise.tau**2))
 
 
 def quantile_of(values: np.ndarray, weights: np.ndarray, q: float) -> float:

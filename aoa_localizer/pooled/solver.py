@@ -1,8 +1,8 @@
 """Locate every emitter of a survey at once, the receivers calibrated jointly over the emitters they heard.
 
 The model (docs/design.md, "Honest on real bearings"): a station's centre bearing of an emitter is the true
-bearing plus its receiver's bias plus an error of the family in noise_family.py, whose scale, shared part and
-wild share are hypotheses on a grid. Emitters linked by a common receiver form a group: the hypotheses'
+bearing plus its receiver's bias plus an error of the family in noise_family.py, whose scale and wild share are
+hypotheses on a grid. Emitters linked by a common receiver form a group: the hypotheses'
 posterior pools the group's evidence, and each emitter's posterior is the mixture of its own posteriors under
 them. A receiver heard over three or more emitters learns its bias (bias.py) and every fix is made again with
 it; an emitter heard by one receiver only gets that receiver's shared, place-like error, a prior no crossing
@@ -163,9 +163,7 @@ def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
 def _noise_summary(noise: NoiseGrid, log_w: np.ndarray, receivers: list[str], emitters: int) -> dict:
     weights, deg = np.exp(log_w), np.degrees
     return {"receivers": receivers, "scale_deg": round(float(deg(expected_error(noise, weights))), 2),
-            "own_deg": round(float(deg(quantile_of(noise.tau, weights, 0.5))), 2),
-            "own_deg_90": [round(float(deg(quantile_of(noise.tau, weights, q))), 2) for q in (0.05, 0.95)],
-            "shared_over_own": round(float(weights @ noise.rho), 2),
+            "scale_deg_90": [round(float(deg(quantile_of(noise.tau, weights, q))), 2) for q in (0.05, 0.95)],
             "wild_share": round(float(weights @ noise.wild), 3), "emitters": emitters}
 
 

@@ -271,8 +271,8 @@ def receiver_lines(result) -> list[str]:
         out.append(f"receiver {cal.name}: {cal.emitters} ids, {cal.stations} stations; {bias}")
     for g in result.noise:
         out.append(f"station error of {', '.join(g['receivers'][:5])}{' ...' if len(g['receivers']) > 5 else ''}: "
-                   f"{g['scale_deg']:.1f} deg (its own part {g['own_deg_90'][0]:.1f}-{g['own_deg_90'][1]:.1f} "
-                   f"deg at 90 %), wild share {g['wild_share']:.2f}, over {g['emitters']} ids")
+                   f"{g['scale_deg']:.1f} deg ({g['scale_deg_90'][0]:.1f}-{g['scale_deg_90'][1]:.1f} deg at 90 %), "
+                   f"wild share {g['wild_share']:.2f}, over {g['emitters']} ids")
     return out
 
 
