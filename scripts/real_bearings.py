@@ -3,7 +3,8 @@
     python scripts/real_bearings.py ../shared/data/real/telemetry_observer_a.csv \
         ../shared/data/real/telemetry_observer_a_truth.csv [--receiver-class unknown] [--scale 1] [--per-id]
 
-The bearings go through the pooled survey model (aoa_localizer.pooled, what `locate` runs by default); `--scale`
+The bearings go through the pooled survey model (aoa_localizer.pooled, what `locate` runs by default), or with
+`--model filter` through `locate --model filter` (a particle filter per id, the round-3 path; no regions); `--scale`
 multiplies every station's offset from the first one (the same bearings on a smaller or larger layout).
 Coverage counts the truth inside the covariance's ellipse (chi-square 2 at the level) and inside the
 highest-density polygon; sharpness is the 95 % semi-major over the error.
@@ -11,8 +12,12 @@ highest-density polygon; sharpness is the 95 % semi-major over the error.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
+import io
+import json
 import math
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +27,8 @@ from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.surveys import least_squares_fix
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.region import ELLIPSE_50
+from aoa_localizer.pooled.solver import EmitterFix, PooledResult
+from aoa_localizer.tools.locate import main as main_locate
 from aoa_localizer.tools.locate import read_rows
 
 
@@ -29,6 +36,24 @@ def inside_rings(rings, lat: float, lon: float) -> bool:
     from matplotlib.path import Path as MplPath
 
     return any(MplPath(np.asarray(r)[:, ::-1]).contains_point((lon, lat)) for r in rings)
+
+
+def filter_fixes(readings: list[SurveyReading], seed: int) -> PooledResult:
+    """`locate --model filter` on the readings: fixes shaped like the pooled model's (no regions)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        src, out = Path(tmp) / "in.csv", Path(tmp) / "out.jsonl"
+        lines = ["time,lat,lon,azimuth_deg,station,id"] + [
+            f"{1.7e9 + 600 * i},{r.lat!r},{r.lon!r},{r.azimuth_deg!r},{r.station},{r.emitter}"
+            for i, r in enumerate(readings)]
+        src.write_text("\n".join(lines) + "\n")
+        with contextlib.redirect_stdout(io.StringIO()):
+            main_locate([str(src), "--model", "filter", "--output", str(out), "--seed", str(seed)])
+        fixes = {}
+        for line in out.read_text().splitlines():
+            g = json.loads(line)
+            fixes[g["id"]] = EmitterFix(g["id"], g["lat"], g["lon"], np.array(g["cov"]), g["state"], g["warnings"],
+                                        g["bearings_used"], g["bearings_given"], [], {0.5: [], 0.95: []}, {})
+    return PooledResult(fixes=fixes)
 
 
 def scaled(readings: list[SurveyReading], truth: dict, factor: float):
@@ -52,6 +77,8 @@ def main(argv=None) -> int:
     ap.add_argument("--receiver-class", default="unknown")
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--per-id", action="store_true")
+    ap.add_argument("--model", choices=("pooled", "filter"), default="pooled")
+    ap.add_argument("--seed", type=int, default=1, help="the filter's seed (--model filter)")
     args = ap.parse_args(argv)
     rows, bad = read_rows(args.bearings, None)
     assert not bad, bad
@@ -60,7 +87,7 @@ def main(argv=None) -> int:
         truth = {r["id"]: (float(r["lat"]), float(r["lon"])) for r in csv.DictReader(fh)}
     if args.scale != 1.0:
         readings, truth = scaled(readings, truth, args.scale)
-    res = locate_pooled(readings, args.receiver_class)
+    res = locate_pooled(readings, args.receiver_class) if args.model == "pooled" else filter_fixes(readings, args.seed)
     errs, ls_errs, in50, in95, hpd50, hpd95, sharp, tracking_out = [], [], 0, 0, 0, 0, [], 0
     for ident, fix in res.fixes.items():
         t_lat, t_lon = truth[ident]
