@@ -230,3 +230,34 @@ def test_observer_a_real_bearings_every_collar_located_about_as_often_inside_as_
     assert 0.8 * 27 <= in95 and 0.8 * 27 <= hpd95
     assert 0.3 * 27 <= in50 <= 0.7 * 27
     assert np.median(sharp) <= 4.0
+
+
+@pytest.mark.parametrize("distance_km", [10, 300, 3000])
+def test_an_id_far_from_the_files_first_row_is_located_as_it_is_on_its_own(tmp_path, cli, distance_km):
+    """Each id is solved in a frame at its own stations: a second observer's id 10, 300 or 3000 km from the file's
+    first row gets the fix the same rows get in a file of their own (issue 51: it moved 13 m at 300 km and 285 km
+    at 3000 km)."""
+    near = LocalFrame(48.35, -53.98)
+    far = LocalFrame(*near.to_geodetic(distance_km * 1000.0 * 0.6, distance_km * 1000.0 * 0.8)[:2])
+    stations = np.array([[-500.0, 0.0], [400.0, -300.0], [0.0, 500.0], [350.0, 350.0]])
+    az = bearings_to(np.array([60.0, -40.0]), stations) + np.array([4.0, -3.0, 5.0, -2.0])
+
+    def rows(frame, ident, who):
+        out = []
+        for i, ((e, n), a) in enumerate(zip(stations, az, strict=True)):
+            lat, lon, _ = frame.to_geodetic(e, n)
+            out.append(f"{1.7e9 + 600 * i},{lat:.9f},{lon:.9f},{a % 360:.3f},s{i},{ident},{who}")
+        return out
+
+    header = ["time,lat,lon,azimuth_deg,station,id,receiver"]
+    got = {}
+    for name, lines in (("both", header + rows(near, "home", "ann") + rows(far, "away", "bob")),
+                        ("alone", header + rows(far, "away", "bob"))):
+        path = tmp_path / f"{name}.csv"
+        path.write_text("\n".join(lines) + "\n")
+        res = cli(locate.main, path, "--output", tmp_path / f"{name}.jsonl")
+        assert res.returncode == 0, res.stderr
+        got[name] = {g["id"]: g for g in map(json.loads, (tmp_path / f"{name}.jsonl").read_text().splitlines())}
+    a, b = got["both"]["away"], got["alone"]["away"]
+    assert math.hypot(*LocalFrame(a["lat"], a["lon"]).to_enu(b["lat"], b["lon"])) < 0.01
+    assert np.allclose(a["cov"], b["cov"], rtol=1e-6)
