@@ -261,3 +261,48 @@ def test_an_id_far_from_the_files_first_row_is_located_as_it_is_on_its_own(tmp_p
     a, b = got["both"]["away"], got["alone"]["away"]
     assert math.hypot(*LocalFrame(a["lat"], a["lon"]).to_enu(b["lat"], b["lon"])) < 0.01
     assert np.allclose(a["cov"], b["cov"], rtol=1e-6)
+
+
+def _square_csv(path: Path, ident: str = "fox", sigma: str = "") -> Path:
+    stations = np.array([[-500.0, 0.0], [400.0, -300.0], [0.0, 500.0], [350.0, 350.0]])
+    lines = ["time,lat,lon,azimuth_deg,station,id,sigma_deg"]
+    for i, ((e, n), az) in enumerate(zip(stations, bearings_to(np.zeros(2), stations), strict=True)):
+        lat, lon, _ = FRAME.to_geodetic(e, n)
+        lines.append(f"{1.7e9 + i},{lat:.8f},{lon:.8f},{az % 360:.2f},s{i},{ident},{sigma}")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("target", ["input", "folder", "missing_folder", "report_file"])
+def test_locate_refuses_an_output_that_would_destroy_the_input_or_cannot_be_written_before_any_work(
+        tmp_path, cli, target):
+    src = _square_csv(tmp_path / "survey.csv")
+    before = src.read_text()
+    args = {"input": ["--output", src], "folder": ["--output", tmp_path],
+            "missing_folder": ["--output", tmp_path / "nowhere" / "o.jsonl"], "report_file": ["--report", src]}[target]
+    res = cli(locate.main, src, *args)
+    assert res.returncode == 2 and res.stderr.startswith("locate: --") and "Traceback" not in res.stderr
+    assert not res.stdout  # refused before any work
+    assert src.read_text() == before
+
+
+def test_locate_skips_a_sigma_no_bearing_has_by_line_and_the_api_says_so_too(tmp_path, cli):
+    res = cli(locate.main, _square_csv(tmp_path / "s.csv", sigma="1e200"))
+    assert res.returncode == 2 and "s.csv:2: sigma_deg must be in [0.001, 180] deg, got 1e+200" in res.stderr
+    rows = [SurveyReading("x", 0.0, 0.0, 10.0, "a", sigma_deg=1e-9), SurveyReading("x", 0.0, 0.01, 200.0, "b"),
+            SurveyReading("x", 0.01, 0.0, math.nan, "c")]
+    res = locate_pooled(rows)
+    assert any("reading 1 (x): sigma_deg 1e-09" in w for w in res.warnings)
+    assert any("reading 3 (x): azimuth nan" in w for w in res.warnings)
+    assert res.refused == {"x": "all its bearings come from one place: a direction, but no range"}
+
+
+def test_an_id_with_control_characters_still_gives_a_kml_that_parses(tmp_path, cli):
+    import xml.dom.minidom
+
+    res = cli(locate.main, _square_csv(tmp_path / "s.csv", ident="fox\x01\x1b"), "--report", tmp_path / "rep")
+    assert res.returncode == 0, res.stderr
+    doc = xml.dom.minidom.parse(str(tmp_path / "rep" / "emitter.kml"))
+    names = [n.firstChild.data for n in doc.getElementsByTagName("name")]
+    assert any("fox\ufffd\ufffd" in n for n in names)
+    assert json.loads((tmp_path / "rep" / "emitter.geojson").read_text())["features"]

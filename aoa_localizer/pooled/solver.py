@@ -5,7 +5,7 @@ bearing plus its receiver's bias plus an error of the family in noise_family.py,
 hypotheses on a grid. Emitters linked by a common receiver form a group: the hypotheses'
 posterior pools the group's evidence, and each emitter's posterior is the mixture of its own posteriors under
 them. A receiver heard over three or more emitters learns its bias (bias.py) and every fix is made again with
-it; an emitter heard by one receiver only gets that receiver's shared, place-like error, a prior no crossing
+it; an emitter heard mostly by one receiver gets that receiver's shared, place-like error, a prior no crossing
 can check.
 """
 from __future__ import annotations
@@ -148,13 +148,15 @@ def _solve(geoms: dict[str, Geometry], noise: NoiseGrid) -> _Solved:
 def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
     """The region once one receiver's shared, place-like error is added: its bearings of one emitter may all point
     at a place beside it (scattering by the transmitter, an observer's belief), which no crossing shows; its size
-    is the receiver class's prior, in shares of the range. Stations of several receivers are independent
-    instruments: unchanged."""
+    is the receiver class's prior, in shares of the range, times the share of the stations that the emitter's
+    most frequent receiver holds (stations of different receivers are independent instruments: a receiver with
+    a single station shares nothing)."""
     e, region = geom.emitter, solved.regions[geom.emitter]
-    if len(set(geom.receivers)) > 1 or not np.any(noise.shared_place > 0):
+    most = Counter(geom.receivers).most_common(1)[0][1]
+    if most < 2 or not np.any(noise.shared_place > 0):
         return region
     rng_m = float(np.median(np.hypot(geom.xy[:, 0] - region.point[0], geom.xy[:, 1] - region.point[1])))
-    sigmas = noise.shared_place * rng_m
+    sigmas = noise.shared_place * rng_m * most / len(geom.receivers)
     box: Box = widened(solved.boxes[e], 3.0 * float(sigmas.max()))
     p = mixture(log_joint(geom, box, solved.shifts[e], solved.extra[e], noise), solved.log_z[e], solved.log_w)
     return summarise(box, np.mean([displaced(box, p, s) for s in sigmas], axis=0))

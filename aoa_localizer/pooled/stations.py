@@ -21,6 +21,7 @@ _MAD_TO_SIGMA = 1.4826  # a Gaussian's sigma over its median absolute deviation
 _MEDIAN_VAR = math.pi / 2  # a median's variance over the mean's, for a Gaussian sample
 _OWN_SCATTER_MIN = 5  # readings from which a station's own scatter is trusted over the receiver's pooled one
 FIXED_SITE_READINGS = 5  # an instrument left at one place, not an observer taking a bearing and moving on
+SIGMA_RANGE_DEG = (1e-3, 180.0)  # a reading's own sigma outside this is no bearing's
 
 
 @dataclass(frozen=True)
@@ -71,13 +72,28 @@ def _centre(az: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:
     return centre, _MEDIAN_VAR * scatter**2 / az.size, scatter
 
 
+def unusable(r: SurveyReading) -> str | None:
+    """Why a reading cannot be used, or None."""
+    if not (math.isfinite(r.lat) and math.isfinite(r.lon) and abs(r.lat) <= 90 and abs(r.lon) <= 180):
+        return f"position {r.lat}, {r.lon} is not a latitude and longitude"
+    if not math.isfinite(r.azimuth_deg):
+        return f"azimuth {r.azimuth_deg} is not a number"
+    if not (math.isnan(r.sigma_deg) or SIGMA_RANGE_DEG[0] <= r.sigma_deg <= SIGMA_RANGE_DEG[1]):
+        return f"sigma_deg {r.sigma_deg:g} is not in [{SIGMA_RANGE_DEG[0]:g}, {SIGMA_RANGE_DEG[1]:g}]"
+    return None
+
+
 def make_stations(readings: list[SurveyReading]) -> tuple[list[Station], list[str]]:
     """The survey's stations (readings grouped by emitter, receiver, name and exact place) and a warning for each
-    station name that one emitter heard from two places."""
+    reading that cannot be used (it is left out) and each station name that one emitter heard from two places."""
     groups: dict[tuple, list[SurveyReading]] = defaultdict(list)
-    for r in readings:
-        groups[(r.emitter, r.receiver, r.station, r.lat, r.lon)].append(r)
     warnings, places = [], defaultdict(set)
+    for i, r in enumerate(readings):
+        why = unusable(r)
+        if why:
+            warnings.append(f"reading {i + 1} ({r.emitter or 'emitter'}): {why}; not used")
+        else:
+            groups[(r.emitter, r.receiver, r.station, r.lat, r.lon)].append(r)
     for emitter, receiver, name, lat, lon in groups:
         if name:
             places[(emitter, receiver, name)].add((lat, lon))

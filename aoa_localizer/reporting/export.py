@@ -4,6 +4,7 @@ properties."""
 from __future__ import annotations
 
 import datetime
+import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -13,6 +14,13 @@ from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.types import Estimate
 
 KML_NS = "http://www.opengis.net/kml/2.2"
+# Characters XML 1.0 cannot hold, escaped or not: a control character in an id or a channel name
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")
+
+
+def xml_text(value) -> str:
+    """`value` as text a KML can hold: each character XML forbids becomes U+FFFD."""
+    return _NOT_XML.sub("\ufffd", str(value))
 
 
 def properties(est: Estimate) -> dict:
@@ -99,16 +107,16 @@ def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarr
     root = ET.Element(q("kml"))
     doc = ET.SubElement(root, q("Document"))
     algorithms = ", ".join(sorted({est.algorithm for est in estimates}))
-    ET.SubElement(doc, q("name")).text = f"aoa_localizer: emitter estimates ({algorithms})"
+    ET.SubElement(doc, q("name")).text = xml_text(f"aoa_localizer: emitter estimates ({algorithms})")
 
     def placemark(name: str, props: dict | None):
         pm = ET.SubElement(doc, q("Placemark"))
-        ET.SubElement(pm, q("name")).text = name
+        ET.SubElement(pm, q("name")).text = xml_text(name)
         if props is not None:
             ET.SubElement(ET.SubElement(pm, q("TimeStamp")), q("when")).text = props["time"]
             data = ET.SubElement(pm, q("ExtendedData"))
             for key, value in props.items():
-                ET.SubElement(ET.SubElement(data, q("Data"), name=key), q("value")).text = str(value)
+                ET.SubElement(ET.SubElement(data, q("Data"), name=key), q("value")).text = xml_text(value)
         return pm
 
     coords = lambda pts: " ".join(f"{lon:.8f},{lat:.8f},0" for lon, lat in pts)  # noqa: E731

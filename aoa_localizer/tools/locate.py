@@ -20,7 +20,9 @@ import csv
 import datetime
 import json
 import math
+import os
 import sys
+import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -33,6 +35,7 @@ from aoa_localizer.engine.surveys import SURVEY_PARTICLES, SiteBearing, locate_b
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES
+from aoa_localizer.pooled.stations import SIGMA_RANGE_DEG
 
 PROG = "python -m aoa_localizer.locate"
 
@@ -115,8 +118,9 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
                     raise ValueError(f"position {lat}, {lon} is not a latitude and longitude")
                 quality = _number(row, "quality", False, comma)
                 sigma = _number(row, "sigma_deg", False, comma)
-                if not math.isnan(sigma) and sigma <= 0:
-                    raise ValueError(f"sigma_deg must be positive, got {sigma}")
+                if not (math.isnan(sigma) or SIGMA_RANGE_DEG[0] <= sigma <= SIGMA_RANGE_DEG[1]):
+                    raise ValueError(f"sigma_deg must be in [{SIGMA_RANGE_DEG[0]:g}, {SIGMA_RANGE_DEG[1]:g}] deg, "
+                                     f"got {sigma:g}")
                 receiver = (row.get("receiver") or row.get("observer") or "").strip()
                 rows.append(Row(line, stamp, lat, lon, _number(row, "azimuth_deg", True, comma), quality, sigma,
                                 (row.get("station") or "").strip(), (row.get("id") or "").strip(), receiver))
@@ -152,6 +156,31 @@ def locate(rows: list[Row], cfg, datum: tuple[float, float]) -> tuple[Estimate |
     return locate_bearings(bearings, cfg.with_changes(datum_lat=datum[0], datum_lon=datum[1]))
 
 
+def check_outputs(source: Path, output: Path | None, report: Path | None):
+    """Refuse, before any work, an output that cannot be written or would destroy the input (a ValueError)."""
+    if output is not None:
+        if output.is_dir():
+            raise ValueError(f"--output {output} is a folder; give a file")
+        if not output.parent.is_dir():
+            raise ValueError(f"--output {output}: no folder {output.parent}")
+        if output.exists() and source.exists() and output.resolve() == source.resolve():
+            raise ValueError(f"--output {output} is the input: it would be overwritten")
+    if report is not None and report.exists() and not report.is_dir():
+        raise ValueError(f"--report {report} is a file; give a folder (made if missing)")
+
+
+def write_atomically(path: Path, text: str):
+    """Write `text` beside `path` and move it into place: an interrupted or failed run leaves the old file whole."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def record(ident: str, est: Estimate, rows: int) -> dict:
     return {"id": ident, "lat": est.lat, "lon": est.lon, "east": est.east, "north": est.north,
             "cov": [[float(v) for v in r] for r in est.cov], "state": est.state, "warnings": list(est.warnings),
@@ -179,7 +208,8 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
     for (ident, (est, rows)), colour in zip(found.items(), plt.rcParams["axes.prop_cycle"].by_key()["color"] * 99,
                                             strict=False):
         ring = ellipse_points((est.east, est.north), est.cov)
-        ax.plot(ring[:, 0], ring[:, 1], color=colour, label=f"{ident or 'emitter'} ({est.state})")
+        label = "".join(ch if ch.isprintable() else "?" for ch in ident or "emitter")
+        ax.plot(ring[:, 0], ring[:, 1], color=colour, label=f"{label} ({est.state})")
         ax.plot(est.east, est.north, "+", color=colour, ms=12)
         for ring in ((regions or {}).get(ident or "default") or {}).get(0.95, []):
             e, n = frame.to_enu(ring[:, 0], ring[:, 1])
@@ -292,6 +322,7 @@ def main(argv=None) -> int:
     setup_logging(args.verbose)
     try:
         cfg = config_from_args(args, survey_config())
+        check_outputs(args.csv, args.output, args.report)
         rows, bad = read_rows(args.csv, args.crs)
     except (ConfigError, OSError, ValueError, UnicodeDecodeError) as exc:
         print(f"locate: {exc}", file=sys.stderr)
@@ -313,7 +344,7 @@ def main(argv=None) -> int:
     else:
         found, lines, failed, regions = _pooled_run(groups, frame, args.receiver_class)
     if args.output:
-        args.output.write_text("".join(line + "\n" for line in lines))
+        write_atomically(args.output, "".join(line + "\n" for line in lines))
     if args.report and found:
         write_report(args.report, frame, found, regions)
     return 1 if failed else 0
