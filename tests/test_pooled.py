@@ -306,3 +306,17 @@ def test_an_id_with_control_characters_still_gives_a_kml_that_parses(tmp_path, c
     names = [n.firstChild.data for n in doc.getElementsByTagName("name")]
     assert any("fox\ufffd\ufffd" in n for n in names)
     assert json.loads((tmp_path / "rep" / "emitter.geojson").read_text())["features"]
+
+
+def test_a_receiver_column_with_a_name_per_row_gets_one_warning_and_every_id_is_located():
+    rng = np.random.default_rng(6)
+    rows = []
+    for j in range(12):
+        truth = rng.uniform(-2000, 2000, 2)
+        st = truth + rng.uniform(-600, 600, (3, 2))
+        for i, r in enumerate(readings_at(st, bearings_to(truth, st) + rng.normal(0, 3, 3), emitter=f"e{j}")):
+            rows.append(SurveyReading(r.emitter, r.lat, r.lon, r.azimuth_deg, r.station, f"rx{j}-{i}"))
+    res = locate_pooled(rows)
+    assert len(res.fixes) == 12 and len(res.receivers) == 36
+    (warning,) = res.warnings
+    assert "36 of 36 receivers heard fewer than 3 ids" in warning
