@@ -56,6 +56,41 @@ def filter_fixes(readings: list[SurveyReading], seed: int) -> PooledResult:
     return PooledResult(fixes=fixes)
 
 
+def api_fixes(rows, path: str, seed: int) -> PooledResult:
+    """Through `Localizer` as a program would feed it: `api_walk` one Localizer for the whole survey, a walking
+    observer whose fix comes with each azimuth and a channel per id (a made-up frequency each); `api_walk_each` one
+    Localizer per id, the same way; `api_fixed_each` one per id, each stop a fixed station."""
+    from aoa_localizer import Localizer, LocalizerConfig
+
+    ids = sorted({r.id for r in rows})
+    freq = {ident: 1e8 + 1e6 * k for k, ident in enumerate(ids)}  # channels far apart: one per id
+    groups = [sorted(rows, key=lambda r: r.stamp)] if path == "api_walk" else [
+        sorted((r for r in rows if r.id == ident), key=lambda r: r.stamp) for ident in ids]
+    fixes = {}
+    for group in groups:
+        loc = Localizer(LocalizerConfig(seed=seed))
+        for r in group:
+            if path == "api_fixed_each":
+                loc.set_station_position(f"{r.station}@{r.line}", r.lat, r.lon)
+                loc.add_bearing(r.stamp, r.azimuth_deg, float("nan"), station=f"{r.station}@{r.line}")
+            else:
+                loc.add_fix(r.stamp, r.lat, r.lon)
+                loc.add_bearing(r.stamp, r.azimuth_deg, float("nan"), frequency_hz=freq[r.id])
+        loc.flush()
+        loc.finish()
+        for channel in loc.channels.all():
+            est = channel.estimate
+            ident = (min(freq, key=lambda i: abs(freq[i] - channel.frequency_hz)) if path == "api_walk"
+                     else group[0].id)
+            if est is not None:
+                fixes[ident] = EmitterFix(ident, est.lat, est.lon, est.cov, est.state, est.warnings,
+                                          est.bearings_used, est.bearings_used, [], {0.5: [], 0.95: []}, {})
+        loc.close()
+        if loc.rejected:
+            print(f"inputs refused: {dict(loc.rejected)}")
+    return PooledResult(fixes=fixes)
+
+
 def scaled(readings: list[SurveyReading], truth: dict, factor: float):
     """The readings and truths with every place's offset from the first reading multiplied by `factor`."""
     frame = LocalFrame(readings[0].lat, readings[0].lon)
@@ -77,7 +112,8 @@ def main(argv=None) -> int:
     ap.add_argument("--receiver-class", default="unknown")
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--per-id", action="store_true")
-    ap.add_argument("--model", choices=("pooled", "filter"), default="pooled")
+    ap.add_argument("--model", choices=("pooled", "filter", "api_walk", "api_walk_each", "api_fixed_each"),
+                    default="pooled")
     ap.add_argument("--seed", type=int, default=1, help="the filter's seed (--model filter)")
     args = ap.parse_args(argv)
     rows, bad = read_rows(args.bearings, None)
@@ -87,7 +123,12 @@ def main(argv=None) -> int:
         truth = {r["id"]: (float(r["lat"]), float(r["lon"])) for r in csv.DictReader(fh)}
     if args.scale != 1.0:
         readings, truth = scaled(readings, truth, args.scale)
-    res = locate_pooled(readings, args.receiver_class) if args.model == "pooled" else filter_fixes(readings, args.seed)
+    if args.model == "pooled":
+        res = locate_pooled(readings, args.receiver_class)
+    elif args.model == "filter":
+        res = filter_fixes(readings, args.seed)
+    else:
+        res = api_fixes(rows, args.model, args.seed)
     errs, ls_errs, in50, in95, hpd50, hpd95, sharp, tracking_out = [], [], 0, 0, 0, 0, [], 0
     for ident, fix in res.fixes.items():
         t_lat, t_lon = truth[ident]

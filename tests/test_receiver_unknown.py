@@ -78,15 +78,15 @@ def _three_station_survey(noise_deg=(12.0, -9.0, 4.0)):
 
 
 def test_three_bearings_10_deg_off_give_a_wide_honest_estimate_at_the_end_of_data():
-    """Defaults, nothing about the receiver given: three bearings that cross in a wide triangle give an estimate
+    """The particle filter's end of data, nothing about the receiver given: three bearings that cross in a wide triangle give an estimate
     whose ellipse is about as wide as its error (a NEES of a few); the old fixed
     1.1 deg (`noise: fixed`) claims metres and is tens of sigmas off."""
-    est = locate_survey(_three_station_survey(), LocalizerConfig(seed=3))
+    est = locate_survey(_three_station_survey(), LocalizerConfig(seed=3, end_of_data_model="filter"))
     assert est is not None and est.end_of_data
     assert est.state in ("poorly_determined", "tracking")
     unknown = nees(np.array([est.east, est.north]), est.cov)
     assert unknown < 3 * ELLIPSE_95
-    fixed = locate_survey(_three_station_survey(), LocalizerConfig(seed=3, noise="fixed"))
+    fixed = locate_survey(_three_station_survey(), LocalizerConfig(seed=3, noise="fixed", end_of_data_model="filter"))
     assert fixed is None or nees(np.array([fixed.east, fixed.north]), fixed.cov) > 10 * unknown
 
 
@@ -100,7 +100,7 @@ def test_hand_held_surveys_every_transmitter_located_with_an_honest_ellipse_near
     errors, ls, inside = [], [], 0
     for i in range(30):
         s = hand_held(rng)
-        est = locate_survey(s, LocalizerConfig(seed=i))
+        est = locate_survey(s, LocalizerConfig(seed=i, end_of_data_model="filter"))
         assert est is not None
         e = np.array([est.east, est.north])
         errors.append(np.hypot(*e))
@@ -127,15 +127,23 @@ def test_a_moving_surveyor_minutes_apart_is_used_not_refused_as_clock_jumps():
     assert est is not None and est.bearings_used == 3
 
 
-def test_a_dense_stream_still_refuses_a_far_stamp_and_the_future_is_always_refused():
+def test_a_dense_stream_still_refuses_a_far_stamp_the_next_fix_contradicts_and_the_future_is_always_refused():
+    """A fix far ahead of a 1 Hz stream is held for the next fix to judge: back on the old timeline, it was a glitch
+    (refused); going on from it, the stream paused (both used, as a surveyor's next stop); the future never."""
     loc = Localizer(LocalizerConfig(datum_lat=DATUM[0], datum_lon=DATUM[1]))
     lat, lon, _ = LocalFrame(*DATUM).to_geodetic(0.0, 0.0)
     for t in range(20):
         loc.add_fix(float(t), lat, lon)
-    loc.add_fix(1e6, lat, lon)  # a glitch on a 1 Hz stream
+    loc.add_fix(1e6, lat, lon)  # a glitch on a 1 Hz stream ...
+    loc.add_fix(20.0, lat, lon)  # ... as the next fix shows
     assert loc.rejected["fix_stamp_jump"] == 1
     loc.add_fix(4e9, lat, lon)  # the year 2096: no receiver measured it yet
-    assert loc.rejected["fix_stamp_jump"] == 2
+    loc.add_fix(4e9 + 1, lat, lon)
+    assert loc.rejected["fix_stamp_jump"] == 3
+    loc.add_fix(5000.0, lat, lon)  # a pause of 80 minutes ...
+    loc.add_fix(5001.0, lat, lon)  # ... the stream goes on from it
+    assert loc.rejected["fix_stamp_jump"] == 3 and not loc.rejected["fix_out_of_order"]
+    assert len(loc.stations[""].gps) == 23
 
 
 def test_locate_reads_a_survey_csv_skips_a_bad_row_by_line_and_writes_one_line_per_id(tmp_path, cli):

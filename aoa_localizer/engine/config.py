@@ -251,6 +251,18 @@ class LocalizerConfig(GroupAccess):
     history_points: int = param(300, "observation points the MCMC moves' posterior keeps", low=1, high=100_000)
     # Robustness (docs/design.md "Never confidently wrong"): noise self-calibration, global-mode safety,
     # emitter-moved test.
+    end_of_data_model: str = choice(
+        "survey",
+        ("survey", "filter"),
+        "at `finish()` (offline, the API): `survey` locates the channels whose every bearing came from a fixed station "
+        "or an antenna standing still (a surveyor's stops) by the survey model `locate` runs, the same answer; "
+        "`filter`: the particle filter's end-of-data check for every channel",
+    )
+    receiver_class: str = choice(
+        "unknown",
+        ("unknown", "handheld", "electronic", "mast", "indoor"),
+        "what the receiver is, for the survey model's prior on its error (docs/interface.md, \"Survey model\")",
+    )
     calibrate_noise: bool = param(
         True,
         "learn the receiver's sigma per quality band and the outlier rate from the "

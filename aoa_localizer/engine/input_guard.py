@@ -49,7 +49,7 @@ class StreamClock:
         self.intervals: list[float] = []  # the latest intervals between adopted stamps
 
     def admit(self, stamp: float) -> Verdict:
-        if stamp > time.time() + _FUTURE_MARGIN_S:  # a measurement cannot come from the future
+        if self.future(stamp):  # a measurement cannot come from the future
             return Verdict.AHEAD
         if self.last is None or 0 < stamp - self.last <= self.max_jump_s or (stamp > self.last and self.sparse()):
             if self.last is not None and stamp > self.last:
@@ -68,6 +68,20 @@ class StreamClock:
             self.candidates.clear()
             return Verdict.CLOCK_JUMP
         return Verdict.AHEAD if stamp > self.last else Verdict.OUT_OF_ORDER
+
+    def future(self, stamp: float) -> bool:
+        """Whether `stamp` is from no receiver yet: more than a year ahead of the wall clock."""
+        return stamp > time.time() + _FUTURE_MARGIN_S
+
+    def far_ahead(self, stamp: float) -> bool:
+        """Whether `stamp` is farther ahead of a dense stream's newest than max_jump_s (what admit() refuses as a
+        stamp jump; nothing is changed)."""
+        return self.last is not None and stamp - self.last > self.max_jump_s and not self.sparse()
+
+    def resume(self, stamp: float) -> None:
+        """Go on from `stamp` after a pause the caller confirmed (the stream went on later, not elsewhere)."""
+        self.last = stamp
+        self.candidates.clear()
 
     def sparse(self) -> bool:
         """A sparse stream (bearings taken by hand minutes apart, their fixes): a long gap is its rhythm, not a clock

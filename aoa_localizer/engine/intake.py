@@ -17,6 +17,7 @@ from aoa_localizer.engine.gps_track import GpsTrack, Where
 from aoa_localizer.engine.heading import ImuHeading, TrackHeading
 from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
 from aoa_localizer.engine.preprocess import reading_sigma
+from aoa_localizer.engine.survey_log import STILL_MPS, SurveyLog
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.station import Pending, Station
 from aoa_localizer.engine.types import Reading
@@ -53,6 +54,7 @@ class Intake:
         self.unknown_quality = 0  # readings used with NaN quality (no correction, default sigma)
         self.other_band = 0  # DF records outside frequency_band_hz, left to the node of their band
         self.waiting_line = "waiting for a GPS fix"
+        self.survey_log = SurveyLog()
 
     def reset(self, channels: Channels):
         """Drop the stations (their tracks, clocks and held bearings) for new `channels`; the datum and the counters
@@ -60,6 +62,7 @@ class Intake:
         self.channels = channels
         self.stations = {}
         self.waiting_line = "waiting for a GPS fix"
+        self.survey_log = SurveyLog()
 
     @property
     def waiting_for_gps(self) -> bool:
@@ -114,11 +117,32 @@ class Intake:
             self.reject(why)
             return []
         st = self.station(station)
-        verdict = self._admit(st.fix_clock, "fix", "fix_clock_jump", stamp)
+        fix = (stamp, lat, lon, alt, sigma_m)
+        held, st.held_fix = st.held_fix, None
+        # the next fix goes on from the held one (later, and where a vehicle or a walker can have got to)
+        paused = held is not None and not st.fix_clock.future(stamp) and confirms(held[:3], fix[:3], math.inf)
+        if paused:  # the stream went on from the held fix: a pause (a surveyor's), not a glitch
+            st.fix_clock.resume(stamp)
+            verdict: Verdict | None = Verdict.OK
+        else:
+            if held is not None:
+                self.reject(Reason.FIX_STAMP_JUMP)  # the held fix was a glitch: the stream did not go on from it
+            if not st.fix_clock.future(stamp) and st.fix_clock.far_ahead(stamp):
+                st.held_fix = fix
+                return []
+            verdict = self._admit(st.fix_clock, "fix", "fix_clock_jump", stamp)
         if verdict is None:
             return []
         if verdict is Verdict.CLOCK_JUMP:  # the track starts again on the new timeline
             st.restart_gps()  # a first fix on the old timeline confirms nothing now
+        if paused:
+            assert held is not None
+            return self._use_fix(st, *held) + self._use_fix(st, *fix)
+        return self._use_fix(st, *fix)
+
+    def _use_fix(self, st: Station, stamp, lat, lon, alt, sigma_m) -> Closed:
+        """An admitted fix: a site's position, the datum's confirmation, or a point of the track."""
+        station = st.name
         if st.fixed:  # a site's fix is its position: trusted like a configured one, no confirmation
             self.place(station, lat, lon, alt, sigma_m)
             self.reject.used()
@@ -197,6 +221,10 @@ class Intake:
         are, those still waiting for a fix are dropped, the open observation points close."""
         closed: Closed = []
         for st in self.stations.values():
+            if st.held_fix is not None:  # the last stretch's first fix: nothing after it to say it was a glitch
+                held, st.held_fix = st.held_fix, None
+                st.fix_clock.resume(held[0])
+                closed += self._use_fix(st, *held)
             closed += self.release(st, final=True)  # those only waiting for their course's later fixes
             self.reject(Reason.NO_FIX_AFTER, len(st.pending))
             st.pending.clear()
@@ -270,6 +298,8 @@ class Intake:
             where, at = gps.locate(p.stamp)
             if where is Where.WAIT or (lead and not final and where is Where.OK and gps.t[-1] < p.stamp + lead):
                 break
+            if where is Where.GAP and st.held_fix is not None and p.stamp > gps.t[-1]:
+                break  # a held fix may be the start of the stream's next stretch: the next fix says
             st.pending.pop()
             if where is not Where.OK or at is None:
                 self.reject(where.value)
@@ -289,6 +319,11 @@ class Intake:
             sigma = reading_sigma(p.quality, self.cfg) if math.isnan(p.sigma) else p.sigma
             reading = Reading(p.stamp, theta, p.quality, sigma, east, north, float(gps_sigma), float(v_east),
                               float(v_north), heading_sigma)
+            # a survey's: from a fixed site, or from an antenna standing still (a surveyor's stop)
+            still = math.hypot(v_east, v_north) < STILL_MPS
+            self.survey_log.add(channel.id, st.fixed or still,
+                                (st.name, p.stamp, east, north, theta, north_angle,
+                                 math.degrees(p.sigma) if math.isfinite(p.sigma) else math.nan))
             closed += [(channel, group) for group in channel.builder(st.name).add(reading)]
         return closed
 

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from aoa_localizer.engine import slices
+from aoa_localizer.engine import slices, survey_log
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -28,6 +28,7 @@ from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.station import Station
+from aoa_localizer.engine.survey_log import SurveyFix
 from aoa_localizer.engine.track_report import assess, mode_masses
 from aoa_localizer.engine.track_state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
@@ -349,9 +350,35 @@ class Localizer:
         `end_of_data` set. Returns the last of them (None if no filter runs, or the last points just had a check).
         A live node never sees the end of data and never calls it."""
         estimate = None
-        for channel in [c for c in list(self.channels.live.values()) if c.track.finish()]:
-            estimate = self._publish(channel, end_of_data=True) or estimate
+        surveyed = self._survey_end() if self.cfg.end_of_data_model == "survey" else {}
+        for channel in self.channels.all():  # a survey's channels may have retired between its bearings
+            if channel.id in surveyed:
+                estimate = self._publish_survey(channel, surveyed[channel.id]) or estimate
+            elif not channel.retired and channel.track.finish():
+                estimate = self._publish(channel, end_of_data=True) or estimate
         return estimate
+
+    def _survey_end(self) -> dict[str, SurveyFix]:
+        """The survey model's fixes of the survey-like channels (survey_log.py), {} without any or a solver."""
+        solve = survey_log.solver()
+        if solve is None or self.intake.frame is None:
+            return {}
+        records = self.intake.survey_log.survey_records(self.intake.frame)
+        return solve(records, self.cfg.receiver_class) if records else {}
+
+    def _publish_survey(self, channel: Channel, fix: SurveyFix) -> Estimate | None:
+        """A survey-like channel's end-of-data estimate from the survey model, in the map frame."""
+        if not _positive_definite(fix.cov):
+            self.rejections(Reason.COVARIANCE_DEGENERATE)
+            return None
+        east, north = self.datum_frame().to_enu(fix.lat, fix.lon)
+        track = channel.track
+        estimate = Estimate(stamp=track.last_stamp, east=float(east), north=float(north), lat=fix.lat, lon=fix.lon,
+                            cov=np.array(fix.cov), bearings_used=fix.bearings, points_used=track.points_used,
+                            ess=float("nan"), algorithm="survey", modes=[(float(east), float(north), 1.0)],
+                            channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
+                            warnings=list(fix.warnings), end_of_data=True)
+        return self._announce(channel, estimate)
 
     def idle(self) -> list[Estimate]:
         """Between inputs (`scheduling: realtime`; the node calls it every few ms): the worker's finished results
@@ -433,6 +460,10 @@ class Localizer:
                             noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,
                             channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
                             end_of_data=end_of_data)
+        return self._announce(channel, estimate)
+
+    def _announce(self, channel: Channel, estimate: Estimate) -> Estimate:
+        """Keep a channel's new estimate as its and the newest, and hand it to `on_estimate`."""
         channel.published(estimate)
         self.estimate = estimate
         self.latest = channel

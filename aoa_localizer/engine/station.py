@@ -87,6 +87,9 @@ class Station:
         self.fix_clock = StreamClock(cfg.max_stamp_jump_s)
         self.df_clocks: dict[str, StreamClock] = {}  # per channel: VFOs of one receiver share their stamps
         self.datum_candidate: tuple[float, float, float, float, float] | None = None  # first fix, until confirmed
+        # a fix far ahead of a dense stream, until the next fix says whether the stream paused (it goes on from
+        # there: both are used) or it was a glitch (the next is back on the old timeline: it is refused)
+        self.held_fix: tuple[float, float, float, float, float] | None = None
 
     def course_source(self) -> tuple[TrackHeading, GpsTrack] | None:
         """The course-over-ground heading and the track it is fitted to (None: another heading source, or a fixed
@@ -109,7 +112,10 @@ class Station:
     def ahead_of_timeline(self, stamp: float) -> bool:
         """Whether a new channel's first stamp is far ahead (more than max_stamp_jump_s) of this station's dense
         timeline (its fixes', or its other channels' newest stamp): a channel's clock takes any first stamp, so one
-        record stamped in 2038 on another frequency would otherwise set the station's newest DF stamp."""
+        record stamped in 2038 on another frequency would otherwise set the station's newest DF stamp. A fix held
+        for its confirmation (a surveyor's next stop) is the timeline such a record is on."""
+        if self.held_fix is not None and abs(stamp - self.held_fix[0]) <= self.cfg.max_stamp_jump_s:
+            return False
         clocks = [(c.last, c) for c in (self.fix_clock, *self.df_clocks.values()) if c.last is not None]
         if not clocks:
             return False
@@ -122,6 +128,7 @@ class Station:
             self.gps = GpsTrack(self.cfg.gps_max_gap_s)
         self.heading = new_heading(self.cfg)
         self.datum_candidate = None
+        self.held_fix = None
 
     def fix_at(self, east: float, north: float, north_angle: float, sigma: float):
         """A fixed station's position (a configured one, or its newest fix)."""

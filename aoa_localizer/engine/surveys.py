@@ -24,8 +24,9 @@ SURVEY_PARTICLES = 2000
 
 
 def survey_config(**changes) -> LocalizerConfig:
-    """The survey program's defaults: the engine's, with SURVEY_PARTICLES particles."""
-    return LocalizerConfig(num_particles=SURVEY_PARTICLES).with_changes(**changes)
+    """`locate --model filter`'s defaults: the engine's, with SURVEY_PARTICLES particles, and the particle filter's
+    own end of data (not the survey model's)."""
+    return LocalizerConfig(num_particles=SURVEY_PARTICLES, end_of_data_model="filter").with_changes(**changes)
 
 
 @dataclass(frozen=True)

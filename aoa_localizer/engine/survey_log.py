@@ -1,0 +1,97 @@
+"""Bearings taken like a survey's, kept so the end of data can hand them to the survey model.
+
+A channel is survey-like when every bearing it used came from a fixed station (a mast, an anchor: its position
+given once) or from an antenna standing still (a surveyor at a stop, whose GPS fix comes with each azimuth). At `finish()`, with `end_of_data_model: survey`, such channels are located by the survey model `locate`
+runs (aoa_localizer.pooled, installed by the package as the solver below), so the API, offline replay and
+`locate` give one answer for the same bearings (docs/interface.md, "Survey model"). A vehicle's drive is never
+survey-like; the engine itself never imports the survey model (it sits above the engine).
+"""
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from aoa_localizer.engine.geodesy import LocalFrame, enu_to_azimuth
+
+MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
+STILL_MPS = 0.5  # an antenna slower than this stands still
+
+
+@dataclass(frozen=True)
+class SurveyRecord:
+    """One used bearing of a survey-like channel: its channel (the emitter), the station (the receiver) that took
+    it, its place (WGS84), its azimuth from true north, and its own sigma (deg; NaN: none given)."""
+
+    channel: str
+    station: str
+    stamp: float
+    lat: float
+    lon: float
+    azimuth_deg: float
+    sigma_deg: float
+
+
+@dataclass(frozen=True)
+class SurveyFix:
+    """The survey model's answer for one channel: WGS84, the covariance (m^2, east/north), state, warnings, and
+    how many bearings and stations it used."""
+
+    lat: float
+    lon: float
+    cov: np.ndarray
+    state: str
+    warnings: list
+    bearings: int
+    stations: int
+
+
+SurveySolver = Callable[[list[SurveyRecord], str], dict[str, SurveyFix]]
+_solver: list[SurveySolver] = []
+
+
+def install_solver(solver: SurveySolver) -> None:
+    """Set the survey model the end of data calls (the package installs aoa_localizer.pooled's)."""
+    _solver[:] = [solver]
+
+
+def solver() -> SurveySolver | None:
+    return _solver[0] if _solver else None
+
+
+class SurveyLog:
+    """Per channel, the bearings it used while every one of them was taken like a survey's (kept in the map
+    plane: station, stamp, east, north, ENU angle, true north's ENU angle there, own sigma in deg)."""
+
+    def __init__(self):
+        self.records: dict[str, list[tuple]] = defaultdict(list)
+        self.not_survey: set[str] = set()  # channels that used a bearing from a moving, densely fixed station
+
+    def add(self, channel: str, survey_like: bool, row: tuple) -> None:
+        if channel in self.not_survey:
+            return
+        if not survey_like or len(self.records[channel]) >= MAX_RECORDS:
+            self.not_survey.add(channel)
+            self.records.pop(channel, None)
+            return
+        self.records[channel].append(row)
+
+    def survey_records(self, frame: LocalFrame) -> list[SurveyRecord]:
+        """Every survey-like channel's bearings, in WGS84 with azimuths from true north."""
+        out = []
+        for channel, rows in self.records.items():
+            if not rows or channel in self.not_survey:
+                continue
+            station, stamp, east, north, theta, north_angle, sigma = (list(c) for c in zip(*rows, strict=True))
+            lat, lon, _ = frame.to_geodetic(np.array(east), np.array(north))
+            azimuth = enu_to_azimuth(np.array(theta), np.array(north_angle))
+            out += [SurveyRecord(channel, s, t, float(a), float(o), float(z), g)
+                    for s, t, a, o, z, g in zip(station, stamp, np.atleast_1d(lat), np.atleast_1d(lon),
+                                                np.atleast_1d(azimuth), sigma, strict=True)]
+        return out
+
+    def clear(self) -> None:
+        self.records.clear()
+        self.not_survey.clear()

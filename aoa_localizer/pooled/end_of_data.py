@@ -1,0 +1,20 @@
+"""The survey model as the engine's end of data: a Localizer's survey-like channels located as `locate` would.
+
+The engine keeps the bearings of channels heard only from fixed stations or a surveyor (engine/survey_log.py)
+and, at `finish()`, hands them here: each channel is an emitter and each Localizer station a station (at each of
+its places); which stations share a receiver follows the same rule as a survey file without a `receiver` column
+(stations.py), so the API and `locate` give one answer for the same bearings.
+"""
+from __future__ import annotations
+
+from aoa_localizer.engine.survey_log import SurveyFix, SurveyRecord
+from aoa_localizer.pooled.solver import locate_pooled
+from aoa_localizer.pooled.stations import SurveyReading
+
+
+def solve(records: list[SurveyRecord], receiver_class: str) -> dict[str, SurveyFix]:
+    """The survey model's fix of every channel it can locate (a channel it refuses keeps the filter's)."""
+    readings = [SurveyReading(r.channel, r.lat, r.lon, r.azimuth_deg, r.station, "", r.sigma_deg) for r in records]
+    result = locate_pooled(readings, receiver_class)
+    return {e: SurveyFix(f.lat, f.lon, f.cov, f.state, list(f.warnings), f.readings, f.stations)
+            for e, f in result.fixes.items()}
