@@ -17,9 +17,9 @@ from aoa_localizer.engine.gps_track import GpsTrack, Where
 from aoa_localizer.engine.heading import ImuHeading, TrackHeading
 from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
 from aoa_localizer.engine.preprocess import reading_sigma
-from aoa_localizer.engine.survey_log import STILL_MPS, SurveyLog
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.station import Pending, Station
+from aoa_localizer.engine.survey_log import STILL_MPS, SurveyLog
 from aoa_localizer.engine.types import Reading
 
 log = logging.getLogger("aoa_localizer")
