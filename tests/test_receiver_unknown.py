@@ -78,9 +78,9 @@ def _three_station_survey(noise_deg=(12.0, -9.0, 4.0)):
 
 
 def test_three_bearings_10_deg_off_give_a_wide_honest_estimate_at_the_end_of_data():
-    """The particle filter's end of data, nothing about the receiver given: three bearings that cross in a wide triangle give an estimate
-    whose ellipse is about as wide as its error (a NEES of a few); the old fixed
-    1.1 deg (`noise: fixed`) claims metres and is tens of sigmas off."""
+    """The particle filter's end of data, nothing about the receiver given: three bearings that cross in a wide
+    triangle give an estimate whose ellipse is about as wide as its error (a NEES of a few); the old fixed 1.1 deg
+    (`noise: fixed`) claims metres and is tens of sigmas off."""
     est = locate_survey(_three_station_survey(), LocalizerConfig(seed=3, end_of_data_model="filter"))
     assert est is not None and est.end_of_data
     assert est.state in ("poorly_determined", "tracking")

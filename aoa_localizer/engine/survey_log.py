@@ -1,9 +1,10 @@
 """Bearings taken like a survey's, kept so the end of data can hand them to the survey model.
 
 A channel is survey-like when every bearing it used came from a fixed station (a mast, an anchor: its position
-given once) or from an antenna standing still (a surveyor at a stop, whose GPS fix comes with each azimuth). At `finish()`, with `end_of_data_model: survey`, such channels are located by the survey model `locate`
-runs (aoa_localizer.pooled, installed by the package as the solver below), so the API, offline replay and
-`locate` give one answer for the same bearings (docs/interface.md, "Survey model"). A vehicle's drive is never
+given once) or from an antenna standing still (a surveyor at a stop, whose GPS fix comes with each azimuth). At
+`finish()`, with `end_of_data_model: survey`, such channels are located by the survey model `locate` runs
+(aoa_localizer.pooled, installed by the package as the solver below), so the API, offline replay and `locate`
+give one answer for the same bearings (docs/interface.md, "Survey model"). A vehicle's drive is never
 survey-like; the engine itself never imports the survey model (it sits above the engine).
 """
 from __future__ import annotations
