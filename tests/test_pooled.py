@@ -320,3 +320,80 @@ def test_a_receiver_column_with_a_name_per_row_gets_one_warning_and_every_id_is_
     assert len(res.fixes) == 12 and len(res.receivers) == 36
     (warning,) = res.warnings
     assert "36 of 36 receivers heard fewer than 3 ids" in warning
+
+
+def _observer_rows(rng, emitters=4):
+    """One observer walking to 3-4 stops around each of several transmitters, a fix and an azimuth at each stop,
+    10-40 minutes apart."""
+    rows, stamp = [], 1.7e9
+    for j in range(emitters):
+        truth = rng.uniform(-2000, 2000, 2)
+        k = int(rng.integers(3, 5))
+        ang = rng.uniform(0, 2 * np.pi, k)
+        st = truth + np.column_stack([300 * np.sin(ang), 300 * np.cos(ang)])
+        for i, ((e, n), az) in enumerate(zip(st, bearings_to(truth, st) + rng.normal(0, 8, k), strict=True)):
+            stamp += rng.uniform(600, 2400)
+            lat, lon, _ = FRAME.to_geodetic(e, n)
+            rows.append((float(stamp), float(lat), float(lon), float(az % 360), f"s{i}", f"e{j}"))
+    return rows
+
+
+def test_the_api_fed_as_a_walking_observer_or_as_fixed_stations_gives_locates_answer(tmp_path, cli):
+    """One answer by every path: the same stops through `locate`, through one Localizer as a walking observer (a
+    fix with each azimuth, a channel per transmitter) and through one Localizer with each stop a fixed station."""
+    from aoa_localizer import Localizer, LocalizerConfig
+
+    rows = _observer_rows(np.random.default_rng(7))
+    path = tmp_path / "walk.csv"
+    path.write_text("time,lat,lon,azimuth_deg,station,id\n"
+                    + "".join(f"{t},{la!r},{lo!r},{az!r},{s},{e}\n" for t, la, lo, az, s, e in rows))
+    out = tmp_path / "walk.jsonl"
+    assert cli(locate.main, path, "--output", out).returncode == 0
+    want = {g["id"]: g for g in map(json.loads, out.read_text().splitlines())}
+    freq = {e: 1e8 + 1e6 * int(e[1:]) for *_, e in rows}
+    for fixed in (False, True):
+        loc = Localizer(LocalizerConfig(seed=1))
+        for t, la, lo, az, s, e in rows:
+            if fixed:
+                name = f"{e}/{s}"  # a station per stop: the survey's stops are not one another's
+                loc.set_station_position(name, la, lo)
+                loc.add_bearing(t, az, math.nan, station=name, frequency_hz=freq[e])
+            else:
+                loc.add_fix(t, la, lo)
+                loc.add_bearing(t, az, math.nan, frequency_hz=freq[e])
+        loc.flush()
+        loc.finish()
+        loc.close()
+        got = {c.id: c.estimate for c in loc.channels.all() if c.estimate is not None}
+        assert not loc.rejected, dict(loc.rejected)
+        for e, g in want.items():
+            est = got[f"f{int(freq[e])}"]
+            assert est.algorithm == "survey" and est.end_of_data
+            assert math.hypot(*LocalFrame(g["lat"], g["lon"]).to_enu(est.lat, est.lon)) < 0.05, (fixed, e)
+            assert np.allclose(est.cov, g["cov"], rtol=1e-3)
+            assert est.state == g["state"]
+
+
+def test_the_filters_end_of_data_is_kept_when_asked_and_for_a_drive():
+    """`end_of_data_model: filter` keeps the particle filter's answer for a surveyor; a vehicle's drive (moving
+    while it takes its bearings) never goes to the survey model."""
+    from aoa_localizer import Localizer, LocalizerConfig
+
+    rows = _observer_rows(np.random.default_rng(8), emitters=1)
+    loc = Localizer(LocalizerConfig(seed=1, end_of_data_model="filter"))
+    for t, la, lo, az, _, _ in rows:
+        loc.add_fix(t, la, lo)
+        loc.add_bearing(t, az, math.nan)
+    loc.flush()
+    est = loc.finish() or loc.estimate
+    loc.close()
+    assert est is not None and est.algorithm != "survey"
+    loc = Localizer(LocalizerConfig(seed=1))
+    for k in range(120):  # 10 m/s east, a bearing a second to a transmitter 1 km north
+        lat, lon, _ = FRAME.to_geodetic(10.0 * k, 0.0)
+        loc.add_fix(1.7e9 + k, lat, lon)
+        loc.add_bearing(1.7e9 + k + 0.5, math.degrees(math.atan2(600 - 10.0 * (k + 0.5), 1000.0)) % 360, 80.0)
+    loc.flush()
+    est = loc.finish() or loc.estimate
+    loc.close()
+    assert est is not None and est.algorithm != "survey"
