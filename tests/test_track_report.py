@@ -73,7 +73,8 @@ def test_a_survey_whose_filter_is_wide_for_its_range_publishes_the_spatial_media
     tails along the rays drag out (48 m against 176 m)."""
     rng = np.random.default_rng(3)
     survey = [hand_held(rng) for _ in range(3)][-1]
-    cfg = LocalizerConfig(seed=0, offset_sigma_deg=0.0)  # no offset marginalised: the place is the cloud's own
+    # the filter's end of data; no offset marginalised: the place is the cloud's own
+    cfg = LocalizerConfig(seed=0, offset_sigma_deg=0.0, end_of_data_model="filter")
     est, loc = locate_survey_with(survey, cfg)
     track = loc.channels.default.track
     f = track.filter
