@@ -143,6 +143,7 @@ def test_a_dense_stream_still_refuses_a_far_stamp_the_next_fix_contradicts_and_t
     loc.add_fix(5000.0, lat, lon)  # a pause of 80 minutes ...
     loc.add_fix(5001.0, lat, lon)  # ... the stream goes on from it
     assert loc.rejected["fix_stamp_jump"] == 3 and not loc.rejected["fix_out_of_order"]
+    assert loc.events["fix_pause"] == 1
     assert len(loc.stations[""].gps) == 23
 
 

@@ -50,7 +50,7 @@ class Intake:
                  observer=None):
         self.cfg, self.channels, self.reject, self.frame, self.observer = cfg, channels, reject, frame, observer
         self.stations: dict[str, Station] = {}
-        self.input_events: Counter = Counter()  # fix_clock_jump, df_clock_jump
+        self.input_events: Counter = Counter()  # fix_clock_jump, df_clock_jump, fix_pause
         self.unknown_quality = 0  # readings used with NaN quality (no correction, default sigma)
         self.other_band = 0  # DF records outside frequency_band_hz, left to the node of their band
         self.waiting_line = "waiting for a GPS fix"
@@ -119,25 +119,24 @@ class Intake:
         st = self.station(station)
         fix = (stamp, lat, lon, alt, sigma_m)
         held, st.held_fix = st.held_fix, None
-        # the next fix goes on from the held one (later, and where a vehicle or a walker can have got to)
-        paused = held is not None and not st.fix_clock.future(stamp) and confirms(held[:3], fix[:3], math.inf)
-        if paused:  # the stream went on from the held fix: a pause (a surveyor's), not a glitch
+        # the next fix goes on from the held one (later, and where a vehicle or a walker can have got to): the
+        # stream paused (a surveyor's next stop), it was no glitch
+        if held is not None and not st.fix_clock.future(stamp) and confirms(held[:3], fix[:3], math.inf):
+            gap = held[0] - (st.fix_clock.last if st.fix_clock.last is not None else held[0])
             st.fix_clock.resume(stamp)
-            verdict: Verdict | None = Verdict.OK
-        else:
-            if held is not None:
-                self.reject(Reason.FIX_STAMP_JUMP)  # the held fix was a glitch: the stream did not go on from it
-            if not st.fix_clock.future(stamp) and st.fix_clock.far_ahead(stamp):
-                st.held_fix = fix
-                return []
-            verdict = self._admit(st.fix_clock, "fix", "fix_clock_jump", stamp)
+            self.input_events["fix_pause"] += 1
+            log.info("fix_pause: the fixes went on %.0f s after the one before, confirmed by the next", gap)
+            return self._use_fix(st, *held) + self._use_fix(st, *fix)
+        if held is not None:
+            self.reject(Reason.FIX_STAMP_JUMP)  # the held fix was a glitch: the stream did not go on from it
+        if not st.fix_clock.future(stamp) and st.fix_clock.far_ahead(stamp):
+            st.held_fix = fix
+            return []
+        verdict = self._admit(st.fix_clock, "fix", "fix_clock_jump", stamp)
         if verdict is None:
             return []
         if verdict is Verdict.CLOCK_JUMP:  # the track starts again on the new timeline
             st.restart_gps()  # a first fix on the old timeline confirms nothing now
-        if paused:
-            assert held is not None
-            return self._use_fix(st, *held) + self._use_fix(st, *fix)
         return self._use_fix(st, *fix)
 
     def _use_fix(self, st: Station, stamp, lat, lon, alt, sigma_m) -> Closed:
