@@ -105,6 +105,27 @@ def test_calibration_learns_how_sigma_falls_with_quality():
     assert noise.reading_outlier_prob == pytest.approx(0.2, abs=0.04)
 
 
+def test_a_stated_heading_variance_the_residuals_do_not_bear_out_is_scaled_down_not_taken_from_the_receiver():
+    """Readings of a 1.1 deg receiver whose headings are exact, but stated 1.1-1.6 deg uncertain (a course's drift
+    floor on a straight road): the fit keeps none of the stated heading variance and finds the receiver's 1.1 deg,
+    where taking the statement at its word drove the receiver to its floor (0.056 deg). With the heading errors
+    real, it keeps them all."""
+    rng = np.random.default_rng(2)
+    q = np.full(400, 90.0)
+    base = np.full(q.size, np.radians(1.117))
+    stated = np.radians(rng.uniform(1.1, 1.6, q.size))
+    exact = np.radians(1.117) * rng.standard_normal(q.size)
+    noise = NoiseModel(0.05)
+    noise.fit(exact, q, base, stated**2)
+    assert noise.heading_scale == 0.0
+    assert noise.scale(np.array([90.0]))[0] == pytest.approx(1.0, rel=0.15)
+    real = exact + stated * rng.standard_normal(q.size)
+    noise = NoiseModel(0.05)
+    noise.fit(real, q, base, stated**2)
+    assert noise.heading_scale == 1.0
+    assert noise.scale(np.array([90.0]))[0] == pytest.approx(1.0, rel=0.25)
+
+
 def test_a_known_variance_beside_the_receivers_is_not_blamed_on_it():
     """Readings of a 2 deg receiver turned by headings of sigma 4 deg: told the heading's variance, the fit finds 2 deg;
     not told, it blames the receiver for about sqrt(2^2 + 4^2) = 4.5 deg."""

@@ -58,7 +58,9 @@ class Calibrator:
         """The point of `readings` under the calibrated noise model (the readings' own sigmas until calibrated)."""
         if self.course:
             readings, self.held_course = turned(readings, self.held_course)
-        made = make_point(readings, self.cfg, self.sigmas(readings) if self.cfg.calibrate_noise else None)
+        calibrated = self.cfg.calibrate_noise
+        made = make_point(readings, self.cfg, self.sigmas(readings) if calibrated else None,
+                          self.noise.heading_scale if calibrated else 1.0)
         return offset_point(made, self.offset)
 
     @property

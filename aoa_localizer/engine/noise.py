@@ -29,6 +29,8 @@ _EM_ITERATIONS = 25
 _EM_TOL = 1e-7  # EM has converged once no log k^2 or outlier rate moves by more than this ...
 _EM_MERGE = 1e-4  # ... and two runs this close go on as one
 _K_RANGE = (0.05, 50.0)
+HEADING_SCALES = (1.0, 0.5, 0.25, 0.0)  # shares of the stated heading variance tried; the best likelihood is kept
+_HEADING_EVIDENCE = 3.0  # nats a share other than the whole must gain over it
 OUTLIER_RANGE = (0.01, 0.6)
 _MIDDLE_HALF_Z = 0.6745  # half of a Gaussian lies within this many sigmas
 _HOLLOW_SHARE, _HOLLOW_MIN_WEIGHT = 0.25, 20.0  # a core with less than half its expected share is hollow
@@ -70,6 +72,10 @@ class NoiseModel:
         # The last fit's core is hollow: its inliers avoid the middle of their own Gaussian (a wide noise that
         # swallows two clusters of bearings either side of a place between two sources)
         self.hollow = False
+        # The share of the heading's stated variance (the course over ground's, from the fixes) that the residuals
+        # bear out: the course's sigma is a model's claim (its drift term a floor), and where it overstates the
+        # heading's error the receiver's own scale would be driven to its floor to make room for it
+        self.heading_scale = 1.0
 
     def scale(self, quality: np.ndarray) -> np.ndarray:
         """k(Q): interpolated between band centres for known quality, the unknown band's for NaN."""
@@ -100,8 +106,15 @@ class NoiseModel:
         if ok.sum() < _MIN_READINGS:
             return float("nan")
         resid, base_sigma, band = resid[ok], base_sigma[ok], band_of(np.asarray(quality, float)[ok])
-        ll, k2, eps, w, self.hollow = yield from _em_in_pieces(resid, base_sigma, known[ok], band,
-                                                               self._starts(resid / base_sigma))
+        starts = self._starts(resid / base_sigma)
+        best = (1.0, (yield from _em_in_pieces(resid, base_sigma, known[ok], band, starts)))
+        if _floored(*best[1][1:4:2]):
+            # the statement left most readings no receiver noise of their own: how much of it do they bear out?
+            for scale in HEADING_SCALES[1:]:
+                fit = yield from _em_in_pieces(resid, base_sigma, scale * known[ok], band, starts)
+                if fit[0] > best[1][0] + (_HEADING_EVIDENCE if best[0] == 1.0 else 0.0):
+                    best = (scale, fit)
+        self.heading_scale, (ll, k2, eps, w, self.hollow) = best
         self.k = np.sqrt(k2)
         self.reading_outlier_prob = eps
         self.readings = w
@@ -111,6 +124,7 @@ class NoiseModel:
     def copy(self) -> NoiseModel:
         other = NoiseModel(self.reading_outlier_prob)
         other.k, other.readings, other.fits, other.hollow = self.k.copy(), self.readings.copy(), self.fits, self.hollow
+        other.heading_scale = self.heading_scale
         return other
 
     def _starts(self, z: np.ndarray) -> np.ndarray:
@@ -129,7 +143,16 @@ class NoiseModel:
                 q = float("nan") if b == UNKNOWN else float(_CENTRES[b])
                 key = "nan" if b == UNKNOWN else f"{q:g}"
                 sig[key] = round(float(self.k[b] * base_sigma_deg(q)), 3)
-        return {"sigma_deg": sig, "reading_outlier_prob": round(self.reading_outlier_prob, 4), "fits": self.fits}
+        out = {"sigma_deg": sig, "reading_outlier_prob": round(self.reading_outlier_prob, 4), "fits": self.fits}
+        if self.heading_scale != 1.0:
+            out["heading_variance_share"] = self.heading_scale
+        return out
+
+
+def _floored(k2: np.ndarray, weights: np.ndarray) -> bool:
+    """Whether the bands holding most of the readings' weight have their scale at the floor."""
+    low = k2 <= (2.0 * _K_RANGE[0]) ** 2
+    return float(weights[low].sum()) > 0.5 * float(weights.sum())
 
 
 def _em_in_pieces(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,

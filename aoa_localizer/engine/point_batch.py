@@ -111,7 +111,8 @@ class PointBatch:
                          np.bincount(of, np.where(keep, np.cos(c.theta), 0.0), k))
         theta = wrap_pi(ref + mean_of(wrap_pi(c.theta - ref[of])))
         rho, common, heading = cfg.df_correlation, mean_of(sigma), mean_of(c.heading_sigma)
-        var = rho * common * common + (1.0 - rho) * np.bincount(of, (a * sigma) ** 2, k) + heading * heading
+        share = noise.heading_scale if noise is not None else 1.0  # of the stated heading variance (noise.py)
+        var = rho * common * common + (1.0 - rho) * np.bincount(of, (a * sigma) ** 2, k) + share * heading * heading
         fields = dict(stamp=mean_of(c.stamp), east=mean_of(c.east), north=mean_of(c.north),
                       theta=wrap_pi(theta - offset) if offset else theta, sigma=np.sqrt(var),
                       n_readings=np.bincount(of, keep, k).astype(int), gps_sigma=mean_of(c.gps_sigma))
@@ -134,7 +135,8 @@ class PointBatch:
     def built(self, noise: NoiseModel | None, offset: float = 0.0) -> list[Built]:
         """Each point and the mask of its readings kept, as make_point gives them (the track takes these)."""
         if self.cfg.point_weighting == "paper":  # its coefficients are a recursion per point: the reference's
-            return [offset_point(make_point(g, self.cfg, sigmas(g, noise)), offset) for g in self.groups]
+            share = noise.heading_scale if noise is not None else 1.0
+            return [offset_point(make_point(g, self.cfg, sigmas(g, noise), share), offset) for g in self.groups]
         f, keep = self._made(noise, offset)
         rows = zip(*(f[name].tolist() for name in _POINT_FIELDS), strict=True)
         masks = np.split(keep, np.cumsum(self.sizes)[:-1]) if self.sizes.size else []

@@ -94,8 +94,8 @@ def circular_median(theta: np.ndarray) -> float:
     return float(theta[np.flatnonzero(spread <= spread.min() + TIE_RAD)[0]])
 
 
-def make_point(readings: list[Reading], cfg: LocalizerConfig,
-               sigma: np.ndarray | None = None) -> tuple[ObservationPoint, np.ndarray]:
+def make_point(readings: list[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None = None,
+               heading_scale: float = 1.0) -> tuple[ObservationPoint, np.ndarray]:
     """Corrected bearing of one observation point and the mask of the readings it kept (the rest: wild).
 
     `point_weighting` "paper" is eqs. 19-21; "inverse_variance" is the best linear combination when
@@ -103,18 +103,19 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig,
     mean, positions and stamps with the same coefficients (the bearing is nearly linear in position over a few
     metres, so the corrected bearing belongs to the equally-weighted position). Variance: a^T C a with C the readings'
     covariance under `df_correlation`. `sigma`: the readings' sigmas when not their own (self-calibrated noise);
-    the gate uses the larger of the two. Up to SMALL_POINT readings in plain floats, else (and as the reference)
+    the gate uses the larger of the two. `heading_scale`: the share of the readings' stated heading variance the
+    calibration bore out (noise.py). Up to SMALL_POINT readings in plain floats, else (and as the reference)
     make_point_arrays.
     """
     if 0 < group_size(readings) <= SMALL_POINT and cfg.point_weighting != "paper":
-        made = _make_small_point(readings, cfg, sigma)
+        made = _make_small_point(readings, cfg, sigma, heading_scale)
         if made is not None:
             return made
-    return make_point_arrays(readings, cfg, sigma)
+    return make_point_arrays(readings, cfg, sigma, heading_scale)
 
 
-def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig,
-                      sigma: np.ndarray | None = None) -> tuple[ObservationPoint, np.ndarray]:
+def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None = None,
+                      heading_scale: float = 1.0) -> tuple[ObservationPoint, np.ndarray]:
     """make_point in numpy, for any number of readings: the reference the plain-float path is tested against."""
     cols = columns(readings)
     theta, own = cols.theta, cols.sigma
@@ -127,7 +128,7 @@ def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig,
     ref = circular_mean(theta)
     rho = cfg.df_correlation
     cov = rho * np.outer(sigma, sigma) + (1.0 - rho) * np.diag(sigma**2)
-    heading = a @ cols.heading_sigma[keep]  # one heading error for the whole point: added whole
+    heading = a @ cols.heading_sigma[keep] * math.sqrt(heading_scale)  # one heading error for the point: whole
     point = ObservationPoint(
         stamp=float(a @ cols.stamp[keep]),
         east=float(a @ cols.east[keep]),
@@ -144,8 +145,8 @@ def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig,
 SMALL_POINT = 32  # readings up to which a point is made in plain floats (numpy's per-call cost dominates below)
 
 
-def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
-                      sigma: np.ndarray | None) -> tuple[ObservationPoint, np.ndarray] | None:
+def _make_small_point(readings: list[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None,
+                      heading_scale: float = 1.0) -> tuple[ObservationPoint, np.ndarray] | None:
     """make_point for a few readings in plain floats, the same maths term by term (make_point's numpy code is the
     reference the tests hold this to); None when a sigma is not positive and finite (the reference handles it)."""
     stamp, theta, _, own, east, north, gps, _, _, heading_sigma = field_lists(readings)
@@ -171,7 +172,7 @@ def _make_small_point(readings: list[Reading], cfg: LocalizerConfig,
     common = mean_of(sig)
     variance = rho * common * common + (1.0 - rho) * sum((ai * sig[i]) ** 2 for ai, i in zip(a, idx, strict=True))
     heading = mean_of(heading_sigma)
-    variance += heading * heading
+    variance += heading * heading * heading_scale
     point = ObservationPoint(
         stamp=mean_of(stamp),
         east=mean_of(east),
