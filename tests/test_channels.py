@@ -249,3 +249,40 @@ def test_the_simulator_shows_two_cars_and_several_frequencies_without_hardware(c
         line = next(line for line in two.stdout.splitlines() if line.startswith(name))
         assert float(line.split("error ")[1].split(" m")[0]) < 10.0
     assert cli(simulate_main, "--emitters", "433e6,12").returncode == 2
+
+
+def test_records_refused_after_opening_their_channels_do_not_lock_a_new_emitter_out(caplog):
+    """A scanning receiver before its first fix: 64 frequencies whose records are all refused leave no channel open,
+    so a genuine new emitter afterwards is located, not refused as `channel_limit` for ever (with 64 empty channels
+    it was); and no channel that was never heard is logged as retired ("silent for inf s")."""
+    import logging
+
+    loc = Localizer(LocalizerConfig(max_channels=64, datum_lat=39.1, datum_lon=117.2))
+    frame = LocalFrame(39.1, 117.2)
+    for k in range(64):
+        loc.add_bearing(10.0 + 0.01 * k, 40.0, 90.0, frequency_hz=1e8 + 1e6 * k)  # before any fix
+    assert loc.rejected["before_first_fix"] == 64 and list(loc.channels.live) == [DEFAULT]
+    with caplog.at_level(logging.INFO, logger="aoa_localizer"):
+        for t in range(20, 400):
+            lat, lon, _ = frame.to_geodetic(5.0 * (t - 20), 0.0)
+            loc.add_fix(float(t), lat, lon)
+            loc.add_bearing(t + 0.5, math.degrees(math.atan2(1200.0 - 5.0 * (t - 19.5), 800.0)) % 360, 90.0,
+                            frequency_hz=433.92e6)
+    assert loc.rejected["channel_limit"] == 0
+    assert loc.channels.live["f433920000"].estimate is not None
+    assert "silent for inf s" not in caplog.text
+
+
+def test_at_the_limit_a_record_retires_the_silent_channels_itself():
+    """Every channel taken and silent for channel_timeout_s: the next record of a new frequency retires them and
+    is heard; before, retiring waited for a record admitted, which at the limit never came."""
+    loc = Localizer(LocalizerConfig(max_channels=2, channel_timeout_s=10.0, datum_lat=39.1, datum_lon=117.2))
+    lat, lon, _ = LocalFrame(39.1, 117.2).to_geodetic(0.0, 0.0)
+    for t in range(0, 40):
+        loc.add_fix(float(t), lat, lon)
+        if t in (1, 2):
+            loc.add_bearing(t + 0.5, 40.0, 90.0, frequency_hz=1e8 * t)
+    loc.add_bearing(35.5, 40.0, 90.0, frequency_hz=5e8)
+    assert loc.rejected["channel_limit"] == 0
+    assert set(loc.channels.live) == {DEFAULT, "f500000000"} and set(loc.channels.retired) == {"f100000000",
+                                                                                             "f200000000"}

@@ -67,6 +67,8 @@ def test_every_channel_id_is_a_short_valid_ros_name_token():
 def test_memory_of_heard_frequencies_is_bounded():
     """Item 12: +71 MB per million jittered frequencies (one dict entry each, for ever)."""
     loc = Localizer(LocalizerConfig(channel_tolerance_hz=1e6))
+    loc.add_fix(0.0, 39.1, 117.2)  # the records are admitted (a channel no record was admitted on is closed)
+    loc.add_fix(0.5, 39.1, 117.2)
     for k in range(20_000):
         loc.add_bearing(1.0 + k * 1e-3, 10.0, 90.0, frequency_hz=433e6 + k * 1e-3)
     assert len(loc.channels._heard) <= 4096

@@ -127,12 +127,22 @@ class Channels:
         self._heard[f] = best
         return best
 
+    def discard_unheard(self, channel: Channel) -> None:
+        """Close a frequency channel no record was ever admitted on (the one that opened it was refused)."""
+        if channel.id != DEFAULT and channel.last_heard == -math.inf and self.live.get(channel.id) is channel:
+            del self.live[channel.id]
+            for f in [f for f, c in self._heard.items() if c is channel]:
+                del self._heard[f]
+
     def retire_silent(self, now: float) -> list[Channel]:
         """Retire the frequency channels silent for `channel_timeout_s` of DF time before `now` (0: never);
-        returns them (their open points still to be used by the caller)."""
+        returns them (their open points still to be used by the caller). A channel never heard is closed, not
+        retired: it has nothing to keep."""
         timeout = self.cfg.channel_timeout_s
         if timeout <= 0:
             return []
+        for c in [c for c in self.live.values() if c.last_heard == -math.inf]:
+            self.discard_unheard(c)
         gone = [c for c in self.live.values() if c.id != DEFAULT and now - c.last_heard > timeout]
         if gone:
             self._heard.clear()

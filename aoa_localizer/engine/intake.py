@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
+from collections.abc import Callable
 
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
@@ -55,6 +56,8 @@ class Intake:
         self.other_band = 0  # DF records outside frequency_band_hz, left to the node of their band
         self.waiting_line = "waiting for a GPS fix"
         self.survey_log = SurveyLog()
+        # called with a record's stamp when every channel is taken: retires the silent ones, says whether any went
+        self.make_room: Callable[[float], bool] | None = None
 
     def reset(self, channels: Channels):
         """Drop the stations (their tracks, clocks and held bearings) for new `channels`; the datum and the counters
@@ -173,6 +176,16 @@ class Intake:
         elif not heading.add(stamp, yaw, math.sqrt(variance) if 0 < variance < math.inf else 0.0):
             self.reject(Reason.HEADING_OUT_OF_ORDER)
 
+    def _channel(self, frequency: float, stamp: float, station: str) -> Channel | Reason:
+        """The record's channel; with every channel taken, the silent ones are retired as of its stamp first, when
+        that lies on its station's timeline (a stamp from nowhere must not retire them)."""
+        channel = self.channels.for_frequency(frequency)
+        if channel is Reason.CHANNEL_LIMIT and self.make_room is not None:
+            st = self.station(station)
+            if not st.ahead_of_timeline(stamp) and not st.fix_clock.future(stamp) and self.make_room(stamp):
+                channel = self.channels.for_frequency(frequency)
+        return channel
+
     def admit_bearing(self, stamp, azimuth_deg, quality, sigma, station: str,
                       frequency_hz) -> tuple[Station, float] | None:
         """Check a DF record and hold it at its station until a fix places it (release): its station and its stamp on
@@ -194,21 +207,26 @@ class Intake:
         if quality < self.cfg.quality_min:  # False for NaN: unknown quality passes, counted below
             self.reject(Reason.LOW_QUALITY)
             return None
-        channel = self.channels.for_frequency(frequency)
+        channel = self._channel(frequency, stamp, station)
         if isinstance(channel, Reason):
             self.reject(channel)
             return None
         st = self.station(station)
+        # a record refused here never opened its channel: one left open would hold a place among max_channels
+        # that no bearing ever fills (a scanning receiver before its first fix filled them all)
         if channel.id not in st.df_clocks and st.ahead_of_timeline(stamp):
             self.reject(Reason.BEARING_STAMP_JUMP)
+            self.channels.discard_unheard(channel)
             return None
         verdict = self._admit(st.df_clock(channel.id), "bearing", "df_clock_jump", stamp)
         if verdict is None:
+            self.channels.discard_unheard(channel)
             return None
         if verdict is Verdict.CLOCK_JUMP:  # waiting on the old timeline: no fix will place them in order any more
             self.reject(Reason.CLOCK_JUMP, st.pending.drop_channel(channel.id))
         if stamp < st.first_stamp:
             self.reject(Reason.BEFORE_FIRST_FIX)
+            self.channels.discard_unheard(channel)
             return None
         self.reject.used()
         channel.last_heard = stamp  # on its clock's timeline (a step back is followed)

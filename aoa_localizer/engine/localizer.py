@@ -81,6 +81,8 @@ class Localizer:
         self.scheduler = Scheduler(cfg.scheduling == "realtime" or (cfg.scheduling == "auto" and live), self.rejections)
         self.channels = Channels(cfg, self.rng, self.rejections, self.scheduler)
         self.intake = Intake(cfg, self.channels, self.rejections, frame, observer)
+        self.intake.make_room = self._make_room
+        self._room: Closed = []  # points of channels retired to make room for a record, used with its call
         self._fixed_stations: dict[str, tuple[float, float, float, float] | None] = {}  # configured positions
         self._start_tracks()
 
@@ -322,14 +324,24 @@ class Localizer:
 
     def _add_bearing(self, stamp, azimuth_deg, quality, sigma, station, frequency_hz) -> Estimate | None:
         admitted = self.intake.admit_bearing(stamp, azimuth_deg, quality, sigma, station, frequency_hz)
+        room, self._room = self._room, []
         if admitted is None:
-            return None
+            return self._use(room) if room else None
         st, now = admitted
-        return self._use(self._retire_silent(now) + self.intake.release(st))
+        return self._use(room + self._retire_silent(now) + self.intake.release(st))
 
-    def _retire_silent(self, now: float) -> Closed:
-        """Once per second of DF time: retire the channels silent for channel_timeout_s; their open points close."""
-        if now - self._retire_check < 1.0:
+    def _make_room(self, stamp: float) -> bool:
+        """A record found every channel taken: the channels silent for channel_timeout_s before its stamp (the
+        intake checked it lies on its station's timeline) are retired now, not at the next record admitted, which
+        at the limit never comes. Whether any went."""
+        before = len(self.channels.live)
+        self._room += self._retire_silent(stamp, every_time=True)
+        return len(self.channels.live) < before
+
+    def _retire_silent(self, now: float, every_time: bool = False) -> Closed:
+        """Once per second of DF time (`every_time`: now): retire the channels silent for channel_timeout_s; their
+        open points close."""
+        if now - self._retire_check < 1.0 and not every_time:
             return []
         self._retire_check = now
         closed: Closed = []
