@@ -92,7 +92,7 @@ def test_unreadable_input_exits_non_zero_with_a_message(tmp_path, make, cli):
     res = cli(replay_main, path, "--offline", "--output", tmp_path / "e.jsonl")
     assert res.returncode == 2
     assert "replay:" in res.stderr
-    assert (tmp_path / "e.jsonl").read_text() == ""  # no header line for a bag that could not be read
+    assert not (tmp_path / "e.jsonl").exists()  # nothing written for a bag that could not be read
     to_stdout = cli(replay_main, path, "--offline")
     assert to_stdout.returncode == 2 and to_stdout.stdout == ""
 
@@ -315,3 +315,15 @@ def test_ctrl_c_during_offline_replay_or_report_ends_in_one_line_and_keeps_what_
     lines = out.read_text().splitlines()
     assert len(lines) >= 3 and all(json.loads(line) for line in lines)
     assert f"the {len(lines) - 1} estimates written to {out} are kept" in errs[0]  # the header line, then estimates
+
+
+def test_a_typo_in_the_bag_path_leaves_an_existing_output_whole_and_a_folder_is_refused(tmp_path, cli):
+    """Issue 51, item 8: `replay bags/nonexistent --offline --output keep.jsonl` used to empty keep.jsonl."""
+    keep = tmp_path / "keep.jsonl"
+    keep.write_text("what a user had\n")
+    res = cli(replay_main, ROOT / "bags" / "nonexistent", "--offline", "--output", keep)
+    assert res.returncode == 2 and "no such bag" in res.stderr
+    assert keep.read_text() == "what a user had\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.jsonl"]  # no staged file left behind
+    res = cli(replay_main, ROOT / "bags" / "seed", "--offline", "--output", tmp_path)
+    assert res.returncode == 2 and "is a folder" in res.stderr and "Traceback" not in res.stderr

@@ -20,13 +20,12 @@ import csv
 import datetime
 import json
 import math
-import os
 import sys
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, setup_logging
+from aoa_localizer.common.output import check_output, write_staged
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -159,26 +158,9 @@ def locate(rows: list[Row], cfg, datum: tuple[float, float]) -> tuple[Estimate |
 def check_outputs(source: Path, output: Path | None, report: Path | None):
     """Refuse, before any work, an output that cannot be written or would destroy the input (a ValueError)."""
     if output is not None:
-        if output.is_dir():
-            raise ValueError(f"--output {output} is a folder; give a file")
-        if not output.parent.is_dir():
-            raise ValueError(f"--output {output}: no folder {output.parent}")
-        if output.exists() and source.exists() and output.resolve() == source.resolve():
-            raise ValueError(f"--output {output} is the input: it would be overwritten")
+        check_output(output, (source,))
     if report is not None and report.exists() and not report.is_dir():
         raise ValueError(f"--report {report} is a file; give a folder (made if missing)")
-
-
-def write_atomically(path: Path, text: str):
-    """Write `text` beside `path` and move it into place: an interrupted or failed run leaves the old file whole."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def record(ident: str, est: Estimate, rows: int) -> dict:
@@ -344,7 +326,7 @@ def main(argv=None) -> int:
     else:
         found, lines, failed, regions = _pooled_run(groups, frame, args.receiver_class)
     if args.output:
-        write_atomically(args.output, "".join(line + "\n" for line in lines))
+        write_staged(args.output, "".join(line + "\n" for line in lines))
     if args.report and found:
         write_report(args.report, frame, found, regions)
     return 1 if failed else 0

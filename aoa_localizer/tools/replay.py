@@ -29,6 +29,7 @@ from aoa_localizer.common.cli import (
     interrupted,
     setup_logging,
 )
+from aoa_localizer.common.output import StagedFile, check_output
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
@@ -36,16 +37,26 @@ from aoa_localizer.engine.memory import keep_freed_memory
 from msgs_adapters.bag import BagError
 
 
+def _staged(args) -> StagedFile | None:
+    """The offline output, staged beside --output (None: stdout); a ValueError for one that cannot be written or
+    is the bag."""
+    if args.output == "-":
+        return None
+    check_output(Path(args.output), (Path(args.bag),))
+    return StagedFile(Path(args.output))
+
+
 def run_offline(args) -> int:
     try:
         cfg = config_from_args(args, LocalizerConfig())
         stations = bag_stations(args)
-    except ConfigError as exc:
+        staged = _staged(args)  # placed at --output once the bag proved readable: a typo destroys nothing
+    except (ConfigError, ValueError) as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 2
     loc = Localizer(cfg)
     written = 0
-    out = open(args.output, "w") if args.output != "-" else sys.stdout
+    out = staged.file if staged is not None else sys.stdout
     header = [json.dumps({"configuration": cfg.to_dict(), "bag": str(args.bag)}) + "\n"]
 
     def write_header():
@@ -53,6 +64,8 @@ def run_offline(args) -> int:
         report redraws the gate and the bound with it), and the bag."""
         if header:
             out.write(header.pop())
+            if staged is not None:
+                staged.place()
 
     def write(est):
         nonlocal written
@@ -66,12 +79,26 @@ def run_offline(args) -> int:
         write_header()
     except BagError as exc:
         print(f"replay: {exc}", file=sys.stderr)
+        _settle(staged, keep=False)
         return 2
     except KeyboardInterrupt:
+        _settle(staged, keep=True)
         return interrupted("replay", f"the {written} estimates written to {args.output} are kept")
-    finally:
-        if out is not sys.stdout:
-            out.close()
+    except BaseException:
+        _settle(staged, keep=False)  # what was placed stays: the lines written before the failure
+        raise
+    _settle(staged, keep=True)
+    return _told(loc, run, written, args.output)
+
+
+def _settle(staged: StagedFile | None, keep: bool) -> None:
+    """The output kept (placed and closed) or dropped (removed unless placed); nothing for stdout."""
+    if staged is not None:
+        staged.keep() if keep else staged.drop()
+
+
+def _told(loc: Localizer, run, written: int, output: str) -> int:
+    """The run's summary on stderr, and the exit code: 1 for a damaged bag, 3 without an estimate."""
     if run.damage:
         print(f"replay: {run.damage}", file=sys.stderr)
     for line in summary(loc, run.truth, run.datum):
@@ -79,7 +106,7 @@ def run_offline(args) -> int:
     if run.foreign:
         print("messages of a type their topic should not carry, skipped: "
               + ", ".join(f"{k} {v}" for k, v in sorted(run.foreign.items())), file=sys.stderr)
-    print(f"{written} estimates written to {args.output}", file=sys.stderr)
+    print(f"{written} estimates written to {output}", file=sys.stderr)
     if run.damage:
         return 1
     return 0 if loc.estimate is not None else 3
