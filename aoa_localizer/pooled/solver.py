@@ -15,6 +15,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import stats
 
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
@@ -27,6 +28,7 @@ from aoa_localizer.pooled.stations import Station, SurveyReading, make_stations,
 _ROUNDS = 2  # fixes made without biases, then again with the biases the first fixes showed
 _OFF_Z = 3.0  # a station further off than this many of its expected errors is named
 _HELD_LOW, _HELD_HIGH = 0.90, 0.99  # a 95 % ellipse holding mass outside this range is said to mislead
+_FIT_P = 0.05  # a fix whose stations' residuals are this unlikely under their expected errors is not `tracking`
 
 __all__ = ["EmitterFix", "PooledResult", "ReceiverCalibration", "SurveyReading", "locate_pooled"]
 
@@ -185,6 +187,17 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
     if len(geom.xy) < 3:
         state = "poorly_determined"
         warnings.append("bearings from two places only: nothing checks their crossing")
+    elif len(geom.xy) == 3:
+        state = "poorly_determined"
+        warnings.append("three stations: one wild bearing among them could not be told from the others")
+    # the stations not named as off: do they meet within their spread? (a named one is the wild share's)
+    z2 = (resid / expected) ** 2
+    z2 = z2[z2 <= _OFF_Z**2]
+    fit_p = float(stats.chi2.sf(float(z2.sum()), z2.size - 2)) if z2.size > 2 else 1.0
+    if fit_p < _FIT_P:
+        state = "poorly_determined"
+        warnings.append(f"the bearings do not meet within their expected spread (chi-square p = {fit_p:.2g}): one "
+                        "of them may be wild")
     if a95 > float(np.median(ranges)):
         state = "poorly_determined"
         warnings.append(f"the 95 % region ({a95:.3g} m) is wide for the range ({np.median(ranges):.3g} m)")

@@ -20,6 +20,7 @@ import csv
 import datetime
 import json
 import math
+import os
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -288,7 +289,40 @@ def receiver_lines(result) -> list[str]:
     return out
 
 
+class _Table:
+    """stdout for the table: once its reader has gone (`locate ... | head`), the rest is dropped and the run goes on,
+    so --output and --report are still written."""
+
+    def __init__(self, stream):
+        self.stream, self.gone = stream, False
+
+    def write(self, text: str) -> int:
+        if not self.gone:
+            try:
+                return self.stream.write(text)
+            except BrokenPipeError:
+                self.gone = True
+                os.dup2(os.open(os.devnull, os.O_WRONLY), self.stream.fileno())  # the interpreter's last flush too
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.gone:
+            try:
+                self.stream.flush()
+            except BrokenPipeError:
+                self.gone = True
+                os.dup2(os.open(os.devnull, os.O_WRONLY), self.stream.fileno())
+
+
 def main(argv=None) -> int:
+    stdout, sys.stdout = sys.stdout, _Table(sys.stdout)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout = stdout
+
+
+def _main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__, formatter_class=HelpFormatter)
     parser.add_argument("csv", type=Path, help="the bearings (CSV with a header)")
     parser.add_argument("--output", type=Path, metavar="OUT.jsonl", help="one JSON line per id")
