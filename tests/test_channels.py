@@ -251,6 +251,7 @@ def test_the_simulator_shows_two_cars_and_several_frequencies_without_hardware(c
     assert cli(simulate_main, "--emitters", "433e6,12").returncode == 2
 
 
+@pytest.mark.slow
 def test_records_refused_after_opening_their_channels_do_not_lock_a_new_emitter_out(caplog):
     """A scanning receiver before its first fix: 64 frequencies whose records are all refused leave no channel open,
     so a genuine new emitter afterwards is located, not refused as `channel_limit` for ever (with 64 empty channels

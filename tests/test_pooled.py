@@ -118,6 +118,7 @@ def test_many_readings_from_biased_stations_do_not_shrink_the_ellipse_below_the_
     assert out[300] > 0.5 * out[10]
 
 
+@pytest.mark.slow
 def test_a_receiver_heard_over_many_emitters_learns_its_bias_and_names_none_where_it_cannot():
     """One walking observer, every azimuth 15 deg clockwise of the truth, 8 emitters each ringed by 3 stations:
     the bias is learned within 3 deg; a second file with two emitters learns none."""
@@ -170,6 +171,7 @@ def test_the_95_percent_region_of_a_well_determined_fix_is_about_its_ellipse():
     assert 0.9 <= fix.ellipse_mass[0.95] <= 0.99
 
 
+@pytest.mark.slow
 def test_locate_reads_a_receiver_column_refuses_an_id_from_one_place_and_writes_the_regions(tmp_path, cli):
     stations = np.array([[-500.0, 0.0], [400.0, -300.0], [0.0, 500.0]])
     lines = ["time,lat,lon,azimuth_deg,station,id,observer"]
@@ -308,6 +310,7 @@ def test_an_id_with_control_characters_still_gives_a_kml_that_parses(tmp_path, c
     assert json.loads((tmp_path / "rep" / "emitter.geojson").read_text())["features"]
 
 
+@pytest.mark.slow
 def test_a_receiver_column_with_a_name_per_row_gets_one_warning_and_every_id_is_located():
     rng = np.random.default_rng(6)
     rows = []
@@ -338,6 +341,7 @@ def _observer_rows(rng, emitters=4):
     return rows
 
 
+@pytest.mark.slow
 def test_the_api_fed_as_a_walking_observer_or_as_fixed_stations_gives_locates_answer(tmp_path, cli):
     """One answer by every path: the same stops through `locate`, through one Localizer as a walking observer (a
     fix with each azimuth, a channel per transmitter) and through one Localizer with each stop a fixed station."""
@@ -374,6 +378,7 @@ def test_the_api_fed_as_a_walking_observer_or_as_fixed_stations_gives_locates_an
             assert est.state == g["state"]
 
 
+@pytest.mark.slow
 def test_the_filters_end_of_data_is_kept_when_asked_and_for_a_drive():
     """`end_of_data_model: filter` keeps the particle filter's answer for a surveyor; a vehicle's drive (moving
     while it takes its bearings) never goes to the survey model."""
