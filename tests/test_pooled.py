@@ -402,3 +402,51 @@ def test_the_filters_end_of_data_is_kept_when_asked_and_for_a_drive():
     est = loc.finish() or loc.estimate
     loc.close()
     assert est is not None and est.algorithm != "survey"
+
+
+def test_a_field_over_the_csv_limit_is_a_skipped_row_and_a_header_over_it_a_refusal(tmp_path, cli):
+    """Issue 51, item 7: a CSV field over 131,072 characters ended `locate` in a traceback."""
+    rows = _square_csv(tmp_path / "s.csv").read_text().splitlines()
+    rows.insert(2, "1.7e9,48.35,-53.98,10,s9," + "x" * 200_000 + ",")
+    path = tmp_path / "long.csv"
+    path.write_text("\n".join(rows) + "\n")
+    res = cli(locate.main, path)
+    assert res.returncode == 0 and "field larger than field limit" in res.stderr and "row skipped" in res.stderr
+    assert "Traceback" not in res.stderr
+    path.write_text("time,lat,lon,azimuth_deg," + "x" * 200_000 + "\n1,2,3,4,5\n")
+    res = cli(locate.main, path)
+    assert res.returncode == 2 and res.stderr.startswith("locate: field larger than field limit")
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_locate_ends_in_one_line_and_exit_130(tmp_path):
+    """Issue 51, item 12: Ctrl-C mid-run gave a traceback. A survey of 200 transmitters takes seconds: interrupted,
+    it says what it kept (nothing: every fix is written at the end) and exits 130 (docs/interface.md)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from aoa_localizer.engine.surveys import observer_like
+
+    data = observer_like(np.random.default_rng(0), emitters=200)
+    lat, lon, _ = FRAME.to_geodetic(data.places[:, 0], data.places[:, 1])
+    path = tmp_path / "big.csv"
+    path.write_text("time,lat,lon,azimuth_deg,station,id\n" + "".join(
+        f"{1.7e9 + 60 * i},{a},{o},{z},{s},{e}\n"
+        for i, (e, s, a, o, z) in enumerate(zip(data.emitter, data.station, lat, lon, data.azimuth_deg, strict=True))))
+    out = tmp_path / "out.jsonl"
+    p = subprocess.Popen([sys.executable, "-m", "aoa_localizer.locate", str(path), "--output", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert p.stdout is not None
+    assert p.stdout.readline().startswith("id ")  # the table's header: the imports are done, the solve begins
+    time.sleep(0.5)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    assert err.strip() == "locate: interrupted (Ctrl-C); nothing written (every id's fix is written at the end of " \
+                          "the run)"
+    assert not out.exists()

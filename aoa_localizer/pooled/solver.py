@@ -135,8 +135,10 @@ def _solve(geoms: dict[str, Geometry], noise: NoiseGrid) -> _Solved:
         log_z = {e: z for e, (z, _) in found.items()}
         total = noise.log_prior + sum(log_z.values())
         log_w = total - logsumexp(total, axis=0)
-        zoomed = {e: zoom(g, shifts[e], extra[e], noise, log_w, found[e][1]) for e, g in geoms.items()}
-        regions = {e: summarise(z.box, mixture(z.log_joint, log_z[e], log_w)) for e, z in zoomed.items()}
+        boxes, regions = {}, {}
+        for e, g in geoms.items():  # one emitter's grid at a time: a file of thousands of ids holds none of them
+            z = zoom(g, shifts[e], extra[e], noise, log_w, found[e][1])
+            boxes[e], regions[e] = z.box, summarise(z.box, mixture(z.log_joint, log_z[e], log_w))
         biases = learn_biases(geoms, {e: r.point for e, r in regions.items()})
         if not biases or round_ == _ROUNDS - 1:
             break
@@ -144,7 +146,7 @@ def _solve(geoms: dict[str, Geometry], noise: NoiseGrid) -> _Solved:
             for k, r in enumerate(g.receivers):
                 if r in biases:
                     shifts[e][k], extra[e][k] = biases[r].without[e]
-    return _Solved(log_w, log_z, {e: z.box for e, z in zoomed.items()}, regions, biases, shifts, extra)
+    return _Solved(log_w, log_z, boxes, regions, biases, shifts, extra)
 
 
 def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:

@@ -25,7 +25,7 @@ import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, setup_logging
+from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, interrupted, setup_logging
 from aoa_localizer.common.output import check_output, write_staged
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
@@ -105,7 +105,14 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
             raise ValueError(f"{path}: the header lacks column(s) {', '.join(missing)} "
                              f"(has: {', '.join(sorted(header))}){_renames(header, missing)}")
         comma = delimiter != ","  # a locale whose lists take semicolons writes decimal commas
-        for record in reader:
+        while True:
+            try:
+                record = next(reader)
+            except StopIteration:
+                break
+            except csv.Error as exc:  # a field over the csv module's limit, a NUL byte: the row cannot be read
+                bad.append(f"{path}: the row after line {reader.line_num}: {exc}; row skipped")
+                continue
             line = reader.line_num
             row = {k.strip().lower(): v for k, v in record.items() if k is not None}
             try:
@@ -318,6 +325,8 @@ def main(argv=None) -> int:
     stdout, sys.stdout = sys.stdout, _Table(sys.stdout)
     try:
         return _main(argv)
+    except KeyboardInterrupt:
+        return interrupted("locate", "nothing written (every id's fix is written at the end of the run)")
     finally:
         sys.stdout = stdout
 
@@ -340,7 +349,7 @@ def _main(argv=None) -> int:
         cfg = config_from_args(args, survey_config())
         check_outputs(args.csv, args.output, args.report)
         rows, bad = read_rows(args.csv, args.crs)
-    except (ConfigError, OSError, ValueError, UnicodeDecodeError) as exc:
+    except (ConfigError, OSError, ValueError, UnicodeDecodeError, csv.Error) as exc:
         print(f"locate: {exc}", file=sys.stderr)
         return 2
     for message in bad:
