@@ -450,3 +450,18 @@ def test_ctrl_c_during_locate_ends_in_one_line_and_exit_130(tmp_path):
     assert err.strip() == "locate: interrupted (Ctrl-C); nothing written (every id's fix is written at the end of " \
                           "the run)"
     assert not out.exists()
+
+
+def test_a_time_that_is_no_number_is_named_by_line_and_a_column_named_twice_is_refused(tmp_path, cli):
+    """Issue 51, item 14: NaN or inf times were not named by line; `lat` and `LAT` together: the last won."""
+    rows = _square_csv(tmp_path / "s.csv").read_text().splitlines()
+    rows[1] = "nan" + rows[1][rows[1].index(","):]
+    rows[2] = "inf" + rows[2][rows[2].index(","):]
+    path = tmp_path / "t.csv"
+    path.write_text("\n".join(rows) + "\n")
+    res = cli(locate.main, path)
+    assert "t.csv:2: time 'nan' is not a finite number; row skipped" in res.stderr
+    assert "t.csv:3: time 'inf' is not a finite number; row skipped" in res.stderr
+    path.write_text("time,lat,LAT,lon,azimuth_deg\n1,48.35,10,-53.98,10\n")
+    res = cli(locate.main, path)
+    assert res.returncode == 2 and "names lat more than once" in res.stderr

@@ -59,9 +59,13 @@ class Row:
 def _stamp(text: str, decimal_comma: bool = False) -> float:
     """Epoch seconds from epoch seconds or ISO 8601 with an offset (a time without one is ambiguous: refused)."""
     try:
-        return float(text.replace(",", ".") if decimal_comma else text)
+        value = float(text.replace(",", ".") if decimal_comma else text)
     except ValueError:
         pass
+    else:
+        if not math.isfinite(value):
+            raise ValueError(f"time {text!r} is not a finite number")
+        return value
     when = datetime.datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
     if when.tzinfo is None:
         raise ValueError(f"time {text!r} has no UTC offset (write e.g. {text}+00:00)")
@@ -98,7 +102,12 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
         delimiter = _delimiter(fh.readline())
         fh.seek(0)
         reader = csv.DictReader(fh, delimiter=delimiter)
-        header = {name.strip().lower() for name in reader.fieldnames or []}  # `Lat` is `lat`
+        names = [name.strip().lower() for name in reader.fieldnames or []]  # `Lat` is `lat`
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"{path}: the header names {', '.join(twice)} more than once (names are read in any "
+                             "case): which one holds the data?")
+        header = set(names)
         position = ("x", "y") if to_wgs84 else ("lat", "lon")
         missing = [c for c in ("time", *position, "azimuth_deg") if c not in header]
         if missing:
