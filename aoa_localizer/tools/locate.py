@@ -86,33 +86,13 @@ def _number(row: dict, name: str, required: bool = True, decimal_comma: bool = F
 
 def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
     """The survey's good rows and one message per bad row (with its line number); raises OSError, ValueError."""
-    to_wgs84 = None
-    if crs:
-        try:
-            from pyproj import Transformer
-            from pyproj.exceptions import CRSError
-        except ImportError as exc:
-            raise ValueError("--crs needs pyproj: pip install 'aoa_localizer[survey]' (or pyproj)") from exc
-        try:
-            to_wgs84 = Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
-        except CRSError as exc:
-            raise ValueError(f"--crs {crs}: {exc}") from exc
+    to_wgs84 = _projection(crs)
     rows, bad = [], []
     with open(path, newline="", encoding="utf-8-sig") as fh:
         delimiter = _delimiter(fh.readline())
         fh.seek(0)
         reader = csv.DictReader(fh, delimiter=delimiter)
-        names = [name.strip().lower() for name in reader.fieldnames or []]  # `Lat` is `lat`
-        twice = sorted({n for n in names if names.count(n) > 1})
-        if twice:
-            raise ValueError(f"{path}: the header names {', '.join(twice)} more than once (names are read in any "
-                             "case): which one holds the data?")
-        header = set(names)
-        position = ("x", "y") if to_wgs84 else ("lat", "lon")
-        missing = [c for c in ("time", *position, "azimuth_deg") if c not in header]
-        if missing:
-            raise ValueError(f"{path}: the header lacks column(s) {', '.join(missing)} "
-                             f"(has: {', '.join(sorted(header))}){_renames(header, missing)}")
+        _check_header(path, reader.fieldnames or [], ("x", "y") if to_wgs84 else ("lat", "lon"))
         comma = delimiter != ","  # a locale whose lists take semicolons writes decimal commas
         while True:
             try:
@@ -122,27 +102,59 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
             except csv.Error as exc:  # a field over the csv module's limit, a NUL byte: the row cannot be read
                 bad.append(f"{path}: the row after line {reader.line_num}: {exc}; row skipped")
                 continue
-            line = reader.line_num
-            row = {k.strip().lower(): v for k, v in record.items() if k is not None}
             try:
-                stamp = _stamp(row.get("time") or "", comma)
-                if to_wgs84:
-                    lon, lat = to_wgs84.transform(_number(row, "x", True, comma), _number(row, "y", True, comma))
-                else:
-                    lat, lon = _number(row, "lat", True, comma), _number(row, "lon", True, comma)
-                if not (abs(lat) <= 90 and abs(lon) <= 180):
-                    raise ValueError(f"position {lat}, {lon} is not a latitude and longitude")
-                quality = _number(row, "quality", False, comma)
-                sigma = _number(row, "sigma_deg", False, comma)
-                if not (math.isnan(sigma) or SIGMA_RANGE_DEG[0] <= sigma <= SIGMA_RANGE_DEG[1]):
-                    raise ValueError(f"sigma_deg must be in [{SIGMA_RANGE_DEG[0]:g}, {SIGMA_RANGE_DEG[1]:g}] deg, "
-                                     f"got {sigma:g}")
-                receiver = (row.get("receiver") or row.get("observer") or "").strip()
-                rows.append(Row(line, stamp, lat, lon, _number(row, "azimuth_deg", True, comma), quality, sigma,
-                                (row.get("station") or "").strip(), (row.get("id") or "").strip(), receiver))
+                rows.append(_row(reader.line_num, {k.strip().lower(): v for k, v in record.items() if k is not None},
+                                 to_wgs84, comma))
             except ValueError as exc:
-                bad.append(f"{path}:{line}: {exc}; row skipped")
+                bad.append(f"{path}:{reader.line_num}: {exc}; row skipped")
     return rows, bad
+
+
+def _projection(crs: str | None):
+    """The transformer from the CRS of projected x, y columns to WGS84 (None: lat, lon columns)."""
+    if not crs:
+        return None
+    try:
+        from pyproj import Transformer
+        from pyproj.exceptions import CRSError
+    except ImportError as exc:
+        raise ValueError("--crs needs pyproj: pip install 'aoa_localizer[survey]' (or pyproj)") from exc
+    try:
+        return Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+    except CRSError as exc:
+        raise ValueError(f"--crs {crs}: {exc}") from exc
+
+
+def _check_header(path: Path, fieldnames, position: tuple[str, str]) -> None:
+    """A ValueError for a header naming a column twice (in any case) or lacking one this program needs."""
+    names = [name.strip().lower() for name in fieldnames]  # `Lat` is `lat`
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"{path}: the header names {', '.join(twice)} more than once (names are read in any "
+                         "case): which one holds the data?")
+    header = set(names)
+    missing = [c for c in ("time", *position, "azimuth_deg") if c not in header]
+    if missing:
+        raise ValueError(f"{path}: the header lacks column(s) {', '.join(missing)} "
+                         f"(has: {', '.join(sorted(header))}){_renames(header, missing)}")
+
+
+def _row(line: int, row: dict, to_wgs84, comma: bool) -> Row:
+    """One row's bearing, or a ValueError saying what is wrong with it."""
+    stamp = _stamp(row.get("time") or "", comma)
+    if to_wgs84:
+        lon, lat = to_wgs84.transform(_number(row, "x", True, comma), _number(row, "y", True, comma))
+    else:
+        lat, lon = _number(row, "lat", True, comma), _number(row, "lon", True, comma)
+    if not (abs(lat) <= 90 and abs(lon) <= 180):
+        raise ValueError(f"position {lat}, {lon} is not a latitude and longitude")
+    quality = _number(row, "quality", False, comma)
+    sigma = _number(row, "sigma_deg", False, comma)
+    if not (math.isnan(sigma) or SIGMA_RANGE_DEG[0] <= sigma <= SIGMA_RANGE_DEG[1]):
+        raise ValueError(f"sigma_deg must be in [{SIGMA_RANGE_DEG[0]:g}, {SIGMA_RANGE_DEG[1]:g}] deg, got {sigma:g}")
+    receiver = (row.get("receiver") or row.get("observer") or "").strip()
+    return Row(line, stamp, lat, lon, _number(row, "azimuth_deg", True, comma), quality, sigma,
+               (row.get("station") or "").strip(), (row.get("id") or "").strip(), receiver)
 
 
 def _delimiter(header: str) -> str:
