@@ -311,3 +311,25 @@ def test_feed_takes_records_by_field_name_with_optional_fields_left_out_and_name
     loc.feed(Input("fix", FixInput(2.0, DATUM[0], DATUM[1])))  # the fix after the bearing pairs it
     (reading,) = open_point(loc)
     assert math.isnan(reading.quality) and reading.stamp == 1.0
+
+
+@pytest.mark.slow
+def test_calls_from_two_threads_are_made_one_at_a_time():
+    """Issue 51, item 10: two threads feeding one Localizer broke its state (internal_error, 2-23 a run). A call
+    waits while another thread's is being made, and then is made whole."""
+    import threading
+
+    loc = Localizer(LocalizerConfig(datum_lat=39.1, datum_lon=117.2))
+    done = threading.Event()
+
+    def feed():
+        loc.add_fix(1.0, 39.1, 117.2)
+        loc.add_bearing(1.5, 40.0, 90.0)
+        done.set()
+
+    with loc._lock:  # another thread's call in progress
+        other = threading.Thread(target=feed)
+        other.start()
+        assert not done.wait(0.3)  # it waits
+    other.join(5.0)
+    assert done.is_set() and not loc.rejected["internal_error"]

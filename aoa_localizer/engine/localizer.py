@@ -6,8 +6,10 @@ counted under a reason (`rejected`) and logged; no exception escapes for bad dat
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
+import threading
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
 from typing import Protocol
@@ -51,6 +53,16 @@ class Observer(Protocol):
         """The readings of a closed observation point, and which of them it kept (False: gated out as wild)."""
 
 
+def _one_at_a_time(method):
+    """A Localizer call made whole before another thread's starts (its state is one stream's: two threads feeding
+    it at once broke its generators' and arrays' invariants, counted as internal_error)."""
+    @functools.wraps(method)
+    def serialised(self, *args, **kwargs):
+        with self._lock:
+            return method(self, *args, **kwargs)
+    return serialised
+
+
 def _positive_definite(cov) -> bool:
     """Finite and full rank to working precision (a cloud of 2 particles, or all on one line, is not)."""
     (a, _), (b, c) = np.asarray(cov, float).tolist()  # 2x2 symmetric: its eigenvalues in closed form
@@ -70,6 +82,7 @@ class Localizer:
         `on_estimate`: called with every new estimate, whichever input made it (a fix often closes the point
         that makes it); `estimate` always holds the latest one (None before the first). `live`: a node's
         Localizer, scheduled `realtime` under `scheduling: auto`."""
+        self._lock = threading.RLock()  # the calls below are made one at a time (_one_at_a_time)
         self.cfg = cfg = config or LocalizerConfig()
         self.on_estimate = on_estimate
         keep_freed_memory()  # the particle temporaries are reused, not mapped afresh (memory.py)
@@ -235,6 +248,7 @@ class Localizer:
             self._fixed_stations.setdefault(name, None)
         return self.intake.add_station(name, fixed)
 
+    @_one_at_a_time
     def set_station_position(self, name: str, lat, lon, alt=float("nan"), sigma_m=0.0) -> bool:
         """A fixed station's position (kept across reset()); it sets the datum when none is set yet. False (the
         reason counted) for a position a fix could not have."""
@@ -249,6 +263,7 @@ class Localizer:
         self.intake.place(name, *position)
         return True
 
+    @_one_at_a_time
     def add_fix(self, stamp, lat, lon, alt=float("nan"), status: int = 0, sigma_m=float("nan"),
                 station: str = "") -> Estimate | None:
         """A NavSatFix's content; `sigma_m` the horizontal position sigma from its covariance (NaN: unknown);
@@ -256,12 +271,14 @@ class Localizer:
         possible, if any."""
         return self._use(self.intake.add_fix(stamp, lat, lon, alt, status, sigma_m, station))
 
+    @_one_at_a_time
     def add_heading(self, stamp, yaw_rad, station: str = "", variance_rad2=float("nan")) -> None:
         """The vehicle's heading from an IMU: REP-103 yaw (rad, counter-clockwise from east, ENU at the vehicle), as
         sensor_msgs/Imu gives it, and the yaw's variance (rad^2; NaN, 0 or negative: not known, taken as exact). Used
         with `bearing_reference: vehicle` and `heading_source: imu`."""
         self.intake.add_heading(stamp, yaw_rad, station, variance_rad2)
 
+    @_one_at_a_time
     def add_bearing(self, stamp, azimuth_deg, quality=float("nan"), station: str = "",
                     frequency_hz=float("nan")) -> Estimate | None:
         """A DF record: azimuth (deg) and quality of the carrier at `frequency_hz` (0 or NaN: the default
@@ -269,6 +286,7 @@ class Localizer:
         point), else None."""
         return self._add_bearing(stamp, azimuth_deg, quality, float("nan"), station, frequency_hz)
 
+    @_one_at_a_time
     def add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan"), station: str = "",
                         frequency_hz=float("nan")) -> Estimate | None:
         """A bearing as a REP-103 yaw (rad, counter-clockwise from east at the antenna) with its variance
@@ -352,10 +370,12 @@ class Localizer:
         return closed
 
     # -- the lifecycle ----------------------------------------------------------------------------
+    @_one_at_a_time
     def flush(self) -> Estimate | None:
         """End of data: bearings still waiting for a fix are dropped, the open observation points are used."""
         return self._use(self.intake.flush())
 
+    @_one_at_a_time
     def finish(self) -> Estimate | None:
         """After flush(), offline: one last global check over all the data (calibration, modes, moves) on every
         live channel, so the final estimates and their modes reflect everything; those Estimates have
@@ -392,6 +412,7 @@ class Localizer:
                             warnings=list(fix.warnings), end_of_data=True)
         return self._announce(channel, estimate)
 
+    @_one_at_a_time
     def idle(self) -> list[Estimate]:
         """Between inputs (`scheduling: realtime`; the node calls it every few ms): the worker's finished results
         applied now rather than at each channel's next point, so a channel whose data paused still gets the start or
@@ -403,6 +424,7 @@ class Localizer:
         self.scheduler.move_one(c.track for c in live)
         return made
 
+    @_one_at_a_time
     def catch_up(self) -> int:
         """Wait for the worker's jobs, then make every owed move (`scheduling: realtime`; nothing otherwise): what a
         receiver's pace leaves time for between messages, so a replay runs live-like however fast it is fed. The
@@ -418,6 +440,7 @@ class Localizer:
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""
         self.scheduler.close()
 
+    @_one_at_a_time
     def reset(self, drop_datum: bool = False):
         """Drop the tracks, the points, the filters and the channels; keep the counters and the fixed stations'
         configured positions (the node's ~/reset). The datum is kept, so the map frame stays put, unless
@@ -429,6 +452,7 @@ class Localizer:
         self.intake.reset(self.channels)
         self._start_tracks()
 
+    @_one_at_a_time
     def adopt_datum(self, frame: LocalFrame | None):
         """Keep the map frame of an earlier Localizer (a datum it took from a fix) so that a restart with new
         settings does not move the map; a configured datum (datum_lat, datum_lon) wins and is kept."""
