@@ -165,19 +165,21 @@ class BagTopicsError(BagError):
 
 def stations_in(topic_names) -> dict[str, dict[str, str]]:
     """The stations a bag's topic names show: NAME for each pair `/NAME/gps/fix`, `/NAME/df/bearing` (the node's
-    `stations` layout; with `/NAME/heading/imu` when present), as {NAME: {kind: topic}}."""
+    `stations` layout; with `/NAME/heading/imu` when present), as {NAME: {kind: topic}}. NAME is the namespace's
+    last part, or the whole namespace where two end alike (`/team1/car` and `/team2/car`: one was dropped)."""
     names = set(topic_names)
-    found: dict[str, dict[str, str]] = {}
+    pairs: list[tuple[str, dict[str, str]]] = []
     for topic in sorted(names):
         prefix, _, tail = topic.rpartition("/gps/fix")
-        name = prefix.rpartition("/")[2]
-        if tail or not name or f"{prefix}/df/bearing" not in names:
+        if tail or not prefix.rpartition("/")[2] or f"{prefix}/df/bearing" not in names:
             continue
         its = {"fix": topic, "bearing": f"{prefix}/df/bearing"}
         if f"{prefix}/heading/imu" in names:
             its["heading"] = f"{prefix}/heading/imu"
-        found.setdefault(name, its)
-    return found
+        pairs.append((prefix, its))
+    last = [prefix.rpartition("/")[2] for prefix, _ in pairs]
+    return {(name if last.count(name) == 1 else prefix.strip("/")): its
+            for name, (prefix, its) in zip(last, pairs, strict=True)}
 
 
 def found_stations(path, inventory, topics: dict[str, str]) -> dict[str, dict[str, str]] | None:

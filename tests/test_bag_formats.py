@@ -154,3 +154,16 @@ def test_an_unreadable_sqlite3_file_is_an_error_not_an_empty_bag(tmp_path, data)
     db.write_bytes(b"garbage" * 100)
     with pytest.raises(BagError):
         list(read_bag(tmp_path / "bag"))
+
+
+def test_two_stations_whose_namespaces_end_alike_are_two_stations():
+    """Issue 51, item 6: `/team1/car/...` and `/team2/car/...` were one station, the second dropped without a count."""
+    from msgs_adapters.bag import stations_in
+
+    topics = ["/team1/car/gps/fix", "/team1/car/df/bearing", "/team2/car/gps/fix", "/team2/car/df/bearing",
+              "/mast/gps/fix", "/mast/df/bearing", "/mast/heading/imu", "/lonely/gps/fix"]
+    assert stations_in(topics) == {
+        "team1/car": {"fix": "/team1/car/gps/fix", "bearing": "/team1/car/df/bearing"},
+        "team2/car": {"fix": "/team2/car/gps/fix", "bearing": "/team2/car/df/bearing"},
+        "mast": {"fix": "/mast/gps/fix", "bearing": "/mast/df/bearing", "heading": "/mast/heading/imu"},
+    }
