@@ -30,7 +30,7 @@ from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.station import Station
-from aoa_localizer.engine.survey_log import SurveyFix
+from aoa_localizer.engine.survey_log import SurveyFix, survey_sentence
 from aoa_localizer.engine.track_report import assess, mode_masses
 from aoa_localizer.engine.track_state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
@@ -190,9 +190,11 @@ class Localizer:
     def robustness_lines(self) -> list[str]:
         """Human lines on what the robustness layer saw: the receiver's noise, alternative hypotheses, events."""
         lines = []
-        if self.cfg.calibrate_noise:
-            lines.append(noise_sentence(self.noise_summary()))
         est = self.estimate
+        if est is not None and est.algorithm == "survey" and est.noise:
+            lines.append(survey_sentence(est.noise))
+        elif self.cfg.calibrate_noise:
+            lines.append(noise_sentence(self.noise_summary()))
         if est is not None and len(est.modes) > 1:
             lines.append("alternative hypotheses: " + "; ".join(
                 f"E {e:.1f} N {n:.1f} ({100 * m:.0f} %)" for e, n, m in est.modes))
@@ -408,8 +410,8 @@ class Localizer:
         estimate = Estimate(stamp=track.last_stamp, east=float(east), north=float(north), lat=fix.lat, lon=fix.lon,
                             cov=np.array(fix.cov), bearings_used=fix.bearings, points_used=track.points_used,
                             ess=float("nan"), algorithm="survey", modes=[(float(east), float(north), 1.0)],
-                            channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
-                            warnings=list(fix.warnings), end_of_data=True)
+                            noise=fix.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
+                            warnings=list(fix.warnings), end_of_data=True, regions=fix.regions)
         return self._announce(channel, estimate)
 
     @_one_at_a_time

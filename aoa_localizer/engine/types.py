@@ -95,6 +95,8 @@ class Estimate:
     # not fit the bearings); `warnings`: plain sentences naming the likely cause and the setting to check
     state: str = "tracking"
     warnings: list = field(default_factory=list)
+    # The survey model's highest-density regions (level -> rings of (lat, lon)); None from the particle filter
+    regions: dict | None = field(repr=False, default=None)
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of docs/interface.md (offline replay output)."""
@@ -116,4 +118,7 @@ class Estimate:
             "frequency_hz": self.frequency_hz if math.isfinite(self.frequency_hz) else None,
             "state": self.state,
             "warnings": list(self.warnings),
+            **({"hpd": {f"{100 * lvl:.0f}": [[[round(float(a), 8), round(float(b), 8)] for a, b in ring]
+                                            for ring in rings] for lvl, rings in self.regions.items()}}
+               if self.regions else {}),
         }

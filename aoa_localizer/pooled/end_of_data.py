@@ -8,7 +8,7 @@ its places); which stations share a receiver follows the same rule as a survey f
 from __future__ import annotations
 
 from aoa_localizer.engine.survey_log import SurveyFix, SurveyRecord
-from aoa_localizer.pooled.solver import locate_pooled
+from aoa_localizer.pooled.solver import PooledResult, locate_pooled
 from aoa_localizer.pooled.stations import SurveyReading
 
 
@@ -16,5 +16,15 @@ def solve(records: list[SurveyRecord], receiver_class: str) -> dict[str, SurveyF
     """The survey model's fix of every channel it can locate (a channel it refuses keeps the filter's)."""
     readings = [SurveyReading(r.channel, r.lat, r.lon, r.azimuth_deg, r.station, "", r.sigma_deg) for r in records]
     result = locate_pooled(readings, receiver_class)
-    return {e: SurveyFix(f.lat, f.lon, f.cov, f.state, list(f.warnings), f.readings, f.stations)
+    return {e: SurveyFix(f.lat, f.lon, f.cov, f.state, list(f.warnings), f.readings, f.stations,
+                         calibration(result, f.receivers), f.hpd)
             for e, f in result.fixes.items()}
+
+
+def calibration(result: PooledResult, receivers: list[str]) -> dict:
+    """What the survey taught about the receivers of one fix: its group's pooled noise and each receiver's bias."""
+    group: dict = next((g for g in result.noise if set(receivers) <= set(g["receivers"])), {})
+    biases = {r: {"bias_deg": round(c.bias_deg, 2), "bias_sd_deg": round(c.bias_sd_deg, 2), "emitters": c.emitters,
+                  "stations": c.stations}
+              for r, c in result.receivers.items() if r in receivers}
+    return {"model": "survey", **group, "receiver_biases": biases}
