@@ -58,9 +58,10 @@ def ellipse_ring(frame: LocalFrame, est: Estimate) -> list[list[float]]:
 
 
 def region_rings(regions: dict | None, est: Estimate) -> list[tuple[str, list[list[list[float]]]]]:
-    """The channel's highest-density regions, if any: (name, closed (lon, lat) rings) per level."""
+    """The channel's highest-density regions (from `regions`, else the estimate's own), if any: (name, closed
+    (lon, lat) rings) per level."""
     out = []
-    for level, rings in sorted(((regions or {}).get(est.channel) or {}).items()):
+    for level, rings in sorted(((regions or {}).get(est.channel) or est.regions or {}).items()):
         closed = [[[float(lon), float(lat)] for lat, lon in ring] for ring in rings]
         out.append((f"{100 * level:.0f} % region {names(est)[0]}", [r + [r[0]] if r[0] != r[-1] else r
                                                                       for r in closed]))
