@@ -16,7 +16,7 @@ import pytest
 import rclpy
 from conftest import DATUM, ros_env
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 
@@ -952,3 +952,27 @@ def test_two_nodes_split_fifty_emitters_by_band_and_each_is_localised_once(spawn
         for name in bands:
             values = diagnostics_values(T.DiagnosticArray(status=[got[f"diag {name}"]]))[got[f"diag {name}"].name]
             assert int(values["other_band"]) > 0 and "rejected.bad_frequency" not in values
+
+
+def test_a_burst_of_parameter_sets_is_one_restart_with_the_last_values(spawn, domain):
+    """Issue 51, item 4: each set used to restart the track at once (about 150 ms each), and a 2 s burst was still
+    being applied 138 s later. Now each set is only checked and accepted; the track restarts once the sets pause,
+    with the last value of each, and /diagnostics counts both."""
+    spawn(["aoa_localizer.node", "--ros-args", "-p", "diagnostics_period_s:=0.5"], domain)
+    with client(domain) as (node, executor):
+        diag = {}
+        node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
+            diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        started = time.monotonic()
+        for k in range(40):
+            req = SetParameters.Request(parameters=[Parameter(name="num_particles", value=ParameterValue(
+                type=ParameterType.PARAMETER_INTEGER, integer_value=150 + k))])
+            assert call(executor, node, SetParameters, "/aoa_localizer/set_parameters", req).results[0].successful
+        burst_s = time.monotonic() - started
+        assert spin_until(executor, lambda: diag.get("parameter_changes") == "40", 15), json.dumps(diag)
+        assert spin_until(executor, lambda: int(diag.get("restarts", 0)) >= 1, 5), json.dumps(diag)
+        spin_until(executor, lambda: False, 1.5)
+        assert 1 <= int(diag["restarts"]) <= 2 + burst_s  # one a quiet pause (or a second of burst), not one a set
+        got = call(executor, node, GetParameters, "/aoa_localizer/get_parameters",
+                   GetParameters.Request(names=["num_particles"]))
+        assert got.values[0].integer_value == 189  # the last value won

@@ -150,6 +150,8 @@ class LocalizerNode(Node):
                                 lambda: self.monitor.health.valid_fix(self._now()))
         self.made: dict[str, Any] = {}  # the newest estimate of each channel made by the input being handled
         self.loc = self._new_localizer(self.cfg)
+        # accepted parameters not applied yet: (config, names changed, first and last change, monotonic s)
+        self.restart_due: tuple[LocalizerConfig, set, float, float] | None = None
         self.outputs = NodeOutputs(self, self.types, self.station_names, self.get_parameter("map_frame").value,
                                    self.get_parameter("emitter_frame").value, self._now)
         self._init_inputs()
@@ -291,18 +293,35 @@ class LocalizerNode(Node):
             )
             return SetParametersResult(successful=True)
         self.pending_params = {}
+        # Accepted now, applied by the idle timer once the changes pause (RESTART_QUIET_S, at most RESTART_MAX_WAIT_S
+        # after the first): a burst of sets costs one restart, the last value of each winning, not one each
+        now = time.monotonic()
+        _, names, first, _ = self.restart_due or (cfg, set(), now, now)
+        self.restart_due = (cfg, names | changes.keys(), first, now)
+        self.monitor.parameter_changes += 1
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, force: bool = False):
+        """Restart the track under the accepted parameters once their changes have paused (or now, `force`)."""
+        if self.restart_due is None:
+            return
+        cfg, names, first, last = self.restart_due
+        now = time.monotonic()
+        if not force and now - last < RESTART_QUIET_S and now - first < RESTART_MAX_WAIT_S:
+            return
+        self.restart_due = None
         old = self.loc
         old.close()
         self.cfg, self.loc = cfg, self._new_localizer(cfg)
-        if changes.keys() & DATUM_PARAMS:
+        if names & DATUM_PARAMS:
             self.path.clear()  # drawn in the old map frame
         else:
             self.loc.adopt_datum(old.frame)  # only datum_* move the map frame
         del old
         self.old_objects.thaw()  # the dropped Localizer's reference cycles go now
         self.outputs.datum(self.loc)
-        self.get_logger().info(f"parameters changed ({', '.join(sorted(changes))}): track restarted")
-        return SetParametersResult(successful=True)
+        self.monitor.restarts += 1
+        self.get_logger().info(f"parameters changed ({', '.join(sorted(names))}): track restarted")
 
     def _incomplete_group(self, changes: dict, error: ConfigError) -> list[str]:
         """The names still missing when every change belongs to one group of parameters set together and the
@@ -402,6 +421,7 @@ class LocalizerNode(Node):
         move, so the point that follows carries none and its pose is not held up); once a second, the objects that
         survived leave the garbage collector's full passes (docs/ros.md, "Latency")."""
         t0 = time.perf_counter()
+        self._apply_parameters()
         self.loc.idle()
         self._publish_made(latency=False)  # no input made these: no latency to count
         self.old_objects.tick()
@@ -432,6 +452,7 @@ class LocalizerNode(Node):
         self.monitor.other_s += time.perf_counter() - t0
 
     def on_reset(self, request, response):
+        self._apply_parameters(force=True)  # a reset acts on the parameters already accepted
         self.loc.reset()
         self.old_objects.thaw()
         response.success = True
@@ -441,6 +462,7 @@ class LocalizerNode(Node):
 
     def on_reset_datum(self, request, response):
         """~/reset and, when the datum was not configured, drop it too: the next confirmed fix sets a new one."""
+        self._apply_parameters(force=True)
         if self.cfg.has_datum:
             response.success = False
             response.message = "the datum is configured (datum_lat, datum_lon): change those parameters to move it"
@@ -475,6 +497,8 @@ def usage() -> str:
 SWITCH_INTERVAL_S = 0.0005
 # One owed sweep (about 2 ms at 300 points) per tick: 50 a second, several times what 50 emitters owe.
 IDLE_PERIOD_S = 0.02
+RESTART_QUIET_S = 0.2  # parameter changes are applied once they pause this long ...
+RESTART_MAX_WAIT_S = 1.0  # ... or this long after the first of them
 GOAL_PERIOD_S = 1.0  # emitter/next_goal is refreshed at most this often (s)
 
 

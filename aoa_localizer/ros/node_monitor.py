@@ -53,6 +53,8 @@ class NodeMonitor:
         self.callback_s: list[float] = []
         self.callback_max_s = 0.0
         self.other_s = 0.0  # work in the period outside the input callbacks: idle moves, the periodic work
+        self.parameter_changes = 0  # parameter sets accepted
+        self.restarts = 0  # track restarts they made (a burst of sets makes one)
         self.period_start = time.perf_counter()
         self.overload = Overload()
         self.arrival_ns = time.time_ns()
@@ -148,7 +150,8 @@ class NodeMonitor:
                           callback_max_ms=f"{1e3 * self.callback_max_s:.3f}",
                           callbacks_in_period=len(self.callback_s))
         values.update(load_pct=f"{100 * self._load():.0f}", period_s=f"{time.perf_counter() - self.period_start:.3f}",
-                      rejected_while_overloaded=sum(self.overload.rejected.values()))
+                      rejected_while_overloaded=sum(self.overload.rejected.values()),
+                      parameter_changes=self.parameter_changes, restarts=self.restarts)
         if self.latency_ms:
             p50, p99, top = np.percentile(self.latency_ms, (50, 99, 100), method="higher")
             values.update(poses_in_period=len(self.latency_ms), pose_latency_p50_ms=f"{p50:.3f}",
