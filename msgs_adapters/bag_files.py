@@ -137,6 +137,13 @@ class BagFiles:
         self.close()
 
 
+DESCRIBED_TOPICS = 20  # a message names this many of a bag's topics, the ones with the most messages
+
+
 def describe_topics(topics: list[TopicInfo]) -> str:
-    """'name (type, N messages)', one per topic, for messages that say what a bag holds."""
-    return ", ".join(f"{t.name} ({t.msgtype}, {t.count} messages)" for t in topics) or "no topics at all"
+    """'name (type, N messages)', one per topic (the DESCRIBED_TOPICS busiest, and how many more), for messages
+    that say what a bag holds: a bag of 30,000 topics made a 1.4 MB line."""
+    shown = sorted(topics, key=lambda t: -t.count)[:DESCRIBED_TOPICS]
+    text = ", ".join(f"{t.name} ({t.msgtype}, {t.count} messages)" for t in shown) or "no topics at all"
+    more = len(topics) - len(shown)
+    return f"{text} and {more} more topic{'s' if more != 1 else ''}" if more else text

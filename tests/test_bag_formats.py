@@ -167,3 +167,14 @@ def test_two_stations_whose_namespaces_end_alike_are_two_stations():
         "team2/car": {"fix": "/team2/car/gps/fix", "bearing": "/team2/car/df/bearing"},
         "mast": {"fix": "/mast/gps/fix", "bearing": "/mast/df/bearing", "heading": "/mast/heading/imu"},
     }
+
+
+def test_a_bag_of_thousands_of_topics_is_described_in_a_line_of_its_busiest():
+    """Issue 51, item 13: the missing-topics error named all 30,000 topics of a bag in one 1.4 MB line."""
+    from msgs_adapters.bag_files import DESCRIBED_TOPICS, TopicInfo, describe_topics
+
+    topics = [TopicInfo(f"/t{k}", "std_msgs/msg/String", k) for k in range(30_000)]
+    text = describe_topics(topics)
+    assert len(text) < 2000 and text.startswith("/t29999 (std_msgs/msg/String, 29999 messages)")
+    assert text.endswith(f"and {30_000 - DESCRIBED_TOPICS} more topics")
+    assert describe_topics(topics[:2]) == "/t1 (std_msgs/msg/String, 1 messages), /t0 (std_msgs/msg/String, 0 messages)"
