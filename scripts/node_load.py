@@ -19,6 +19,7 @@ import time
 import numpy as np
 from node_rig import NodeRig
 
+from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.geodesy import LocalFrame
 from msgs_adapters import build
 
@@ -67,6 +68,8 @@ def main():
     parser.add_argument("--attach", type=int, metavar="PID",
                         help="measure a node already running (e.g. under a profiler) in ROS_DOMAIN_ID, not a new one")
     parser.add_argument("--json", help="write the figures here too")
+    parser.add_argument("--listen-posteriors", action="store_true",
+                        help="subscribe to every channel's emitter/<channel>/posterior (a map client's load)")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     angle = rng.uniform(0, 2 * math.pi, args.emitters)
@@ -83,8 +86,13 @@ def main():
         if "pose_latency_p99_ms" in values:
             periods.append(values)
 
+    grids = [0]
     with NodeRig(args.node_param, on_status, args.attach) as rig:
         T, frame = rig.T, LocalFrame(*DATUM)
+        if args.listen_posteriors:
+            for f in freqs:
+                rig.node.create_subscription(T.OccupancyGrid, f"emitter/{channel_id(float(f))}/posterior",
+                                             lambda _m: grids.__setitem__(0, grids[0] + 1), 1)
         t0, sent, scans, next_fix, next_rss = time.monotonic(), 0, 0, 0.0, 0.0
         stamp0 = time.time()
         while (t := time.monotonic() - t0) < args.seconds:
@@ -106,7 +114,7 @@ def main():
         rig.spin_until(time.monotonic() + 3)
         rss.append((round(time.monotonic() - t0, 1), round(rss_mb(rig.proc.pid), 1),
                     round(tree_rss_mb(rig.proc.pid), 1)))
-        figures = {"node_cpu_s": cpu_seconds(rig.proc.pid),
+        figures = {"posterior_grids_received": grids[0], "node_cpu_s": cpu_seconds(rig.proc.pid),
                    "worker_cpu_s": round(sum(cpu_seconds(c) for c in children(rig.proc.pid)), 1)}
     figures.update(summarise(args, sent, last, periods, rss))
     print(json.dumps(figures, indent=1))

@@ -273,12 +273,17 @@ def test_an_outside_client_gets_pose_fix_posterior_and_goal(spawn, domain):
         node.create_subscription(T.OccupancyGrid, "emitter/posterior", lambda m: got.update(grid=m), 1)
         node.create_subscription(T.PoseStamped, "emitter/next_goal", lambda m: got.update(goal=m), 1)
         node.create_subscription(T.Marker, "emitter/next_goal_marker", lambda m: got.update(arrow=m), 1)
+        diag: dict = {}
+        node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
+            diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
         _publish_drive(node, executor, emitter)
         assert spin_until(executor, lambda: "pose" in got and "fix" in got, 10), open(node_p.log_path).read()
         spin_until(executor, lambda: False, 2.0)  # the last points
         _, east, north, cov = estimate_from_pose(got["pose"])
         # emitter/posterior, while listened to: the estimate in its most probable cells, in the map frame
         assert spin_until(executor, lambda: "grid" in got, 5)
+        # their cost named in /diagnostics (issue 51, item 3: the overload warning blamed the filter)
+        assert spin_until(executor, lambda: "posterior_grids_ms" in diag, 5), json.dumps(diag)
         grid, info = got["grid"], got["grid"].info
         values = np.array(grid.data, np.int8).reshape(info.height, info.width)
         row = int((north - info.origin.position.y) / info.resolution)

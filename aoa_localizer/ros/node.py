@@ -424,6 +424,8 @@ class LocalizerNode(Node):
         self._apply_parameters()
         self.loc.idle()
         self._publish_made(latency=False)  # no input made these: no latency to count
+        self.monitor.posterior_work.add(self.outputs.posteriors(
+            self.loc, POSTERIOR_BUDGET_S, self.get_parameter("diagnostics_period_s").value))
         self.old_objects.tick()
         self.monitor.other_s += time.perf_counter() - t0
 
@@ -438,7 +440,6 @@ class LocalizerNode(Node):
         self.pub_diag.publish(build.diagnostic_array(self.types, self._now(), self.diag_name, level, message, values,
                                                      hardware_id, mon.channel_diagnostics(self.loc, self.diag_name)))
         self.outputs.paths(self.path)
-        self.outputs.posteriors(self.loc)
         self.outputs.summary(self.loc)
         self.outputs.drop_gone(self.loc)
         mon.end_period(t0)
@@ -497,6 +498,7 @@ def usage() -> str:
 SWITCH_INTERVAL_S = 0.0005
 # One owed sweep (about 2 ms at 300 points) per tick: 50 a second, several times what 50 emitters owe.
 IDLE_PERIOD_S = 0.02
+POSTERIOR_BUDGET_S = 0.004  # between messages, grids are made until this is spent (at least one; the rest wait)
 RESTART_QUIET_S = 0.2  # parameter changes are applied once they pause this long ...
 RESTART_MAX_WAIT_S = 1.0  # ... or this long after the first of them
 GOAL_PERIOD_S = 1.0  # emitter/next_goal is refreshed at most this often (s)

@@ -17,6 +17,7 @@ from aoa_localizer.engine.input_guard import StampGaps
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
+from aoa_localizer.ros.node_outputs import PosteriorWork
 
 _MAX_LOAD = 0.8  # share of wall time spent working (inputs, idle moves, diagnostics) above which it warns
 _STALL_PERIODS = 2.0  # a diagnostics period this many times longer than configured: the node was held up
@@ -54,6 +55,7 @@ class NodeMonitor:
         self.callback_max_s = 0.0
         self.other_s = 0.0  # work in the period outside the input callbacks: idle moves, the periodic work
         self.parameter_changes = 0  # parameter sets accepted
+        self.posterior_work = PosteriorWork()  # the posterior grids of this period
         self.restarts = 0  # track restarts they made (a burst of sets makes one)
         self.period_start = time.perf_counter()
         self.overload = Overload()
@@ -152,6 +154,11 @@ class NodeMonitor:
         values.update(load_pct=f"{100 * self._load():.0f}", period_s=f"{time.perf_counter() - self.period_start:.3f}",
                       rejected_while_overloaded=sum(self.overload.rejected.values()),
                       parameter_changes=self.parameter_changes, restarts=self.restarts)
+        w = self.posterior_work
+        if w.made or w.deferred:  # the grids listened to: their cost is named, not blamed on the filter
+            values.update(posterior_grids_made=w.made, posterior_grids_waiting=w.deferred,
+                          posterior_grids_ms=f"{1e3 * w.seconds:.1f}")
+        self.posterior_work = PosteriorWork()
         if self.latency_ms:
             p50, p99, top = np.percentile(self.latency_ms, (50, 99, 100), method="higher")
             values.update(poses_in_period=len(self.latency_ms), pose_latency_p50_ms=f"{p50:.3f}",

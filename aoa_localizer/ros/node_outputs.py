@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
@@ -21,6 +23,20 @@ from msgs_adapters import build
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+@dataclass
+class PosteriorWork:
+    """Posterior grids made, waiting for a later call, and the time they took."""
+
+    made: int = 0
+    deferred: int = 0
+    seconds: float = 0.0
+
+    def add(self, other: PosteriorWork) -> None:
+        self.made += other.made
+        self.deferred = other.deferred  # what waits now, not summed over the calls
+        self.seconds += other.seconds
+
+
 class NodeOutputs:
     """The node's publishers of what the engine makes. `types`: the message classes (msgs_adapters.build)."""
 
@@ -33,6 +49,9 @@ class NodeOutputs:
         self.pub_path = {name: node.create_publisher(types.Path, (f"{name}/" if name else "") + "vehicle/path", 1)
                          for name in stations}  # relative names: namespaces and remaps apply
         self.summary_sent: Any = None  # the channel summary last published on emitter/channels
+        self._grids: dict[str, tuple[Any, Any]] = {}  # per channel: the estimate its last grid drew, and the grid
+        self._grid_turn = 0  # the listened channel the next round of grids starts with
+        self._grid_sent: dict[str, float] = {}  # per channel: when its grid last went out (monotonic s)
         self.datum_sent: Any = None  # the LocalFrame last published on emitter/datum
 
     def _channel_publishers(self, prefix: str) -> SimpleNamespace:
@@ -74,17 +93,40 @@ class NodeOutputs:
             ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
             pubs.markers.publish(build.markers(T, est, rays, ring, frame))
 
-    def posteriors(self, loc: Localizer):
+    def posteriors(self, loc: Localizer, budget_s: float, period_s: float) -> PosteriorWork:
         """Each channel's posterior grid on its emitter/<channel>/posterior, and the primary channel's on
-        emitter/posterior, for the ones someone listens to (a grid costs cells x points: once a period)."""
-        for channel, listening in self._listened(loc, "posterior"):
-            est, grid = channel.estimate, loc.posterior_grid(channel)
-            if grid is None or est is None:
+        emitter/posterior, for the ones someone listens to, each at most once a `period_s`. A grid costs cells x
+        points, so a channel's is made again only when its estimate changed (else its last grid goes out again),
+        and once this call's grids took `budget_s` the rest wait for the next call, which starts where this one
+        stopped: called between messages, the grids never hold an input up for long."""
+        listened = self._listened(loc, "posterior")
+        work = PosteriorWork()
+        if not listened:
+            return work
+        start, now = self._grid_turn % len(listened), time.monotonic()
+        t0 = time.perf_counter()
+        for k in range(len(listened)):
+            channel, listening = listened[(start + k) % len(listened)]
+            est = channel.estimate
+            if est is None or now - self._grid_sent.get(channel.id, -math.inf) < period_s:
                 continue
-            msg = build.occupancy_grid(self.types, est.stamp, grid.east0, grid.north0, grid.resolution, grid.value,
-                                       self.map_frame)
+            cached = self._grids.get(channel.id)
+            if cached is None or cached[0] is not est:
+                if time.perf_counter() - t0 >= budget_s:
+                    work.deferred += 1
+                    continue
+                grid = loc.posterior_grid(channel)
+                if grid is None:
+                    continue
+                cached = self._grids[channel.id] = (est, build.occupancy_grid(
+                    self.types, est.stamp, grid.east0, grid.north0, grid.resolution, grid.value, self.map_frame))
+                work.made += 1
+                self._grid_turn = (start + k + 1) % len(listened)
             for pub in listening:
-                pub.publish(msg)
+                pub.publish(cached[1])
+            self._grid_sent[channel.id] = now
+        work.seconds = time.perf_counter() - t0
+        return work
 
     def next_goals(self, loc: Localizer, vehicle: tuple[float, float] | None, radius_m: float):
         """Each channel's goal (engine/next_goal.py) for the vehicle at `vehicle` (map frame) on its
@@ -164,6 +206,8 @@ class NodeOutputs:
         """The publishers of channels the engine no longer keeps (retired long ago): memory stays bounded under a
         stream of ever new frequencies."""
         kept = {c.id for c in loc.channels.all()} | {DEFAULT}
+        self._grids = {cid: g for cid, g in self._grids.items() if cid in kept}
+        self._grid_sent = {cid: t for cid, t in self._grid_sent.items() if cid in kept}
         for cid in [cid for cid in self.channel_pubs if cid not in kept]:
             for pub in vars(self.channel_pubs.pop(cid)).values():
                 self.node.destroy_publisher(pub)
