@@ -981,3 +981,17 @@ def test_a_burst_of_parameter_sets_is_one_restart_with_the_last_values(spawn, do
         got = call(executor, node, GetParameters, "/aoa_localizer/get_parameters",
                    GetParameters.Request(names=["num_particles"]))
         assert got.values[0].integer_value == 189  # the last value won
+
+
+def test_a_whole_number_for_a_decimal_parameter_is_that_decimal_at_start_and_at_run_time(spawn, domain):
+    """Issue 53, item 5: `-p goal_radius_m:=200` was refused ("expecting type 'DOUBLE'"), at start and at run time."""
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "goal_radius_m:=200"], domain)
+    with client(domain) as (node, executor):
+        req = SetParameters.Request(parameters=[Parameter(name="gps_max_gap_s", value=ParameterValue(
+            type=ParameterType.PARAMETER_INTEGER, integer_value=3))])
+        assert call(executor, node, SetParameters, "/aoa_localizer/set_parameters", req).results[0].successful
+        got = call(executor, node, GetParameters, "/aoa_localizer/get_parameters",
+                   GetParameters.Request(names=["goal_radius_m", "gps_max_gap_s"]))
+        assert [(v.type, v.double_value) for v in got.values] == [(ParameterType.PARAMETER_DOUBLE, 200.0),
+                                                                  (ParameterType.PARAMETER_DOUBLE, 3.0)]
+    assert node_p.poll() is None

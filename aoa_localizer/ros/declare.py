@@ -48,6 +48,7 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
     """Declare every spec on `node` and return the values; raises ConfigError (the caller refuses to start) for a
     value outside its declaration when `check`."""
     values = {}
+    _take_whole_numbers(node, [p.name for p in specs if p.spec.kind is float])
     for p in specs:
         d = descriptor(p)
         try:
@@ -69,6 +70,23 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
         for p in specs:
             p.spec.check(p.name, values[p.name])
     return values
+
+
+def _take_whole_numbers(node: Node, names: list[str]):
+    """A whole number given for a decimal parameter is that decimal, as ROS users type them (`-p
+    goal_radius_m:=200`): at start (the overrides) and at run time (a callback before rclpy checks the type)."""
+    overrides = _overrides(node)
+    for name in names:
+        given = overrides.get(name)
+        if given is not None and given.type_ == Parameter.Type.INTEGER:
+            overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(given.value))
+    decimal: set = getattr(node, "_aoa_decimal_names", set())
+    if not decimal:  # the first declaration on this node: the run-time callback, once
+        node.add_pre_set_parameters_callback(lambda params: [
+            Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+            if p.name in decimal and p.type_ == Parameter.Type.INTEGER else p for p in params])
+        node._aoa_decimal_names = decimal  # type: ignore[attr-defined]
+    decimal.update(names)
 
 
 def refuse_unknown(node: Node):
