@@ -6,6 +6,7 @@ from scipy.stats import chi2
 
 # Scale of the 95 % error ellipse for 2 degrees of freedom: x^T P^-1 x <= 5.991.
 ELLIPSE_95 = float(chi2.ppf(0.95, df=2))
+ELLIPSE_50 = float(chi2.ppf(0.5, df=2))
 
 
 def fisher_information(emitter, sensors, sigmas) -> np.ndarray:

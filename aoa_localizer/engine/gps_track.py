@@ -13,7 +13,7 @@ from aoa_localizer.engine.rejections import Reason
 # Fixes kept: enough to bracket any bearing still pending (bearings arrive within gps_max_gap_s).
 _KEEP_FIXES = 512
 _VELOCITY_SPAN = 3  # fix-to-fix segments a velocity is measured over
-_STILL_MPS = 0.5  # an antenna slower than this at an isolated fix stood still (its position may be held) ...
+STILL_MPS = 0.5  # an antenna slower than this at an isolated fix stood still (its position may be held) ...
 _HELD_MAX_M = 2.0  # ... if it cannot have gone farther than this from it at its mean speed across the gap
 
 
@@ -85,14 +85,14 @@ class GpsTrack:
 
     def _held(self, stamp: float, k: int) -> tuple[Where, tuple[float, ...] | None]:
         """Across a gap: the nearer of fixes k - 1 and k if it is within max_gap_s of the stamp and the antenna stood
-        still there (no segment within the gap, or slower than _STILL_MPS: a surveyor's fix at each bearing, minutes
+        still there (no segment within the gap, or slower than STILL_MPS: a surveyor's fix at each bearing, minutes
         apart) and cannot have moved more than _HELD_MAX_M from it by the stamp; else a gap. A moving vehicle's fixes
         around a drop-out are never held."""
         j = k - 1 if stamp - self.t[k - 1] <= self.t[k] - stamp else k
         v_e, v_n = self._velocity(j)
         # how far the antenna can have gone from the held fix, at its mean speed across the gap
         across = math.hypot(self.e[k] - self.e[k - 1], self.n[k] - self.n[k - 1]) / (self.t[k] - self.t[k - 1])
-        if (abs(stamp - self.t[j]) > self.max_gap_s or v_e * v_e + v_n * v_n > _STILL_MPS**2
+        if (abs(stamp - self.t[j]) > self.max_gap_s or v_e * v_e + v_n * v_n > STILL_MPS**2
                 or across * abs(stamp - self.t[j]) > _HELD_MAX_M):
             return Where.GAP, None
         return Where.OK, (self.e[j], self.n[j], self.north[j], self.sigma[j], 0.0, 0.0)

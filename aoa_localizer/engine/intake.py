@@ -14,13 +14,13 @@ from collections.abc import Callable
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, azimuth_to_enu, wrap_pi
-from aoa_localizer.engine.gps_track import GpsTrack, Where
+from aoa_localizer.engine.gps_track import STILL_MPS, GpsTrack, Where
 from aoa_localizer.engine.heading import ImuHeading, TrackHeading
 from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
 from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.station import Pending, Station
-from aoa_localizer.engine.survey_log import STILL_MPS, SurveyLog
+from aoa_localizer.engine.survey_log import SurveyLog
 from aoa_localizer.engine.types import Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -336,11 +336,12 @@ class Intake:
             sigma = reading_sigma(p.quality, self.cfg) if math.isnan(p.sigma) else p.sigma
             reading = Reading(p.stamp, theta, p.quality, sigma, east, north, float(gps_sigma), float(v_east),
                               float(v_north), heading_sigma)
-            # a survey's: from a fixed site, or from an antenna standing still (a surveyor's stop)
-            still = math.hypot(v_east, v_north) < STILL_MPS
-            self.survey_log.add(channel.id, st.fixed or still,
-                                (st.name, p.stamp, east, north, theta, north_angle,
-                                 math.degrees(p.sigma) if math.isfinite(p.sigma) else math.nan))
+            if channel.id not in self.survey_log.not_survey:  # a drive's channel costs a set look-up a reading
+                # a survey's: from a fixed site, or from an antenna standing still (a surveyor's stop)
+                still = math.hypot(v_east, v_north) < STILL_MPS
+                self.survey_log.add(channel.id, st.fixed or still,
+                                    (st.name, p.stamp, east, north, theta, north_angle,
+                                     math.degrees(p.sigma) if math.isfinite(p.sigma) else math.nan))
             closed += [(channel, group) for group in channel.builder(st.name).add(reading)]
         return closed
 

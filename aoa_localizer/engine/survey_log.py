@@ -18,7 +18,6 @@ import numpy as np
 from aoa_localizer.engine.geodesy import LocalFrame, enu_to_azimuth
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
-STILL_MPS = 0.5  # an antenna slower than this stands still
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,9 @@ from dataclasses import dataclass
 import contourpy
 import numpy as np
 
-from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.engine.crlb import ELLIPSE_50, ELLIPSE_95
 from aoa_localizer.pooled.grid import CELLS, Box
 
-ELLIPSE_50 = 1.3862943611198906  # chi-square(2) 50 % quantile, -2 ln 0.5
 LEVELS = (0.5, 0.95)
 
 

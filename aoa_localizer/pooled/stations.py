@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -128,12 +128,8 @@ def _with_receivers(stations: list[Station]) -> list[Station]:
         if s.receiver:
             out.append(s)
         else:
-            out.append(_replace_receiver(s, f"site {s.name}" if sites else "survey"))
+            out.append(replace(s, receiver=f"site {s.name}" if sites else "survey"))
     return out
-
-
-def _replace_receiver(s: Station, receiver: str) -> Station:
-    return Station(s.emitter, receiver, s.name, s.lat, s.lon, s.centre, s.var, s.n, s.scatter)
 
 
 def pooled_scatter(stations: list[Station]) -> dict[str, float]:

@@ -57,25 +57,23 @@ def ellipse_ring(frame: LocalFrame, est: Estimate) -> list[list[float]]:
     return ring
 
 
-def region_rings(regions: dict | None, est: Estimate) -> list[tuple[str, list[list[list[float]]]]]:
-    """The channel's highest-density regions (from `regions`, else the estimate's own), if any: (name, closed
-    (lon, lat) rings) per level."""
+def region_rings(est: Estimate) -> list[tuple[str, list[list[list[float]]]]]:
+    """The estimate's highest-density regions (the survey model's), if any: (name, closed (lon, lat) rings) per
+    level."""
     out = []
-    for level, rings in sorted(((regions or {}).get(est.channel) or est.regions or {}).items()):
+    for level, rings in sorted((est.regions or {}).items()):
         closed = [[[float(lon), float(lat)] for lat, lon in ring] for ring in rings]
         out.append((f"{100 * level:.0f} % region {names(est)[0]}", [r + [r[0]] if r[0] != r[-1] else r
                                                                       for r in closed]))
     return out
 
 
-def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray],
-            regions: dict | None = None) -> dict:
-    """A FeatureCollection: per emitter its estimate (Point), 95 % ellipse (Polygon) and, where given
-    (`regions`: channel -> level -> rings of (lat, lon)), its highest-density regions (MultiPolygon); per station
-    its track (LineString, ENU rows east, north)."""
+def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray]) -> dict:
+    """A FeatureCollection: per emitter its estimate (Point), 95 % ellipse (Polygon) and, where it has them, its
+    highest-density regions (MultiPolygon); per station its track (LineString, ENU rows east, north)."""
     features = []
     for est in estimates:
-        for name, rings in region_rings(regions, est):
+        for name, rings in region_rings(est):
             features.append({"type": "Feature",
                              "geometry": {"type": "MultiPolygon", "coordinates": [[r] for r in rings]},
                              "properties": {"name": name, "channel": est.channel}})
@@ -100,8 +98,7 @@ def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.n
     return {"type": "FeatureCollection", "features": features}
 
 
-def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray],
-        regions: dict | None = None) -> str:
+def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray]) -> str:
     """A KML document with the same placemarks (opens in Google Earth and GIS tools)."""
     ET.register_namespace("", KML_NS)
     q = lambda tag: f"{{{KML_NS}}}{tag}"  # noqa: E731
@@ -129,7 +126,7 @@ def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarr
         poly = ET.SubElement(placemark(ellipse_name, props), q("Polygon"))
         ring = ET.SubElement(ET.SubElement(poly, q("outerBoundaryIs")), q("LinearRing"))
         ET.SubElement(ring, q("coordinates")).text = coords(ellipse_ring(frame, est))
-        for name, rings in region_rings(regions, est):
+        for name, rings in region_rings(est):
             multi = ET.SubElement(placemark(name, None), q("MultiGeometry"))
             for r in rings:
                 boundary = ET.SubElement(ET.SubElement(multi, q("Polygon")), q("outerBoundaryIs"))

@@ -31,7 +31,7 @@ from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
 from aoa_localizer.engine.rejections import REASONS
 from aoa_localizer.ros.declare import declare, refuse_unknown, value_of
 from aoa_localizer.ros.node_monitor import NodeMonitor
-from aoa_localizer.ros.node_outputs import NodeOutputs
+from aoa_localizer.ros.node_outputs import NodeOutputs, PosteriorWork
 from aoa_localizer.ros.node_params import NODE_PARAMS, STATION_POSITION
 from aoa_localizer.ros.ros_main import run_node, spin
 from aoa_localizer.ros.vehicle_path import VehiclePath
@@ -439,6 +439,7 @@ class LocalizerNode(Node):
         hardware_id = self.get_parameter("hardware_id").value
         self.pub_diag.publish(build.diagnostic_array(self.types, self._now(), self.diag_name, level, message, values,
                                                      hardware_id, mon.channel_diagnostics(self.loc, self.diag_name)))
+        mon.posterior_work = PosteriorWork()  # the grids of the period just reported
         self.outputs.paths(self.path)
         self.outputs.summary(self.loc)
         self.outputs.drop_gone(self.loc)

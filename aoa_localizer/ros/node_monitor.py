@@ -158,7 +158,6 @@ class NodeMonitor:
         if w.made or w.deferred:  # the grids listened to: their cost is named, not blamed on the filter
             values.update(posterior_grids_made=w.made, posterior_grids_waiting=w.deferred,
                           posterior_grids_ms=f"{1e3 * w.seconds:.1f}")
-        self.posterior_work = PosteriorWork()
         if self.latency_ms:
             p50, p99, top = np.percentile(self.latency_ms, (50, 99, 100), method="higher")
             values.update(poses_in_period=len(self.latency_ms), pose_latency_p50_ms=f"{p50:.3f}",

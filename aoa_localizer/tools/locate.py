@@ -198,10 +198,9 @@ def record(ident: str, est: Estimate, rows: int) -> dict:
             "bearings_used": est.bearings_used, "bearings_given": rows, "modes": est.to_json_dict()["modes"]}
 
 
-def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]],
-                 regions: dict | None = None):
-    """map.png (bearings, estimates, 95 % ellipses, and the 95 % highest-density regions where given: channel ->
-    level -> rings of (lat, lon)), emitter.kml and emitter.geojson of every id."""
+def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):
+    """map.png (bearings, estimates, 95 % ellipses, and each estimate's 95 % highest-density region where it has
+    one), emitter.kml and emitter.geojson of every id."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -213,8 +212,8 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
 
     out.mkdir(parents=True, exist_ok=True)
     named = [replace(est, channel=ident or "default") for ident, (est, _) in found.items()]
-    (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}, regions), indent=1))
-    (out / "emitter.kml").write_text(kml(frame, named, {}, regions))
+    (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}), indent=1))
+    (out / "emitter.kml").write_text(kml(frame, named, {}))
     fig, ax = plt.subplots(figsize=(8, 8))
     for (ident, (est, rows)), colour in zip(found.items(), plt.rcParams["axes.prop_cycle"].by_key()["color"] * 99,
                                             strict=False):
@@ -222,7 +221,7 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
         label = "".join(ch if ch.isprintable() else "?" for ch in ident or "emitter")
         ax.plot(ring[:, 0], ring[:, 1], color=colour, label=f"{label} ({est.state})")
         ax.plot(est.east, est.north, "+", color=colour, ms=12)
-        for ring in ((regions or {}).get(ident or "default") or {}).get(0.95, []):
+        for ring in (est.regions or {}).get(0.95, []):
             e, n = frame.to_enu(ring[:, 0], ring[:, 1])
             ax.fill(e, n, color=colour, alpha=0.15, lw=0)
         reach = 1.5 * max(float(np.max(np.hypot(ring[:, 0] - est.east, ring[:, 1] - est.north))), 50.0)
@@ -270,7 +269,6 @@ def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class:
     for warning in result.warnings:
         print(f"locate: warning: {warning}", file=sys.stderr)
     found: dict[str, tuple[Estimate, list[Row]]] = {}
-    regions: dict[str, dict] = {}
     lines, failed = [], 0
     for ident, group in groups.items():
         fix = result.fixes.get(ident)
@@ -281,14 +279,13 @@ def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class:
         east, north = frame.to_enu(fix.lat, fix.lon)
         est = Estimate(group[-1].stamp, float(east), float(north), fix.lat, fix.lon, fix.cov, fix.readings,
                        fix.stations, float("nan"), "pooled", modes=[(float(east), float(north), 1.0)],
-                       channel=ident or "default", state=fix.state, warnings=list(fix.warnings))
+                       channel=ident or "default", state=fix.state, warnings=list(fix.warnings), regions=fix.hpd)
         found[ident] = (est, group)
-        regions[est.channel] = fix.hpd
         _print_row(ident, est)
         lines.append(json.dumps(pooled_record(ident, est, fix, len(group), result)))
     for text in receiver_lines(result):
         print(text)
-    return found, lines, failed, regions
+    return found, lines, failed
 
 
 def pooled_record(ident: str, est: Estimate, fix, rows: int, result) -> dict:
@@ -296,8 +293,7 @@ def pooled_record(ident: str, est: Estimate, fix, rows: int, result) -> dict:
     out = record(ident, est, rows)
     group = next((g for g in result.noise if set(fix.receivers) <= set(g["receivers"])), None)
     out.update({"model": "pooled", "stations": fix.stations, "receivers": fix.receivers,
-                "hpd": {f"{100 * lvl:.0f}": [[[round(float(a), 8), round(float(b), 8)] for a, b in ring]
-                                             for ring in rings] for lvl, rings in fix.hpd.items()},
+                "hpd": est.to_json_dict()["hpd"],
                 "ellipse_mass": {f"{100 * lvl:.0f}": round(m, 3) for lvl, m in fix.ellipse_mass.items()},
                 "noise": group})
     return out
@@ -384,13 +380,12 @@ def _main(argv=None) -> int:
     for row in rows:
         groups.setdefault(row.id, []).append(row)
     print(f"{'id':<12} {'lat':>11} {'lon':>12} {'95% semi-axes (m)':>18} {'bearings':>8}  state")
-    regions: dict = {}
     if args.model == "filter":
         found, lines, failed = _filter_run(groups, cfg, datum)
     else:
-        found, lines, failed, regions = _pooled_run(groups, frame, args.receiver_class)
+        found, lines, failed = _pooled_run(groups, frame, args.receiver_class)
     if args.output:
         write_staged(args.output, "".join(line + "\n" for line in lines))
     if args.report and found:
-        write_report(args.report, frame, found, regions)
+        write_report(args.report, frame, found)
     return 1 if failed else 0
