@@ -99,7 +99,7 @@ def main():
             phase = SPEED * t / RADIUS_M
             east, north = RADIUS_M * math.cos(phase), RADIUS_M * math.sin(phase)
             if t >= next_fix:
-                lat, lon, alt = frame.to_geodetic(east, north, 0.0)
+                lat, lon, alt = frame.to_geodetic(east, north)
                 rig.pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
                 next_fix += 0.1
             if t >= next_rss:

@@ -34,7 +34,7 @@ def main():
         while (t := time.monotonic() - t0) < args.seconds:
             east, north = 20.0 * t, 0.0  # 20 m/s along the x axis, past the emitter
             if t >= next_fix:
-                lat, lon, alt = frame.to_geodetic(east, north, 0.0)
+                lat, lon, alt = frame.to_geodetic(east, north)
                 rig.pub_fix.publish(build.navsatfix(T, stamp0 + t, float(lat), float(lon), float(alt)))
                 next_fix += 0.1
             az = math.degrees(math.atan2(EMITTER[0] - east, EMITTER[1] - north)) % 360

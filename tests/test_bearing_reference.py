@@ -50,7 +50,7 @@ def _drive_east(loc, az_of, speed=10.0, seconds=20, stop_after=None):
     half second, azimuth az_of(t, east)."""
     for k in range(seconds + 1):
         east = speed * min(k, stop_after if stop_after is not None else k)
-        lat, lon, _ = FRAME.to_geodetic(east, 0.0, 0.0)
+        lat, lon, _ = FRAME.to_geodetic(east, 0.0)
         loc.add_fix(float(k), float(lat), float(lon), 5.0)
         t = k + 0.5
         loc.add_bearing(t, az_of(t, speed * min(t, stop_after if stop_after is not None else t)), 90.0)
@@ -147,7 +147,7 @@ def test_a_smooth_gps_drift_the_jitter_cannot_see_is_inside_the_courses_sigma():
             track.add(t, place[0], place[1], math.pi / 2)
             heading.note_fix(track)
             if k > 20:  # a reading 5 s back: the fixes after it are there
-                course = heading.at(track, k - 4.5, 0.0)
+                course = heading.at(track, k - 4.5, 0.0, None)
                 if course is not None:
                     z.append(math.remainder(course[0], 2.0 * math.pi) / course[1])
     assert len(z) > 1000 and np.sqrt(np.mean(np.square(z))) < 1.2 and np.max(np.abs(z)) < 3.5
@@ -165,7 +165,7 @@ def test_a_stopped_vehicle_on_noisy_gps_keeps_the_course_it_came_with_and_its_si
         readings = _readings_of(loc)
         for k in range(61):
             noise = 3.0 * rng.standard_normal(2)
-            lat, lon, _ = FRAME.to_geodetic(10.0 * min(k, 30) + noise[0], noise[1], 0.0)
+            lat, lon, _ = FRAME.to_geodetic(10.0 * min(k, 30) + noise[0], noise[1])
             loc.add_fix(float(k), float(lat), float(lon), 5.0)
             loc.add_bearing(k + 0.5, 0.0, 90.0)  # straight ahead
         loc.flush()
@@ -198,7 +198,7 @@ def test_an_imu_heading_is_interpolated_at_the_reading_and_bad_ones_are_counted(
     loc.add_heading(3.0, 0.0)  # out of order
     loc.add_heading(30.0, float("nan"))
     for k in range(21):
-        lat, lon, _ = FRAME.to_geodetic(0.0, 0.0, 0.0)
+        lat, lon, _ = FRAME.to_geodetic(0.0, 0.0)
         loc.add_fix(float(k), float(lat), float(lon), 5.0)
         loc.add_bearing(k + 0.25, 0.0, 90.0)  # straight ahead
     loc.flush()
@@ -236,7 +236,7 @@ def test_an_imu_yaws_variance_is_the_readings_heading_sigma():
         readings = _readings_of(loc)
         for k in range(12):
             loc.add_heading(float(k), 0.0, variance_rad2=variance)
-            lat, lon, _ = FRAME.to_geodetic(0.0, 0.0, 0.0)
+            lat, lon, _ = FRAME.to_geodetic(0.0, 0.0)
             loc.add_fix(float(k), float(lat), float(lon), 5.0)
             loc.add_bearing(k + 0.5, 0.0, 90.0)
         loc.flush()

@@ -155,7 +155,7 @@ def test_channels_sharing_stamps_close_their_points_at_different_readings():
     for step in range(400):  # 20 s
         t = 0.05 * step
         if step % 2 == 0:
-            lat, lon, alt = frame.to_geodetic(15.0 * t, 0.0, 0.0)
+            lat, lon, alt = frame.to_geodetic(15.0 * t, 0.0)
             loc.add_fix(1e9 + t, float(lat), float(lon), float(alt))
         for f in freqs:
             loc.add_bearing(1e9 + t, 45.0, 80.0, frequency_hz=f)

@@ -18,7 +18,7 @@ def test_enu_round_trip_is_exact_to_a_centimetre_at_10_km(datum):
     frame = LocalFrame(*datum)
     east = np.array([10_000.0, -10_000.0, 7071.0, 0.0])
     north = np.array([0.0, 10_000.0, -7071.0, -10_000.0])
-    lat, lon, alt = frame.to_geodetic(east, north, 0.0)
+    lat, lon, alt = frame.to_geodetic(east, north)
     e2, n2 = frame.to_enu(lat, lon, alt)
     assert np.max(np.abs(e2 - east)) < 0.01 and np.max(np.abs(n2 - north)) < 0.01
 
@@ -80,30 +80,51 @@ def _pymap3d_north_angle(frame, lat, lon):
 
 @pytest.mark.parametrize("lat0", [-89.9, -60.0, 0.0, 39.1, 75.0, 89.9])
 def test_the_fast_local_frame_equals_pymap3d(lat0):
-    """LocalFrame's precomputed-rotation maths against pymap3d, the reference, for scalars and arrays: points up to
-    100 km away and 3 km up, to 1e-6 m and 1e-9 deg (north angle to 1e-6 rad)."""
+    """LocalFrame against pymap3d, the reference, for scalars and arrays: to_enu is geodetic2enu's east and north;
+    to_geodetic is its inverse at the given altitude (pymap3d's enu2geodetic of the same point, up included), for
+    points up to 100 km away and 3 km up, to 1e-6 m and 1e-9 deg (north angle to 1e-6 rad)."""
     import pymap3d
 
     rng = np.random.default_rng(int(lat0 * 10) % 1000)
     frame = LocalFrame(lat0, float(rng.uniform(-180, 180)), float(rng.uniform(-50, 500)))
-    east, north, up = rng.uniform(-1e5, 1e5, 40), rng.uniform(-1e5, 1e5, 40), rng.uniform(-100, 3000, 40)
-    ref_lat, ref_lon, ref_alt = pymap3d.enu2geodetic(east, north, up, frame.lat0, frame.lon0, frame.alt0)
-    lat, lon, alt = frame.to_geodetic(east, north, up)
-    assert np.allclose(lat, ref_lat, atol=1e-9) and np.allclose(alt, ref_alt, atol=1e-6)
+    east, north, height = rng.uniform(-1e5, 1e5, 40), rng.uniform(-1e5, 1e5, 40), rng.uniform(-100, 3000, 40)
+    lat, lon, alt = frame.to_geodetic(east, north, height)
+    assert np.allclose(alt, height, atol=1e-6)
+    ref_e, ref_n, ref_u = pymap3d.geodetic2enu(lat, lon, alt, frame.lat0, frame.lon0, frame.alt0)
+    assert np.allclose(ref_e, east, atol=1e-6) and np.allclose(ref_n, north, atol=1e-6)
+    ref_lat, ref_lon, _ = pymap3d.enu2geodetic(east, north, ref_u, frame.lat0, frame.lon0, frame.alt0)
+    assert np.allclose(lat, ref_lat, atol=1e-9)
     assert np.allclose(np.mod(lon - ref_lon + 180, 360) - 180, 0, atol=1e-9)
-    e, n = frame.to_enu(ref_lat, ref_lon, ref_alt)
-    ref_e, ref_n, _ = pymap3d.geodetic2enu(ref_lat, ref_lon, ref_alt, frame.lat0, frame.lon0, frame.alt0)
+    e, n = frame.to_enu(lat, lon, alt)
     assert np.allclose(e, ref_e, atol=1e-6) and np.allclose(n, ref_n, atol=1e-6)
     for k in range(5):  # the scalar path (plain floats), point by point
-        la, lo, al = frame.to_geodetic(float(east[k]), float(north[k]), float(up[k]))
+        la, lo, al = frame.to_geodetic(float(east[k]), float(north[k]), float(height[k]))
         assert isinstance(la, float) and la == pytest.approx(ref_lat[k], abs=1e-9) and al == pytest.approx(
-            ref_alt[k], abs=1e-6)
-        ek, nk = frame.to_enu(float(ref_lat[k]), float(ref_lon[k]), float(ref_alt[k]))
-        assert (ek, nk) == pytest.approx((ref_e[k], ref_n[k]), abs=1e-6)
+            height[k], abs=1e-6)
+        ek, nk = frame.to_enu(float(ref_lat[k]), float(ref_lon[k]), float(height[k]))
+        assert (ek, nk) == pytest.approx((east[k], north[k]), abs=1e-6)
         if abs(lat0) < 89:  # the probe reference itself is ill-conditioned next to a pole
             assert frame.north_angle(float(ref_lat[k]), float(ref_lon[k])) == pytest.approx(
                 float(_pymap3d_north_angle(frame, ref_lat[k], ref_lon[k])), abs=1e-6)
     assert frame.north_angle(lat0, frame.lon0) == pytest.approx(math.pi / 2, abs=1e-12)
+
+
+@pytest.mark.parametrize("km", [300.0, 3000.0, 5000.0])
+def test_a_map_point_far_from_the_datum_goes_down_to_the_ground(km):
+    """Far from the datum the plane rises above the ground (7 km at 300 km): a map point is the place on the ground
+    below it, so the place goes back to the same map point (the old along-the-plane inverse was 330 m out at 300 km)
+    and its distance from the datum is the arc whose sine it is (a sphere's orthographic projection, to 0.5 %)."""
+    from pymap3d import vincenty
+
+    frame = LocalFrame(39.1, 117.2, 5.0)
+    bearing = np.radians([0.0, 60.0, 135.0, 250.0])
+    east, north = km * 1e3 * np.cos(bearing), km * 1e3 * np.sin(bearing)
+    lat, lon, alt = frame.to_geodetic(east, north)
+    assert np.allclose(alt, 5.0, atol=1e-6)
+    e, n = frame.to_enu(lat, lon)
+    assert np.max(np.hypot(e - east, n - north)) < 1e-3
+    arc = vincenty.vdist(39.1, 117.2, lat, lon)[0]
+    assert np.allclose(np.sin(arc / 6.371e6) * 6.371e6, km * 1e3, rtol=5e-3)
 
 
 def test_a_float_angle_is_wrapped_by_math_to_the_same_bit_as_numpy():

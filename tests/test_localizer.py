@@ -18,7 +18,7 @@ EMITTER = (1200.0, 800.0)
 
 
 def fix_at(east, north):
-    lat, lon, _ = FRAME.to_geodetic(east, north, 0.0)
+    lat, lon, _ = FRAME.to_geodetic(east, north)
     return float(lat), float(lon)
 
 

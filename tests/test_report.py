@@ -23,7 +23,7 @@ FRAME = LocalFrame(39.1, 117.2, 5.0)
 @pytest.fixture
 def estimate():
     cov = np.array([[30.0, 12.0], [12.0, 10.0]])
-    lat, lon, _ = FRAME.to_geodetic(1200.0, 800.0, 0.0)
+    lat, lon, _ = FRAME.to_geodetic(1200.0, 800.0)
     return Estimate(stamp=1795000000.5, east=1200.0, north=800.0, lat=float(lat), lon=float(lon), cov=cov,
                     bearings_used=300, points_used=60, ess=80.0, algorithm="afsa")
 

@@ -253,7 +253,7 @@ def _publish_drive(node, executor, emitter, seconds=60.0, speed=20.0, df_hz=10.0
     for k in range(int(seconds * df_hz) + 1):
         t = k / df_hz
         if k % int(df_hz) == 0:
-            lat, lon, alt = frame.to_geodetic(start_east + speed * t, 0.0, 0.0)
+            lat, lon, alt = frame.to_geodetic(start_east + speed * t, 0.0)
             pub_fix.publish(build.navsatfix(T, t0 + t, float(lat), float(lon), float(alt)))
         az = math.degrees(math.atan2(emitter[0] - start_east - speed * t, emitter[1])) % 360
         pub_df.publish(build.df_record(T, t0 + t, az + rng.normal(0, 1.0), 90.0))
@@ -330,7 +330,7 @@ def test_frames_datum_path_and_stale_inputs_in_a_namespace(spawn, domain):
         ).read()
         spin_until(executor, lambda: len(got["path"].poses) == 31, 5)
         datum = got["datum"][0]
-        lat0, lon0, alt0 = frame.to_geodetic(0.0, 0.0, 0.0)  # the first fix: the datum when none is configured
+        lat0, lon0, alt0 = frame.to_geodetic(0.0, 0.0)  # the first fix: the datum when none is configured
         assert datum.header.frame_id == "site" and (datum.latitude, datum.longitude) == pytest.approx((lat0, lon0))
         assert got["pose"].header.frame_id == "site" and got["fix"].header.frame_id == "emitter"
         path = got["path"]
@@ -379,7 +379,7 @@ def test_an_imu_heading_and_its_variance_turn_relative_bearings_in_the_node(spaw
             imu.orientation.w, imu.orientation_covariance[8] = 1.0, 1e-4  # yaw 0 (east), known to 0.01 rad
             pubs["heading/imu"].publish(imu)
             if k % 2 == 0:
-                lat, lon, _ = frame.to_geodetic(east, 0.0, 0.0)
+                lat, lon, _ = frame.to_geodetic(east, 0.0)
                 pubs["gps/fix"].publish(build.navsatfix(T, t, float(lat), float(lon), 5.0))
             true_azimuth = math.degrees(math.atan2(emitter[0] - east, emitter[1]))
             pubs["df/bearing"].publish(build.df_record(T, t + 0.25, (true_azimuth - 90.0) % 360.0, 90.0))
@@ -409,7 +409,7 @@ def test_bad_messages_leave_the_node_running_and_are_counted(spawn, domain):
         other.create_publisher(T.PoseWithCovarianceStamped, "df/bearing", 10)  # a wrong encoding on the topic
         assert spin_until(executor, lambda: pub_fix.get_subscription_count() and pub_df.get_subscription_count(), 10)
         spin_until(executor, lambda: False, 1.0)  # both ends of the match settled: nothing lost at the start
-        lat, lon, _ = frame.to_geodetic(0.0, 0.0, 0.0)
+        lat, lon, _ = frame.to_geodetic(0.0, 0.0)
         sequence = [
             (pub_fix, build.navsatfix(T, 100.0, float(lat), float(lon), 5.0)),
             (pub_fix, build.navsatfix(T, 101.0, float(lat), float(lon), 5.0, status=-1)),  # no fix

@@ -48,8 +48,8 @@ def test_two_vehicles_fix_the_emitter_better_than_either_alone():
 
 
 def site_bearings(frame: LocalFrame, site_enu, stamps, sigma_deg, rng) -> np.ndarray:
-    s_lat, s_lon, _ = frame.to_geodetic(*site_enu, 0.0)
-    e_lat, e_lon, _ = frame.to_geodetic(*TRUTH, 0.0)
+    s_lat, s_lon, _ = frame.to_geodetic(*site_enu)
+    e_lat, e_lon, _ = frame.to_geodetic(*TRUTH)
     _, az = vincenty.vdist(s_lat, s_lon, e_lat, e_lon)
     return float(az) + sigma_deg * rng.standard_normal(len(stamps))
 
@@ -64,7 +64,7 @@ def test_a_fixed_site_gives_its_position_once_and_bearings_for_hours():
     stamps = np.arange(5.0, 3 * 3600.0, 60.0)
     az = site_bearings(frame, site, stamps, 0.5, np.random.default_rng(0))
     loc = Localizer(LocalizerConfig(seed=1))
-    lat, lon, _ = frame.to_geodetic(*site, 0.0)
+    lat, lon, _ = frame.to_geodetic(*site)
     assert loc.set_station_position("site", lat, lon)
     events = [(t, "bearing", "site", (t, a, 90.0, 0.0)) for t, a in zip(stamps, az, strict=True)]
     events += [(row[0], kind, name, row) for kind, name, row in fleet.events()]

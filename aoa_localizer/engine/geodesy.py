@@ -17,6 +17,9 @@ WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 _ECEF_ITERATIONS = 5  # ECEF -> latitude fixed point: converged to 1e-12 rad within 10 km of the surface
+_MEAN_RADIUS_M = 6_371_008.8
+_SKEW_FROM_M = 30_000.0  # nearer the datum the plane turns a bearing by under 0.0003 deg: left out
+_GROUND_ITERATIONS = 3  # Newton steps from the sphere's guess: the ellipsoid's altitude to a millimetre at 5000 km
 
 
 def _is_scalar(*values) -> bool:
@@ -112,6 +115,42 @@ def enu_to_azimuth(theta, north_angle=np.pi / 2):
     return wrap_360(np.degrees(north_angle - np.asarray(theta)))
 
 
+Skew = tuple[float, float] | None
+
+
+def turn(base: float, offset: float, skew: Skew) -> float:
+    """The map angle (rad) of the direction `offset` rad counter-clockwise, on the ground, from the one whose map
+    angle is `base`, at a place whose `skew` LocalFrame.skew gave: the plane foreshortens the direction away from
+    the datum by the cosine of the arc (11 % at 3000 km), so far away a turn on the ground is not the same turn on
+    the map. A sphere's orthographic projection: north (`base` the north angle, `offset` 0) stays exact."""
+    if skew is None:
+        return wrap_pi_float(base + offset)
+    away, c = skew
+    d = base - away
+    local = math.atan2(c * math.sin(d), math.cos(d)) + offset
+    return wrap_pi_float(away + math.atan2(math.sin(local), c * math.cos(local)))
+
+
+def unturn(theta: float, base: float, skew: Skew) -> float:
+    """turn's inverse: the ground angle (rad, counter-clockwise) from the direction of map angle `base` to the one
+    of map angle `theta`."""
+    if skew is None:
+        return wrap_pi_float(theta - base)
+    away, c = skew
+    return wrap_pi_float(math.atan2(c * math.sin(theta - away), math.cos(theta - away))
+                         - math.atan2(c * math.sin(base - away), math.cos(base - away)))
+
+
+def ground_to_map(north_angle: float, skew: Skew) -> np.ndarray:
+    """The 2x2 matrix taking an east/north step on the ground at a place to the map plane: the meridian
+    convergence's rotation and, far from the datum, the plane's foreshortening (turn). A map covariance C is
+    J^-1 C J^-T on the ground there."""
+    away, c = (north_angle - math.pi / 2, 1.0) if skew is None else skew
+    north = math.atan2(c * math.sin(north_angle - away), math.cos(north_angle - away))
+    radial, across = np.array([math.cos(away), math.sin(away)]), np.array([-math.sin(away), math.cos(away)])
+    return np.column_stack([c * math.cos(b) * radial + math.sin(b) * across for b in (north - math.pi / 2, north)])
+
+
 @dataclass(frozen=True)
 class LocalFrame:
     """A local ENU tangent plane at a WGS84 datum (REP-105 `map`). Scalars in, floats out; arrays in, arrays out."""
@@ -141,18 +180,54 @@ class LocalFrame:
             return e0 * dx + e1 * dy, n0 * dx + n1 * dy + n2 * dz
         return _out(e0 * dx + e1 * dy), _out(n0 * dx + n1 * dy + n2 * dz)
 
-    def to_geodetic(self, east, north, up=0.0):
-        """(east, north[, up]) metres to (lat, lon, alt)."""
+    def to_geodetic(self, east, north, alt=None):
+        """The place at altitude `alt` (m, default the datum's) whose map coordinates are (east, north): to_enu's
+        inverse, so a map point goes down to the ground, not along the plane (which rises above the ground as
+        d^2 / 2R: 7 km at 300 km from the datum). Newton steps along the plane's up axis on the altitude."""
+        alt = self.alt0 if alt is None else alt
+        scalar = _is_scalar(east, north, alt)
+        if not scalar:
+            east, north, alt = np.broadcast_arrays(*(np.asarray(v, float) for v in (east, north, alt)))
+        sqrt = math.sqrt if scalar else np.sqrt
+        radius = WGS84_A + self.alt0  # the sphere's guess: the ground falls below the plane as the circle does
+        r2 = east * east + north * north
+        up = (alt - self.alt0) - (radius - sqrt(radius * radius - r2 if scalar else np.maximum(radius * radius - r2,
+                                                                                                  0.0)))
+        if scalar and r2 >= radius * radius:
+            up = alt - self.alt0 - radius
+        for _ in range(_GROUND_ITERATIONS):
+            lat, lon, height = self._place(east, north, up)
+            up = up - (height - alt) / self._up_cosine(lat, lon)
+        lat, lon, height = self._place(east, north, up)
+        if scalar:
+            return math.degrees(lat), math.degrees(lon), height
+        return _out(np.degrees(lat)), _out(np.degrees(lon)), _out(height)
+
+    def _place(self, east, north, up):
+        """(east, north, up) in the datum's ENU to geodetic (rad, rad, m): pymap3d's enu2geodetic."""
         (e0, e1, e2), (n0, n1, n2), (u0, u1, u2) = self._rot
-        if not _is_scalar(east, north, up):
-            east, north, up = np.asarray(east, float), np.asarray(north, float), np.asarray(up, float)
         x = self._origin[0] + e0 * east + n0 * north + u0 * up
         y = self._origin[1] + e1 * east + n1 * north + u1 * up
         z = self._origin[2] + e2 * east + n2 * north + u2 * up
-        lat, lon, alt = _geodetic(x, y, z)
-        if _is_scalar(lat, lon, alt):
-            return math.degrees(lat), math.degrees(lon), alt
-        return _out(np.degrees(lat)), _out(np.degrees(lon)), _out(alt)
+        return _geodetic(x, y, z)
+
+    def _up_cosine(self, lat_rad, lon_rad):
+        """The cosine between the plane's up axis and the ground's up at a place: how fast altitude follows it."""
+        u0, u1, u2 = self._rot[2]
+        if _is_scalar(lat_rad, lon_rad):
+            c = math.cos(lat_rad)
+            return max(u0 * c * math.cos(lon_rad) + u1 * c * math.sin(lon_rad) + u2 * math.sin(lat_rad), 0.05)
+        c = np.cos(lat_rad)
+        return np.maximum(u0 * c * np.cos(lon_rad) + u1 * c * np.sin(lon_rad) + u2 * np.sin(lat_rad), 0.05)
+
+    @staticmethod
+    def skew(east: float, north: float) -> Skew:
+        """How the plane bends directions at a map point, for `turn`: the map angle away from the datum and the
+        foreshortening along it; None within 30 km of the datum, where it is under 0.0003 deg."""
+        r2 = east * east + north * north
+        if r2 < _SKEW_FROM_M * _SKEW_FROM_M:
+            return None
+        return math.atan2(north, east), math.sqrt(max(1.0 - r2 / (_MEAN_RADIUS_M * _MEAN_RADIUS_M), 1e-6))
 
     def north_angle(self, lat, lon):
         """ENU angle of true north at (lat, lon): pi/2 at the datum, off by the meridian convergence elsewhere

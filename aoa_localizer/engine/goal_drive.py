@@ -78,7 +78,7 @@ class GoalDrive:
         self.place, self.t = target, t1
         self.odometer_m += distance
         self.legs += 1
-        e_lat, e_lon, _ = self.frame.to_geodetic(emitter[0], emitter[1], 0.0)
+        e_lat, e_lon, _ = self.frame.to_geodetic(emitter[0], emitter[1])
         return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)))
 
 

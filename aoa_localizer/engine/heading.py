@@ -14,7 +14,7 @@ from collections import deque
 from scipy.stats import chi2
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.geodesy import wrap_pi
+from aoa_localizer.engine.geodesy import Skew, turn, wrap_pi
 from aoa_localizer.engine.gps_track import GpsTrack
 
 _KEEP = 4096  # headings kept (IMU samples, or good courses at fixes): minutes at 20-50 Hz
@@ -107,7 +107,7 @@ class TrackHeading:
         if course is not None:
             self.good.add(t, *course)
 
-    def at(self, track: GpsTrack, stamp: float, _north_angle: float) -> tuple[float, float] | None:
+    def at(self, track: GpsTrack, stamp: float, _north_angle: float, _skew: Skew) -> tuple[float, float] | None:
         """The heading (ENU rad) at `stamp` and its sigma (rad), or None. The last good course is held only for a
         vehicle not seen moving: one that moves (faster than three sigmas of its fixes' noise) on a course too
         uncertain, or bent (turning), may have turned away from it."""
@@ -157,7 +157,7 @@ class ImuHeading:
         """False (not used) for a stamp not after the newest one. `sd`: the yaw's sigma (rad; 0: exact)."""
         return self.samples.add(stamp, yaw_rad, sd)
 
-    def at(self, _track: object, stamp: float, north_angle: float) -> tuple[float, float] | None:
+    def at(self, _track: object, stamp: float, north_angle: float, skew: Skew) -> tuple[float, float] | None:
         """The heading (ENU rad) at `stamp` and its sigma (the larger of its samples'), or None."""
         t, h, sd = self.samples.t, self.samples.h, self.samples.sd
         k = bisect.bisect_left(t, stamp)
@@ -171,4 +171,4 @@ class ImuHeading:
             if held is None:
                 return None
             yaw, sigma = held
-        return float(wrap_pi(yaw + north_angle - math.pi / 2)), sigma
+        return turn(north_angle, yaw - math.pi / 2, skew), sigma

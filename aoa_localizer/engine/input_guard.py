@@ -9,6 +9,8 @@
 * `implausible_fix`: what no vehicle's GPS reports: an altitude outside [-1000, 20000] m, a latitude within
   0.01 deg of a pole (no local north), and (0, 0) exactly, the "null island" of receivers without a fix.
 * `confirms`: whether a second fix agrees with a first (the datum is never taken from a single fix).
+* `beyond_map`: a place farther from the datum than the map plane serves (3000 km: docs/design.md, "One map
+  frame").
 """
 from __future__ import annotations
 
@@ -23,6 +25,9 @@ POLE_MARGIN_DEG = 0.01
 _CONFIRM_DISTANCE_M = 100.0  # two fixes agree when closer than this ...
 _CONFIRM_SPEED_MPS = 150.0  # ... plus this speed times the time between them
 _EARTH_RADIUS_M = 6_371_000.0
+# The map plane holds bearings to a fraction of their noise this far from its datum (tests/test_far_from_datum.py);
+# beyond, its foreshortening (26 % at 4500 km) grows past what the engine's turn of the plane corrects well
+MAP_REACH_M = 3_000_000.0
 _SPARSE_WINDOW = 5  # intervals that tell a sparse stream
 # A stamp this far ahead of the wall clock is from no receiver (a year: a computer whose clock lost days or months
 # to a missing RTC battery still takes its GPS-stamped inputs)
@@ -102,17 +107,26 @@ def implausible_fix(lat: float, lon: float, alt: float) -> Reason | None:
     return None
 
 
+def beyond_map(datum: tuple[float, float], lat: float, lon: float) -> bool:
+    """Whether (lat, lon) is farther than MAP_REACH_M from the map's datum (lat, lon) along the ground."""
+    return _arc_m(datum[0], datum[1], lat, lon) > MAP_REACH_M
+
+
+def _arc_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    """The great-circle distance (m) on a sphere of the Earth's mean radius (haversine)."""
+    p1, p2 = math.radians(lat1), math.radians(lat2)
+    dl = math.radians(lon2 - lon1)
+    a = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
+    return 2 * _EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(a)))
+
+
 def confirms(first: tuple[float, float, float], second: tuple[float, float, float], max_gap_s: float) -> bool:
     """Whether fix `second` (stamp, lat, lon) agrees with `first`: at most `max_gap_s` later, and within 100 m
     plus 150 m/s of travel."""
     (t1, lat1, lon1), (t2, lat2, lon2) = first, second
     if not 0 < t2 - t1 <= max_gap_s:
         return False
-    p1, p2 = math.radians(lat1), math.radians(lat2)
-    dl = math.radians(lon2 - lon1)
-    a = math.sin((p2 - p1) / 2) ** 2 + math.cos(p1) * math.cos(p2) * math.sin(dl / 2) ** 2
-    distance = 2 * _EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(a)))
-    return distance <= _CONFIRM_DISTANCE_M + _CONFIRM_SPEED_MPS * abs(t2 - t1)
+    return _arc_m(lat1, lon1, lat2, lon2) <= _CONFIRM_DISTANCE_M + _CONFIRM_SPEED_MPS * abs(t2 - t1)
 
 
 class StampGaps:

@@ -13,10 +13,10 @@ from collections.abc import Callable
 
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.geodesy import LocalFrame, azimuth_to_enu, wrap_pi
+from aoa_localizer.engine.geodesy import LocalFrame, Skew, turn
 from aoa_localizer.engine.gps_track import STILL_MPS, GpsTrack, Where
 from aoa_localizer.engine.heading import ImuHeading, TrackHeading
-from aoa_localizer.engine.input_guard import StreamClock, Verdict, confirms, implausible_fix
+from aoa_localizer.engine.input_guard import StreamClock, Verdict, beyond_map, confirms, implausible_fix
 from aoa_localizer.engine.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.station import Pending, Station
@@ -98,11 +98,14 @@ class Intake:
         east, north = frame.to_enu(lat, lon)
         st.fix_at(float(east), float(north), float(frame.north_angle(lat, lon)), sigma_m)
 
-    @staticmethod
-    def bad_position(lat: float, lon: float, alt: float) -> Reason | None:
+    def bad_position(self, lat: float, lon: float, alt: float) -> Reason | None:
+        """Why a position cannot be used, or None: out of range, implausible, or beyond the map plane's reach."""
         if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
             return Reason.FIX_BAD_POSITION
-        return implausible_fix(lat, lon, alt)
+        why = implausible_fix(lat, lon, alt)
+        if why is None and self.frame is not None and beyond_map((self.frame.lat0, self.frame.lon0), lat, lon):
+            return Reason.FIX_BEYOND_MAP
+        return why
 
     # -- inputs ---------------------------------------------------------------------------------------
     def add_fix(self, stamp, lat, lon, alt, status: int, sigma_m, station: str) -> Closed:
@@ -326,7 +329,7 @@ class Intake:
                 self.reject(Reason.CHANNEL_RETIRED)
                 continue
             east, north, north_angle, gps_sigma, v_east, v_north = at
-            turned = self._theta(st, p.stamp, p.azimuth, north_angle)
+            turned = self._theta(st, p.stamp, p.azimuth, north_angle, LocalFrame.skew(east, north))
             if turned is None:
                 self.reject(Reason.HEADING_UNKNOWN)
                 continue
@@ -345,22 +348,25 @@ class Intake:
             closed += [(channel, group) for group in channel.builder(st.name).add(reading)]
         return closed
 
-    def _theta(self, st: Station, stamp: float, azimuth: float, north_angle: float) -> tuple[float, float] | None:
-        """The reading's ENU angle (rad) from its azimuth as `bearing_reference` defines it, and the sigma of the
-        heading it was turned by (rad); None when a vehicle-relative azimuth has no heading at its stamp."""
+    def _theta(self, st: Station, stamp: float, azimuth: float, north_angle: float,
+               skew: Skew) -> tuple[float, float] | None:
+        """The reading's map angle (rad) from its azimuth as `bearing_reference` defines it, and the sigma of the
+        heading it was turned by (rad); None when a vehicle-relative azimuth has no heading at its stamp. The
+        azimuth turns from north (or the heading) on the ground, and the plane's skew far from the datum says
+        what that turn is on the map (geodesy.turn)."""
         cfg = self.cfg
         if cfg.bearing_reference == "true_north":
-            return float(azimuth_to_enu(azimuth, north_angle)), 0.0
+            return turn(north_angle, -math.radians(azimuth), skew), 0.0
         if cfg.bearing_reference == "magnetic_north":
-            return float(azimuth_to_enu(azimuth + cfg.magnetic_declination_deg, north_angle)), 0.0
+            return turn(north_angle, -math.radians(azimuth + cfg.magnetic_declination_deg), skew), 0.0
         course = st.course_source()
         if isinstance(st.heading, ImuHeading):
-            at = st.heading.at(st.gps, stamp, north_angle)
+            at = st.heading.at(st.gps, stamp, north_angle, skew)
         elif course is not None:
-            at = course[0].at(course[1], stamp, north_angle)
+            at = course[0].at(course[1], stamp, north_angle, skew)
         else:
             return None  # the forward axis, ENU in the map plane
         if at is None:
             return None
         heading, sigma = at
-        return float(wrap_pi(heading - math.radians(azimuth + cfg.mount_offset_deg))), sigma
+        return turn(heading, -math.radians(azimuth + cfg.mount_offset_deg), skew), sigma

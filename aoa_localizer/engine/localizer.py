@@ -19,7 +19,7 @@ import numpy as np
 from aoa_localizer.engine import slices, survey_log
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.geodesy import LocalFrame, ground_to_map
 from aoa_localizer.engine.gps_track import GpsTrack
 from aoa_localizer.engine.intake import Closed, Intake, as_float
 from aoa_localizer.engine.memory import keep_freed_memory
@@ -405,10 +405,13 @@ class Localizer:
         if not _positive_definite(fix.cov):
             self.rejections(Reason.COVARIANCE_DEGENERATE)
             return None
-        east, north = self.datum_frame().to_enu(fix.lat, fix.lon)
+        frame = self.datum_frame()
+        east, north = frame.to_enu(fix.lat, fix.lon)
         track = channel.track
+        to_map = ground_to_map(frame.north_angle(fix.lat, fix.lon), LocalFrame.skew(east, north))
         estimate = Estimate(stamp=track.last_stamp, east=float(east), north=float(north), lat=fix.lat, lon=fix.lon,
-                            cov=np.array(fix.cov), bearings_used=fix.bearings, points_used=track.points_used,
+                            cov=to_map @ fix.cov @ to_map.T, ground_cov=np.array(fix.cov),
+                            bearings_used=fix.bearings, points_used=track.points_used,
                             ess=float("nan"), algorithm="survey", modes=[(float(east), float(north), 1.0)],
                             noise=fix.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
                             warnings=list(fix.warnings), end_of_data=True, regions=fix.regions)
@@ -486,12 +489,15 @@ class Localizer:
         if not _positive_definite(cov):
             self.rejections(Reason.COVARIANCE_DEGENERATE)
             return None
-        lat, lon, _ = self.datum_frame().to_geodetic(mean[0], mean[1])
+        frame = self.datum_frame()
+        lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
+        from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         f = track.cloud
         modes = mode_masses(track)
         state, warnings = assess(track, np.asarray(mean), np.asarray(cov), modes)
         estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
-                            lon=float(lon), cov=np.array(cov), bearings_used=track.bearings_used,
+                            lon=float(lon), cov=np.array(cov), ground_cov=from_map @ np.asarray(cov) @ from_map.T,
+                            bearings_used=track.bearings_used,
                             points_used=track.points_used, ess=f.ess(), algorithm=self.cfg.algorithm,
                             # the user's own copies: the filter's arrays are read-only and shared
                             particles=f.x.copy(), weights=f.weights.copy(), modes=modes,

@@ -61,6 +61,8 @@ class Reason(StrEnum):
     FIX_BAD_ALTITUDE = "fix_bad_altitude", "fix altitude outside -1000..20000 m"
     FIX_NEAR_POLE = "fix_near_pole", "fix within 0.01 deg of a pole (no local north)"
     FIX_NULL_ISLAND = "fix_null_island", "fix at exactly 0, 0 (a receiver without a fix)"
+    FIX_BEYOND_MAP = ("fix_beyond_map", "fix or station more than 3000 km from the map's datum (restart there, or set "
+                      "datum_lat/datum_lon near it)")
     FIX_UNCONFIRMED = ("fix_unconfirmed", "a first fix the next fix contradicts (farther than 100 m + 150 m/s): not "
                        "taken as the datum")
     BAD_HEADING = "bad_heading", "heading stamp or yaw is not a finite number"

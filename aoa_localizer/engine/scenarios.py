@@ -229,7 +229,7 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
     fixes = gps_fixes(sc, frame, rng, t_gps, traj.at(t_gps))
     sensor = traj.at(t_df)
     bearings, sigma, wild, emitter = df_records(sc, frame, rng, t_df, sensor, traj.course(t_df))
-    e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1], 0.0)
+    e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1])
     return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)))
 
 
@@ -240,7 +240,7 @@ def gps_fixes(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_gps: 
     if sc.gps_dropout_prob:
         kept = rng.random(t_gps.size) >= sc.gps_dropout_prob
         t_gps, gps_enu = t_gps[kept], gps_enu[kept]
-    lat, lon, alt = frame.to_geodetic(gps_enu[:, 0], gps_enu[:, 1], np.zeros(t_gps.size))
+    lat, lon, alt = frame.to_geodetic(gps_enu[:, 0], gps_enu[:, 1])
     return np.column_stack([t_gps, lat, lon, alt])
 
 
@@ -250,8 +250,8 @@ def df_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_df: 
     azimuth to the emitter with the scenario's noise, wild bearings and reflector (from the vehicle's forward axis,
     `course` an ENU angle, when the scenario has a mount offset); with each bearing's true sigma, whether it was
     wild, and the emitter's place at the end."""
-    s_lat, s_lon, _ = frame.to_geodetic(sensor[:, 0], sensor[:, 1], np.zeros(t_df.size))
-    e_lat, e_lon, _ = frame.to_geodetic(sc.emitter[0], sc.emitter[1], 0.0)
+    s_lat, s_lon, _ = frame.to_geodetic(sensor[:, 0], sensor[:, 1])
+    e_lat, e_lon, _ = frame.to_geodetic(sc.emitter[0], sc.emitter[1])
     _, az_true = vincenty.vdist(s_lat, s_lon, np.full(t_df.size, e_lat), np.full(t_df.size, e_lon))
     lo, hi = sc.quality
     quality = np.full(t_df.size, lo) if lo == hi else rng.uniform(lo, hi, t_df.size)
@@ -280,6 +280,6 @@ def df_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_df: 
 
 def _azimuths(frame: LocalFrame, sensor: np.ndarray, s_lat, s_lon, target: np.ndarray) -> np.ndarray:
     """Geodesic azimuths (deg) from each sensor position to one ENU target."""
-    t_lat, t_lon, _ = frame.to_geodetic(target[0], target[1], 0.0)
+    t_lat, t_lon, _ = frame.to_geodetic(target[0], target[1])
     _, az = vincenty.vdist(s_lat, s_lon, np.full(sensor.shape[0], t_lat), np.full(sensor.shape[0], t_lon))
     return np.asarray(az, float)

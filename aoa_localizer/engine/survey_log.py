@@ -9,13 +9,14 @@ survey-like; the engine itself never imports the survey model (it sits above the
 """
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from aoa_localizer.engine.geodesy import LocalFrame, enu_to_azimuth
+from aoa_localizer.engine.geodesy import LocalFrame, unturn
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
 
@@ -88,7 +89,9 @@ class SurveyLog:
                 continue
             station, stamp, east, north, theta, north_angle, sigma = (list(c) for c in zip(*rows, strict=True))
             lat, lon, _ = frame.to_geodetic(np.array(east), np.array(north))
-            azimuth = enu_to_azimuth(np.array(theta), np.array(north_angle))
+            # the turn from north on the ground, which far from the datum is not the turn on the map (geodesy.turn)
+            azimuth = [math.degrees(-unturn(t, a, LocalFrame.skew(e, n))) % 360.0
+                       for t, a, e, n in zip(theta, north_angle, east, north, strict=True)]
             out += [SurveyRecord(channel, s, t, float(a), float(o), float(z), g)
                     for s, t, a, o, z, g in zip(station, stamp, np.atleast_1d(lat), np.atleast_1d(lon),
                                                 np.atleast_1d(azimuth), sigma, strict=True)]

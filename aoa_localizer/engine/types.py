@@ -97,6 +97,9 @@ class Estimate:
     warnings: list = field(default_factory=list)
     # The survey model's highest-density regions (level -> rings of (lat, lon)); None from the particle filter
     regions: dict | None = field(repr=False, default=None)
+    # The covariance as east/north at the emitter itself (m^2, emitter/fix's): `cov` is the map plane's, which
+    # the meridian convergence turns and, far from the datum, foreshortens; None: take `cov`
+    ground_cov: np.ndarray | None = field(repr=False, default=None)
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of docs/interface.md (offline replay output)."""

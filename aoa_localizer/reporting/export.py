@@ -46,7 +46,7 @@ def track_name(station: str) -> str:
 
 
 def _lonlat(frame: LocalFrame, enu: np.ndarray) -> list[list[float]]:
-    lat, lon, _ = frame.to_geodetic(enu[:, 0], enu[:, 1], np.zeros(len(enu)))
+    lat, lon, _ = frame.to_geodetic(enu[:, 0], enu[:, 1])
     return [[float(x), float(y)] for x, y in zip(np.atleast_1d(lon), np.atleast_1d(lat), strict=False)]
 
 

@@ -270,7 +270,7 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     estimates = [e for e in estimates if e.channel == est.channel]
     truth = None
     if run.truth is not None and run.datum is not None:
-        lat, lon, _ = LocalFrame(*run.datum).to_geodetic(run.truth[1], run.truth[2], 0.0)
+        lat, lon, _ = LocalFrame(*run.datum).to_geodetic(run.truth[1], run.truth[2])
         truth = tuple(float(v) for v in frame.to_enu(lat, lon))
     tracks = trace.tracks()
     readings = np.array(trace.readings, dtype=float).reshape(-1, 6)

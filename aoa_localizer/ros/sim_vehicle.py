@@ -204,7 +204,7 @@ class SimVehicle(Node):
         """The localizer's goal, from its map frame (at emitter/datum) into the scenario's."""
         if self.node_datum is None:
             return
-        lat, lon, _ = self.node_datum.to_geodetic(msg.pose.position.x, msg.pose.position.y, 0.0)
+        lat, lon, _ = self.node_datum.to_geodetic(msg.pose.position.x, msg.pose.position.y)
         east, north = LocalFrame(*self.datum).to_enu(float(lat), float(lon))
         self.goal = (float(east), float(north))
 
