@@ -41,6 +41,9 @@ from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
 from msgs_adapters.bag_files import BagFiles, BagFilesError
 
 CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by this
+# After the source ends the node is judged once its counts stand still over two /diagnostics, or after this long
+SETTLED_COUNTS = ("fixes_received", "bearings_received", "bearings_used", "points_used")
+SETTLE_MAX_S = 30.0
 
 
 class Stop(Exception):
@@ -52,13 +55,13 @@ class _StopOnce:
     are being stopped) only say so, so the cleanup finishes instead of ending in a traceback."""
 
     def __init__(self):
-        self.stopping = False
+        self.stopping = self.signalled = False
 
     def __call__(self, signum, frame):
         if self.stopping:
             print("launch: already stopping; the children get a few seconds to exit", file=sys.stderr)
             return
-        self.stopping = True
+        self.stopping = self.signalled = True
         raise Stop(signal.Signals(signum).name)
 
 
@@ -213,7 +216,8 @@ class Monitor:
         self.node.create_subscription(T.NavSatFix, "emitter/datum", lambda m: setattr(self, "node_datum", m),
                                       latched)
         self.node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: setattr(self, "fix", m), 10)
-        self.node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: setattr(self, "diag", m), 10)
+        self.node.create_subscription(T.DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.diagnostics_seen = 0
         self.fix = None
         self.recorder = None
         if record is not None:
@@ -227,6 +231,28 @@ class Monitor:
             self.rclpy.spin_once(self.node, timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
             if self.recorder:
                 self.recorder.poll()
+
+    def _on_diagnostics(self, msg) -> None:
+        self.diag, self.diagnostics_seen = msg, self.diagnostics_seen + 1
+
+    def settle(self, at_least_s: float, at_most_s: float) -> bool:
+        """Spin until the node has worked through what it received: two /diagnostics in a row with the same counts
+        (fixes and bearings received and used) and the same newest estimate, after `at_least_s`; False when
+        `at_most_s` passed first (a busy machine's node still working, or a node that says nothing)."""
+        start = time.monotonic()
+        seen, last, same = self.diagnostics_seen, None, 0
+        while time.monotonic() - start < at_most_s:
+            self.spin(0.2)
+            if self.diagnostics_seen == seen:
+                continue
+            seen = self.diagnostics_seen
+            state = self.state()
+            now = (tuple(state.get("diag", {}).get(k) for k in SETTLED_COUNTS), state.get("stamp"),
+                   state.get("east"))
+            same, last = (same + 1 if now == last else 0), now
+            if same >= 1 and time.monotonic() - start >= at_least_s:
+                return True
+        return False
 
     def state(self) -> dict:
         from msgs_adapters.fields import diagnostics_values, estimate_from_pose
@@ -416,7 +442,10 @@ class Run:
         if failure:
             print(f"launch: {failure}", file=sys.stderr)
             return 2
-        monitor.spin(1.5)  # the last observation point closes on the last fixes
+        # the last observation point closes on the last fixes, and a busy node may still be working through its queue
+        if not monitor.settle(1.5, SETTLE_MAX_S):
+            print(f"launch: the node was still working {SETTLE_MAX_S:g} s after the source ended; judging what it "
+                  "published", file=sys.stderr)
         ok, why, figures = verdict(monitor.state(), args.max_ellipse)
         print_result(ok, why, figures)
         if args.result:
@@ -476,8 +505,9 @@ def main(argv=None) -> int:
     finally:
         stop.stopping = True  # a Ctrl-C during the cleanup must not cut it short with a traceback
         run.close()
-        for s, handler in old.items():
-            signal.signal(s, handler)
+        if not stop.signalled:  # once stopped by a signal, a second one on the way out says so and changes nothing
+            for s, handler in old.items():
+                signal.signal(s, handler)
 
 
 def progress_line(state: dict, elapsed: float) -> str:
