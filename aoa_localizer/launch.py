@@ -1,7 +1,10 @@
-"""Entry point of `python -m aoa_localizer.launch`; the program is aoa_localizer.ros.launch."""
+"""Entry point of `python -m aoa_localizer.launch`: the program is aoa_localizer.ros.launch, a Ctrl-C while it
+loads is common/start_up.py's."""
 import sys
 
-from aoa_localizer.ros.launch import main
+from aoa_localizer.common.start_up import program
+
+main = program("launch", "aoa_localizer.ros.launch", interrupted=2)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,7 +1,10 @@
-"""Entry point of `python -m aoa_localizer.replay`; the program is aoa_localizer.tools.replay."""
+"""Entry point of `python -m aoa_localizer.replay`: the program is aoa_localizer.tools.replay, a Ctrl-C while it
+loads is common/start_up.py's."""
 import sys
 
-from aoa_localizer.tools.replay import main
+from aoa_localizer.common.start_up import program
+
+main = program("replay", "aoa_localizer.tools.replay", interrupted=130)
 
 if __name__ == "__main__":
     sys.exit(main())

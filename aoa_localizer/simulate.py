@@ -1,7 +1,10 @@
-"""Entry point of `python -m aoa_localizer.simulate`; the program is aoa_localizer.tools.simulate."""
+"""Entry point of `python -m aoa_localizer.simulate`: the program is aoa_localizer.tools.simulate, a Ctrl-C while it
+loads is common/start_up.py's."""
 import sys
 
-from aoa_localizer.tools.simulate import main
+from aoa_localizer.common.start_up import program
+
+main = program("simulate", "aoa_localizer.tools.simulate", interrupted=130)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
-from aoa_localizer.engine import slices, survey_log
+from aoa_localizer.engine import slices, survey_solver
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, ground_to_map
@@ -394,7 +394,7 @@ class Localizer:
 
     def _survey_end(self) -> dict[str, SurveyFix]:
         """The survey model's fixes of the survey-like channels (survey_log.py), {} without any or a solver."""
-        solve = survey_log.solver()
+        solve = survey_solver.solver()
         if solve is None or self.intake.frame is None:
             return {}
         records = self.intake.survey_log.survey_records(self.intake.frame)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,19 +48,6 @@ class SurveyFix:
     stations: int
     noise: dict  # the pooled calibration of the fix's group: station error, wild share, receivers' biases
     regions: dict  # level -> rings of (lat, lon): the highest-density regions
-
-
-SurveySolver = Callable[[list[SurveyRecord], str], dict[str, SurveyFix]]
-_solver: list[SurveySolver] = []
-
-
-def install_solver(solver: SurveySolver) -> None:
-    """Set the survey model the end of data calls (the package installs aoa_localizer.pooled's)."""
-    _solver[:] = [solver]
-
-
-def solver() -> SurveySolver | None:
-    return _solver[0] if _solver else None
 
 
 class SurveyLog:
