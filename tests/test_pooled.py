@@ -469,3 +469,23 @@ def test_a_time_that_is_no_number_is_named_by_line_and_a_column_named_twice_is_r
     path.write_text("time,lat,LAT,lon,azimuth_deg\n1,48.35,10,-53.98,10\n")
     res = cli(locate.main, path)
     assert res.returncode == 2 and "names lat more than once" in res.stderr
+
+
+def test_times_in_milliseconds_are_read_as_such_and_said(tmp_path, cli):
+    """Epoch milliseconds (a receiver's log, a JavaScript tool): every row's time is one, so they are read as
+    milliseconds, with a line that says so, and the filter path locates the id as the same rows in seconds do
+    (issue 51, item 14: `bearing_stamp_jump ... 0 of 3 points`)."""
+    seconds = _square_csv(tmp_path / "s.csv")
+    lines = seconds.read_text().splitlines()
+    ms = tmp_path / "ms.csv"
+    ms.write_text("\n".join([lines[0]] + [f"{int(float(row.split(',')[0]) * 1000)},{row.split(',', 1)[1]}"
+                                          for row in lines[1:]]) + "\n")
+    got = {}
+    for path in (seconds, ms):
+        res = cli(locate.main, path, "--model", "filter", "--output", tmp_path / f"{path.stem}.jsonl")
+        assert res.returncode == 0, res.stderr
+        assert ("milliseconds since 1970" in res.stderr) == (path is ms)
+        got[path.stem] = json.loads((tmp_path / f"{path.stem}.jsonl").read_text())
+    a, b = got["ms"], got["s"]  # the filter's particles: within its Monte Carlo spread, not to the bit
+    assert math.hypot(*LocalFrame(a["lat"], a["lon"]).to_enu(b["lat"], b["lon"])) < 0.2 * math.sqrt(
+        max(np.linalg.eigvalsh(np.array(b["cov"]))))

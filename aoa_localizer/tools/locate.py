@@ -84,8 +84,14 @@ def _number(row: dict, name: str, required: bool = True, decimal_comma: bool = F
     return value
 
 
+# Epoch times in this range are milliseconds (as seconds they would be after the year 5138; a receiver's log or a
+# JavaScript tool writes them): every row's must be, or none is read so
+_MILLISECONDS = (1e11, 1e14)
+
+
 def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
-    """The survey's good rows and one message per bad row (with its line number); raises OSError, ValueError."""
+    """The survey's good rows and one message per bad row (with its line number), and a note when every time is in
+    milliseconds (then read as such); raises OSError, ValueError."""
     to_wgs84 = _projection(crs)
     rows, bad = [], []
     with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -107,6 +113,9 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
                                  to_wgs84, comma))
             except ValueError as exc:
                 bad.append(f"{path}:{reader.line_num}: {exc}; row skipped")
+    if rows and all(_MILLISECONDS[0] <= r.stamp < _MILLISECONDS[1] for r in rows):
+        bad.append(f"{path}: the times look like milliseconds since 1970 ({rows[0].stamp:.6g}): read as such")
+        rows = [replace(r, stamp=r.stamp / 1000.0) for r in rows]
     return rows, bad
 
 
