@@ -7,6 +7,7 @@ Each storage file is read by rosbags on its own (bag_files); a damaged MCAP file
 from __future__ import annotations
 
 import logging
+import re
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -36,6 +37,8 @@ log = logging.getLogger("aoa_localizer.bag")
 
 TOPICS = {"fix": "/gps/fix", "bearing": "/df/bearing", "truth": "/sim/truth", "datum": "/sim/datum",
           "heading": "/heading/imu"}
+# One transmitter's truth among several (a channel's, as the node names them: /sim/f446000000/truth)
+CHANNEL_TRUTH = re.compile(r"^/sim/(?P<channel>[A-Za-z][A-Za-z0-9_]*)/truth$")
 _TYPES = {"fix": "sensor_msgs/msg/NavSatFix", "bearing": "geometry_msgs/msg/Vector3Stamped",
           "truth": "geometry_msgs/msg/PointStamped", "datum": "sensor_msgs/msg/NavSatFix"}
 
@@ -84,11 +87,13 @@ class BagEvent:
     log_time_ns: int
     record: Any
     station: str = ""  # the station whose topic carried it ("": the default topics)
+    channel: str = ""  # a truth's channel (CHANNEL_TRUTH; "": the bag's one /sim/truth)
 
 
 def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None, stations=None):
     """Write fixes (stamp, lat, lon, alt rows), DF records (stamp, azimuth, quality[, frequency] rows) and, for
-    simulated runs, the truth (/sim/truth, ENU in `map`) and the datum (/sim/datum) as a rosbag2 MCAP bag.
+    simulated runs, the truth (ENU in `map`: one (east, north) on /sim/truth, or {channel: (east, north)}, each
+    transmitter's on /sim/CHANNEL/truth) and the datum (/sim/datum) as a rosbag2 MCAP bag.
     `stations` ({NAME: (fixes, bearings)}) adds each station's on /NAME/gps/fix and /NAME/df/bearing."""
     ts = typestore()
     T = build.rosbags_types(ts)
@@ -101,9 +106,10 @@ def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None, sta
         messages += [(b[0], prefix + TOPICS["bearing"], "bearing", build.df_record(T, b[0], b[1], b[2], *b[3:4]))
                      for b in its_bearings]
     t0 = min(m[0] for m in messages) if messages else 0.0
-    if truth_enu is not None:
-        truth = build.point_stamped(T, t0, float(truth_enu[0]), float(truth_enu[1]))
-        messages.append((t0, TOPICS["truth"], "truth", truth))
+    truths = truth_enu if isinstance(truth_enu, dict) else {} if truth_enu is None else {"": truth_enu}
+    for channel, (east, north) in truths.items():
+        topic = f"/sim/{channel}/truth" if channel else TOPICS["truth"]
+        messages.append((t0, topic, "truth", build.point_stamped(T, t0, float(east), float(north))))
     if datum is not None:
         origin = build.navsatfix(T, t0, datum[0], datum[1], datum[2], frame_id="map")
         messages.append((t0, TOPICS["datum"], "datum", origin))
@@ -217,10 +223,13 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None,
             inventory = reader.topics()
             stations = stations or found_stations(path, inventory, topics)
             by_topic = {t: (k, "") for k, t in topics.items()}
+            channel_of = {t.name: m["channel"] for t in inventory if (m := CHANNEL_TRUTH.match(t.name))}
+            by_topic.update((name, ("truth", "")) for name in channel_of)
             needed = [topics]
             if stations:
                 by_topic = {t: (k, "") for k, t in topics.items() if k not in ("fix", "bearing", "heading")}
                 by_topic.update({t: (k, name) for name, its in stations.items() for k, t in its.items()})
+                by_topic.update((name, ("truth", "")) for name in channel_of)
                 needed = list(stations.values())
             for need in needed:
                 if not {need["fix"], need["bearing"]} <= {t.name for t in inventory}:
@@ -241,7 +250,7 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None,
                                              f"({type(exc).__name__}: {exc})")
                         reader.lost += 1
                         continue
-                    yield BagEvent(kind, msg.log_time, _convert(kind, decoded), station)
+                    yield BagEvent(kind, msg.log_time, _convert(kind, decoded), station, channel_of.get(msg.topic, ""))
                 count += 1
     except BagFilesError as exc:
         raise BagError(str(exc)) from exc

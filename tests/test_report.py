@@ -205,6 +205,34 @@ def test_a_report_of_two_stations_and_two_emitters_draws_and_exports_each(tmp_pa
 
 
 @pytest.mark.slow
+def test_each_transmitter_of_a_bag_is_scored_against_its_own_truth(tmp_path, cli):
+    """`simulate --emitters` writes each transmitter's truth on /sim/CHANNEL/truth; replay and report score each
+    channel against its own (issue 53, item 2: the second was scored against the first's, 854 m). A bag whose one
+    /sim/truth names no transmitter is scored against none of several channels, and says so."""
+    from aoa_localizer.engine.fleet import PAIR, simulate_fleet
+    from aoa_localizer.report import main as report_main
+    from aoa_localizer.tools import replay
+    from msgs_adapters.bag import write_bag
+
+    emitters = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}
+    fleet = simulate_fleet(PAIR, emitters, 0)
+    stations = {name: (fleet.fixes[name], fleet.bearings[name]) for name in PAIR}
+    write_bag(tmp_path / "own", [], [], {f"f{int(f)}": e for f, e in emitters.items()}, fleet.scenario.datum,
+              stations=stations)
+    write_bag(tmp_path / "one", [], [], emitters[433.92e6], fleet.scenario.datum, stations=stations)
+    res = cli(replay.main, tmp_path / "own", "--offline", "--seed", "1", "--output", tmp_path / "own.jsonl")
+    assert res.returncode == 0, res.stderr
+    for f, (east, north) in emitters.items():
+        line = next(x for x in res.stderr.splitlines() if x.startswith(f"channel f{int(f)}: error against"))
+        assert f"(E {east:.1f} m, N {north:.1f} m" in line and float(line.split()[-2]) < 10.0
+    assert report_main([str(tmp_path / "own"), "--out", str(tmp_path / "r"), "--seed", "1"]) == 0
+    summary = (tmp_path / "r/summary.md").read_text()
+    assert "inside its ellipse" in summary and "Final error against the truth" in summary
+    res = cli(replay.main, tmp_path / "one", "--offline", "--seed", "1", "--output", tmp_path / "one.jsonl")
+    assert "error against" not in res.stderr and "names no transmitter" in res.stderr, res.stderr
+
+
+@pytest.mark.slow
 def test_the_map_draws_the_posterior_grid_where_it_lies(tmp_path, monkeypatch):
     """map.png carries emitter/posterior's layer: an image on the map at the grid's place, and on the zoom at its
     place relative to the estimate."""

@@ -14,9 +14,9 @@ from aoa_localizer.engine.localizer import Localizer
 from msgs_adapters.bag import BagError, read_bag
 
 
-def summary(loc: Localizer, truth, datum) -> list[str]:
+def summary(loc: Localizer, truths: dict[str, tuple], datum) -> list[str]:
     """Human-readable closing lines: the estimate (one line per channel when frequencies were heard), ellipse,
-    counts, and error when the bag carries the truth."""
+    counts, and each channel's error when the bag carries its truth (truth_of)."""
     lines = []
     heard = [c for c in loc.channels.all() if c.estimate is not None]
     if not heard:
@@ -24,7 +24,11 @@ def summary(loc: Localizer, truth, datum) -> list[str]:
     for channel in heard:
         label = "" if channel.id == DEFAULT and len(heard) == 1 else (
             f"channel {channel.id}{' (retired)' if channel.retired else ''}: ")
+        truth = truth_of(truths, channel.id, len(heard))
         lines += [label + line for line in _estimate_lines(loc, channel.estimate, truth, datum)]
+    if "" in truths and len(heard) > 1 and not set(truths) & {c.id for c in heard}:
+        lines.append(f"the bag's truth (/sim/truth) names no transmitter: not scored against the {len(heard)} "
+                     "channels (a bag with several writes each one's on /sim/CHANNEL/truth)")
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(loc.rejected.items())) or "none"
     lines.append(f"inputs not used: {rejected}")
     return lines + loc.robustness_lines()
@@ -47,11 +51,20 @@ def _estimate_lines(loc: Localizer, est, truth, datum) -> list[str]:
     return lines
 
 
+def truth_of(truths: dict[str, tuple], channel: str, channels: int) -> tuple | None:
+    """The truth a channel is scored against: its own, or the bag's one /sim/truth when the run heard one channel
+    (a truth that names no transmitter cannot be matched among several)."""
+    if channel in truths:
+        return truths[channel]
+    return truths.get("") if channels == 1 else None
+
+
 class BagRun:
     """What running a bag through the engine left: the truth and datum it carried, and the damage if any."""
 
     def __init__(self):
-        self.truth = None  # (stamp, east, north) in the scenario's map
+        # (stamp, east, north) in the scenario's map: each transmitter's by its channel, "" the bag's one /sim/truth
+        self.truths: dict[str, tuple] = {}
         self.datum = None  # (lat, lon, alt) of that map
         self.damage: str | None = None
         self.messages = 0
@@ -78,7 +91,7 @@ def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay"
                     bar.update()
                     result.messages += 1
                     if event.kind == "truth":
-                        result.truth = event.record
+                        result.truths[event.channel] = event.record
                     elif event.kind == "datum":
                         result.datum = (event.record.lat, event.record.lon, event.record.alt)
                     elif event.kind == "foreign":

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoa_localizer.common.bag_run import run_bag
+from aoa_localizer.common.bag_run import run_bag, truth_of
 from aoa_localizer.common.cli import (
     HelpFormatter,
     add_engine_args,
@@ -120,7 +120,16 @@ def error_series(estimates, readings: np.ndarray, truth) -> tuple[np.ndarray, np
     return t, err, bound, major
 
 
-def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, truth, bound, damage, others=()):
+def _error_words(est: Estimate, truth) -> str:
+    """An estimate's error against its truth (map m) and whether its 95 % ellipse holds it; "-" without one."""
+    if truth is None:
+        return "-"
+    err = np.array([est.east - truth[0], est.north - truth[1]])
+    return f"{math.hypot(*err):.2f} m, {'inside' if inside_ellipse(err, est.cov) else 'outside'} its ellipse"
+
+
+def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, truth, bound, damage, others=(),
+                  truths=None):
     a, b, azimuth = ellipse_axes(est.cov)
     used = int(sum(1 for r in trace.readings if r[5]))
     lines = [
@@ -158,10 +167,11 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
             )
         )
     if others:
-        lines += ["", "## Other emitters (channels)", "", "| channel | frequency | estimate | 95 % ellipse | points |",
-                  "|---|---|---|---|---|"]
+        lines += ["", "## Other emitters (channels)", "", "| channel | frequency | estimate | 95 % ellipse | points | "
+                  "error against its truth |", "|---|---|---|---|---|---|"]
         lines += [f"| `{e.channel}` | {_mhz(e.frequency_hz)} | {e.lat:.7f}, {e.lon:.7f} | "
-                  f"{ellipse_axes(e.cov)[0]:.1f} x {ellipse_axes(e.cov)[1]:.1f} m | {e.points_used} |" for e in others]
+                  f"{ellipse_axes(e.cov)[0]:.1f} x {ellipse_axes(e.cov)[1]:.1f} m | {e.points_used} | "
+                  f"{_error_words(e, (truths or {}).get(e.channel))} |" for e in others]
         lines.append("")
     events = {k: v for k, v in loc.events.items() if k != "alarm_points"}
     if events:
@@ -268,10 +278,13 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     frame, est = loc.datum_frame(), estimates[-1]
     finals = list({e.channel: e for e in estimates}.values())  # each channel's last estimate
     estimates = [e for e in estimates if e.channel == est.channel]
-    truth = None
-    if run.truth is not None and run.datum is not None:
-        lat, lon, _ = LocalFrame(*run.datum).to_geodetic(run.truth[1], run.truth[2])
-        truth = tuple(float(v) for v in frame.to_enu(lat, lon))
+    truths = {}  # each channel's truth (bag_run.truth_of), in the engine's map
+    for e in finals:
+        of = truth_of(run.truths, e.channel, len(finals))
+        if of is not None and run.datum is not None:
+            lat, lon, _ = LocalFrame(*run.datum).to_geodetic(of[1], of[2])
+            truths[e.channel] = tuple(float(v) for v in frame.to_enu(lat, lon))
+    truth = truths.get(est.channel)
     tracks = trace.tracks()
     readings = np.array(trace.readings, dtype=float).reshape(-1, 6)
     kept = readings[:, 5].astype(bool)
@@ -288,7 +301,7 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     enu = {name: rows[:, 1:3] for name, rows in tracks.items()}
     (args.out / "emitter.kml").write_text(export.kml(frame, finals, enu))
     (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, finals, enu), indent=1))
-    write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage, others)
+    write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage, others, truths)
 
 
 if __name__ == "__main__":

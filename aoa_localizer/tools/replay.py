@@ -101,7 +101,7 @@ def _told(loc: Localizer, run, written: int, output: str) -> int:
     """The run's summary on stderr, and the exit code: 1 for a damaged bag, 3 without an estimate."""
     if run.damage:
         print(f"replay: {run.damage}", file=sys.stderr)
-    for line in summary(loc, run.truth, run.datum):
+    for line in summary(loc, run.truths, run.datum):
         print(line, file=sys.stderr)
     if run.foreign:
         print("messages of a type their topic should not carry, skipped: "

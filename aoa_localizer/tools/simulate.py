@@ -132,8 +132,9 @@ def run_fleet(args) -> int:
         from msgs_adapters.bag import write_bag
 
         named = {n: (data.fixes[n], data.bearings[n]) for n in stations if n}
-        write_bag(args.write_bag, data.fixes.get("", []), data.bearings.get("", []), next(iter(emitters.values())),
-                  data.scenario.datum, stations=named)
+        truths = {channel_id(f) if f else "": where for f, where in emitters.items()}  # each one by its channel
+        write_bag(args.write_bag, data.fixes.get("", []), data.bearings.get("", []), truths, data.scenario.datum,
+                  stations=named)
         print(f"bag written to {args.write_bag}")
     loc = Localizer(cfg)
     feed_fleet(loc, data)
