@@ -995,3 +995,33 @@ def test_a_whole_number_for_a_decimal_parameter_is_that_decimal_at_start_and_at_
         assert [(v.type, v.double_value) for v in got.values] == [(ParameterType.PARAMETER_DOUBLE, 200.0),
                                                                   (ParameterType.PARAMETER_DOUBLE, 3.0)]
     assert node_p.poll() is None
+
+
+def test_a_domain_with_another_graph_is_refused_and_its_publishers_named(domain):
+    """Issue 53, item 1: a launcher in a domain where another graph publishes (here a client on gps/fix) is refused
+    with exit 2, naming it, before it starts anything; the run's messages would have mixed with the other's."""
+    with client(domain, name="other_graph") as (node, executor):
+        pub = node.create_publisher(T.NavSatFix, "gps/fix", 10)
+        spin_until(executor, lambda: False, 0.5)
+        res = launch(["--scenario", "seed", "--speedup", 40, "--domain-id", domain], timeout=60)
+        assert pub is not None
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert f"ROS_DOMAIN_ID {domain} already has publishers" in res.stderr and "other_graph on /gps/fix" in res.stderr
+    assert "logs in" not in res.stdout  # nothing was started
+
+
+def test_two_sources_on_one_input_topic_are_named_in_the_diagnostics(spawn, domain):
+    """Issue 53, item 1: the node says when one of its inputs has more than one publisher (another graph in its
+    domain, or two receivers on one station's topic): WARN, `input_publishers` naming both."""
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "diagnostics_period_s:=0.3"], domain)
+    with client(domain, name="receiver_a") as (a, executor), client(domain, name="receiver_b") as (b, other):
+        a.create_publisher(T.Vector3Stamped, "df/bearing", 10)
+        b.create_publisher(T.Vector3Stamped, "df/bearing", 10)
+        diag: dict = {}
+        a.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
+            diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        assert spin_until(executor, lambda: "input_publishers" in diag, 20), json.dumps(diag)
+        other.spin_once(timeout_sec=0.01)
+    assert "/df/bearing has 2 publishers" in diag["input_publishers"] and diag["level"] == "1"
+    assert "/receiver_a" in diag["input_publishers"] and "/receiver_b" in diag["input_publishers"]
+    assert node_p.poll() is None

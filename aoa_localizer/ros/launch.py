@@ -44,6 +44,10 @@ CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by thi
 # After the source ends the node is judged once its counts stand still over two /diagnostics, or after this long
 SETTLED_COUNTS = ("fixes_received", "bearings_received", "bearings_used", "points_used")
 SETTLE_MAX_S = 30.0
+# A domain is another graph's when someone publishes on a topic ending so; the launcher picks this many at most
+RUN_TOPICS = ("gps/fix", "df/bearing", "sim/truth", "emitter/pose")
+DOMAIN_TRIES = 5
+_UNNAMED = "_NODE_NAME_UNKNOWN_"  # rmw's name for a node whose endpoints came before its name
 
 
 class Stop(Exception):
@@ -401,13 +405,54 @@ def refusal(args) -> str | None:
     return None
 
 
-def enter_domain(args) -> int:
-    """The run's own ROS domain (never 0 unless asked), set for this process and its children."""
-    domain = args.domain_id if args.domain_id is not None else \
-        random.Random(os.getpid() ^ time.time_ns()).randint(1, 101)
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
+def enter_domain(args) -> tuple[int | None, str]:
+    """The run's own ROS domain (never 0 unless asked), set for this process and its children, and what was said of
+    it. A domain the launcher picks must have no publisher on the run's topics (another graph there would mix its
+    messages into the run: it picks again); a domain the user gave that has them is refused (None, and why)."""
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    return domain
+    if args.domain_id is not None:
+        others = foreign_publishers(args.domain_id)
+        if others:
+            return None, (f"ROS_DOMAIN_ID {args.domain_id} already has publishers on this run's topics ({others}): "
+                          "their messages would mix with the run's; choose another --domain-id, or leave it out to "
+                          "get a free one")
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+        return args.domain_id, ""
+    pick = random.Random(os.getpid() ^ time.time_ns())
+    said: list[str] = []
+    for _ in range(DOMAIN_TRIES):
+        domain = pick.randint(1, 101)
+        others = foreign_publishers(domain)
+        if not others:
+            os.environ["ROS_DOMAIN_ID"] = str(domain)
+            return domain, "; ".join(said)
+        said.append(f"ROS_DOMAIN_ID {domain} is in use ({others}): picked another")
+    return None, "; ".join(said) + f"; no free domain in {DOMAIN_TRIES} tries: give one with --domain-id"
+
+
+def foreign_publishers(domain: int, wait_s: float = 0.8) -> str:
+    """Who publishes on a run's topics (a GPS fix, a DF bearing, the simulation's truth, the node's pose) in
+    `domain`, as "node on topic, ..." ("" when nobody does within `wait_s` of discovery)."""
+    import rclpy
+    from rclpy.context import Context
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    try:
+        node = rclpy.create_node("aoa_launch_probe", context=ctx)
+        found: list[str] = []
+        start = time.monotonic()
+        # an endpoint is often discovered before its node's name: wait a little longer for the name
+        while time.monotonic() - start < (2.0 * wait_s if found else wait_s):
+            time.sleep(0.1)
+            found = [f"{i.node_name} on {topic}" for topic, _ in node.get_topic_names_and_types()
+                     if topic.endswith(RUN_TOPICS) for i in node.get_publishers_info_by_topic(topic)]
+            if found and not any(_UNNAMED in f for f in found):
+                break
+        node.destroy_node()
+        return ", ".join(sorted(set(found))[:5])
+    finally:
+        rclpy.try_shutdown(context=ctx)
 
 
 class Run:
@@ -490,21 +535,27 @@ def main(argv=None) -> int:
     if problem:
         print(f"launch: {problem}", file=sys.stderr)
         return 2
-    domain = enter_domain(args)
-    logdir = Path(tempfile.mkdtemp(prefix="aoa_launch_"))
-    run = Run(args, logdir)
-    source = args.bag if args.bag else f"scenario {args.scenario} at {args.speedup:g}x"
-    print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {run.source_name}: {source}", flush=True)
     stop = _StopOnce()
     old = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
+    run = None
     try:
+        domain, said = enter_domain(args)
+        if said:
+            print(f"launch: {said}", file=sys.stderr, flush=True)
+        if domain is None:
+            return 2
+        logdir = Path(tempfile.mkdtemp(prefix="aoa_launch_"))
+        run = Run(args, logdir)
+        source = args.bag if args.bag else f"scenario {args.scenario} at {args.speedup:g}x"
+        print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {run.source_name}: {source}", flush=True)
         return run.execute()
     except Stop as exc:
         print(f"launch: stopped by {exc}", file=sys.stderr)
         return 2
     finally:
         stop.stopping = True  # a Ctrl-C during the cleanup must not cut it short with a traceback
-        run.close()
+        if run is not None:
+            run.close()
         if not stop.signalled:  # once stopped by a signal, a second one on the way out says so and changes nothing
             for s, handler in old.items():
                 signal.signal(s, handler)

@@ -187,6 +187,7 @@ class LocalizerNode(Node):
         refuse_unknown(self)
         self.cfg = self._config_from({})
         self.pending_params: dict = {}  # the first parameters of a group set together, held until it is complete
+        self.crowded_said: list[str] = []  # the input topics with more than one source, as last logged
 
     def _init_inputs(self):
         """Each station's gps/fix and df/bearing (and heading/imu for a vehicle-relative array with an IMU), with
@@ -402,18 +403,32 @@ class LocalizerNode(Node):
 
     def diagnostics(self) -> tuple[int, str, dict]:
         """(level, message, values) of the localizer's state, as published on /diagnostics (NodeMonitor)."""
-        return self.monitor.diagnostics(self.loc, self._now(), self.pending_params, self._wrong_publishers())
+        problems = self._publisher_problems()
+        if problems["input_publishers"] != self.crowded_said:  # said in the log once each time it changes
+            self.crowded_said = problems["input_publishers"]
+            for words in self.crowded_said:
+                self.get_logger().warning(words)
+        return self.monitor.diagnostics(self.loc, self._now(), self.pending_params, problems)
 
-    def _wrong_publishers(self) -> list[str]:
-        """Publishers on our input topics with another message type (DDS never delivers them)."""
-        out = []
+    def _publisher_problems(self) -> dict[str, list[str]]:
+        """What is wrong with the publishers on our input topics, by diagnostics key: `wrong_encoding`, another
+        message type (DDS never delivers them); `input_publishers`, more than one node on one topic (two sources
+        mixed into one station: another graph in this ROS_DOMAIN_ID, or receivers that need a station each)."""
+        out: dict[str, list[str]] = {"wrong_encoding": [], "input_publishers": []}
         for sub, want in self.subs:
             topic = sub.topic_name
-            for info in self.get_publishers_info_by_topic(topic):
+            infos = self.get_publishers_info_by_topic(topic)
+            for info in infos:
                 if info.topic_type != want:
                     hint = next((f": start the node with -p bearing_encoding:={encoding}"
                                  for encoding, kind in INPUT_TYPES.items() if kind == info.topic_type), "")
-                    out.append(f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}{hint}")
+                    out["wrong_encoding"].append(
+                        f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}{hint}")
+            nodes = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos if i.topic_type == want})
+            if len(nodes) > 1:
+                out["input_publishers"].append(
+                    f"{topic} has {len(nodes)} publishers ({', '.join(nodes[:5])}); one source is expected: another "
+                    "graph in this ROS_DOMAIN_ID, or receivers that need a station each (stations)")
         return out
 
     def on_idle(self):

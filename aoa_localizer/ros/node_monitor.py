@@ -107,10 +107,11 @@ class NodeMonitor:
         self.other_s = self.period_start - t0
 
     # -- /diagnostics ---------------------------------------------------------------------------------
-    def diagnostics(self, loc: Localizer, now: float, held: dict, wrong: list[str]) -> tuple[int, str, dict]:
+    def diagnostics(self, loc: Localizer, now: float, held: dict, wrong: dict[str, list[str]]) -> tuple[int, str, dict]:
         """(level, message, values) of the localizer's state: WARN before the first estimate, while a global check
         runs, and while any warning holds (its words join the message); ERROR while the filter keeps restarting.
-        `held`: parameters waiting for the rest of their group; `wrong`: publishers of the wrong type."""
+        `held`: parameters waiting for the rest of their group; `wrong`: what is wrong with the inputs' publishers,
+        by diagnostics key (Node._publisher_problems)."""
         values = self._state_values(loc)
         values.update(self._robustness_values(loc))
         if held:
@@ -178,11 +179,12 @@ class NodeMonitor:
         period = max(time.perf_counter() - self.period_start, self.period_s())
         return (sum(self.callback_s) + self.other_s) / period
 
-    def _warnings(self, loc: Localizer, wrong: list[str]) -> list[tuple[str, str, str]]:
+    def _warnings(self, loc: Localizer, wrong: dict[str, list[str]]) -> list[tuple[str, str, str]]:
         """(key, value, words for the status message) of each warning that holds now."""
         out = []
-        if wrong:
-            out.append(("wrong_encoding", "; ".join(wrong), wrong[0]))
+        for key, problems in wrong.items():  # a publisher of another type; more than one source on one input topic
+            if problems:
+                out.append((key, "; ".join(problems), problems[0]))
         overload = self._overload(loc)
         if overload:
             out.append(("overload", overload, "the node cannot keep up with its inputs"))
