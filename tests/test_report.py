@@ -228,6 +228,7 @@ def test_each_transmitter_of_a_bag_is_scored_against_its_own_truth(tmp_path, cli
     assert report_main([str(tmp_path / "own"), "--out", str(tmp_path / "r"), "--seed", "1"]) == 0
     summary = (tmp_path / "r/summary.md").read_text()
     assert "inside its ellipse" in summary and "Final error against the truth" in summary
+    assert "The receiver over its channels**: " in summary  # both channels calibrated: the pool is named
     res = cli(replay.main, tmp_path / "one", "--offline", "--seed", "1", "--output", tmp_path / "one.jsonl")
     assert "error against" not in res.stderr and "names no transmitter" in res.stderr, res.stderr
 

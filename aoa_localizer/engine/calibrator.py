@@ -19,6 +19,7 @@ from aoa_localizer.engine.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.point_batch import Built, PointBatch, offset_point, sigmas
 from aoa_localizer.engine.preprocess import columns, make_point
 from aoa_localizer.engine.receiver import NoiseGrid
+from aoa_localizer.engine.receiver_pool import PooledNoise
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.slices import run_whole
 from aoa_localizer.engine.track_state import WindowEntry
@@ -48,7 +49,23 @@ class Calibrator:
         self.held_course = math.nan  # the course the newest point's readings ended on
         if cfg.noise == "unknown" and cfg.likelihood == "mixture":
             self.grid = NoiseGrid.for_config(cfg)
+        # The receiver's calibration pooled over its other channels (Channels.pooled_noise), asked once, at the
+        # track's first search; `pooled` what it said (None: nothing was pooled)
+        self.pool: Callable[[], PooledNoise | None] | None = None
+        self.pooled: PooledNoise | None = None
+        self._pool_asked = False
         self._summary: tuple[NoiseModel, int, float, dict] | None = None  # (model, fits, share, summary)
+
+    def noise_prior(self) -> NoiseGrid | None:
+        """The latent noise the track's searches and filter use (None once the readings calibrated it): the weak
+        prior, or, from the track's first search on, the receiver's pooled calibration when other channels have
+        one. Taken once, so the searches and the filter always agree on it."""
+        if self.grid is not None and not self._pool_asked:
+            self._pool_asked = True
+            pooled = self.pool() if self.pool is not None else None
+            if pooled is not None:
+                self.grid, self.pooled = NoiseGrid.for_config(self.cfg, pooled), pooled
+        return self.grid
 
     def sigmas(self, readings: list[Reading]) -> np.ndarray:
         """Each reading's sigma under the calibrated noise model (the configured one until calibrated)."""

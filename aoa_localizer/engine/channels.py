@@ -10,6 +10,7 @@ import numpy as np
 
 from aoa_localizer.engine.config import FREQUENCY_MAX_HZ, LocalizerConfig
 from aoa_localizer.engine.preprocess import PointBuilder
+from aoa_localizer.engine.receiver_pool import PooledNoise, pooled_noise
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.track import EmitterTrack
@@ -90,8 +91,15 @@ class Channels:
         else:
             rng = np.random.default_rng([self.cfg.seed, zlib.crc32(cid.encode())])
         channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.scheduler, self._first_point(cid))
+        channel.track.calibration.pool = lambda: self.pooled_noise(but=channel)
         self.live[cid] = channel
         return channel
+
+    def pooled_noise(self, but: Channel | None = None) -> PooledNoise | None:
+        """The receiver's noise as the channels that calibrated theirs show it (receiver_pool.py; `but` left out):
+        one receiver hears every channel of a Localizer."""
+        return pooled_noise(c.track.calibration.noise for c in (*self.live.values(), *self.retired.values())
+                            if c is not but)
 
     def _first_point(self, cid: str) -> float:
         """Carriers of one scan share their stamps, so their points would all close at the same reading and make a

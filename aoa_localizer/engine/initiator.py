@@ -205,7 +205,7 @@ class Initiator:
         configured one."""
         t = self.track
         model = EmitterModel(self.cfg)
-        model.grid = t.calibration.grid
+        model.grid = t.calibration.noise_prior()
         cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
         f = make_filter(cfg, t.rng, model)
         t.scheduler.take(f)

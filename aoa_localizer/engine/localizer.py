@@ -27,6 +27,7 @@ from aoa_localizer.engine.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.posterior_grid import PosteriorGrid, posterior_grid
 from aoa_localizer.engine.preprocess import reading_sigma
+from aoa_localizer.engine.receiver_pool import PooledNoise
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduler import Scheduler
 from aoa_localizer.engine.station import Station
@@ -187,6 +188,13 @@ class Localizer:
                 f"(log-likelihood +{hint.gain:.0f}): a receiver delay or clock offset? try df_time_offset_s = "
                 f"{self.cfg.df_time_offset_s + hint.shift_s:.2f}")
 
+    def receiver_noise(self) -> PooledNoise | None:
+        """The receiver's noise pooled over the channels that calibrated theirs (receiver_pool.py), when more than
+        one frequency was heard (with one, its own calibration says it all); None otherwise."""
+        if sum(not math.isnan(c.frequency_hz) for c in self.channels.all()) < 2 or not self.cfg.calibrate_noise:
+            return None
+        return self.channels.pooled_noise()
+
     def robustness_lines(self) -> list[str]:
         """Human lines on what the robustness layer saw: the receiver's noise, alternative hypotheses, events."""
         lines = []
@@ -195,6 +203,9 @@ class Localizer:
             lines.append(survey_sentence(est.noise))
         elif self.cfg.calibrate_noise:
             lines.append(noise_sentence(self.noise_summary()))
+        pooled = self.receiver_noise()
+        if pooled is not None:
+            lines.append(f"the receiver over its channels: {pooled.sentence()}")
         if est is not None and len(est.modes) > 1:
             lines.append("alternative hypotheses: " + "; ".join(
                 f"E {e:.1f} N {n:.1f} ({100 * m:.0f} %)" for e, n, m in est.modes))

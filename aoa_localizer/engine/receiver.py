@@ -17,6 +17,7 @@ import numpy as np
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.preprocess import reading_sigma
+from aoa_localizer.engine.receiver_pool import PooledNoise
 from aoa_localizer.engine.slices import DENSITIES, charge
 
 SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers
@@ -45,12 +46,15 @@ class NoiseGrid:
         object.__setattr__(self, "distinct", np.unique(self.scale, return_inverse=True))
 
     @classmethod
-    def weak(cls, configured_sigma_deg: float) -> NoiseGrid:
+    def weak(cls, configured_sigma_deg: float, pooled: PooledNoise | None = None) -> NoiseGrid:
         """The weakly informative prior: sigmas over SIGMA_SPAN_DEG (log-spaced), log-normal around the configured
-        sigma (wide: the whole span is plausible); each with every wild share."""
+        sigma (wide: the whole span is plausible); each with every wild share. `pooled`: the receiver's other
+        channels' calibration (receiver_pool.py), around which the prior is centred instead, as narrow as their
+        spread allows. The hypotheses' scales stay on the configured sigma, which the points are made with."""
         sig = np.geomspace(*SIGMA_SPAN_DEG, _N_SCALES)
         log_s = np.log(sig / configured_sigma_deg)
-        w_scale = np.exp(-0.5 * (log_s / _CENTRE_LOG_SD) ** 2)
+        centre, log_sd = (0.0, _CENTRE_LOG_SD) if pooled is None else (math.log(pooled.scale), pooled.log_sd)
+        w_scale = np.exp(-0.5 * ((log_s - centre) / log_sd) ** 2)
         w = np.outer(w_scale, _OUTLIER_PRIOR).ravel()
         scale = np.repeat(np.exp(log_s), len(_OUTLIERS))
         outlier = np.tile(np.array(_OUTLIERS), _N_SCALES)
@@ -67,11 +71,11 @@ class NoiseGrid:
         return NoiseGrid(keep, np.full(keep.size, mid), np.log(mass / mass.sum()))
 
     @classmethod
-    def for_config(cls, cfg: LocalizerConfig) -> NoiseGrid:
-        """weak() centred on the configured sigma: `bearing_sigma_deg`, or the geometric middle of sigma(Q)."""
+    def for_config(cls, cfg: LocalizerConfig, pooled: PooledNoise | None = None) -> NoiseGrid:
+        """weak() on the configured sigma: `bearing_sigma_deg`, or the geometric middle of sigma(Q)."""
         if cfg.sigma_model == "constant":
-            return cls.weak(cfg.bearing_sigma_deg)
-        return cls.weak(math.degrees(math.sqrt(reading_sigma(40.0, cfg) * reading_sigma(100.0, cfg))))
+            return cls.weak(cfg.bearing_sigma_deg, pooled)
+        return cls.weak(math.degrees(math.sqrt(reading_sigma(40.0, cfg) * reading_sigma(100.0, cfg))), pooled)
 
 
 

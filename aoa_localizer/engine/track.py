@@ -283,13 +283,13 @@ class EmitterTrack:
         filter's prior, the configured one, or (before a start) the radio-range prior of the points held."""
         c, cfg = self.calibration, self.cfg
         if prior and self.filter is not None and self.model.prior_prec.any():
-            return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, self.model.prior_mean, self.model.prior_prec, c.grid,
-                          self.model.reach)
+            return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, self.model.prior_mean, self.model.prior_prec,
+                          c.noise_prior(), self.model.reach)
         if prior and cfg.prior_east is not None and cfg.prior_north is not None and cfg.prior_sigma_m is not None:
             return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, np.array([cfg.prior_east, cfg.prior_north]),
-                          np.eye(2) / cfg.prior_sigma_m**2, c.grid)
+                          np.eye(2) / cfg.prior_sigma_m**2, c.noise_prior())
         reach = (self.reach() if self.filter is None else self.model.reach) if prior else None
-        return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, grid=c.grid, reach=reach)
+        return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, grid=c.noise_prior(), reach=reach)
 
     def reach(self) -> tuple[float, float, float] | None:
         """The radio-range prior of the points held (global_search.Robust.reach): centred on their antennas, its

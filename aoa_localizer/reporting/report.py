@@ -156,6 +156,9 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
         lines.append(f"* **Input damaged**: {damage}; this report covers the data before the damage")
     if loc.cfg.calibrate_noise:
         lines.append(f"* **Receiver noise (self-calibrated)**: {noise_sentence(loc.noise_summary())}")
+    pooled = loc.receiver_noise()
+    if pooled is not None:
+        lines.append(f"* **The receiver over its channels**: {pooled.sentence()}")
     if len(est.modes) > 1:
         lines.append(
             "* **Alternative hypotheses** (posterior modes and their probability): "

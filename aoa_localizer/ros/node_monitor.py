@@ -228,6 +228,10 @@ class NodeMonitor:
             values.update({f"noise.sigma_deg.q{k}": v for k, v in noise["sigma_deg"].items()})
             values.update({"noise.reading_outlier_prob": noise["reading_outlier_prob"],
                            "noise.point_outlier_prob": noise["point_outlier_prob"]})
+        pooled = loc.receiver_noise()
+        if pooled is not None:  # one receiver over its channels (receiver_pool.py)
+            values.update({"receiver_noise": pooled.sentence(), "receiver_noise.scale": round(pooled.scale, 3),
+                           "receiver_noise.channels": pooled.channels})
         values["health.recent_outlier_share"] = f"{loc.track_status().outlier_share:.2f}"
         est = loc.estimate
         if est is not None:
