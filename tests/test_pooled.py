@@ -10,7 +10,7 @@ import pytest
 from matplotlib.path import Path as MplPath
 from scipy import special, stats
 
-from aoa_localizer.engine.crlb import inside_ellipse
+from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.noise_family import log_likelihood, logsumexp, noise_grid
@@ -487,3 +487,36 @@ def test_times_in_milliseconds_are_read_as_such_and_said(tmp_path, cli):
         assert ("milliseconds since 1970" in res.stderr) == (path is ms)
         got[path.stem] = json.loads((tmp_path / f"{path.stem}.jsonl").read_text())
     assert got["ms"]["lat"] == got["s"]["lat"] and got["ms"]["cov"] == got["s"]["cov"]  # one seed, one run
+
+
+@pytest.mark.slow
+def test_fixed_stations_live_estimates_are_the_survey_models_and_hold_their_biases():
+    """Issue 50: four fixed anchors, each with a steady bias (+-6 deg) and 60 readings: while the data come, every
+    estimate from the third place on is the survey model's (its ellipse bounded below by the biases, the truth
+    inside it), never the filter's, which takes 240 readings as independent (0.1-0.5 m ellipses, the truth outside);
+    the end of data's is the same fix."""
+    from aoa_localizer import Localizer, LocalizerConfig
+
+    rng = np.random.default_rng(3)
+    stations = np.array([[-500.0, 0.0], [400.0, -300.0], [0.0, 500.0], [350.0, 350.0]])
+    truth = np.array([60.0, -40.0])
+    bias = np.array([6.0, -5.0, 4.0, -6.0])
+    loc = Localizer(LocalizerConfig(seed=1))
+    made = []
+    loc.on_estimate = made.append
+    for i, (e, n) in enumerate(stations):
+        lat, lon, _ = FRAME.to_geodetic(e, n)
+        loc.set_station_position(f"s{i}", lat, lon)
+    az = bearings_to(truth, stations)
+    for k in range(60):
+        for i in range(4):
+            loc.add_bearing(1.7e9 + 4 * k + i, float(az[i] + bias[i] + rng.normal(0, 1.0)) % 360, math.nan,
+                            station=f"s{i}")
+    loc.flush()
+    live = [e for e in made if not e.end_of_data]
+    assert live and all(e.algorithm == "survey" for e in live[-50:])
+    last = live[-1]
+    err = np.array(FRAME.to_enu(last.lat, last.lon)) - truth
+    assert inside_ellipse(err, last.ground_cov) and ellipse_axes(last.ground_cov)[0] > 20.0
+    final = loc.finish()
+    assert final.end_of_data and math.hypot(*LocalFrame(final.lat, final.lon).to_enu(last.lat, last.lon)) < 1.0

@@ -1020,7 +1020,9 @@ def test_two_sources_on_one_input_topic_are_named_in_the_diagnostics(spawn, doma
         diag: dict = {}
         a.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
             diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
-        assert spin_until(executor, lambda: "input_publishers" in diag, 20), json.dumps(diag)
+        # named once discovery has both names (an endpoint may come before its node's name)
+        assert spin_until(executor, lambda: all(n in diag.get("input_publishers", "") for n in (
+            "/receiver_a", "/receiver_b")), 20), json.dumps(diag)
         other.spin_once(timeout_sec=0.01)
     assert "/df/bearing has 2 publishers" in diag["input_publishers"] and diag["level"] == "1"
     assert "/receiver_a" in diag["input_publishers"] and "/receiver_b" in diag["input_publishers"]

@@ -12,6 +12,7 @@ import math
 import threading
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import replace
 from typing import Protocol
 
 import numpy as np
@@ -411,8 +412,30 @@ class Localizer:
         records = self.intake.survey_log.survey_records(self.intake.frame)
         return solve(records, self.cfg.receiver_class) if records else {}
 
-    def _publish_survey(self, channel: Channel, fix: SurveyFix) -> Estimate | None:
-        """A survey-like channel's end-of-data estimate from the survey model, in the map frame."""
+    def _live_survey(self, channel: Channel) -> Estimate | None:
+        """A survey-like channel's estimate while the data come (every bearing from a fixed site or a standing
+        antenna, from three places on): the survey model's fix of its bearings alone, made again as they grow
+        (SurveyLog.due) and otherwise the last one, restamped; None (the filter's estimate) for any other channel
+        or while the model has no fix for it. The end of data pools every survey-like channel (finish)."""
+        log = self.intake.survey_log
+        if log.due(channel.id):
+            log.mark_solved(channel.id)
+            solve = survey_solver.solver()
+            fix = solve(log.survey_records(self.datum_frame(), only=channel.id), self.cfg.receiver_class).get(
+                channel.id) if solve is not None else None
+            made = self._publish_survey(channel, fix, end_of_data=False) if fix is not None else None
+            if made is None:
+                log.live.pop(channel.id, None)
+            else:
+                log.live[channel.id] = made
+            return made
+        last = log.live.get(channel.id)
+        if not isinstance(last, Estimate):
+            return None
+        return self._announce(channel, replace(last, stamp=channel.track.last_stamp))
+
+    def _publish_survey(self, channel: Channel, fix: SurveyFix, end_of_data: bool = True) -> Estimate | None:
+        """A survey-like channel's estimate from the survey model, in the map frame."""
         if not _positive_definite(fix.cov):
             self.rejections(Reason.COVARIANCE_DEGENERATE)
             return None
@@ -425,7 +448,7 @@ class Localizer:
                             bearings_used=fix.bearings, points_used=track.points_used,
                             ess=float("nan"), algorithm="survey", modes=[(float(east), float(north), 1.0)],
                             noise=fix.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
-                            warnings=list(fix.warnings), end_of_data=True, regions=fix.regions)
+                            warnings=list(fix.warnings), end_of_data=end_of_data, regions=fix.regions)
         return self._announce(channel, estimate)
 
     @_one_at_a_time
@@ -494,7 +517,11 @@ class Localizer:
 
     def _publish(self, channel: Channel, end_of_data: bool = False) -> Estimate | None:
         """The channel's new estimate, kept and handed to `on_estimate`; None (counted) when its covariance is not
-        positive definite."""
+        positive definite. A survey-like channel's is the survey model's while it has a fix (_live_survey)."""
+        if not end_of_data and self.cfg.end_of_data_model == "survey":
+            live = self._live_survey(channel)
+            if live is not None:
+                return live
         track = channel.track
         mean, cov = track.estimate()
         if not _positive_definite(cov):

@@ -4,8 +4,11 @@ A channel is survey-like when every bearing it used came from a fixed station (a
 given once) or from an antenna standing still (a surveyor at a stop, whose GPS fix comes with each azimuth). At
 `finish()`, with `end_of_data_model: survey`, such channels are located by the survey model `locate` runs
 (aoa_localizer.pooled, installed by the package as the solver below), so the API, offline replay and `locate`
-give one answer for the same bearings (docs/interface.md, "Survey model"). A vehicle's drive is never
-survey-like; the engine itself never imports the survey model (it sits above the engine).
+give one answer for the same bearings (docs/interface.md, "Survey model"). While the data come, a survey-like
+channel's estimates are the survey model's too, solved again each time its bearings grow by a quarter or a place
+joins (`due`), so the live estimates never rest on readings taken as independent that are not (an anchor's steady
+bias at a place). A vehicle's drive is never survey-like; the engine itself never imports the survey model (it sits
+above the engine).
 """
 from __future__ import annotations
 
@@ -18,6 +21,8 @@ import numpy as np
 from aoa_localizer.engine.geodesy import LocalFrame, unturn
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
+LIVE_GROWTH = 1.25  # a live survey fix is made again once the channel's bearings grew by this factor ...
+LIVE_PLACES = 3  # ... or a place joined, from this many places on (fewer: no crossing, the filter's estimate)
 
 
 @dataclass(frozen=True)
@@ -57,21 +62,38 @@ class SurveyLog:
     def __init__(self):
         self.records: dict[str, list[tuple]] = defaultdict(list)
         self.not_survey: set[str] = set()  # channels that used a bearing from a moving, densely fixed station
+        self.places: dict[str, set] = defaultdict(set)  # each channel's antenna places (decimetres)
+        self.solved: dict[str, tuple[int, int]] = {}  # (bearings, places) at a channel's last live fix
+        self.live: dict[str, object] = {}  # a channel's last live survey estimate (the Localizer's Estimate)
 
     def add(self, channel: str, survey_like: bool, row: tuple) -> None:
         if channel in self.not_survey:
             return
         if not survey_like or len(self.records[channel]) >= MAX_RECORDS:
             self.not_survey.add(channel)
-            self.records.pop(channel, None)
+            for kept in (self.records, self.places, self.solved, self.live):
+                kept.pop(channel, None)
             return
         self.records[channel].append(row)
+        self.places[channel].add((round(row[2], 1), round(row[3], 1)))
 
-    def survey_records(self, frame: LocalFrame) -> list[SurveyRecord]:
-        """Every survey-like channel's bearings, in WGS84 with azimuths from true north."""
+    def due(self, channel: str) -> bool:
+        """Whether a survey-like channel's live fix is to be made (again): from LIVE_PLACES places on, when its
+        bearings grew by LIVE_GROWTH or a place joined since the last one."""
+        if channel in self.not_survey or len(self.places.get(channel, ())) < LIVE_PLACES:
+            return False
+        last = self.solved.get(channel)
+        now = (len(self.records[channel]), len(self.places[channel]))
+        return last is None or now[1] > last[1] or now[0] >= LIVE_GROWTH * last[0]
+
+    def mark_solved(self, channel: str) -> None:
+        self.solved[channel] = (len(self.records[channel]), len(self.places[channel]))
+
+    def survey_records(self, frame: LocalFrame, only: str | None = None) -> list[SurveyRecord]:
+        """Every survey-like channel's bearings (`only`: that channel's), in WGS84 with azimuths from true north."""
         out = []
         for channel, rows in self.records.items():
-            if not rows or channel in self.not_survey:
+            if not rows or channel in self.not_survey or (only is not None and channel != only):
                 continue
             station, stamp, east, north, theta, north_angle, sigma = (list(c) for c in zip(*rows, strict=True))
             lat, lon, _ = frame.to_geodetic(np.array(east), np.array(north))
@@ -84,8 +106,8 @@ class SurveyLog:
         return out
 
     def clear(self) -> None:
-        self.records.clear()
-        self.not_survey.clear()
+        for kept in (self.records, self.not_survey, self.places, self.solved, self.live):
+            kept.clear()
 
 
 def survey_sentence(noise: dict) -> str:

@@ -48,6 +48,7 @@ DATUM_PARAMS = frozenset({"datum_lat", "datum_lon", "datum_alt"})  # the only pa
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
 ENGINE_LOGGER = "aoa_localizer"  # the engine's logger (engine/localizer.py); its modules' are children
+_UNNAMED = "_NODE_NAME_UNKNOWN_"  # rmw's name for a node whose endpoints were discovered before its name
 DRAIN_MAX = 100  # DF records handled per executor callback beyond the first (then timers and services get a turn)
 # The queued fixes are taken before every this many drained records: a record a take of the fix queue cost the node
 # 12 % more CPU at 5000 records/s, and 10 records are at most a second of one channel's stream at 10 Hz
@@ -424,7 +425,10 @@ class LocalizerNode(Node):
                                  for encoding, kind in INPUT_TYPES.items() if kind == info.topic_type), "")
                     out["wrong_encoding"].append(
                         f"{topic} has a {info.topic_type} publisher ({info.node_name}); expected {want}{hint}")
-            nodes = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos if i.topic_type == want})
+            # a node discovered by its endpoint before its name is each its own (rmw says _NODE_NAME_UNKNOWN_)
+            nodes = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" if _UNNAMED not in i.node_name
+                            else f"a node not named yet ({bytes(i.endpoint_gid[:4]).hex()})"
+                            for i in infos if i.topic_type == want})
             if len(nodes) > 1:
                 out["input_publishers"].append(
                     f"{topic} has {len(nodes)} publishers ({', '.join(nodes[:5])}); one source is expected: another "
