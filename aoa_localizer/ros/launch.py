@@ -222,6 +222,7 @@ class Monitor:
         self.node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: setattr(self, "fix", m), 10)
         self.node.create_subscription(T.DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.diagnostics_seen = 0
+        self.crowded = ""  # the node's first input_publishers warning: another source on its inputs
         self.fix = None
         self.recorder = None
         if record is not None:
@@ -237,7 +238,13 @@ class Monitor:
                 self.recorder.poll()
 
     def _on_diagnostics(self, msg) -> None:
+        from msgs_adapters.fields import diagnostics_values
+
         self.diag, self.diagnostics_seen = msg, self.diagnostics_seen + 1
+        crowded = diagnostics_values(msg).get("aoa_localizer: localizer", {}).get("input_publishers")
+        if crowded and not self.crowded:  # another graph that discovery had not shown when the domain was chosen
+            self.crowded = crowded
+            print(f"launch: another source publishes on the node's inputs: {crowded}", file=sys.stderr, flush=True)
 
     def settle(self, at_least_s: float, at_most_s: float) -> bool:
         """Spin until the node has worked through what it received: two /diagnostics in a row with the same counts
@@ -430,7 +437,7 @@ def enter_domain(args) -> tuple[int | None, str]:
     return None, "; ".join(said) + f"; no free domain in {DOMAIN_TRIES} tries: give one with --domain-id"
 
 
-def foreign_publishers(domain: int, wait_s: float = 0.8) -> str:
+def foreign_publishers(domain: int, wait_s: float = 1.5) -> str:
     """Who publishes on a run's topics (a GPS fix, a DF bearing, the simulation's truth, the node's pose) in
     `domain`, as "node on topic, ..." ("" when nobody does within `wait_s` of discovery)."""
     import rclpy
@@ -492,6 +499,9 @@ class Run:
             print(f"launch: the node was still working {SETTLE_MAX_S:g} s after the source ended; judging what it "
                   "published", file=sys.stderr)
         ok, why, figures = verdict(monitor.state(), args.max_ellipse)
+        if monitor.crowded:  # the estimate may rest on another graph's messages: never "converged"
+            ok, why = False, (f"another source published on the node's inputs during the run ({monitor.crowded}); "
+                              "run again in a free domain (leave out --domain-id)")
         print_result(ok, why, figures)
         if args.result:
             args.result.write_text(json.dumps({"converged": ok, "reason": why, **figures}, indent=1))
