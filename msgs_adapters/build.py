@@ -91,9 +91,16 @@ def point_stamped(T, stamp: float, x: float, y: float, z: float = 0.0, frame_id:
     return T.PointStamped(header=header(T, stamp, frame_id), point=T.Point(x=float(x), y=float(y), z=float(z)))
 
 
+# The variance of what emitter/pose does not estimate (z, roll, pitch, yaw): large, the convention for "unknown"
+# (robot_localization's and nav2's consumers read 0 as "known exactly")
+UNESTIMATED_VARIANCE = 1e9
+
+
 def emitter_pose(T, est, frame_id: str = "map"):
-    """emitter/pose: x east, y north, the 2x2 covariance in the x/y block (other entries 0: not estimated)."""
+    """emitter/pose: x east, y north, the 2x2 covariance in the x/y block; z and the orientation are not estimated
+    (UNESTIMATED_VARIANCE on their diagonal, 0 off it)."""
     cov = np.zeros(36)
+    cov[[14, 21, 28, 35]] = UNESTIMATED_VARIANCE
     cov[[0, 1, 6, 7]] = np.asarray(est.cov, float).reshape(4)
     pose = T.Pose(position=T.Point(x=est.east, y=est.north, z=0.0), orientation=T.Quaternion(w=1.0))
     return T.PoseWithCovarianceStamped(

@@ -73,6 +73,9 @@ def test_emitter_pose_carries_the_estimate_and_its_covariance(estimate):
         stamp, east, north, cov = estimate_from_pose(m)
         assert (stamp, east, north) == (12.25, 1200.5, -800.25)
         assert np.array(cov) == pytest.approx(estimate.cov)
+        # z and the orientation are not estimated: a large variance, never 0 ("known exactly" to ROS consumers)
+        full = np.array(m.pose.covariance).reshape(6, 6)
+        assert np.all(np.diag(full)[2:] == build.UNESTIMATED_VARIANCE) and not full[2:, :2].any()
 
 
 def test_emitter_fix_is_lat_lon_with_an_approximated_enu_covariance(estimate):

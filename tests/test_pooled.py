@@ -1,6 +1,7 @@
 """The pooled survey model (aoa_localizer.pooled): its likelihood against scipy, its stations and receivers, any
 scale, biases that repeat, a receiver learned over its emitters, bad input, and real bearings with a truth."""
 import csv
+import datetime
 import json
 import math
 from pathlib import Path
@@ -520,3 +521,44 @@ def test_fixed_stations_live_estimates_are_the_survey_models_and_hold_their_bias
     assert inside_ellipse(err, last.ground_cov) and ellipse_axes(last.ground_cov)[0] > 20.0
     final = loc.finish()
     assert final.end_of_data and math.hypot(*LocalFrame(final.lat, final.lon).to_enu(last.lat, last.lon)) < 1.0
+
+
+@pytest.mark.slow
+def test_locate_says_what_is_wrong_with_a_file_by_its_column_and_takes_a_time_zone(tmp_path, cli):
+    """Issue 53, part 2: an empty file says it is empty; a bad value names its column and line; times without a
+    UTC offset are refused with the option that reads them (--time-zone), which takes a zone name or an offset."""
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    res = cli(locate.main, empty)
+    assert res.returncode == 2 and "empty.csv is empty" in res.stderr
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,lat,lon,azimuth_deg\n1700000000,48.3,abc,45\n")
+    res = cli(locate.main, bad)
+    assert res.returncode == 2 and "bad.csv:2: lon 'abc' is not a number; row skipped" in res.stderr
+    square = _square_csv(tmp_path / "s.csv")
+    lines = square.read_text().splitlines()
+    berlin = tmp_path / "berlin.csv"  # the same instants, written as Berlin's wall clock (UTC+1 in November)
+    berlin.write_text("\n".join([lines[0]] + [
+        f"{datetime.datetime.fromtimestamp(float(r.split(',')[0]) + 3600, datetime.UTC):%Y-%m-%dT%H:%M:%S},"
+        + r.split(",", 1)[1] for r in lines[1:]]) + "\n")
+    res = cli(locate.main, berlin)
+    assert res.returncode == 2 and "--time-zone Europe/Berlin" in res.stderr
+    got = {}
+    for name, args in (("utc", [square]), ("zone", [berlin, "--time-zone", "Europe/Berlin"]),
+                       ("offset", [berlin, "--time-zone", "+01:00"])):
+        res = cli(locate.main, *args, "--output", tmp_path / f"{name}.jsonl")
+        assert res.returncode == 0, res.stderr
+        got[name] = json.loads((tmp_path / f"{name}.jsonl").read_text())
+    assert got["zone"]["lat"] == got["utc"]["lat"] == got["offset"]["lat"]
+    assert cli(locate.main, square, "--time-zone", "Mars/Base").returncode == 2
+
+
+@pytest.mark.slow
+def test_locates_filter_model_repeats_by_default(tmp_path, cli):
+    """Issue 53, part 2: `--model filter` has a fixed default seed, so one file gives one answer run after run."""
+    square = _square_csv(tmp_path / "s.csv")
+    outs = []
+    for k in range(2):
+        assert cli(locate.main, square, "--model", "filter", "--output", tmp_path / f"{k}.jsonl").returncode == 0
+        outs.append(json.loads((tmp_path / f"{k}.jsonl").read_text()))
+    assert outs[0]["lat"] == outs[1]["lat"] and outs[0]["cov"] == outs[1]["cov"]

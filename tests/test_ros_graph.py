@@ -92,6 +92,8 @@ def test_vehicle_and_node_converge_and_the_launcher_leaves_no_process(tmp_path, 
     result = json.loads((tmp_path / "r.json").read_text())
     assert result["converged"] and result["error_m"] < 10.0
     assert "error against the simulated truth" in res.stdout
+    # east and north say what they are measured from (issue 53, item 6)
+    assert f"from the node's datum {result['datum'][0]:.7f}, {result['datum'][1]:.7f}" in res.stdout
     assert no_process_with(marker)
     logdir = Path(re.search(r"logs in (\S+);", res.stdout).group(1))
     assert "Traceback" not in (logdir / "aoa_localizer.log").read_text()  # nor the check worker's, at Ctrl-C

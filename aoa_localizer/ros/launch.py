@@ -279,6 +279,8 @@ class Monitor:
         truth = self.truth_in_node_frame()
         if truth is not None:
             out["truth"] = truth
+        if self.node_datum is not None:  # what east and north are measured from
+            out["datum"] = (self.node_datum.latitude, self.node_datum.longitude)
         return out
 
     def truth_in_node_frame(self) -> tuple[float, float] | None:
@@ -313,6 +315,7 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
         "lat": state.get("lat"),
         "lon": state.get("lon"),
         "cov": state["cov"],
+        "datum": state.get("datum"),
     }
     diag = state.get("diag", {})
     if diag.get("state"):
@@ -566,9 +569,11 @@ def main(argv=None) -> int:
         stop.stopping = True  # a Ctrl-C during the cleanup must not cut it short with a traceback
         if run is not None:
             run.close()
-        if not stop.signalled:  # once stopped by a signal, a second one on the way out says so and changes nothing
-            for s, handler in old.items():
-                signal.signal(s, handler)
+        # Once stopped by a signal, the process is on its way out: a later one is ignored. Python's own exit puts a
+        # handler it set back to the default (the process then ends by the signal: exit -2 where 2 was due), but
+        # leaves an ignored signal ignored.
+        for s, handler in old.items():
+            signal.signal(s, signal.SIG_IGN if stop.signalled else handler)
 
 
 def progress_line(state: dict, elapsed: float) -> str:
@@ -589,8 +594,9 @@ def progress_line(state: dict, elapsed: float) -> str:
 def print_result(ok: bool, why: str, f: dict):
     if f:
         where = f"lat {f['lat']:.7f} lon {f['lon']:.7f}, " if f.get("lat") is not None else ""
+        origin = f" from the node's datum {f['datum'][0]:.7f}, {f['datum'][1]:.7f}" if f.get("datum") else ""
         print(
-            f"estimate: {where}E {f['east']:.1f} m N {f['north']:.1f} m, "
+            f"estimate: {where}E {f['east']:.1f} m N {f['north']:.1f} m{origin}, "
             f"95% ellipse semi-axes {f['ellipse95_m'][0]:.1f} m x {f['ellipse95_m'][1]:.1f} m"
         )
         if "error_m" in f:

@@ -38,6 +38,7 @@ from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES
 from aoa_localizer.pooled.stations import SIGMA_RANGE_DEG
 
 PROG = "python -m aoa_localizer.locate"
+SURVEY_SEED = 1  # `--model filter`'s seed unless --seed: the same file gives the same answer run after run
 
 
 @dataclass(frozen=True)
@@ -56,8 +57,9 @@ class Row:
     receiver: str = ""
 
 
-def _stamp(text: str, decimal_comma: bool = False) -> float:
-    """Epoch seconds from epoch seconds or ISO 8601 with an offset (a time without one is ambiguous: refused)."""
+def _stamp(text: str, decimal_comma: bool = False, zone: datetime.tzinfo | None = None) -> float:
+    """Epoch seconds from epoch seconds or ISO 8601 with an offset; a time without one is in `zone` (--time-zone),
+    and refused without it (it is ambiguous)."""
     try:
         value = float(text.replace(",", ".") if decimal_comma else text)
     except ValueError:
@@ -66,9 +68,15 @@ def _stamp(text: str, decimal_comma: bool = False) -> float:
         if not math.isfinite(value):
             raise ValueError(f"time {text!r} is not a finite number")
         return value
-    when = datetime.datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
+    try:
+        when = datetime.datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"time {text!r} is neither epoch seconds nor an ISO 8601 time") from None
     if when.tzinfo is None:
-        raise ValueError(f"time {text!r} has no UTC offset (write e.g. {text}+00:00)")
+        if zone is None:
+            raise ValueError(f"time {text!r} has no UTC offset (write e.g. {text}+00:00, or give the zone the "
+                             "times were taken in: --time-zone Europe/Berlin, --time-zone +02:00)")
+        when = when.replace(tzinfo=zone)
     return when.timestamp()
 
 
@@ -78,7 +86,10 @@ def _number(row: dict, name: str, required: bool = True, decimal_comma: bool = F
         if required:
             raise ValueError(f"no {name}")
         return float("nan")
-    value = float(text.replace(",", ".") if decimal_comma else text)
+    try:
+        value = float(text.replace(",", ".") if decimal_comma else text)
+    except ValueError:
+        raise ValueError(f"{name} {text!r} is not a number") from None
     if not math.isfinite(value):
         raise ValueError(f"{name} is not a finite number ({text!r})")
     return value
@@ -89,7 +100,7 @@ def _number(row: dict, name: str, required: bool = True, decimal_comma: bool = F
 _MILLISECONDS = (1e11, 1e14)
 
 
-def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
+def read_rows(path: Path, crs: str | None, zone: datetime.tzinfo | None = None) -> tuple[list[Row], list[str]]:
     """The survey's good rows and one message per bad row (with its line number), and a note when every time is in
     milliseconds (then read as such); raises OSError, ValueError."""
     to_wgs84 = _projection(crs)
@@ -110,7 +121,7 @@ def read_rows(path: Path, crs: str | None) -> tuple[list[Row], list[str]]:
                 continue
             try:
                 rows.append(_row(reader.line_num, {k.strip().lower(): v for k, v in record.items() if k is not None},
-                                 to_wgs84, comma))
+                                 to_wgs84, comma, zone))
             except ValueError as exc:
                 bad.append(f"{path}:{reader.line_num}: {exc}; row skipped")
     if rows and all(_MILLISECONDS[0] <= r.stamp < _MILLISECONDS[1] for r in rows):
@@ -148,9 +159,9 @@ def _check_header(path: Path, fieldnames, position: tuple[str, str]) -> None:
                          f"(has: {', '.join(sorted(header))}){_renames(header, missing)}")
 
 
-def _row(line: int, row: dict, to_wgs84, comma: bool) -> Row:
+def _row(line: int, row: dict, to_wgs84, comma: bool, zone: datetime.tzinfo | None = None) -> Row:
     """One row's bearing, or a ValueError saying what is wrong with it."""
-    stamp = _stamp(row.get("time") or "", comma)
+    stamp = _stamp(row.get("time") or "", comma, zone)
     if to_wgs84:
         lon, lat = to_wgs84.transform(_number(row, "x", True, comma), _number(row, "y", True, comma))
     else:
@@ -164,6 +175,21 @@ def _row(line: int, row: dict, to_wgs84, comma: bool) -> Row:
     receiver = (row.get("receiver") or row.get("observer") or "").strip()
     return Row(line, stamp, lat, lon, _number(row, "azimuth_deg", True, comma), quality, sigma,
                (row.get("station") or "").strip(), (row.get("id") or "").strip(), receiver)
+
+
+def _zone(text: str) -> datetime.tzinfo:
+    """--time-zone: an IANA zone name (daylight saving applied per time) or a fixed offset (+HH:MM)."""
+    try:
+        return datetime.datetime.strptime(text, "%z").tzinfo or datetime.UTC
+    except ValueError:
+        pass
+    try:
+        from zoneinfo import ZoneInfo
+
+        return ZoneInfo(text)
+    except (ValueError, KeyError, OSError) as exc:  # ZoneInfoNotFoundError is a KeyError
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a zone name (Europe/Berlin) nor an offset "
+                                         "(+02:00)") from exc
 
 
 def _delimiter(header: str) -> str:
@@ -368,13 +394,20 @@ def _main(argv=None) -> int:
                              "each id through its own particle filter (uses quality, --algorithm, --particles, -p)")
     parser.add_argument("--receiver-class", choices=tuple(RECEIVER_CLASSES), default="unknown",
                         help="what the receiver is, for the prior on its error (pooled model)")
+    parser.add_argument("--time-zone", metavar="ZONE", type=_zone,
+                        help="the zone of times written without a UTC offset (an IANA name such as Europe/Berlin, "
+                             "or an offset such as +02:00); without it such times are refused")
     add_engine_args(parser, SURVEY_PARTICLES)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
     try:
         cfg = config_from_args(args, survey_config())
+        cfg = cfg if cfg.seed is not None else cfg.with_changes(seed=SURVEY_SEED)  # one file, one answer
         check_outputs(args.csv, args.output, args.report)
-        rows, bad = read_rows(args.csv, args.crs)
+        if args.csv.is_file() and args.csv.stat().st_size == 0:
+            raise ValueError(f"{args.csv} is empty: a header line (time,lat,lon,azimuth_deg,...) and a row a "
+                             "bearing are needed")
+        rows, bad = read_rows(args.csv, args.crs, args.time_zone)
     except (ConfigError, OSError, ValueError, UnicodeDecodeError, csv.Error) as exc:
         print(f"locate: {exc}", file=sys.stderr)
         return 2
