@@ -117,3 +117,14 @@ def test_a_group_set_only_in_part_is_refused_with_what_is_missing():
     with pytest.raises(IncompleteGroup, match=r"datum_lat and datum_lon are set together \(finite\)") as err:
         LocalizerConfig(datum_lon=10.0)
     assert err.value.missing == ["datum_lat"]
+
+
+def test_param_docs_says_what_it_did(tmp_path, capsys):
+    """Issue 53, part 4: `param_docs` printed nothing when it succeeded; it says whether it rewrote a document."""
+    from aoa_localizer.tools.param_docs import BEGIN, END, main
+
+    doc = tmp_path / "doc.md"
+    doc.write_text(f"# Parameters\n{BEGIN}\nOUT OF DATE\n{END}\n")
+    assert main([str(doc)]) == 0 and "generated tables rewritten from the code" in capsys.readouterr().out
+    assert "OUT OF DATE" not in doc.read_text()
+    assert main([str(doc)]) == 0 and "already match the code" in capsys.readouterr().out

@@ -69,7 +69,8 @@ def test_the_documented_program_modules_are_thin_entry_points():
 
     for name, home in [("node", "ros.node"), ("sim_vehicle", "ros.sim_vehicle"), ("launch", "ros.launch"),
                        ("replay", "tools.replay"), ("report", "reporting.report"), ("simulate", "tools.simulate"),
-                       ("kraken_bridge", "ros.kraken_bridge")]:
+                       ("kraken_bridge", "ros.kraken_bridge"), ("locate", "tools.locate"),
+                       ("param_docs", "tools.param_docs")]:
         source = importlib.util.find_spec(f"aoa_localizer.{name}").origin
         text = open(source).read()
         assert f'program("{name}", "aoa_localizer.{home}", ' in text and len(text.splitlines()) <= 11, name

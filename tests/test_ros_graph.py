@@ -87,7 +87,7 @@ def no_process_with(marker: str) -> bool:
 def test_vehicle_and_node_converge_and_the_launcher_leaves_no_process(tmp_path, domain):
     marker = f"marker_rays:={40 + domain}"  # a node argument no other test uses
     res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 2, "--domain-id", domain,
-                  "-p", marker.replace(":=", "="), "--result", tmp_path / "r.json"])
+                  "-p", marker.replace(":=", "="), "--result", tmp_path / "r.json", "--keep-logs"])
     assert res.returncode == 0, res.stdout + res.stderr
     result = json.loads((tmp_path / "r.json").read_text())
     assert result["converged"] and result["error_m"] < 10.0
@@ -117,6 +117,8 @@ def test_a_vehicle_with_its_array_mounted_at_an_offset_is_read_as_mounted(tmp_pa
                   "--vehicle-param", "mount_offset_deg=30", "--result", tmp_path / "r.json"])
     assert res.returncode == 0, res.stdout + res.stderr
     assert json.loads((tmp_path / "r.json").read_text())["error_m"] < 10.0
+    # a converged run leaves no aoa_launch_* folder behind (issue 53, part 4) unless --keep-logs
+    assert "logs removed" in res.stdout and not Path(re.search(r"logs in (\S+);", res.stdout).group(1)).exists()
 
 
 def test_a_launcher_timeout_says_where_the_run_stood(domain):

@@ -16,6 +16,7 @@ import json
 import math
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -367,6 +368,9 @@ def parse_args(argv) -> argparse.Namespace:
     parser.add_argument("--max-ellipse", type=finite_number(0.0, low_open=True), default=50.0, metavar="M",
                         help="widest 95 %% ellipse (m) called converged")
     parser.add_argument("--result", type=Path, metavar="FILE", help="write the final estimate and verdict as JSON")
+    parser.add_argument("--keep-logs", action="store_true",
+                        help="keep the processes' logs after a converged run too (a run that did not converge, or "
+                             "was stopped, always keeps them)")
     args = parser.parse_args(argv)
     if args.scenario is None and not args.bag:
         args.scenario = "seed"
@@ -530,11 +534,14 @@ class Run:
         return None
 
     def close(self):
+        """Stop the children and the monitor (once: a second call finds nothing left)."""
         for child in reversed(self.children):
             child.stop()
+        self.children = []
         if self.monitor is not None:
             recorder = self.monitor.recorder
             self.monitor.close()
+            self.monitor = None
             if recorder and recorder.failed:
                 print(f"recording stopped early ({recorder.failed}); {self.args.record} keeps what was written "
                       "before, and replay salvages it", flush=True)
@@ -561,7 +568,12 @@ def main(argv=None) -> int:
         run = Run(args, logdir)
         source = args.bag if args.bag else f"scenario {args.scenario} at {args.speedup:g}x"
         print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {run.source_name}: {source}", flush=True)
-        return run.execute()
+        code = run.execute()
+        if code == 0 and not args.keep_logs:  # nothing to look into: no aoa_launch_* folder left behind
+            run.close()
+            shutil.rmtree(logdir, ignore_errors=True)
+            print(f"logs removed (the run converged; --keep-logs keeps them in {logdir.parent})")
+        return code
     except Stop as exc:
         print(f"launch: stopped by {exc}", file=sys.stderr)
         return 2

@@ -78,7 +78,12 @@ def main(argv=None) -> int:
         if not any(begin in text and end in text for begin, end, _ in BLOCKS):
             print(f"param_docs: {path}: no generated block (parameters, or rejection reasons)", file=sys.stderr)
             return 2
-        path.write_text(rewrite(text))
+        new = rewrite(text)
+        if new == text:
+            print(f"param_docs: {path}: its generated tables already match the code")
+        else:
+            path.write_text(new)
+            print(f"param_docs: {path}: generated tables rewritten from the code")
     return 0
 
 
