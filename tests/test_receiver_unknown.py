@@ -166,7 +166,8 @@ def test_locate_reads_a_survey_csv_skips_a_bad_row_by_line_and_writes_one_line_p
     assert got["id"] == "fox" and got["bearings_used"] == 3 and got["state"] in ("poorly_determined", "tracking")
     e, n = frame.to_enu(got["lat"], got["lon"])
     assert nees(np.array([e, n]), np.array(got["cov"])) < 3 * ELLIPSE_95
-    assert {p.name for p in (tmp_path / "rep").iterdir()} == {"map.png", "emitter.kml", "emitter.geojson"}
+    assert {p.name for p in (tmp_path / "rep").iterdir()} == {"map.png", "emitter.kml", "emitter.geojson",
+                                                           "emitter_fox.cot"}  # TAK's, with pytak installed
 
 
 def test_locate_refuses_a_csv_without_its_columns(tmp_path, cli):

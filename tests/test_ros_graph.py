@@ -1059,3 +1059,44 @@ def test_two_sources_on_one_input_topic_are_named_in_the_diagnostics(spawn, doma
     assert "/df/bearing has 2 publishers" in diag["input_publishers"] and diag["level"] == "1"
     assert "/receiver_a" in diag["input_publishers"] and "/receiver_b" in diag["input_publishers"]
     assert node_p.poll() is None
+
+
+def test_the_node_sends_each_estimate_to_tak_as_cursor_on_target(spawn, domain):
+    """Issue 53, part 3: `cot_url:=udp://127.0.0.1:PORT` (a TAK receiver's UDP input on this machine): CoT events
+    arrive as the estimate changes (at most one a cot_period_s: the drive's points come in two seconds here) with
+    the emitter's place, and /diagnostics counts them; a cot_url the node cannot use refuses the start."""
+    import socket
+    import xml.etree.ElementTree as ET
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.setblocking(False)
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1", "-p", "diagnostics_period_s:=0.3", "-p",
+                    f"cot_url:=udp://127.0.0.1:{rx.getsockname()[1]}"], domain)
+    emitter = (600.0, 400.0)
+    events = []
+
+    def take():
+        try:
+            while True:
+                events.append(ET.fromstring(rx.recv(65536)))
+        except BlockingIOError:
+            return False
+
+    with client(domain) as (node, executor):
+        diag: dict = {}
+        node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
+            diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        _publish_drive(node, executor, emitter)
+        assert spin_until(executor, lambda: take() or len(events) >= 1, 20), open(node_p.log_path).read()
+        spin_until(executor, lambda: False, 1.5)  # the drive's last points, and a diagnostics period
+        take()
+        assert spin_until(executor, lambda: int(diag.get("cot_sent", 0)) == len(events), 5), json.dumps(diag)
+    last = events[-1]
+    assert last.get("uid") == "aoa_localizer.default" and last.get("type") == "a-u-G"
+    east, north = LocalFrame(*DATUM).to_enu(float(last.find("point").get("lat")), float(last.find("point").get("lon")))
+    assert math.hypot(east - emitter[0], north - emitter[1]) < 30.0
+    assert diag["cot_failed"] == "0"
+    refused = subprocess.run([sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p", "cot_url:=http://x:1"],
+                             env=ros_env(domain), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2 and "the scheme must be udp:// or tcp://" in refused.stderr

@@ -30,6 +30,7 @@ from aoa_localizer.common.cli import (
     interrupted,
     setup_logging,
 )
+from aoa_localizer.common.cot import write_cot_files
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
@@ -304,6 +305,7 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     enu = {name: rows[:, 1:3] for name, rows in tracks.items()}
     (args.out / "emitter.kml").write_text(export.kml(frame, finals, enu))
     (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, finals, enu), indent=1))
+    print(f"report: {write_cot_files(args.out, finals)}", file=sys.stderr)
     write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage, others, truths)
 
 

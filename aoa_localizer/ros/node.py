@@ -13,6 +13,7 @@ track with the new settings, an invalid one is refused with its reason.
 from __future__ import annotations
 
 import logging
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -24,6 +25,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
+from aoa_localizer.common.cot import CotSender, CotUnavailable, estimate_event
 from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec, unknown_names
 from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
 from aoa_localizer.engine.localizer import Localizer
@@ -155,6 +157,8 @@ class LocalizerNode(Node):
         self.restart_due: tuple[LocalizerConfig, set, float, float] | None = None
         self.outputs = NodeOutputs(self, self.types, self.station_names, self.get_parameter("map_frame").value,
                                    self.get_parameter("emitter_frame").value, self._now)
+        self.cot = self._cot_sender()  # raises ConfigError: the caller refuses to start
+        self.cot_sent_at: dict[str, float] = {}  # each channel's last CoT event (monotonic s)
         self._init_inputs()
         self.pub_diag = self.create_publisher(self.types.DiagnosticArray, "/diagnostics", 10)
         self.diag_name = f"{self.get_fully_qualified_name().lstrip('/')}: localizer"  # like diagnostic_updater
@@ -168,6 +172,25 @@ class LocalizerNode(Node):
         self.outputs.datum(self.loc)  # a configured datum is known at once
         self.get_logger().info(f"started: algorithm {self.cfg.algorithm}, N = {self.cfg.num_particles}, "
                                f"bearing encoding {self.cfg.bearing_encoding}")
+
+    def _cot_sender(self) -> CotSender | None:
+        """The sender of `cot_url` (None: unset); ConfigError for a URL it cannot take or without pytak."""
+        url = self.get_parameter("cot_url").value
+        if not url:
+            return None
+        try:
+            return CotSender(url)
+        except (ValueError, CotUnavailable) as exc:
+            raise ConfigError(str(exc)) from exc
+
+    def _send_cot(self, est) -> None:
+        """A channel's estimate to TAK, at most once per cot_period_s (a failure is counted, never raised)."""
+        now = time.monotonic()
+        if self.cot is None or now - self.cot_sent_at.get(est.channel, -math.inf) < self.get_parameter(
+                "cot_period_s").value:
+            return
+        self.cot_sent_at[est.channel] = now
+        self.cot.send(estimate_event(est, self.get_parameter("cot_stale_s").value))
 
     def _init_logging(self):
         """The engine's Python log lines go to the ROS logger (console and /rosout), not a second time to the root."""
@@ -394,6 +417,7 @@ class LocalizerNode(Node):
         made, self.made = self.made, {}
         for est in made.values():
             self.outputs.estimate(self.loc, est, self.get_parameter("marker_rays").value)
+            self._send_cot(est)
             if latency:
                 self.monitor.published()
         self.outputs.summary(self.loc, only_if_new_channel=list(made))
@@ -409,7 +433,12 @@ class LocalizerNode(Node):
             self.crowded_said = problems["input_publishers"]
             for words in self.crowded_said:
                 self.get_logger().warning(words)
-        return self.monitor.diagnostics(self.loc, self._now(), self.pending_params, problems)
+        level, message, values = self.monitor.diagnostics(self.loc, self._now(), self.pending_params, problems)
+        if self.cot is not None:  # what went to TAK, and why not
+            values.update(cot_sent=self.cot.sent, cot_failed=self.cot.failed)
+            if self.cot.last_error:
+                values["cot_last_error"] = self.cot.last_error
+        return level, message, values
 
     def _publisher_problems(self) -> dict[str, list[str]]:
         """What is wrong with the publishers on our input topics, by diagnostics key: `wrong_encoding`, another

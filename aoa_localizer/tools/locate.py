@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, interrupted, setup_logging
+from aoa_localizer.common.cot import write_cot_files
 from aoa_localizer.common.output import check_output, write_staged
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
@@ -235,7 +236,7 @@ def record(ident: str, est: Estimate, rows: int) -> dict:
 
 def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):
     """map.png (bearings, estimates, 95 % ellipses, and each estimate's 95 % highest-density region where it has
-    one), emitter.kml and emitter.geojson of every id."""
+    one), emitter.kml, emitter.geojson and an emitter_<id>.cot (TAK) of every id."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -249,6 +250,7 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
     named = [replace(est, channel=ident or "default") for ident, (est, _) in found.items()]
     (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}), indent=1))
     (out / "emitter.kml").write_text(kml(frame, named, {}))
+    print(f"locate: {write_cot_files(out, named)}", file=sys.stderr)
     fig, ax = plt.subplots(figsize=(8, 8))
     for (ident, (est, rows)), colour in zip(found.items(), plt.rcParams["axes.prop_cycle"].by_key()["color"] * 99,
                                             strict=False):
