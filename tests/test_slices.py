@@ -93,9 +93,21 @@ def test_a_result_finished_after_half_the_budget_waits_for_the_next_point():
 
 
 def test_the_meter_charges_a_kernel_by_its_model():
-    before = slices.spent()
+    before = slices.spent_ns()
     slices.charge(slices.Cost(10.0, 0.5), 40)
-    assert slices.spent() - before == pytest.approx(30.0, abs=1e-9)
+    assert slices.metered_since(before) == 30.0
+
+
+def test_a_calls_cost_is_exact_whatever_the_thread_metered_before():
+    """The meter counts integer nanoseconds: 2000 + 1500 + 1500 us is 5000 us exactly, also after 130,602.776 us of
+    earlier work (in floats it came to 4999.99999999999, and a sweep budget's edge moved with the thread's past:
+    the fast tier's flaky test_reproducible_sweeps_*)."""
+    slices.charge(slices.Cost(130_602.776, 0.0), 0)
+    with slices.one_call():
+        call = slices.current_call()
+        for us in (2000.0, 1500.0, 1500.0):
+            slices.charge(slices.Cost(us, 0.0), 0)
+        assert call.cost() == 5000.0
 
 
 def test_a_piece_that_raises_ends_the_job_and_its_result_raises():

@@ -23,7 +23,7 @@ import numpy as np
 
 from aoa_localizer.engine.checks import CheckResult, CheckWorker
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.slices import SWEEP_BUDGET_US, Call, SlicedJob, Steps, current_call, spent
+from aoa_localizer.engine.slices import SWEEP_BUDGET_US, Call, SlicedJob, Steps, current_call, metered_since, spent_ns
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
 
@@ -137,7 +137,7 @@ class Scheduler:
         first = not (call.swept or call.pieces) and call.cost() < 0.5 * SWEEP_BUDGET_US
         while debt.sweeps and (first or call.cost() + debt.sweep_us < SWEEP_BUDGET_US):
             first, call.swept = False, True
-            before = spent()
+            before = spent_ns()
             if f.n <= SWEEP_PART:
                 f.move(1)
                 debt.sweeps -= 1
@@ -148,7 +148,7 @@ class Scheduler:
                 debt.at += SWEEP_PART
                 if debt.at >= f.n:
                     debt.sweeps, debt.order = debt.sweeps - 1, None
-            debt.sweep_us = spent() - before
+            debt.sweep_us = metered_since(before)
 
     def settle(self, track: EmitterTrack) -> None:
         """Every sweep the track's filter owes, made now (the end of data)."""

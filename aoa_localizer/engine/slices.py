@@ -41,28 +41,37 @@ SWEEP_BUDGET_US = 5000.0
 PIECE_EVALUATIONS = 30_000  # bearing densities a grid's score makes per piece (a millisecond or two)
 
 _meter = threading.local()  # a thread's own, so Localizers in other threads never move a job's pieces
+# The meter counts whole nanoseconds, in an int: a call's cost is a difference of the thread's totals, and in floats
+# that difference carried the totals' rounding (2000 + 1500 + 1500 came to 4999.99999999999 after 130,000 us of
+# earlier work), so where a budget's edge fell depended on what the thread had metered before
+_NS_PER_US = 1000
 
 
 def charge(cost: Cost, elements: int) -> None:
     """Count what a kernel call over `elements` elements cost."""
-    _meter.spent = spent() + cost.per_call + cost.per_element * elements
+    _meter.spent_ns = getattr(_meter, "spent_ns", 0) + round(_NS_PER_US * (cost.per_call + cost.per_element * elements))
 
 
-def spent() -> float:
-    """The metered cost so far in this thread (microseconds, by the models)."""
-    return getattr(_meter, "spent", 0.0)
+def spent_ns() -> int:
+    """The metered cost so far in this thread (nanoseconds, by the models): take differences of these."""
+    return getattr(_meter, "spent_ns", 0)
+
+
+def metered_since(start_ns: int) -> float:
+    """The metered cost since `start_ns` (a spent_ns() reading), in microseconds: exact, whatever came before."""
+    return (spent_ns() - start_ns) / _NS_PER_US
 
 
 class Call:
     """What the pieces made in one call have cost so far."""
 
     def __init__(self) -> None:
-        self.start, self.pieces = spent(), 0
+        self.start_ns, self.pieces = spent_ns(), 0
         self.swept = False  # a resampling's sweep (or part of one) was made in the call
 
     def cost(self) -> float:
         """The call's metered cost so far (microseconds, by the models), its pieces' own cost included."""
-        return spent() - self.start + PIECE_US * self.pieces
+        return metered_since(self.start_ns) + PIECE_US * self.pieces
 
 
 def current_call() -> Call:
