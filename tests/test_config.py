@@ -128,3 +128,12 @@ def test_param_docs_says_what_it_did(tmp_path, capsys):
     assert main([str(doc)]) == 0 and "generated tables rewritten from the code" in capsys.readouterr().out
     assert "OUT OF DATE" not in doc.read_text()
     assert main([str(doc)]) == 0 and "already match the code" in capsys.readouterr().out
+
+
+def test_every_node_parameters_default_is_valid():
+    """A node parameter's default passes its own declaration (an empty `cot_url`, "off", once refused every start
+    in the graph tests while no fast test saw it)."""
+    from aoa_localizer.ros.node_params import NODE_PARAMS
+
+    for p in NODE_PARAMS:
+        p.spec.check(p.name, p.default)

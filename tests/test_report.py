@@ -87,7 +87,7 @@ def test_report_on_a_sample_bag_writes_every_file(tmp_path):
     res = report(ROOT / "bags/seed", "--out", tmp_path / "r", "--seed", 1)
     assert res.returncode == 0, res.stderr
     files = {p.name for p in (tmp_path / "r").iterdir()}
-    assert files == {"map.png", "error.png", "emitter.kml", "emitter.geojson", "summary.md"}
+    assert files == {"map.png", "error.png", "emitter.kml", "emitter.geojson", "summary.md", "emitter_default.cot"}
     assert (tmp_path / "r/map.png").read_bytes()[:4] == b"\x89PNG"
     summary = (tmp_path / "r/summary.md").read_text()
     assert "Final error against the truth" in summary and "Inputs not used" in summary

@@ -39,6 +39,7 @@ class Spec:
     optional: bool = False
     read_only: bool = False
     items: type = float  # a list's elements: finite numbers, or (str) names
+    empty: bool = False  # a str that may be empty (unset: the feature is off)
 
     def check(self, name: str, value: Any):
         """Raise ConfigError naming the parameter when `value` breaks this declaration."""
@@ -60,6 +61,8 @@ class Spec:
                 self.low is None or self.low <= len(value)) and (self.high is None or len(value) <= self.high)
         if not isinstance(value, str):
             return False
+        if self.empty and value == "":
+            return True
         return value in self.choices if self.choices else bool(value) and not any(c.isspace() for c in value)
 
     def _in_range(self, value) -> bool:
@@ -72,7 +75,9 @@ class Spec:
     def describe(self) -> str:
         """What a valid value is, in words: 'one of a, b', 'an integer >= 2', 'a finite number in (0, 1)'."""
         if self.kind is str:
-            return f"one of {', '.join(self.choices)}" if self.choices else "a name without spaces"
+            if self.choices:
+                return f"one of {', '.join(self.choices)}"
+            return "a name without spaces, or empty" if self.empty else "a name without spaces"
         if self.kind is bool:
             return "true or false"
         if self.kind is list:

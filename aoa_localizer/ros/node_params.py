@@ -38,7 +38,7 @@ NODE_PARAMS = [
     ParameterSpec("cot_url", "", Spec(
         "where each channel's estimate goes as a Cursor-on-Target event for TAK (ATAK, WinTAK, iTAK), in pytak's "
         "convention: udp://239.2.3.1:6969 (multicast), udp://HOST:PORT, tcp://HOST:PORT; empty: none (needs "
-        "pip install 'aoa_localizer[tak]')", str, read_only=True)),
+        "pip install 'aoa_localizer[tak]')", str, read_only=True, empty=True)),
     ParameterSpec("cot_period_s", 1.0, Spec("a channel's CoT event is sent at most this often, while its estimate "
                                             "changes (s)", float, low=0.0, high=3600.0, read_only=True)),
     ParameterSpec("cot_stale_s", 120.0, Spec("a CoT event's stale time after it is sent: TAK greys the emitter out "
