@@ -1100,3 +1100,16 @@ def test_the_node_sends_each_estimate_to_tak_as_cursor_on_target(spawn, domain):
     refused = subprocess.run([sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p", "cot_url:=http://x:1"],
                              env=ros_env(domain), cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2 and "the scheme must be udp:// or tcp://" in refused.stderr
+
+
+def test_the_launcher_reports_every_transmitter_against_its_own_truth(domain):
+    """Issue 53, items 2 and 5: `--vehicle-param emitters=[433.92e6,...]` (numbers YAML 1.1 reads as text, as
+    `simulate --emitters` takes them) plays two transmitters; the vehicle publishes each one's truth on
+    sim/<channel>/truth and the launcher reports every channel against its own."""
+    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 1, "--domain-id", domain, "--vehicle-param",
+                  "emitters=[433.92e6,1200,800,446e6,400,1100]"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    for channel in ("f433920000", "f446000000"):
+        line = next(x for x in res.stdout.splitlines() if x.startswith(f"channel {channel}:"))
+        error = float(re.search(r"error against its truth ([0-9.]+) m", line).group(1))
+        assert error < 10.0, line

@@ -12,6 +12,7 @@ No process is left behind: children run in their own process groups and are stop
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -23,6 +24,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -164,8 +166,27 @@ def build_commands(args, node_params: dict, found: dict[str, dict[str, str]]) ->
         if args.duration:
             source += ["-p", f"duration_s:={float(args.duration)}"]
         for k, v in parse_params(args.vehicle_param, "--vehicle-param").items():
-            source += ["-p", f"{k}:={v}"]
+            source += ["-p", f"{k}:={ros_value(vehicle_value(v))}"]
     return node, source
+
+
+def vehicle_value(text: str):
+    """--vehicle-param's TEXT as ROS reads it (YAML), with numbers YAML 1.1 takes for text (`433.92e6`) read as the
+    numbers they are, as `simulate --emitters` reads them: one reading of numbers everywhere."""
+    def number(v):
+        if isinstance(v, list):  # ROS takes no mixed lists: a list of numbers is of floats
+            items = [number(x) for x in v]
+            numeric = all(isinstance(x, int | float) and not isinstance(x, bool) for x in items)
+            return [float(x) for x in items] if numeric else items
+        if isinstance(v, str):
+            try:
+                x = float(v)
+            except ValueError:
+                return v
+            return x if math.isfinite(x) else v
+        return v
+
+    return number(yaml.safe_load(text))
 
 
 def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dict:
@@ -222,6 +243,12 @@ class Monitor:
                                       latched)
         self.node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: setattr(self, "fix", m), 10)
         self.node.create_subscription(T.DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        # every channel's pose and, from a simulation with several transmitters, its own truth (emitter/channels
+        # names them as they open)
+        self.T, self.latched = T, latched
+        self.channel_poses: dict[str, Any] = {}
+        self.channel_truths: dict[str, Any] = {}
+        self.node.create_subscription(T.String, "emitter/channels", self._on_channels, latched)
         self.diagnostics_seen = 0
         self.crowded = ""  # the node's first input_publishers warning: another source on its inputs
         self.fix = None
@@ -237,6 +264,37 @@ class Monitor:
             self.rclpy.spin_once(self.node, timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
             if self.recorder:
                 self.recorder.poll()
+
+    def _on_channels(self, msg) -> None:
+        for channel in json.loads(msg.data).get("channels", {}):
+            if channel in self.channel_poses or channel == "default":
+                continue
+            self.channel_poses[channel] = None
+            self.node.create_subscription(self.T.PoseWithCovarianceStamped, f"emitter/{channel}/pose",
+                                          functools.partial(self.channel_poses.__setitem__, channel), self.latched)
+            self.node.create_subscription(self.T.PointStamped, f"sim/{channel}/truth",
+                                          functools.partial(self.channel_truths.__setitem__, channel), self.latched)
+
+    def channel_lines(self) -> list[str]:
+        """One line per frequency channel: its estimate, and its error against its own truth when the simulation
+        gave one (in the node's map frame, as the verdict's)."""
+        from msgs_adapters.fields import estimate_from_pose
+
+        lines = []
+        for channel, pose in sorted(self.channel_poses.items()):
+            if pose is None:
+                lines.append(f"channel {channel}: no estimate")
+                continue
+            _, east, north, cov = estimate_from_pose(pose)
+            major, minor, _ = ellipse_axes(np.array(cov))
+            line = f"channel {channel}: E {east:.1f} m N {north:.1f} m, 95% ellipse {major:.1f} m x {minor:.1f} m"
+            truth = self._in_node_frame(self.channel_truths.get(channel))
+            if truth is not None:
+                err = np.array([east - truth[0], north - truth[1]])
+                inside = "inside" if crlb_nees(err, np.array(cov)) <= ELLIPSE_95 else "outside"
+                line += f"; error against its truth {float(np.hypot(*err)):.2f} m ({inside} its ellipse)"
+            lines.append(line)
+        return lines
 
     def _on_diagnostics(self, msg) -> None:
         from msgs_adapters.fields import diagnostics_values
@@ -287,10 +345,13 @@ class Monitor:
     def truth_in_node_frame(self) -> tuple[float, float] | None:
         """sim/truth (east, north in the simulation's map at sim/datum) in the node's map at emitter/datum, so
         the error is measured in one frame; None until the truth and both datums are known."""
-        if self.truth is None or self.sim_datum is None or self.node_datum is None:
+        return self._in_node_frame(self.truth)
+
+    def _in_node_frame(self, truth) -> tuple[float, float] | None:
+        if truth is None or self.sim_datum is None or self.node_datum is None:
             return None
         sim = LocalFrame(self.sim_datum.latitude, self.sim_datum.longitude, self.sim_datum.altitude)
-        lat, lon, _ = sim.to_geodetic(self.truth.point.x, self.truth.point.y)
+        lat, lon, _ = sim.to_geodetic(truth.point.x, truth.point.y)
         node = LocalFrame(self.node_datum.latitude, self.node_datum.longitude, self.node_datum.altitude)
         east, north = node.to_enu(lat, lon, self.node_datum.altitude)
         return float(east), float(north)
@@ -380,7 +441,7 @@ def parse_args(argv) -> argparse.Namespace:
 def _vehicle_value_problem(name: str, text: str) -> str | None:
     """Why --vehicle-param NAME=TEXT is refused (None: it is fine), read as ROS reads `-p NAME:=TEXT` (YAML)."""
     try:
-        value = yaml.safe_load(text)
+        value = vehicle_value(text)
         VEHICLE_SPECS[name].spec.check(name, value)
     except (yaml.YAMLError, ConfigError) as exc:
         return f"--vehicle-param {exc}"
@@ -510,6 +571,8 @@ class Run:
             ok, why = False, (f"another source published on the node's inputs during the run ({monitor.crowded}); "
                               "run again in a free domain (leave out --domain-id)")
         print_result(ok, why, figures)
+        for line in monitor.channel_lines():  # the verdict is the primary channel's; every channel is reported
+            print(line)
         if args.result:
             args.result.write_text(json.dumps({"converged": ok, "reason": why, **figures}, indent=1))
         return 0 if ok else 1

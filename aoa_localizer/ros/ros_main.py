@@ -7,6 +7,7 @@ import signal
 import sys
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
@@ -57,7 +58,11 @@ def run_node(name: str, make, run, refusals: tuple, argv=None, usage: str = "") 
         except BrokenPipeError:  # `--help | head`: the reader left; not an error of ours
             sys.stdout = open(os.devnull, "w")  # the interpreter's exit flush must not fail either
         return 0
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:  # --ros-args rcl cannot parse (a -p value YAML reads as a mixed list): one line
+        print(f"{name}: refusing to start: {str(exc).split(', at ')[0]}", file=sys.stderr)
+        return 2
     stop = Stop()
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:

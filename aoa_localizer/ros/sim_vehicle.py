@@ -26,6 +26,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from aoa_localizer.core.spec import ConfigError, ParameterSpec, Spec
+from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.fleet import FLEETS, Fleet, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.goal_drive import GoalDrive
@@ -156,6 +157,7 @@ class SimVehicle(Node):
         self.counts: tuple[int, int] | None = None  # fixes and DF readings of a run made ahead (drive:=track)
         self.sigma_of: dict[float, float] = {}  # each bearing's noise by its stamp, for the pose encoding
         self.goal_end_s = 0.0
+        self.truths: dict[str, np.ndarray] = {}  # with several transmitters, each one's by its channel
         self.stations = self._goal_drive(overrides) if s["drive"] == "goal" else self._simulate(overrides)
         latched = QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -167,6 +169,8 @@ class SimVehicle(Node):
             self.pubs[name] = (self.create_publisher(self.T.NavSatFix, prefix + "gps/fix", 100),
                                self.create_publisher(bearing_type, prefix + "df/bearing", 100))
         self.pub_truth = self.create_publisher(self.T.PointStamped, "sim/truth", latched)
+        self.channel_truths = {channel: self.create_publisher(self.T.PointStamped, f"sim/{channel}/truth", latched)
+                               for channel in self.truths}
         self.pub_datum = self.create_publisher(self.T.NavSatFix, "sim/datum", latched)
         if s["drive"] == "goal":
             self.create_subscription(self.T.NavSatFix, "emitter/datum", self.on_node_datum, latched)
@@ -230,6 +234,8 @@ class SimVehicle(Node):
         f = simulate_fleet(stations, fleet.emitters, self.data_seed)
         self.events = [(row[0], name, kind, row) for kind, name, row in f.events()]
         self.datum, self.emitter = f.scenario.datum, next(iter(f.truth.values()))
+        # each transmitter's truth on sim/<channel>/truth (sim/truth keeps the first's), as simulate's bags carry
+        self.truths = {channel_id(freq): where for freq, where in f.truth.items() if freq}
         self.counts = (sum(map(len, f.fixes.values())), sum(map(len, f.bearings.values())))
         self.sigma_rad = f.scenario.sigma_rad
         return list(fleet.stations)
@@ -256,6 +262,8 @@ class SimVehicle(Node):
         base = time.time()
         self.pub_datum.publish(build.navsatfix(T, base, *self.datum, frame_id="map"))
         self.pub_truth.publish(build.point_stamped(T, base, *self.emitter))
+        for channel, where in self.truths.items():
+            self.channel_truths[channel].publish(build.point_stamped(T, base, *where))
         events = self.events
         if self.counts is None:
             end = self.duration_s or self.goal_end_s
