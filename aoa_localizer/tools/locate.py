@@ -235,15 +235,13 @@ def record(ident: str, est: Estimate, rows: int) -> dict:
 
 
 def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):
-    """map.png (bearings, estimates, 95 % ellipses, and each estimate's 95 % highest-density region where it has
-    one), emitter.kml, emitter.geojson and an emitter_<id>.cot (TAK) of every id."""
+    """map.png (every id's estimate and 95 % ellipse, numbered), maps/<id>.png (each id zoomed to its bearings:
+    reporting/survey_map.py), emitter.kml, emitter.geojson and an emitter_<id>.cot (TAK) of every id."""
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
 
-    from aoa_localizer.engine.crlb import ellipse_points
+    from aoa_localizer.reporting import survey_map
     from aoa_localizer.reporting.export import geojson, kml
 
     out.mkdir(parents=True, exist_ok=True)
@@ -251,29 +249,10 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
     (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}), indent=1))
     (out / "emitter.kml").write_text(kml(frame, named, {}))
     print(f"locate: {write_cot_files(out, named)}", file=sys.stderr)
-    fig, ax = plt.subplots(figsize=(8, 8))
-    for (ident, (est, rows)), colour in zip(found.items(), plt.rcParams["axes.prop_cycle"].by_key()["color"] * 99,
-                                            strict=False):
-        ring = ellipse_points((est.east, est.north), est.cov)
-        label = "".join(ch if ch.isprintable() else "?" for ch in ident or "emitter")
-        ax.plot(ring[:, 0], ring[:, 1], color=colour, label=f"{label} ({est.state})")
-        ax.plot(est.east, est.north, "+", color=colour, ms=12)
-        for ring in (est.regions or {}).get(0.95, []):
-            e, n = frame.to_enu(ring[:, 0], ring[:, 1])
-            ax.fill(e, n, color=colour, alpha=0.15, lw=0)
-        reach = 1.5 * max(float(np.max(np.hypot(ring[:, 0] - est.east, ring[:, 1] - est.north))), 50.0)
-        for row in rows:
-            e, n = frame.to_enu(row.lat, row.lon)
-            th = math.radians(90.0 - row.azimuth_deg)
-            ax.plot([e, e + reach * math.cos(th)], [n, n + reach * math.sin(th)], color=colour, lw=0.8, alpha=0.6)
-            ax.plot(e, n, "^", color=colour)
-    ax.set_aspect("equal")
-    ax.set_xlabel("east (m)")
-    ax.set_ylabel("north (m)")
-    ax.legend(loc="best")
-    ax.set_title("bearings, estimates and 95 % ellipses")
-    fig.savefig(out / "map.png", dpi=110)
-    plt.close(fig)
+    survey_map.overview(out / "map.png", frame, found)
+    (out / "maps").mkdir(exist_ok=True)
+    for ident, (est, rows) in found.items():
+        survey_map.id_map(out / "maps" / f"{survey_map.file_name(ident)}.png", frame, ident, est, rows)
 
 
 def _filter_run(groups: dict[str, list[Row]], cfg, datum) -> tuple[dict, list[str], int]:
