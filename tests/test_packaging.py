@@ -122,3 +122,13 @@ def test_help_into_a_closed_pipe_is_not_an_error(monkeypatch):
     monkeypatch.setattr("sys.stdout", ClosedPipe())
     assert sim_vehicle.main(["prog", "--help"]) == 0
     assert not rclpy.ok()
+
+
+def test_the_nodes_help_names_every_output():
+    """Issue 53, part 4: the node's --help summary left out emitter/posterior and emitter/next_goal."""
+    from aoa_localizer.ros.node import usage
+
+    text = usage()
+    for topic in ("emitter/pose", "emitter/fix", "emitter/posterior", "emitter/next_goal", "emitter/datum",
+                  "emitter/channels", "/diagnostics", "cot_url"):
+        assert topic in text, topic

@@ -4,8 +4,10 @@
 
 Inputs `gps/fix`, `df/bearing` (sensor-data QoS: reliable and best-effort publishers both connect), or
 `NAME/gps/fix`, `NAME/df/bearing` per station of `stations`; outputs `emitter/pose` (latched), `emitter/fix`,
-`emitter/particles`, `emitter/markers`, the same under `emitter/<channel>/` per frequency channel, the latched
-summary `emitter/channels`, `/diagnostics` at 1 Hz; services `~/reset` and `~/reset_datum`. Every
+`emitter/particles`, `emitter/markers`, `emitter/posterior` (while listened to), `emitter/next_goal` and its marker,
+the same under `emitter/<channel>/` per frequency channel, the latched summary `emitter/channels`, the latched
+`emitter/datum`, `/diagnostics` at 1 Hz, and Cursor-on-Target to TAK with `cot_url`; services `~/reset` and
+`~/reset_datum`. Every
 LocalizerConfig field is a parameter (a filter's own settings as `<filter>.*`); a changed parameter restarts the
 track with the new settings, an invalid one is refused with its reason.
 """
