@@ -255,3 +255,21 @@ def test_the_closed_form_positive_definite_test_agrees_with_the_eigenvalues():
         assert _positive_definite(cov) == bool(high > 0 and low > 1e-9 * high)
     assert not any(_positive_definite(np.array(c, float)) for c in ([[0, 0], [0, 0]], [[1, 0], [0, np.nan]],
                                                                      [[1, 1], [1, 1]], [[np.inf, 0], [0, 1]]))
+
+
+def test_a_normal_runs_refusals_are_not_logged_as_faults(caplog):
+    """Issue 53, part 4: a sample bag's normal run printed WARNING lines a user reads as faults. Bearings before the
+    first fix, wild readings inside a point and the last bearings without a fix after them are logged at INFO; a
+    bad input still warns. Each is counted either way."""
+    import logging
+
+    from aoa_localizer.engine.rejections import Rejections
+
+    rejections = Rejections()
+    with caplog.at_level(logging.INFO, logger="aoa_localizer"):
+        for reason in ("before_first_fix", "point_outlier", "no_fix_after", "bad_azimuth"):
+            rejections(reason)
+    levels = {r.getMessage().split(":")[1].split()[0]: r.levelname for r in caplog.records}
+    assert levels == {"before_first_fix": "INFO", "point_outlier": "INFO", "no_fix_after": "INFO",
+                      "bad_azimuth": "WARNING"}
+    assert rejections.counts["point_outlier"] == 1

@@ -80,6 +80,11 @@ def table() -> str:
     return "\n".join(["| reason | what |", "|---|---|"] + [f"| `{r.value}` | {r.words} |" for r in Reason])
 
 
+# What every normal run refuses (bearings before the first fix, wild readings inside a point, the last bearings
+# with no fix after them): logged at INFO, not as a fault; counted like the rest
+ROUTINE = frozenset({Reason.BEFORE_FIRST_FIX, Reason.POINT_OUTLIER, Reason.NO_FIX_AFTER})
+
+
 class Rejections:
     """The inputs not used, counted by reason (the first of each kind logged), and the fate of the latest inputs, so
     the status can say when most are being refused."""
@@ -94,8 +99,9 @@ class Rejections:
         for _ in range(count):
             self.counts[reason.value] += 1  # plain strings: what programs print, compare and serialise
             self.recent.append(reason)
-            if self.counts[reason.value] == 1:
-                log.warning("input not used: %s (%s); further ones are counted", reason.value, reason.words)
+            if self.counts[reason.value] == 1:  # the ordinary ones of a normal run are not said as faults
+                log.log(logging.INFO if reason in ROUTINE else logging.WARNING,
+                        "input not used: %s (%s); further ones are counted", reason.value, reason.words)
 
     def used(self) -> None:
         """An input was used."""
