@@ -287,8 +287,8 @@ def test_ctrl_c_during_offline_replay_or_report_ends_in_one_line_and_keeps_what_
     out, err_file = tmp_path / "est.jsonl", tmp_path / "stderr.txt"
     slow = ["--particles", "3000"]  # long enough to be interrupted mid-run (the report takes about 8 s alone)
     errs = []
-    # Each is interrupted once it works on the data, never while Python still imports (no handler yet): the replay
-    # when it has written three estimates, the report a second after its first warning about the bag's readings
+    # Each is interrupted once it works on the data, never while Python still imports: the replay when it has
+    # written three estimates, the report (-v: the engine's lines) a second after its first line about the readings
     seen: list[float] = []
 
     def report_busy(now: float) -> bool:
@@ -298,7 +298,7 @@ def test_ctrl_c_during_offline_replay_or_report_ends_in_one_line_and_keeps_what_
 
     for args, ready in ((["aoa_localizer.replay", ROOT / "bags/urban", "--offline", "--output", out, *slow],
                          lambda _: out.exists() and len(out.read_text().splitlines()) >= 3),
-                        (["aoa_localizer.report", ROOT / "bags/urban", "--out", tmp_path / "rep", *slow],
+                        (["aoa_localizer.report", ROOT / "bags/urban", "--out", tmp_path / "rep", *slow, "-v"],
                          report_busy)):
         started = time.monotonic()
         with err_file.open("w") as err_sink:
