@@ -135,5 +135,11 @@ def test_every_node_parameters_default_is_valid():
     in the graph tests while no fast test saw it)."""
     from aoa_localizer.ros.node_params import NODE_PARAMS
 
+    refused = []
     for p in NODE_PARAMS:
-        p.spec.check(p.name, p.default)
+        try:
+            p.spec.check(p.name, p.default)
+        except ConfigError as exc:
+            refused.append(str(exc))
+    assert refused == []
+    assert any(p.name == "cot_url" and p.default == "" for p in NODE_PARAMS)  # the case that broke
