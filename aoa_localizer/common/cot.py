@@ -10,8 +10,10 @@ import socket
 import time
 import warnings
 import xml.etree.ElementTree as ET
+from pathlib import Path
 from urllib.parse import urlparse
 
+from aoa_localizer.common.output import file_name
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 
 RETRY_S = 10.0  # after a failed send, the next tries this much later (a TCP server down costs no 2 s timeouts)
@@ -60,15 +62,12 @@ def write_cot_files(folder, estimates, stale_s: float = FILE_STALE_S) -> str:
     """`emitter_<name>.cot` in `folder` for each estimate (named by its channel, or a survey's id: characters a file
     name cannot hold become `_`), to drop onto a TAK device or send with any CoT tool; what was written, or why
     nothing was (pytak missing)."""
-    from pathlib import Path
-
     try:
         events = [(est.channel, estimate_event(est, stale_s)) for est in estimates]
     except CotUnavailable as exc:
         return f"no .cot files: {exc}"
     for name, payload in events:
-        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name) or "emitter"
-        (Path(folder) / f"emitter_{safe}.cot").write_bytes(payload)
+        (Path(folder) / f"emitter_{file_name(name)}.cot").write_bytes(payload)
     return f"{len(events)} .cot file{'s' if len(events) != 1 else ''} for TAK"
 
 

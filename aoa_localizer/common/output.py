@@ -57,3 +57,8 @@ def write_staged(path: Path, text: str) -> None:
     with StagedFile(path) as staged:
         staged.file.write(text)
         staged.keep()
+
+
+def file_name(ident: str) -> str:
+    """An emitter's id or channel as a file name: characters a file name cannot hold become `_`."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in ident) or "emitter"

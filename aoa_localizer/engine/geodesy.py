@@ -190,11 +190,8 @@ class LocalFrame:
             east, north, alt = np.broadcast_arrays(*(np.asarray(v, float) for v in (east, north, alt)))
         sqrt = math.sqrt if scalar else np.sqrt
         radius = WGS84_A + self.alt0  # the sphere's guess: the ground falls below the plane as the circle does
-        r2 = east * east + north * north
-        up = (alt - self.alt0) - (radius - sqrt(radius * radius - r2 if scalar else np.maximum(radius * radius - r2,
-                                                                                                  0.0)))
-        if scalar and r2 >= radius * radius:
-            up = alt - self.alt0 - radius
+        below = radius * radius - (east * east + north * north)  # beyond the horizon (<= 0): the plane's edge
+        up = (alt - self.alt0) - (radius - sqrt(max(below, 0.0) if scalar else np.maximum(below, 0.0)))
         for _ in range(_GROUND_ITERATIONS):
             lat, lon, height = self._place(east, north, up)
             up = up - (height - alt) / self._up_cosine(lat, lon)

@@ -20,11 +20,6 @@ def _printable(text: str) -> str:
     return "".join(ch if ch.isprintable() else "?" for ch in text) or "emitter"
 
 
-def file_name(ident: str) -> str:
-    """An id as a file name: characters a file name cannot hold become `_`."""
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in ident) or "emitter"
-
-
 def _scale_bar(ax) -> None:
     """A bar of a round length (1, 2 or 5 x 10^k m) about a fifth of the plot's width, bottom left."""
     x0, x1 = ax.get_xlim()

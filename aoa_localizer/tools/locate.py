@@ -27,7 +27,7 @@ from pathlib import Path
 
 from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, interrupted, setup_logging
 from aoa_localizer.common.cot import write_cot_files
-from aoa_localizer.common.output import check_output, write_staged
+from aoa_localizer.common.output import check_output, file_name, write_staged
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -252,7 +252,7 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
     survey_map.overview(out / "map.png", frame, found)
     (out / "maps").mkdir(exist_ok=True)
     for ident, (est, rows) in found.items():
-        survey_map.id_map(out / "maps" / f"{survey_map.file_name(ident)}.png", frame, ident, est, rows)
+        survey_map.id_map(out / "maps" / f"{file_name(ident)}.png", frame, ident, est, rows)
 
 
 def _filter_run(groups: dict[str, list[Row]], cfg, datum) -> tuple[dict, list[str], int]:
