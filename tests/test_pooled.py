@@ -13,7 +13,9 @@ from scipy import special, stats
 
 from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.surveys import least_squares_fix
 from aoa_localizer.pooled import SurveyReading, locate_pooled
+from aoa_localizer.pooled.grid import CELLS, Box, displaced, widened
 from aoa_localizer.pooled.noise_family import log_likelihood, logsumexp, noise_grid
 from aoa_localizer.pooled.region import ELLIPSE_50
 from aoa_localizer.pooled.stations import make_stations
@@ -204,35 +206,49 @@ def test_locate_refuses_an_unknown_receiver_class(tmp_path, cli):
     assert res.returncode == 2 and "handheld" in res.stderr
 
 
-def _real():
-    rows, bad = locate.read_rows(REAL / "telemetry_observer_a.csv", None)
+def _real(observer: str = "a"):
+    rows, bad = locate.read_rows(REAL / f"telemetry_observer_{observer}.csv", None)
     assert not bad
-    with open(REAL / "telemetry_observer_a_truth.csv", newline="") as fh:
+    with open(REAL / f"telemetry_observer_{observer}_truth.csv", newline="") as fh:
         truth = {r["id"]: (float(r["lat"]), float(r["lon"])) for r in csv.DictReader(fh)}
     return [SurveyReading(r.id, r.lat, r.lon, r.azimuth_deg, r.station) for r in rows], truth
 
 
+def _least_squares_errors(readings, truth) -> list[float]:
+    out = []
+    for ident, (lat, lon) in truth.items():
+        mine = [r for r in readings if r.emitter == ident]
+        frame = LocalFrame(lat, lon)
+        st = np.column_stack(frame.to_enu(np.array([r.lat for r in mine]), np.array([r.lon for r in mine])))
+        out.append(float(np.hypot(*least_squares_fix(st, np.array([r.azimuth_deg for r in mine])))))
+    return out
+
+
 @pytest.mark.slow
-def test_observer_a_real_bearings_every_collar_located_about_as_often_inside_as_the_ellipses_say():
-    """Observer A's 27 collars (CC BY-SA 4.0, examples/real/SOURCES.md), defaults: every collar located, median
-    error at or under least squares' 133 m, the truth inside the 95 % ellipse for 80-100 % and inside the 50 %
-    one for 30-70 % (docs/benchmarks.md has today's figures), the 95 % region inside for as many, and sharpness
-    (95 % semi-major over error) at most 4 at the median."""
-    readings, truth = _real()
+@pytest.mark.parametrize(("observer", "collars", "median_over_ls"), [("a", 27, 1.0), ("b", 19, 1.05)])
+def test_real_bearings_every_collar_located_about_as_often_inside_as_the_ellipses_say(observer, collars,
+                                                                                      median_over_ls):
+    """Two observers' real collars (CC BY-SA 4.0, examples/real/SOURCES.md), defaults: every collar located, median
+    error at (A) or about (B, 19 collars) least squares', the truth inside the 95 % ellipse for 85-100 % and
+    inside the 50 % one for 30-80 % (docs/benchmarks.md has today's figures), the 95 % region inside for as many,
+    sharpness (95 % semi-major over error) at most 4 at the median, and no `tracking` fix outside its ellipse."""
+    readings, truth = _real(observer)
     res = locate_pooled(readings)
-    assert len(res.fixes) == 27 and not res.refused
-    errs, in50, in95, hpd95, sharp = [], 0, 0, 0, []
+    assert len(res.fixes) == collars and not res.refused
+    errs, in50, in95, hpd95, sharp, tracking_out = [], 0, 0, 0, [], 0
     for ident, fix in res.fixes.items():
         err = np.array(LocalFrame(*truth[ident]).to_enu(fix.lat, fix.lon))
         errs.append(float(np.hypot(*err)))
         in50 += inside_ellipse(err, fix.cov, ELLIPSE_50)
         in95 += inside_ellipse(err, fix.cov)
+        tracking_out += fix.state == "tracking" and not inside_ellipse(err, fix.cov)
         hpd95 += any(MplPath(r[:, ::-1]).contains_point(truth[ident][::-1]) for r in fix.hpd[0.95])
         sharp.append(fix.semi_axes()[0] / errs[-1])
-    assert np.median(errs) <= 133.0
-    assert 0.8 * 27 <= in95 and 0.8 * 27 <= hpd95
-    assert 0.3 * 27 <= in50 <= 0.7 * 27
+    assert np.median(errs) <= median_over_ls * np.median(_least_squares_errors(readings, truth))
+    assert 0.85 * collars <= in95 and 0.85 * collars <= hpd95
+    assert 0.3 * collars <= in50 <= 0.8 * collars
     assert np.median(sharp) <= 4.0
+    assert tracking_out == 0
 
 
 @pytest.mark.parametrize("distance_km", [10, 300, 3000])
@@ -562,3 +578,27 @@ def test_locates_filter_model_repeats_by_default(tmp_path, cli):
         assert cli(locate.main, square, "--model", "filter", "--output", tmp_path / f"{k}.jsonl").returncode == 0
         outs.append(json.loads((tmp_path / f"{k}.jsonl").read_text()))
     assert outs[0]["lat"] == outs[1]["lat"] and outs[0]["cov"] == outs[1]["cov"]
+
+
+def test_a_place_like_error_that_follows_the_truths_range_leans_the_posterior_outward():
+    """The bearings point at an apparent place 300 m north of two stations; the truth is displaced from it by
+    `share` of the truth's own range: a truth farther out is displaced further, so the posterior's mean lies
+    beyond the apparent place (hand-checked: the kernel is wider there), it holds all its mass, and with a share
+    of 0 it stays where the apparent place is (within the wider grid's cell)."""
+    src = Box(0.0, 300.0, 20.0, 20.0)
+    x, y, _ = src.cells()
+    gx, gy = np.meshgrid(x, y)
+    p = np.exp(-0.5 * ((gx - 0.0) ** 2 + (gy - 300.0) ** 2) / 5.0**2).ravel()
+    p /= p.sum()
+    stations = np.array([[-100.0, 0.0], [100.0, 0.0]])
+    out = widened(src, 3 * 0.3 * 600.0)
+    ox, oy, _ = out.cells()
+    ogx, ogy = (g.ravel() for g in np.meshgrid(ox, oy))
+    floor = 0.5 * src.hx / CELLS
+    q = displaced(src, p, out, stations, 0.3, 600.0, 1e6, floor)
+    assert q.sum() == pytest.approx(1.0)
+    assert float(q @ ogy) > 330.0  # leans away from the stations (a constant kernel: about 300)
+    assert abs(float(q @ ogx)) < 1.0  # the layout is symmetric east-west
+    still = displaced(src, p, out, stations, 0.0, 600.0, 1e6, floor)
+    cell = 2 * out.hy / CELLS
+    assert abs(float(still @ ogy) - 300.0) < cell and abs(float(still @ ogx)) < cell

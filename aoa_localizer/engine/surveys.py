@@ -127,11 +127,13 @@ class SurveySet:
 
 
 def observer_like(rng: np.random.Generator, emitters: int = 27, bias_deg: float = 10.0, visible_deg: float = 8.0,
-                  place_share: float = 0.3, wild_share: float = 0.08) -> SurveySet:
+                  place_share: tuple = (0.2, 0.6), place_weight: tuple = (0.75, 0.25),
+                  wild_share: float = 0.08) -> SurveySet:
     """One observer walking to 3-5 stations 100-700 m from each of several transmitters, built to reproduce what
-    observer A's real survey shows (examples/real): a bias common to all of the observer's azimuths, an apparent
-    place per transmitter (the bearings agree on a place beside it, `place_share` of the range per axis, which no
-    crossing shows), a visible scatter, and wild azimuths (uniform)."""
+    two observers' real surveys show (examples/real, docs/design.md): a bias common to all of the observer's
+    azimuths, an apparent place per transmitter (the bearings agree on a place beside it, per axis one of
+    `place_share` of the range, drawn with `place_weight`, which no crossing shows), a visible scatter, and wild
+    azimuths (uniform)."""
     names, stations, places, az, truth = [], [], [], [], {}
     for j in range(emitters):
         t = rng.uniform(-800, 800, 2)
@@ -140,7 +142,8 @@ def observer_like(rng: np.random.Generator, emitters: int = 27, bias_deg: float 
         rng_m = rng.uniform(100, 700, k)
         ang = rng.uniform(0, 2 * math.pi, k)
         st = t + np.column_stack([rng_m * np.sin(ang), rng_m * np.cos(ang)])
-        apparent = t + rng.normal(0, place_share * float(np.median(rng_m)), 2)
+        share = place_share[int(rng.choice(len(place_share), p=place_weight))]
+        apparent = t + rng.normal(0, share * float(np.median(rng_m)), 2)
         a = np.degrees(np.arctan2(apparent[0] - st[:, 0], apparent[1] - st[:, 1])) + bias_deg
         a += visible_deg * rng.standard_normal(k)
         wild = rng.random(k) < wild_share

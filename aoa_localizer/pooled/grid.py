@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
 from aoa_localizer.pooled.noise_family import NoiseGrid, log_likelihood, logsumexp
@@ -81,10 +80,15 @@ def first_box(geom: Geometry) -> Box:
     return Box(0.0, 0.0, h, h)
 
 
+def log_prior_at(x: np.ndarray, y: np.ndarray, scale: float) -> np.ndarray:
+    """log of a bivariate Cauchy at the origin with this scale, at places (x[i], y[i])."""
+    return -math.log(2 * math.pi * scale**2) - 1.5 * np.log1p((x**2 + y**2) / scale**2)
+
+
 def log_prior(x: np.ndarray, y: np.ndarray, scale: float) -> np.ndarray:
-    """log of a bivariate Cauchy at the origin with this scale, on the grid (G*G,) (rows y, columns x)."""
-    r2 = (x[None, :] ** 2 + y[:, None] ** 2).ravel() / scale**2
-    return -math.log(2 * math.pi * scale**2) - 1.5 * np.log1p(r2)
+    """log_prior_at on the grid (G*G,) (rows y, columns x)."""
+    gx, gy = np.meshgrid(x, y)
+    return log_prior_at(gx.ravel(), gy.ravel(), scale)
 
 
 def log_joint(geom: Geometry, box: Box, shift: np.ndarray, extra_var: np.ndarray, noise: NoiseGrid) -> np.ndarray:
@@ -178,10 +182,28 @@ def widened(box: Box, margin: float) -> Box:
     return Box(box.cx, box.cy, box.hx + margin, box.hy + margin)
 
 
-def displaced(box: Box, p: np.ndarray, sigma_m: float) -> np.ndarray:
-    """The posterior of a place whose bearings point at it plus an isotropic Gaussian offset of sigma_m (C,)."""
-    if sigma_m <= 0:
-        return p
-    cells = (sigma_m / (2 * box.hy / CELLS), sigma_m / (2 * box.hx / CELLS))
-    q = ndimage.gaussian_filter(p.reshape(CELLS, CELLS), cells, mode="constant", truncate=4.0).ravel()
+def median_range(xy: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The median distance from each place (x[i], y[i]) to the stations `xy` (K, 2)."""
+    return np.median(np.hypot(x[None, :] - xy[:, :1], y[None, :] - xy[:, 1:]), axis=0)
+
+
+def displaced(src: Box, p: np.ndarray, out: Box, xy: np.ndarray, share: float, cap_m: float, scale: float,
+              floor_m: float) -> np.ndarray:
+    """The truth's posterior on `out` (C,) when the bearings point at an apparent place (posterior `p` on `src`)
+    displaced from the truth by an isotropic Gaussian whose sigma is `share` of the truth's own median range to
+    the stations `xy` (at most `cap_m`, at least `floor_m`): a truth farther out than the crossing is displaced
+    further, so the posterior leans outward. The apparent place's Cauchy prior (`scale`) is divided out and the
+    truth's applied."""
+    sx, sy, _ = src.cells()
+    ax, ay = (g.ravel() for g in np.meshgrid(sx, sy))
+    order = np.argsort(p)[::-1]
+    keep = order[: int(np.searchsorted(np.cumsum(p[order]), _KEEP)) + 1]  # the cells holding the mass
+    ax, ay = ax[keep], ay[keep]
+    like = p[keep] / np.exp(log_prior_at(ax, ay, scale))
+    ox, oy, _ = out.cells()
+    gx, gy = (g.ravel() for g in np.meshgrid(ox, oy))
+    sigma = np.maximum(share * np.minimum(median_range(xy, gx, gy), cap_m), floor_m)
+    d2 = (gx[:, None] - ax[None, :]) ** 2 + (gy[:, None] - ay[None, :]) ** 2
+    kernel = np.exp(-0.5 * d2 / sigma[:, None] ** 2) / sigma[:, None] ** 2
+    q = (kernel @ like) * np.exp(log_prior_at(gx, gy, scale))
     return q / q.sum()

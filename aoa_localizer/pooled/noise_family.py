@@ -18,19 +18,23 @@ import numpy as np
 @dataclass(frozen=True)
 class ReceiverClass:
     """What receivers of a kind do: the independent station error's scale (median deg, sd of its log), and the
-    hypotheses (equal weights) for one receiver's shared, place-like error as a share of the range."""
+    hypotheses for one receiver's shared, place-like error as a share of the truth's range, with their weights."""
 
     scale_deg: float
     log_sd: float
     shared_place: tuple
+    shared_weight: tuple = (1.0,)
 
 
+# A hand-held survey's place-like error: the two-scale mixture fitted (maximum likelihood against the surveyed
+# truth) to two real observers' 46 collars, docs/design.md "Honest on real bearings"
+_HAND_HELD_PLACE = {"shared_place": (0.2, 0.6), "shared_weight": (0.75, 0.25)}
 RECEIVER_CLASSES: dict[str, ReceiverClass] = {
-    "unknown": ReceiverClass(6.0, 1.0, (0.15, 0.35)),
-    "handheld": ReceiverClass(15.0, 0.6, (0.2, 0.4)),
+    "unknown": ReceiverClass(6.0, 1.0, **_HAND_HELD_PLACE),
+    "handheld": ReceiverClass(15.0, 0.6, **_HAND_HELD_PLACE),
     "electronic": ReceiverClass(3.0, 0.8, (0.0,)),
     "mast": ReceiverClass(2.0, 0.8, (0.0,)),
-    "indoor": ReceiverClass(10.0, 0.7, (0.0, 0.1)),
+    "indoor": ReceiverClass(10.0, 0.7, (0.0, 0.1), (0.5, 0.5)),
 }
 TAU_DEG = np.geomspace(0.2, 50.0, 15)  # a lab array to barely a direction
 WILD = np.array([0.02, 0.12])  # a station's chance of being wild
@@ -45,7 +49,8 @@ class NoiseGrid:
     tau: np.ndarray  # (H,) rad
     wild: np.ndarray  # (H,)
     log_prior: np.ndarray  # (H,)
-    shared_place: np.ndarray  # (L,) the place-like error's hypotheses, shares of the range
+    shared_place: np.ndarray  # (L,) the place-like error's hypotheses, shares of the truth's range
+    shared_weight: np.ndarray  # (L,) their prior weights
 
     @property
     def size(self) -> int:
@@ -58,7 +63,8 @@ class NoiseGrid:
         return [np.flatnonzero(band == b) for b in range(count)]
 
     def subset(self, index: np.ndarray) -> NoiseGrid:
-        return NoiseGrid(self.tau[index], self.wild[index], self.log_prior[index], self.shared_place)
+        return NoiseGrid(self.tau[index], self.wild[index], self.log_prior[index], self.shared_place,
+                         self.shared_weight)
 
 
 def noise_grid(receiver_class: str) -> NoiseGrid:
@@ -70,7 +76,7 @@ def noise_grid(receiver_class: str) -> NoiseGrid:
     tau_deg, wild = (a.ravel() for a in np.meshgrid(TAU_DEG, WILD, indexing="ij"))
     log_prior = -0.5 * ((np.log(tau_deg) - math.log(median)) / log_sd) ** 2
     log_prior -= logsumexp(log_prior, axis=0)
-    return NoiseGrid(np.radians(tau_deg), wild, log_prior, np.array(cls.shared_place))
+    return NoiseGrid(np.radians(tau_deg), wild, log_prior, np.array(cls.shared_place), np.array(cls.shared_weight))
 
 
 def logsumexp(x: np.ndarray, axis: int) -> np.ndarray:

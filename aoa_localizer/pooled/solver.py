@@ -20,7 +20,18 @@ from scipy import stats
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
 from aoa_localizer.pooled.bias import BIAS_MIN_EMITTERS, Bias, learn_biases, residuals
-from aoa_localizer.pooled.grid import Box, Geometry, displaced, evidence, log_joint, mixture, prior_scale, widened, zoom
+from aoa_localizer.pooled.grid import (
+    CELLS,
+    Geometry,
+    displaced,
+    evidence,
+    log_joint,
+    median_range,
+    mixture,
+    prior_scale,
+    widened,
+    zoom,
+)
 from aoa_localizer.pooled.noise_family import NoiseGrid, expected_error, logsumexp, noise_grid, quantile_of
 from aoa_localizer.pooled.region import LEVELS, Region, summarise
 from aoa_localizer.pooled.stations import Station, SurveyReading, make_stations, pooled_scatter, station_variance
@@ -29,6 +40,7 @@ _ROUNDS = 2  # fixes made without biases, then again with the biases the first f
 _OFF_Z = 3.0  # a station further off than this many of its expected errors is named
 _HELD_LOW, _HELD_HIGH = 0.90, 0.99  # a 95 % ellipse holding mass outside this range is said to mislead
 _FIT_P = 0.05  # a fix whose stations' residuals are this unlikely under their expected errors is not `tracking`
+_RANGE_CAP = 2.0  # a truth's range counts up to this many times the crossing's (beyond, the Cauchy prior rules)
 
 __all__ = ["EmitterFix", "PooledResult", "ReceiverCalibration", "SurveyReading", "locate_pooled"]
 
@@ -151,19 +163,23 @@ def _solve(geoms: dict[str, Geometry], noise: NoiseGrid) -> _Solved:
 
 def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
     """The region once one receiver's shared, place-like error is added: its bearings of one emitter may all point
-    at a place beside it (scattering by the transmitter, an observer's belief), which no crossing shows; its size
-    is the receiver class's prior, in shares of the range, times the share of the stations that the emitter's
-    most frequent receiver holds (stations of different receivers are independent instruments: a receiver with
-    a single station shares nothing)."""
+    at a place beside it (scattering by the transmitter, an observer's belief), which no crossing shows. Its size
+    is the receiver class's prior, in shares of the truth's range (so a truth beyond the crossing is displaced
+    further), times the share of the stations that the emitter's most frequent receiver holds (stations of
+    different receivers are independent instruments: a receiver with a single station shares nothing)."""
     e, region = geom.emitter, solved.regions[geom.emitter]
     most = Counter(geom.receivers).most_common(1)[0][1]
     if most < 2 or not np.any(noise.shared_place > 0):
         return region
-    rng_m = float(np.median(np.hypot(geom.xy[:, 0] - region.point[0], geom.xy[:, 1] - region.point[1])))
-    sigmas = noise.shared_place * rng_m * most / len(geom.receivers)
-    box: Box = widened(solved.boxes[e], 3.0 * float(sigmas.max()))
-    p = mixture(log_joint(geom, box, solved.shifts[e], solved.extra[e], noise), solved.log_z[e], solved.log_w)
-    return summarise(box, np.mean([displaced(box, p, s) for s in sigmas], axis=0))
+    rng_m = float(median_range(geom.xy, region.point[:1], region.point[1:])[0])
+    shares = noise.shared_place * most / len(geom.receivers)
+    cap = _RANGE_CAP * rng_m
+    src = solved.boxes[e]
+    out = widened(src, 3.0 * float(shares.max()) * cap)
+    p = mixture(log_joint(geom, src, solved.shifts[e], solved.extra[e], noise), solved.log_z[e], solved.log_w)
+    floor = 0.5 * min(src.hx, src.hy) / CELLS  # a share of 0 still moves the mass onto the wider grid
+    q = [displaced(src, p, out, geom.xy, s, cap, geom.prior_scale, floor) for s in shares]
+    return summarise(out, np.average(q, axis=0, weights=noise.shared_weight))
 
 
 def _noise_summary(noise: NoiseGrid, log_w: np.ndarray, receivers: list[str], emitters: int) -> dict:
