@@ -61,6 +61,8 @@ class BagFiles:
             raise BagFilesError(f"{path}: no such bag")
         if path.is_file():
             return self._plains([path])
+        if not path.is_dir():  # a FIFO, a device: reading one would wait for ever or never end
+            raise BagFilesError(f"{path}: neither a bag folder nor a regular file (a pipe or a device?)")
         meta = path / "metadata.yaml"
         if meta.is_file() and meta.stat().st_size > METADATA_MAX_BYTES:
             log.warning("%s: %d bytes, more than any bag's metadata (%d): not read; reading the storage files", meta,

@@ -333,3 +333,18 @@ def test_calls_from_two_threads_are_made_one_at_a_time():
         assert not done.wait(0.3)  # it waits
     other.join(5.0)
     assert done.is_set() and not loc.rejected["internal_error"]
+
+
+@pytest.mark.parametrize("how", ["pickle", "copy", "deepcopy"])
+def test_a_localizer_is_neither_pickled_nor_copied_and_says_so(how):
+    """Issue 51, item 14: pickling or copying a Localizer failed on an RLock; it now says what it is and what to do."""
+    import copy
+    import pickle
+
+    loc = Localizer()
+    try:
+        act = {"pickle": pickle.dumps, "copy": copy.copy, "deepcopy": copy.deepcopy}[how]
+        with pytest.raises(TypeError, match="a Localizer cannot be pickled or copied"):
+            act(loc)
+    finally:
+        loc.close()

@@ -327,3 +327,17 @@ def test_a_typo_in_the_bag_path_leaves_an_existing_output_whole_and_a_folder_is_
     assert [p.name for p in tmp_path.iterdir()] == ["keep.jsonl"]  # no staged file left behind
     res = cli(replay_main, ROOT / "bags" / "seed", "--offline", "--output", tmp_path)
     assert res.returncode == 2 and "is a folder" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_a_pipe_named_like_a_bag_is_refused_in_one_line_not_waited_on(tmp_path, cli):
+    """Issue 51, item 14: a FIFO named x.mcap ended `replay` in a traceback (NotADirectoryError); reading it would
+    wait for a writer. Refused before reading, exit 2, by `replay` and `report`."""
+    import os
+
+    from aoa_localizer.reporting.report import main as report_main
+
+    fifo = tmp_path / "x.mcap"
+    os.mkfifo(fifo)
+    for res in (cli(replay_main, fifo, "--offline"), cli(report_main, fifo, "--out", tmp_path / "r")):
+        assert res.returncode == 2 and "neither a bag folder nor a regular file" in res.stderr
+        assert "Traceback" not in res.stderr

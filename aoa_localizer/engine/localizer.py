@@ -479,6 +479,12 @@ class Localizer:
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""
         self.scheduler.close()
 
+    def __reduce_ex__(self, protocol):
+        """A Localizer holds a worker process, locks and generators mid-run: it is neither pickled nor copied
+        (docs/interface.md, "Python API")."""
+        raise TypeError("a Localizer cannot be pickled or copied (it holds a worker process and locks): make a new "
+                        "one with the same config and seed and feed it the same inputs")
+
     @_one_at_a_time
     def reset(self, drop_datum: bool = False):
         """Drop the tracks, the points, the filters and the channels; keep the counters and the fixed stations'
