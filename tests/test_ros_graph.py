@@ -1061,6 +1061,21 @@ def test_two_sources_on_one_input_topic_are_named_in_the_diagnostics(spawn, doma
     assert node_p.poll() is None
 
 
+def test_two_nodes_with_one_name_are_named_in_the_diagnostics(spawn, domain):
+    """Issue 51, item 14: two nodes started with one name share one /diagnostics name and one ~/reset, unwarned.
+    Each now says so: WARN, `node_name`, and a log line."""
+    args = ["aoa_localizer.node", "--ros-args", "-p", "diagnostics_period_s:=0.3"]
+    first, second = spawn(args, domain), spawn(args, domain)
+    with client(domain, name="watcher") as (node, executor):
+        diag: dict = {}
+        node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
+            diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        assert spin_until(executor, lambda: "node_name" in diag, 20), json.dumps(diag)
+    assert "2 nodes are named /aoa_localizer" in diag["node_name"] and diag["level"] == "1"
+    assert "__node:=" in diag["node_name"]
+    assert first.poll() is None and second.poll() is None
+
+
 def test_the_node_sends_each_estimate_to_tak_as_cursor_on_target(spawn, domain):
     """Issue 53, part 3: `cot_url:=udp://127.0.0.1:PORT` (a TAK receiver's UDP input on this machine): CoT events
     arrive as the estimate changes (at most one a cot_period_s: the drive's points come in two seconds here) with

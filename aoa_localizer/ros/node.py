@@ -213,7 +213,7 @@ class LocalizerNode(Node):
         refuse_unknown(self)
         self.cfg = self._config_from({})
         self.pending_params: dict = {}  # the first parameters of a group set together, held until it is complete
-        self.crowded_said: list[str] = []  # the input topics with more than one source, as last logged
+        self.crowded_said: list[str] = []  # input topics with more than one source, a twin of this node: as last logged
 
     def _init_inputs(self):
         """Each station's gps/fix and df/bearing (and heading/imu for a vehicle-relative array with an IMU), with
@@ -431,9 +431,10 @@ class LocalizerNode(Node):
     def diagnostics(self) -> tuple[int, str, dict]:
         """(level, message, values) of the localizer's state, as published on /diagnostics (NodeMonitor)."""
         problems = self._publisher_problems()
-        if problems["input_publishers"] != self.crowded_said:  # said in the log once each time it changes
-            self.crowded_said = problems["input_publishers"]
-            for words in self.crowded_said:
+        said = problems["input_publishers"] + problems["node_name"]
+        if said != self.crowded_said:  # said in the log once each time it changes
+            self.crowded_said = said
+            for words in said:
                 self.get_logger().warning(words)
         level, message, values = self.monitor.diagnostics(self.loc, self._now(), self.pending_params, problems)
         if self.cot is not None:  # what went to TAK, and why not
@@ -445,8 +446,16 @@ class LocalizerNode(Node):
     def _publisher_problems(self) -> dict[str, list[str]]:
         """What is wrong with the publishers on our input topics, by diagnostics key: `wrong_encoding`, another
         message type (DDS never delivers them); `input_publishers`, more than one node on one topic (two sources
-        mixed into one station: another graph in this ROS_DOMAIN_ID, or receivers that need a station each)."""
-        out: dict[str, list[str]] = {"wrong_encoding": [], "input_publishers": []}
+        mixed into one station: another graph in this ROS_DOMAIN_ID, or receivers that need a station each);
+        `node_name`, another node with this one's name (they would share one /diagnostics name and one ~/reset)."""
+        out: dict[str, list[str]] = {"wrong_encoding": [], "input_publishers": [], "node_name": []}
+        me = (self.get_name(), self.get_namespace())
+        twins = sum(1 for name, ns in self.get_node_names_and_namespaces() if (name, ns) == me)
+        if twins > 1:
+            full = f"{me[1].rstrip('/')}/{me[0]}"
+            out["node_name"].append(
+                f"{twins} nodes are named {full}: they share one /diagnostics name and one ~/reset; start each with "
+                "its own name (--ros-args -r __node:=other_name) or namespace")
         for sub, want in self.subs:
             topic = sub.topic_name
             infos = self.get_publishers_info_by_topic(topic)
