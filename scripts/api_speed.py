@@ -33,8 +33,8 @@ import particles_peers  # noqa: E402
 
 from aoa_localizer import Localizer, LocalizerConfig  # noqa: E402
 from aoa_localizer.engine import geodesy  # noqa: E402
-from aoa_localizer.engine.evaluation import scenario_config  # noqa: E402
-from aoa_localizer.engine.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
+from aoa_localizer.simulation.evaluation import scenario_config  # noqa: E402
+from aoa_localizer.simulation.scenarios import SCENARIOS, robustness_cells, simulate  # noqa: E402
 
 logging.getLogger("aoa_localizer").setLevel(logging.ERROR)
 

@@ -18,10 +18,10 @@ import numpy as np
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.crlb import crlb_rmse
-from aoa_localizer.engine.evaluation import feed_fleet
-from aoa_localizer.engine.fleet import simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.simulation.evaluation import feed_fleet
+from aoa_localizer.simulation.fleet import simulate_fleet
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 SPACING_HZ = 25e3
 

@@ -44,10 +44,10 @@ from aoa_localizer import LocalizerConfig  # noqa: E402
 from aoa_localizer.common.cli import param_changes  # noqa: E402
 from aoa_localizer.core.spec import ConfigError  # noqa: E402
 from aoa_localizer.engine.crlb import crlb_rmse  # noqa: E402
-from aoa_localizer.engine.evaluation import LARGE_ERROR_M, final_scores, run, run_batch_ml  # noqa: E402
 from aoa_localizer.engine.geodesy import azimuth_to_enu  # noqa: E402
-from aoa_localizer.engine.scenarios import SCENARIOS, geometry_cells, robustness_cells, simulate  # noqa: E402
 from aoa_localizer.filters import REGISTRY  # noqa: E402
+from aoa_localizer.simulation.evaluation import LARGE_ERROR_M, final_scores, run, run_batch_ml  # noqa: E402
+from aoa_localizer.simulation.scenarios import SCENARIOS, geometry_cells, robustness_cells, simulate  # noqa: E402
 
 logging.getLogger("aoa_localizer").setLevel(logging.ERROR)  # per-run first-rejection notes would flood the table
 

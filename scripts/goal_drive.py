@@ -7,7 +7,8 @@ Routes (start (0, 0), emitter at the `homing` scenario's (1500, 1500), stop-and-
 * `homing`: the homing scenario's drive (straight at the emitter, then a dog-leg past it);
 * `straight`: a straight road east, passing 1500 m south of the emitter;
 * `goal after homing` / `goal after straight`: that route until the localizer has an estimate, then the goal
-  (engine.goal_drive.GoalDrive, engine.next_goal; goal radius 500 m, refreshed at every stop, about every 8 s).
+  (simulation.goal_drive.GoalDrive, engine.outputs.next_goal; goal radius 500 m, refreshed at every stop, about
+  every 8 s).
 Default configuration; each run's data seed is the same for all routes. A run that does not get there within
 MAX_LEGS stops counts as not reached.
 """
@@ -21,8 +22,8 @@ from dataclasses import replace
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
-from aoa_localizer.engine.goal_drive import GoalDrive, closed_loop
-from aoa_localizer.engine.scenarios import SCENARIOS
+from aoa_localizer.simulation.goal_drive import GoalDrive, closed_loop
+from aoa_localizer.simulation.scenarios import SCENARIOS
 
 TARGET_M = 50.0
 RADIUS_M = 500.0

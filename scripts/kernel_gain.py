@@ -15,8 +15,8 @@ import timeit
 
 import numpy as np
 
-from aoa_localizer.engine.global_search import Points, Robust, latent_log_densities
-from aoa_localizer.engine.receiver import NoiseGrid
+from aoa_localizer.engine.inference.global_search import Points, Robust, latent_log_densities
+from aoa_localizer.engine.inference.receiver import NoiseGrid
 
 try:
     import numba

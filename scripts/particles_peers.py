@@ -21,7 +21,7 @@ except ImportError:  # the `bench` extra is not installed
     particles = None
 
 from aoa_localizer.engine.geodesy import wrap_pi
-from aoa_localizer.engine.likelihood import mixture_loglik
+from aoa_localizer.engine.inference.likelihood import mixture_loglik
 
 AVAILABLE = particles is not None
 

@@ -37,9 +37,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import particles_peers  # noqa: E402
 
 from aoa_localizer import Localizer, LocalizerConfig  # noqa: E402
-from aoa_localizer.engine.evaluation import scenario_config  # noqa: E402
 from aoa_localizer.engine.geodesy import azimuth_to_enu  # noqa: E402
-from aoa_localizer.engine.scenarios import SCENARIOS, ScenarioData, robustness_cells, simulate  # noqa: E402
+from aoa_localizer.simulation.evaluation import scenario_config  # noqa: E402
+from aoa_localizer.simulation.scenarios import SCENARIOS, ScenarioData, robustness_cells, simulate  # noqa: E402
 
 try:
     from stonesoup.models.measurement.nonlinear import Cartesian2DToBearing

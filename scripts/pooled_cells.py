@@ -3,7 +3,7 @@
     python scripts/pooled_cells.py [--cells observer anchors anchor_medians hand_held] [--runs 4] [--seed 0]
                                    [--scale 1] [--receiver-class unknown]
 
-Cells (aoa_localizer.engine.surveys): `observer` one walking observer, 27 transmitters, built to reproduce
+Cells (aoa_localizer.simulation.surveys): `observer` one walking observer, 27 transmitters, built to reproduce
 observer A's real survey (a common bias, an apparent place per transmitter, 8 deg visible scatter, 8 % wild);
 `anchors` four indoor angle-of-arrival anchors heard at 16 places, 250 readings each with a steady bias per
 anchor and place; `anchor_medians` the same with one median bearing per anchor and place; `hand_held` the round-3
@@ -21,9 +21,10 @@ from matplotlib.path import Path as MplPath
 
 from aoa_localizer.engine.crlb import inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.surveys import SurveySet, hand_held_set, indoor_anchors, least_squares_fix, observer_like
+from aoa_localizer.engine.site_bearings import least_squares_fix
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.region import ELLIPSE_50
+from aoa_localizer.simulation.surveys import SurveySet, hand_held_set, indoor_anchors, observer_like
 
 FRAME = LocalFrame(44.0, 7.0)
 CELLS = {

@@ -24,7 +24,7 @@ import numpy as np
 
 from aoa_localizer.engine.crlb import inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.surveys import least_squares_fix
+from aoa_localizer.engine.site_bearings import least_squares_fix
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.region import ELLIPSE_50
 from aoa_localizer.pooled.solver import EmitterFix, PooledResult

@@ -18,10 +18,10 @@ import numpy as np
 from aoa_localizer.engine import channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
-from aoa_localizer.engine.fleet import simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scenarios import SCENARIOS
+from aoa_localizer.simulation.fleet import simulate_fleet
+from aoa_localizer.simulation.scenarios import SCENARIOS
 
 FIRST, BRIEF = 433.92e6, 446.0e6
 EMITTERS = {FIRST: (1200.0, 800.0), BRIEF: (400.0, 1100.0)}

@@ -23,8 +23,8 @@ from dataclasses import replace
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.scenarios import SCENARIOS, SEED_TRACK, robustness_cells, simulate
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import SCENARIOS, SEED_TRACK, robustness_cells, simulate
 
 SETTINGS = ("bearing_reference", "mount_offset_deg", "magnetic_declination_deg")
 

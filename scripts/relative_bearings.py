@@ -16,8 +16,8 @@ import numpy as np
 
 from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.crlb import ellipse_axes
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.scenarios import SCENARIOS, mounted, receiver_settings, simulate
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import SCENARIOS, mounted, receiver_settings, simulate
 
 
 def main() -> None:

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from aoa_localizer.engine.evaluation import run_model
 from aoa_localizer.models import benchmarks as B
+from aoa_localizer.simulation.evaluation import run_model
 
 # Per algorithm, how the table runs it (LocalizerConfig changes).
 SETTINGS = {"pf": ("sir", {"ess_threshold": 1.0}), "espf": ("espf", {}),

@@ -29,11 +29,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import peer_speed  # noqa: E402
 
 from aoa_localizer import Localizer, LocalizerConfig  # noqa: E402
-from aoa_localizer.engine import checks, initiator, supervisor  # noqa: E402
-from aoa_localizer.engine.evaluation import scenario_config  # noqa: E402
-from aoa_localizer.engine.scenarios import simulate  # noqa: E402
+from aoa_localizer.engine.inference import checks  # noqa: E402
+from aoa_localizer.engine.track import initiator, supervisor  # noqa: E402
 from aoa_localizer.filters.base import ParticleFilter  # noqa: E402
 from aoa_localizer.filters.resample_move import ResampleMove  # noqa: E402
+from aoa_localizer.simulation.evaluation import scenario_config  # noqa: E402
+from aoa_localizer.simulation.scenarios import simulate  # noqa: E402
 
 SPENT: defaultdict[str, float] = defaultdict(float)
 COUNT: defaultdict[str, int] = defaultdict(int)

@@ -19,7 +19,8 @@ from aoa_localizer.common.cli import param_changes
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.surveys import hand_held, least_squares_fix, locate_survey, survey_config
+from aoa_localizer.engine.site_bearings import least_squares_fix, survey_config
+from aoa_localizer.simulation.surveys import hand_held, locate_survey
 from aoa_localizer.tools.locate import locate, read_rows
 
 LENTH_CSV = Path(__file__).resolve().parent.parent / "examples" / "lenth1981.csv"

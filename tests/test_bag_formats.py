@@ -13,7 +13,7 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 from aoa_localizer.common.bag_run import run_bag
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.simulation.scenarios import simulate
 from msgs_adapters import build
 from msgs_adapters.bag import TOPICS, BagError, BagTopicsError, _qos, read_bag, typestore, write_bag
 

@@ -8,11 +8,11 @@ import pytest
 from conftest import DATUM
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.gps_track import GpsTrack
-from aoa_localizer.engine.heading import TrackHeading, _Jitter
-from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, mounted, simulate
+from aoa_localizer.engine.ingest.gps_track import GpsTrack
+from aoa_localizer.engine.ingest.heading import TrackHeading, _Jitter
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import SCENARIOS, Trajectory, mounted, simulate
 
 FRAME = LocalFrame(*DATUM)
 # urban's track (the seed polyline, three corners) driven at 10 m/s, without GPS noise or wild readings

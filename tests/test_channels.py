@@ -6,10 +6,10 @@ import pytest
 
 from aoa_localizer.engine.channels import DEFAULT, channel_id
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.fleet import simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.simulation.fleet import simulate_fleet
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 EMITTERS = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0), 868.3e6: (1800.0, 200.0)}
 

@@ -1,5 +1,5 @@
-"""`scheduling: realtime`: global checks and start searches in the worker thread (engine/checks.py), move sweeps
-spread over the points after a resampling (filters/resample_move.py)."""
+"""`scheduling: realtime`: global checks and start searches in the worker thread (engine/inference/checks.py), move
+sweeps spread over the points after a resampling (filters/resample_move.py)."""
 import multiprocessing
 import os
 import pickle
@@ -10,15 +10,15 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer.core.spec import ConfigError
-from aoa_localizer.engine import checks
-from aoa_localizer.engine import initiator as initiator_module
-from aoa_localizer.engine import supervisor as supervisor_module
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.evaluation import scenario_config
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.inference import checks
+from aoa_localizer.engine.ingest.preprocess import columns
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.preprocess import columns
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.engine.track import initiator as initiator_module
+from aoa_localizer.engine.track import supervisor as supervisor_module
+from aoa_localizer.simulation.evaluation import scenario_config
+from aoa_localizer.simulation.scenarios import simulate
 
 
 def settle_starts(loc: Localizer):
@@ -287,7 +287,7 @@ def test_the_worker_and_the_resource_tracker_die_with_a_killed_parent(tmp_path):
     script = tmp_path / "parent.py"
     script.write_text(
         "import math, multiprocessing.resource_tracker as rt, time\n"
-        "from aoa_localizer.engine.checks import CheckWorker\n"
+        "from aoa_localizer.engine.inference.checks import CheckWorker\n"
         "if __name__ == '__main__':\n"
         "    w = CheckWorker()\n"
         "    w.submit(math.pi.__float__).result(60)\n"
@@ -323,7 +323,7 @@ def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeyp
     two minutes). One stale result is searched again; a second is used, its modes proposing for every point held."""
     from concurrent.futures import Future
 
-    from aoa_localizer.engine.checks import search_start
+    from aoa_localizer.engine.inference.checks import search_start
 
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
@@ -350,7 +350,7 @@ def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeyp
 def test_a_checks_modes_are_scored_on_the_filters_own_posterior():
     """The end of data's check over every point: its best mode's log posterior is the track's own at that place (the
     radio-range prior included), so the re-start test compares the modes and the particles on one posterior."""
-    from aoa_localizer.engine.global_search import log_posterior
+    from aoa_localizer.engine.inference.global_search import log_posterior
 
     data = simulate("seed", 1)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=1)))

@@ -1,9 +1,9 @@
 """The DF clock check on hand-made points: bearings taken 1 s before their stamps on a drive with a turn."""
 import numpy as np
 
-from aoa_localizer.engine import clock_check
-from aoa_localizer.engine.global_search import Points, Robust
-from aoa_localizer.engine.slices import run_whole
+from aoa_localizer.engine.inference.global_search import Points, Robust
+from aoa_localizer.engine.ingest import clock_check
+from aoa_localizer.engine.scheduling.slices import run_whole
 
 
 def best_shift(*args):

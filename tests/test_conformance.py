@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.engine.emitter_model import EmitterModel
-from aoa_localizer.engine.evaluation import run, run_model
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.filters import REGISTRY, make_filter
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models import benchmarks as B
+from aoa_localizer.simulation.evaluation import run, run_model
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 SMALL_SEED = dataclasses.replace(SCENARIOS["seed"], name="small", points=24, readings_per_point=2)
 
@@ -50,7 +50,7 @@ def test_the_paper_variant_runs_on_a_papers_model_finitely_and_repeatably(algori
 def test_the_batch_reference_of_the_benchmark_runs():
     """The robust batch-ML reference the robustness benchmark compares every filter with (it broke once the
     parameter caps were declared: it asked for init_bearings 1e9)."""
-    from aoa_localizer.engine.evaluation import run_batch_ml
+    from aoa_localizer.simulation.evaluation import run_batch_ml
 
     scores = run_batch_ml(simulate(SMALL_SEED, 3), LocalizerConfig(seed=1))
     assert scores["converged"] and scores["error"] < 20.0

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 
 @pytest.mark.slow

@@ -9,9 +9,9 @@ from pymap3d import vincenty
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ellipse_axes
-from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import simulate
 
 
 def _located(data, datum_km: float):

@@ -4,15 +4,16 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from aoa_localizer.engine import emitter_model, slices
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.emitter_model import EmitterModel
-from aoa_localizer.engine.likelihood import (
+from aoa_localizer.engine.inference import emitter_model
+from aoa_localizer.engine.inference.emitter_model import EmitterModel
+from aoa_localizer.engine.inference.likelihood import (
     BearingLikelihood,
     gaussian_loglik,
     mixture_loglik,
 )
-from aoa_localizer.engine.scheduler import SWEEP_PART, Scheduler
+from aoa_localizer.engine.scheduling import slices
+from aoa_localizer.engine.scheduling.scheduler import SWEEP_PART, Scheduler
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters import REGISTRY, make_filter
 from aoa_localizer.filters.afsa import AfsaMoves, uniform_disc

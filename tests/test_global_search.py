@@ -5,11 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from aoa_localizer.engine import global_search, start_grid
-from aoa_localizer.engine.global_search import Points, Robust, find_modes, log_posterior, refine
-from aoa_localizer.engine.receiver import NoiseGrid
-from aoa_localizer.engine.slices import run_whole
-from aoa_localizer.engine.start_grid import StartGrid
+from aoa_localizer.engine.inference import global_search, start_grid
+from aoa_localizer.engine.inference.global_search import Points, Robust, find_modes, log_posterior, refine
+from aoa_localizer.engine.inference.receiver import NoiseGrid
+from aoa_localizer.engine.inference.start_grid import StartGrid
+from aoa_localizer.engine.scheduling.slices import run_whole
 
 
 def _points(rng: np.random.Generator) -> Points:

@@ -4,11 +4,11 @@ import math
 import numpy as np
 import pytest
 
-from aoa_localizer.engine.global_search import Points, Robust, log_posterior
-from aoa_localizer.engine.grid_proposal import Blend, GridProposal
-from aoa_localizer.engine.safety import ModeProposal, weighted_sample
-from aoa_localizer.engine.slices import run_whole
-from aoa_localizer.engine.start_grid import StartGrid
+from aoa_localizer.engine.inference.global_search import Points, Robust, log_posterior
+from aoa_localizer.engine.inference.grid_proposal import Blend, GridProposal
+from aoa_localizer.engine.inference.safety import ModeProposal, weighted_sample
+from aoa_localizer.engine.inference.start_grid import StartGrid
+from aoa_localizer.engine.scheduling.slices import run_whole
 
 
 def _small_grid() -> GridProposal:

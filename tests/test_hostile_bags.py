@@ -12,7 +12,7 @@ import yaml
 import zstandard
 from test_bag_formats import _TYPES, _chunks, _messages
 
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.simulation.scenarios import simulate
 from msgs_adapters import decompress
 from msgs_adapters.bag import TOPICS, BagError, _qos, read_bag, typestore, write_bag
 from msgs_adapters.bag_files import BagFiles, BagFilesError

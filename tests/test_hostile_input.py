@@ -7,7 +7,7 @@ from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.channels import FREQUENCY_MAX_HZ, channel_id
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.simulation.scenarios import simulate
 
 
 def feed_with(extra, at_share=1 / 3):

@@ -8,9 +8,9 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.input_guard import StreamClock, Verdict
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.engine.ingest.input_guard import StreamClock, Verdict
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import simulate
 from msgs_adapters.fields import stamp_seconds
 
 FUTURE = 2_145_916_800.0  # 2038-01-01
@@ -172,7 +172,7 @@ def test_the_fixes_own_covariance_keeps_the_ellipse_honest_near_the_emitter():
     ellipse holds the truth in most runs (8 of 8 measured); without it, most runs lie outside their ellipse: the
     median run's NEES is over the 95 % bound (9.9-21 measured over filter seeds and numpy versions; a count of the
     runs inside, 3 or 4 of 8, was too close to call)."""
-    from aoa_localizer.engine.scenarios import Scenario
+    from aoa_localizer.simulation.scenarios import Scenario
 
     sc = Scenario("close", (1200.0, 800.0), ((0.0, 0.0), (1200.0, 790.0), (2400.0, 0.0)), points=40,
                   readings_per_point=3, quality=(90.0, 90.0), gps_noise_m=3.0, dwell_s=3.0)
@@ -228,7 +228,7 @@ def test_stamps_that_a_clock_offset_explains_are_pointed_out(late_s):
 
 
 def test_stamp_gaps_count_a_hole_in_a_regular_stream_and_nothing_else():
-    from aoa_localizer.engine.input_guard import StampGaps
+    from aoa_localizer.engine.ingest.input_guard import StampGaps
 
     gaps = StampGaps()
     for k in range(100):

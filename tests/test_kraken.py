@@ -10,7 +10,7 @@ import pytest
 from test_ros_graph import client, spin_until
 
 from aoa_localizer.common.kraken_csv import LineFilter, MalformedLine, parse_line, quality_from_confidence
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 SPECTRUM = ", ".join("0.00" for _ in range(360))
 

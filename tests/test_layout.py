@@ -11,9 +11,9 @@ import aoa_localizer
 
 # CONTRIBUTING's layers, bottom first: a package imports only packages below it (and itself); the modules at the
 # package's top (entry points, the public API) may import any.
-LAYERS = ["core", "models", "filters", "engine", "pooled", "common", "reporting", "ros", "tools"]
+LAYERS = ["core", "models", "filters", "engine", "pooled", "simulation", "common", "reporting", "ros", "tools"]
 
-ROS_FREE = ["aoa_localizer", "aoa_localizer.engine.localizer", "aoa_localizer.engine.evaluation",
+ROS_FREE = ["aoa_localizer", "aoa_localizer.engine.localizer", "aoa_localizer.simulation.evaluation",
             "aoa_localizer.filters", "aoa_localizer.models", "aoa_localizer.reporting.report",
             "aoa_localizer.tools.replay", "aoa_localizer.tools.simulate", "aoa_localizer.tools.param_docs",
             "aoa_localizer.tools.locate", "aoa_localizer.pooled",
@@ -108,8 +108,8 @@ def test_the_launcher_gives_the_vehicles_encoding_and_a_bags_scenario_settings_t
     """ROS-package issue: `--vehicle-param bearing_encoding=pose` gave no estimate unless the node got it too, and
     with --bag no scenario settings reached the node. Now the node reads what the vehicle publishes; with --bag the
     named scenario's receiver settings apply (its datum does not: the bag's truth is scored through datums)."""
-    from aoa_localizer.engine.scenarios import SCENARIOS
     from aoa_localizer.ros.launch import node_parameters, parse_args
+    from aoa_localizer.simulation.scenarios import SCENARIOS
 
     params = node_parameters(parse_args(["--vehicle-param", "bearing_encoding=pose"]))
     assert params["bearing_encoding"] == "pose" and params["datum_lat"] == SCENARIOS["seed"].datum[0]
@@ -121,3 +121,12 @@ def test_the_launcher_gives_the_vehicles_encoding_and_a_bags_scenario_settings_t
                                                                                                    30.0)
     assert node_parameters(parse_args(["--vehicle-param", "mount_offset_deg=30", "-p", "mount_offset_deg=0"])
                            )["mount_offset_deg"] == "0"  # the user's -p wins
+
+
+def test_the_engine_keeps_its_rooms_and_at_most_15_modules_at_its_top():
+    """Issue 52, item 5: engine/ was one flat room of 48 modules; what every room uses stays at its top, the rest
+    lives in rooms by role."""
+    engine = Path(aoa_localizer.__file__).parent / "engine"
+    assert len(list(engine.glob("*.py"))) <= 15
+    assert sorted(p.name for p in engine.iterdir() if (p / "__init__.py").exists()) == [
+        "inference", "ingest", "outputs", "scheduling", "track"]

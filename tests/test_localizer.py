@@ -9,9 +9,9 @@ from conftest import DATUM, open_point, track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
-from aoa_localizer.engine.track_state import TrackState
+from aoa_localizer.engine.track.state import TrackState
 from aoa_localizer.engine.types import FixInput, Input
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 FRAME = LocalFrame(*DATUM)
 EMITTER = (1200.0, 800.0)

@@ -1,10 +1,10 @@
-"""Process memory settings (engine/memory.py): the allocator keeps freed memory; old objects leave the collector's
-full passes yet are freed as usual, and their cycles go at thaw()."""
+"""Process memory settings (engine/scheduling/memory.py): the allocator keeps freed memory; old objects leave the
+collector's full passes yet are freed as usual, and their cycles go at thaw()."""
 import gc
 import platform
 import weakref
 
-from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import OldObjects, keep_freed_memory
 
 
 def test_keep_freed_memory_applies_on_glibc():

@@ -8,10 +8,10 @@ import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.goal_drive import GoalDrive, closed_loop
-from aoa_localizer.engine.next_goal import MAX_PARTICLES, bearing_information, candidates, next_goal, thinned
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.engine.outputs.next_goal import MAX_PARTICLES, bearing_information, candidates, next_goal, thinned
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.goal_drive import GoalDrive, closed_loop
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 
 def test_a_bearing_tells_nothing_along_the_line_and_log_k_between_k_far_apart_directions():

@@ -101,7 +101,7 @@ def test_stamp_gaps_count_random_losses_of_a_regular_stream():
     drops at the publisher, where the middleware reports nothing)."""
     import numpy as np
 
-    from aoa_localizer.engine.input_guard import StampGaps
+    from aoa_localizer.engine.ingest.input_guard import StampGaps
 
     rng = np.random.default_rng(0)
     for share in (0.25, 0.43):

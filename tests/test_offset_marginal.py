@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.global_search import Points, Robust, linearised
-from aoa_localizer.engine.offset import marginalise, prior_sd
-from aoa_localizer.engine.scenarios import SCENARIOS, simulate
+from aoa_localizer.engine.inference.global_search import Points, Robust, linearised
+from aoa_localizer.engine.inference.offset import marginalise, prior_sd
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 GAUSSIAN = Robust(0.0)  # no wild share: the EM weights are 1 / sigma^2
 SIGMA = math.radians(1.0)

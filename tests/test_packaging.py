@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 import rclpy
 
-from aoa_localizer.engine.scenarios import SCENARIOS
 from aoa_localizer.ros import node, sim_vehicle
+from aoa_localizer.simulation.scenarios import SCENARIOS
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())

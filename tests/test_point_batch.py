@@ -1,4 +1,4 @@
-"""Every point of a check remade at once (engine/point_batch.py) agrees with make_point, point by point."""
+"""Every point of a check remade at once (engine/ingest/point_batch.py) agrees with make_point, point by point."""
 import math
 
 import numpy as np
@@ -6,12 +6,12 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.engine.evaluation import scenario_config
-from aoa_localizer.engine.noise import NoiseModel
-from aoa_localizer.engine.point_batch import PointBatch, offset_point, sigmas
-from aoa_localizer.engine.preprocess import Group, columns, make_point
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.engine.inference.noise import NoiseModel
+from aoa_localizer.engine.ingest.point_batch import PointBatch, offset_point, sigmas
+from aoa_localizer.engine.ingest.preprocess import Group, columns, make_point
 from aoa_localizer.engine.types import Reading
+from aoa_localizer.simulation.evaluation import scenario_config
+from aoa_localizer.simulation.scenarios import simulate
 
 FIELDS = ("stamp", "east", "north", "theta", "sigma", "n_readings", "gps_sigma")
 

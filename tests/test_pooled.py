@@ -13,7 +13,7 @@ from scipy import special, stats
 
 from aoa_localizer.engine.crlb import ellipse_axes, inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.surveys import least_squares_fix
+from aoa_localizer.engine.site_bearings import least_squares_fix
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.grid import CELLS, Box, displaced, widened
 from aoa_localizer.pooled.noise_family import log_likelihood, logsumexp, noise_grid
@@ -449,7 +449,7 @@ def test_ctrl_c_during_locate_ends_in_one_line_and_exit_130(tmp_path):
     import sys
     import time
 
-    from aoa_localizer.engine.surveys import observer_like
+    from aoa_localizer.simulation.surveys import observer_like
 
     data = observer_like(np.random.default_rng(0), emitters=200)
     lat, lon, _ = FRAME.to_geodetic(data.places[:, 0], data.places[:, 1])

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.posterior_grid import CELLS, REGION, region_mass
-from aoa_localizer.engine.scenarios import simulate
+from aoa_localizer.engine.outputs.posterior_grid import CELLS, REGION, region_mass
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import simulate
 
 
 @pytest.mark.slow

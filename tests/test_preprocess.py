@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.preprocess import (
+from aoa_localizer.engine.ingest.preprocess import (
     SMALL_POINT,
     Group,
     PointBuilder,
@@ -18,6 +17,7 @@ from aoa_localizer.engine.preprocess import (
     reading_sigma,
     recursive_corrected_mean,
 )
+from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.types import Estimate, Reading
 
 

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.engine import initiator
-from aoa_localizer.engine.checks import search_start
 from aoa_localizer.engine.crlb import ELLIPSE_95, nees
-from aoa_localizer.engine.evaluation import scenario_config
-from aoa_localizer.engine.initiator import MAX_ELLIPSE_RANGE_SHARE, MIN_INLIERS
-from aoa_localizer.engine.scenarios import SCENARIOS, robustness_cells, simulate
-from aoa_localizer.engine.track_state import TrackState
+from aoa_localizer.engine.inference.checks import search_start
+from aoa_localizer.engine.track import initiator
+from aoa_localizer.engine.track.initiator import MAX_ELLIPSE_RANGE_SHARE, MIN_INLIERS
+from aoa_localizer.engine.track.state import TrackState
+from aoa_localizer.simulation.evaluation import scenario_config
+from aoa_localizer.simulation.scenarios import SCENARIOS, robustness_cells, simulate
 
 
 @pytest.mark.slow
@@ -63,7 +63,7 @@ def test_a_start_from_a_mode_by_the_road_does_not_hold_the_filter_there():
     """The emitter 7 km ahead of a straight drive with 20 % wild bearings, data seed 9: a filter starts on a mode by
     the road. With a Gaussian prior at that mode (sigma ten times its range) it ended `tracking` 3.2 km off, outside
     its ellipse; on the search's own posterior (the radio-range prior) it ends with the truth inside."""
-    from aoa_localizer.engine.evaluation import run
+    from aoa_localizer.simulation.evaluation import run
 
     data = simulate(replace(SCENARIOS["straight"], emitter=(7000.0, 300.0), filter_overrides={}, wild_share=0.2), 9)
     res = run(data, LocalizerConfig(seed=9))

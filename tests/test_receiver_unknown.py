@@ -10,16 +10,17 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.engine.checks import refined
 from aoa_localizer.engine.crlb import ELLIPSE_95, inside_ellipse, nees
-from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import TWO_PI, LocalFrame, wrap_pi
-from aoa_localizer.engine.global_search import Points, Robust, linearised, log_posterior
-from aoa_localizer.engine.offset import joint_optimum, shifted
-from aoa_localizer.engine.receiver import NoiseGrid, em_weights, log_densities, log_sum
-from aoa_localizer.engine.scenarios import robustness_cells, simulate
-from aoa_localizer.engine.slices import run_whole
-from aoa_localizer.engine.surveys import DATUM, Survey, hand_held, least_squares_fix, locate_survey
+from aoa_localizer.engine.inference.checks import refined
+from aoa_localizer.engine.inference.global_search import Points, Robust, linearised, log_posterior
+from aoa_localizer.engine.inference.offset import joint_optimum, shifted
+from aoa_localizer.engine.inference.receiver import NoiseGrid, em_weights, log_densities, log_sum
+from aoa_localizer.engine.scheduling.slices import run_whole
+from aoa_localizer.engine.site_bearings import least_squares_fix
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import robustness_cells, simulate
+from aoa_localizer.simulation.surveys import DATUM, Survey, hand_held, locate_survey
 from aoa_localizer.tools import locate
 
 
@@ -345,7 +346,7 @@ def test_a_points_weight_under_the_latent_noise_from_running_sums_matches_the_fu
     sums when the cloud and the earlier points are unchanged (one point evaluated, not K), and starts the sums
     again after a move, a dropped point or points remade; always the difference of the two full posteriors to
     1e-9."""
-    from aoa_localizer.engine import emitter_model
+    from aoa_localizer.engine.inference import emitter_model
     from aoa_localizer.engine.types import ObservationPoint
 
     seen = []
@@ -381,7 +382,7 @@ def test_the_joint_with_the_noise_hypothesis_given_one_is_its_column_and_sums_to
     """Moves on place and noise together read the joint per hypothesis and given one: the given value is the
     joint's column for each row (the same operations, so to the last bits), and the log-sum-exp over hypotheses
     is the marginal the filter publishes, with antenna noise, a Gaussian prior and the reach prior on."""
-    from aoa_localizer.engine.emitter_model import EmitterModel
+    from aoa_localizer.engine.inference.emitter_model import EmitterModel
     from aoa_localizer.engine.types import ObservationPoint
 
     model = EmitterModel(LocalizerConfig(gps_sigma_m=3.0))

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.engine.evaluation import run
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.scenarios import SCENARIOS, Scenario, simulate
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import SCENARIOS, Scenario, simulate
 from aoa_localizer.tools.replay import main as replay_main
 from msgs_adapters.bag import write_bag
 
@@ -242,7 +242,7 @@ def test_bad_station_options_are_refused(tmp_path, cli, args, words):
 def test_channels_in_a_bag_give_one_line_per_channel_and_json_lines_per_emitter(tmp_path, cli):
     """A DF record's frequency (vector.z) picks its channel offline too: the closing lines name each channel and
     every JSON line carries its channel and frequency."""
-    from aoa_localizer.engine.fleet import simulate_fleet
+    from aoa_localizer.simulation.fleet import simulate_fleet
 
     fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 0)
     write_bag(tmp_path / "bag", fleet.fixes[""], fleet.bearings[""], datum=fleet.scenario.datum)

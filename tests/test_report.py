@@ -177,8 +177,8 @@ def test_rmse_curves_give_every_series_its_own_style_and_clip_a_diverged_one(tmp
 def test_a_report_of_two_stations_and_two_emitters_draws_and_exports_each(tmp_path):
     """Two cars hearing two carriers: one point and one ellipse per emitter (named by channel, with its frequency),
     one track per car, and the other emitter in the summary."""
-    from aoa_localizer.engine.fleet import PAIR, simulate_fleet
     from aoa_localizer.report import main as report_main
+    from aoa_localizer.simulation.fleet import PAIR, simulate_fleet
     from msgs_adapters.bag import write_bag
 
     emitters = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}
@@ -209,8 +209,8 @@ def test_each_transmitter_of_a_bag_is_scored_against_its_own_truth(tmp_path, cli
     """`simulate --emitters` writes each transmitter's truth on /sim/CHANNEL/truth; replay and report score each
     channel against its own (issue 53, item 2: the second was scored against the first's, 854 m). A bag whose one
     /sim/truth names no transmitter is scored against none of several channels, and says so."""
-    from aoa_localizer.engine.fleet import PAIR, simulate_fleet
     from aoa_localizer.report import main as report_main
+    from aoa_localizer.simulation.fleet import PAIR, simulate_fleet
     from aoa_localizer.tools import replay
     from msgs_adapters.bag import write_bag
 
@@ -238,9 +238,9 @@ def test_the_map_draws_the_posterior_grid_where_it_lies(tmp_path, monkeypatch):
     """map.png carries emitter/posterior's layer: an image on the map at the grid's place, and on the zoom at its
     place relative to the estimate."""
     from aoa_localizer.engine.config import LocalizerConfig
-    from aoa_localizer.engine.evaluation import run
-    from aoa_localizer.engine.scenarios import simulate
     from aoa_localizer.reporting import plots
+    from aoa_localizer.simulation.evaluation import run
+    from aoa_localizer.simulation.scenarios import simulate
 
     loc = run(simulate("seed", 1), LocalizerConfig(seed=1)).localizer
     est, grid = loc.estimate, loc.posterior_grid()

@@ -7,17 +7,17 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.engine import noise as noise_module
-from aoa_localizer.engine.evaluation import run
-from aoa_localizer.engine.global_search import Points, Robust, find_modes
+from aoa_localizer.engine.inference import noise as noise_module
+from aoa_localizer.engine.inference.global_search import Points, Robust, find_modes
+from aoa_localizer.engine.inference.noise import NoiseModel
+from aoa_localizer.engine.inference.safety import HealthMonitor, ModeProposal
+from aoa_localizer.engine.ingest.preprocess import reading_sigma
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.noise import NoiseModel
-from aoa_localizer.engine.preprocess import reading_sigma
-from aoa_localizer.engine.safety import HealthMonitor, ModeProposal
-from aoa_localizer.engine.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
-from aoa_localizer.engine.slices import run_whole
-from aoa_localizer.engine.track_report import merge_overlapping
+from aoa_localizer.engine.scheduling.slices import run_whole
+from aoa_localizer.engine.track.report import merge_overlapping
 from aoa_localizer.filters.moves import independence_from
+from aoa_localizer.simulation.evaluation import run
+from aoa_localizer.simulation.scenarios import SEED_TRACK, Scenario, robustness_cells, simulate
 
 BASE = robustness_cells()["wild0"]
 
@@ -231,7 +231,7 @@ def test_health_monitor_alarms_on_an_implausible_outlier_share():
 
 def test_independence_moves_keep_a_known_posterior():
     """From a start far away, independence MH with the mode proposal lands on N(mu, S): mean and covariance."""
-    from aoa_localizer.engine.global_search import Mode
+    from aoa_localizer.engine.inference.global_search import Mode
 
     mu, cov = np.array([10.0, -5.0]), np.array([[4.0, 1.0], [1.0, 2.0]])
     prec = np.linalg.inv(cov)
@@ -253,8 +253,8 @@ def test_independence_moves_keep_a_known_posterior():
 def test_an_importance_sample_draws_eight_a_particle_up_to_its_cap():
     """A start's or re-start's importance sample: 8 draws a particle (800 at the default N = 100), at most 2000 in all
     for a larger cloud (whose sweeps spread it), never fewer than the particles."""
-    from aoa_localizer.engine.global_search import Mode
-    from aoa_localizer.engine.safety import importance_sample
+    from aoa_localizer.engine.inference.global_search import Mode
+    from aoa_localizer.engine.inference.safety import importance_sample
 
     prop = ModeProposal([Mode(np.zeros(2), np.eye(2), 0.0, 0.0, 10, 90.0)], broad_sigma_m=20.0)
     looks = []
@@ -270,7 +270,7 @@ def test_an_importance_sample_draws_eight_a_particle_up_to_its_cap():
 
 
 def test_closed_form_2x2_inverse_equals_numpy():
-    from aoa_localizer.engine.global_search import inverse_2x2
+    from aoa_localizer.engine.inference.global_search import inverse_2x2
 
     rng = np.random.default_rng(0)
     m = rng.normal(size=(50, 2, 2))
@@ -301,8 +301,8 @@ def test_a_points_noise_scales_in_plain_floats_are_numpys_interpolation_to_the_b
 def test_a_points_calibrated_sigmas_are_the_same_from_its_readings_and_from_the_workers_columns():
     """The caller makes a point's sigmas from its readings, the worker from their packed columns: the same values
     to the bit, and numpy's (the reference for more readings) to rounding."""
-    from aoa_localizer.engine.point_batch import sigmas
-    from aoa_localizer.engine.preprocess import Group, columns
+    from aoa_localizer.engine.ingest.point_batch import sigmas
+    from aoa_localizer.engine.ingest.preprocess import Group, columns
     from aoa_localizer.engine.types import Reading
 
     model = NoiseModel(0.1)

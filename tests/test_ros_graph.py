@@ -21,7 +21,7 @@ from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.scenarios import SCENARIOS
+from aoa_localizer.simulation.scenarios import SCENARIOS
 from msgs_adapters import build
 from msgs_adapters.bag import read_bag
 from msgs_adapters.fields import diagnostics_values, estimate_from_pose
@@ -783,7 +783,7 @@ def test_two_stations_and_two_emitters_each_get_their_topics_summary_and_status(
     """`stations:=[car1,car2]`: each car on its own NAME/gps/fix and NAME/df/bearing, both hearing two carriers at
     the same stamps; every channel's pose under emitter/<channel>/, the summary on emitter/channels, a status per
     channel, a path per car, and nothing on the default channel's emitter/pose."""
-    from aoa_localizer.engine.fleet import PAIR, simulate_fleet
+    from aoa_localizer.simulation.fleet import PAIR, simulate_fleet
 
     emitters = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}
     fleet = simulate_fleet(PAIR, emitters, 0)
@@ -910,8 +910,8 @@ def test_two_nodes_split_fifty_emitters_by_band_and_each_is_localised_once(spawn
     truth, and each node counts the other's records as `other_band`."""
     from dataclasses import replace
 
-    from aoa_localizer.engine.fleet import simulate_fleet
-    from aoa_localizer.engine.scenarios import SCENARIOS
+    from aoa_localizer.simulation.fleet import simulate_fleet
+    from aoa_localizer.simulation.scenarios import SCENARIOS
 
     rng = np.random.default_rng(7)
     emitters = {400e6 + 25e3 * k: (float(rng.uniform(300, 1800)), float(rng.uniform(300, 1300))) for k in range(50)}

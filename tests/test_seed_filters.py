@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.engine.evaluation import run, run_model
-from aoa_localizer.engine.scenarios import simulate
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.espf import sbx_beta, sbx_children, top_n
 from aoa_localizer.filters.gfapf import gravitation_step
 from aoa_localizer.models import benchmarks as B
+from aoa_localizer.simulation.evaluation import run, run_model
+from aoa_localizer.simulation.scenarios import simulate
 
 
 def test_sbx_children_by_hand():

@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.engine.evaluation import run_model
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.agapf import adaptive_pc, adaptive_pm
 from aoa_localizer.filters.de import crossover, distinct_indices, evolve, mutate
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
 from aoa_localizer.models import benchmarks as B
+from aoa_localizer.simulation.evaluation import run_model
 
 
 def test_batched_ukf_equals_the_kalman_filter_on_a_linear_model():

@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 from conftest import track_of
 
-from aoa_localizer.engine import checks, slices
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.evaluation import scenario_config
+from aoa_localizer.engine.inference import checks
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scenarios import simulate
-from aoa_localizer.engine.slices import SlicedJob, run_whole
+from aoa_localizer.engine.scheduling import slices
+from aoa_localizer.engine.scheduling.slices import SlicedJob, run_whole
+from aoa_localizer.simulation.evaluation import scenario_config
+from aoa_localizer.simulation.scenarios import simulate
 
 PIECE_COST = slices.Cost(0.0, 1.0)  # a piece that charges its size in microseconds
 

@@ -1,4 +1,4 @@
-"""Several DF stations fused: moving vehicles with their own GPS tracks, and fixed sites (engine/station.py)."""
+"""Several DF stations fused: moving vehicles with their own GPS tracks, and fixed sites (engine/ingest/station.py)."""
 import math
 
 import numpy as np
@@ -7,9 +7,9 @@ from pymap3d import vincenty
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ellipse_axes
-from aoa_localizer.engine.fleet import PAIR, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.simulation.fleet import PAIR, simulate_fleet
 
 TRUTH = (1200.0, 800.0)
 

@@ -8,8 +8,8 @@ from scipy.optimize import minimize
 
 from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95
-from aoa_localizer.engine.surveys import hand_held, locate_survey_with
-from aoa_localizer.engine.track_report import cloud_estimate, spatial_median, wide_for_range
+from aoa_localizer.engine.track.report import cloud_estimate, spatial_median, wide_for_range
+from aoa_localizer.simulation.surveys import hand_held, locate_survey_with
 
 
 def _reference_median(x: np.ndarray, w: np.ndarray) -> np.ndarray:

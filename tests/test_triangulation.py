@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from aoa_localizer.engine.triangulation import (
+from aoa_localizer.engine.inference.triangulation import (
     good_pairs,
     initial_particles,
     intersect_rays,

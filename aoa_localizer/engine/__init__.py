@@ -1,2 +1,2 @@
-"""The ROS-free engine: configuration, the Localizer and what it is made of (pairing, points, the robustness layer),
-simulated scenarios and their evaluation. Nothing here imports rclpy."""
+"""The ROS-free engine: configuration, the Localizer and what it is made of, in rooms by role (ingest, track,
+inference, outputs, scheduling). Nothing here imports rclpy, and nothing here imports the simulation."""

@@ -9,11 +9,11 @@ import zlib
 import numpy as np
 
 from aoa_localizer.engine.config import FREQUENCY_MAX_HZ, LocalizerConfig
-from aoa_localizer.engine.preprocess import PointBuilder
-from aoa_localizer.engine.receiver_pool import PooledNoise, pooled_noise
+from aoa_localizer.engine.inference.receiver_pool import PooledNoise, pooled_noise
+from aoa_localizer.engine.ingest.preprocess import PointBuilder
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.scheduler import Scheduler
-from aoa_localizer.engine.track import EmitterTrack
+from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.track.emitter_track import EmitterTrack
 from aoa_localizer.engine.types import Estimate
 
 DEFAULT = "default"  # the channel of records without a frequency

@@ -17,24 +17,25 @@ from typing import Protocol
 
 import numpy as np
 
-from aoa_localizer.engine import slices, survey_solver
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, ground_to_map
-from aoa_localizer.engine.gps_track import GpsTrack
-from aoa_localizer.engine.intake import Closed, Intake, as_float
-from aoa_localizer.engine.memory import keep_freed_memory
-from aoa_localizer.engine.next_goal import NextGoal, next_goal
-from aoa_localizer.engine.noise import sentence as noise_sentence
-from aoa_localizer.engine.posterior_grid import PosteriorGrid, posterior_grid
-from aoa_localizer.engine.preprocess import reading_sigma
-from aoa_localizer.engine.receiver_pool import PooledNoise
+from aoa_localizer.engine.inference.noise import sentence as noise_sentence
+from aoa_localizer.engine.inference.receiver_pool import PooledNoise
+from aoa_localizer.engine.ingest.gps_track import GpsTrack
+from aoa_localizer.engine.ingest.intake import Closed, Intake, as_float
+from aoa_localizer.engine.ingest.preprocess import reading_sigma
+from aoa_localizer.engine.ingest.station import Station
+from aoa_localizer.engine.outputs import survey_solver
+from aoa_localizer.engine.outputs.next_goal import NextGoal, next_goal
+from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid, posterior_grid
+from aoa_localizer.engine.outputs.survey_log import SurveyFix, survey_sentence
 from aoa_localizer.engine.rejections import Reason, Rejections
-from aoa_localizer.engine.scheduler import Scheduler
-from aoa_localizer.engine.station import Station
-from aoa_localizer.engine.survey_log import SurveyFix, survey_sentence
-from aoa_localizer.engine.track_report import assess, mode_masses
-from aoa_localizer.engine.track_state import TrackStatus
+from aoa_localizer.engine.scheduling import slices
+from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.track.report import assess, mode_masses
+from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -220,7 +221,7 @@ class Localizer:
 
     def posterior_grid(self, channel: Channel | None = None) -> PosteriorGrid | None:
         """The posterior of `channel`'s track (None: the latest estimate's channel) on a map grid around its
-        estimate (engine/posterior_grid.py); None before its first estimate."""
+        estimate (engine/outputs/posterior_grid.py); None before its first estimate."""
         channel = channel or self.latest
         track, est = channel.track, channel.estimate
         if est is None or not track.estimating:
@@ -240,9 +241,9 @@ class Localizer:
     def next_goal(self, vehicle: tuple[float, float], radius_m: float, channel: Channel | None = None
                   ) -> NextGoal | None:
         """Where within `radius_m` of `vehicle` (east, north) the next bearing is expected to shrink the posterior of
-        `channel` (None: the latest estimate's) most (engine/next_goal.py), for a bearing as noisy as the median of the
-        points used; None before its first estimate, and while a provisional one is behind the points held (the
-        vehicle should drive on, across its bearings)."""
+        `channel` (None: the latest estimate's) most (engine/outputs/next_goal.py), for a bearing as noisy as the
+        median of the points used; None before its first estimate, and while a provisional one is behind the points
+        held (the vehicle should drive on, across its bearings)."""
         channel = channel or self.latest
         track, est = channel.track, channel.estimate
         if est is None or not track.cloud_is_current:

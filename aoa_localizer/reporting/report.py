@@ -35,8 +35,8 @@ from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.inference.noise import sentence as noise_sentence
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.engine.rejections import REASONS
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.reporting import export, plots

@@ -34,12 +34,12 @@ from aoa_localizer.core.spec import ConfigError, unknown_names
 from aoa_localizer.engine.config import parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 from aoa_localizer.engine.crlb import nees as crlb_nees
-from aoa_localizer.engine.fleet import FLEETS
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.parent_death import die_with_parent
-from aoa_localizer.engine.scenarios import SCENARIOS, receiver_settings
+from aoa_localizer.engine.scheduling.parent_death import die_with_parent
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
+from aoa_localizer.simulation.fleet import FLEETS
+from aoa_localizer.simulation.scenarios import SCENARIOS, receiver_settings
 from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
 from msgs_adapters.bag_files import BagFiles, BagFilesError
 

@@ -31,8 +31,8 @@ from aoa_localizer.common.cot import CotSender, CotUnavailable, estimate_event
 from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec, unknown_names
 from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.memory import OldObjects, keep_freed_memory
 from aoa_localizer.engine.rejections import REASONS
+from aoa_localizer.engine.scheduling.memory import OldObjects, keep_freed_memory
 from aoa_localizer.ros.declare import declare, refuse_unknown, value_of
 from aoa_localizer.ros.node_monitor import NodeMonitor
 from aoa_localizer.ros.node_outputs import NodeOutputs, PosteriorWork

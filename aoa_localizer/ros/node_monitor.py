@@ -13,9 +13,9 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 
 from aoa_localizer.engine.channels import DEFAULT
 from aoa_localizer.engine.crlb import ellipse_axes
-from aoa_localizer.engine.input_guard import StampGaps
+from aoa_localizer.engine.inference.noise import sentence as noise_sentence
+from aoa_localizer.engine.ingest.input_guard import StampGaps
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.noise import sentence as noise_sentence
 from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
 from aoa_localizer.ros.node_outputs import PosteriorWork
 

@@ -129,7 +129,7 @@ class NodeOutputs:
         return work
 
     def next_goals(self, loc: Localizer, vehicle: tuple[float, float] | None, radius_m: float):
-        """Each channel's goal (engine/next_goal.py) for the vehicle at `vehicle` (map frame) on its
+        """Each channel's goal (engine/outputs/next_goal.py) for the vehicle at `vehicle` (map frame) on its
         emitter/<channel>/next_goal and next_goal_marker, the primary channel's on emitter/, for the ones someone
         listens to; none without an estimate or a vehicle's place."""
         if vehicle is None:

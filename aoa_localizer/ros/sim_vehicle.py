@@ -10,7 +10,7 @@ truth goes out latched on `sim/truth` (PointStamped, emitter in `map` at the sce
 `sim/datum` (NavSatFix of that datum). The node exits when the scenario is played. A scenario with several
 stations (`pair`: two cars) plays each on NAME/gps/fix and NAME/df/bearing; overrides apply to single-vehicle
 scenarios only. With `drive:=goal` the vehicle drives its track until the localizer publishes `emitter/next_goal`,
-then towards the newest goal, stop by stop (engine/goal_drive.py), for `duration_s` or as long as its scenario.
+then towards the newest goal, stop by stop (simulation/goal_drive.py), for `duration_s` or as long as its scenario.
 """
 from __future__ import annotations
 
@@ -27,12 +27,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from aoa_localizer.core.spec import ConfigError, ParameterSpec, Spec
 from aoa_localizer.engine.channels import channel_id
-from aoa_localizer.engine.fleet import FLEETS, Fleet, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.goal_drive import GoalDrive
-from aoa_localizer.engine.scenarios import SCENARIOS, Trajectory, mounted, simulate
 from aoa_localizer.ros.declare import declare, refuse_unknown
 from aoa_localizer.ros.ros_main import Stop, run_node
+from aoa_localizer.simulation.fleet import FLEETS, Fleet, simulate_fleet
+from aoa_localizer.simulation.goal_drive import GoalDrive
+from aoa_localizer.simulation.scenarios import SCENARIOS, Trajectory, mounted, simulate
 from msgs_adapters import build
 
 

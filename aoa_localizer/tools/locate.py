@@ -32,7 +32,7 @@ from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.surveys import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
+from aoa_localizer.engine.site_bearings import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES

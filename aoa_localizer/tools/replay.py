@@ -33,7 +33,7 @@ from aoa_localizer.common.output import StagedFile, check_output
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from msgs_adapters.bag import BagError
 
 

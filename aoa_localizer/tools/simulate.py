@@ -25,11 +25,11 @@ from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse
-from aoa_localizer.engine.evaluation import feed_fleet, run, scenario_config
-from aoa_localizer.engine.fleet import FLEETS, simulate_fleet
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scenarios import SCENARIOS, mounted, receiver_settings, simulate
+from aoa_localizer.simulation.evaluation import feed_fleet, run, scenario_config
+from aoa_localizer.simulation.fleet import FLEETS, simulate_fleet
+from aoa_localizer.simulation.scenarios import SCENARIOS, mounted, receiver_settings, simulate
 
 
 def emitter_value(text: str) -> tuple[float, tuple[float, float]]:

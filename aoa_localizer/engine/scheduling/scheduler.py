@@ -1,0 +1,216 @@
+"""Where a Localizer's deferred work runs and what it owes, in one place.
+
+A track defers two kinds of work. Its jobs (start searches and global checks) run a few pieces per point
+(`reproducible`: a seed repeats a run; slices.py), their result applied in the call that made the last piece, or in
+the check worker's process (`realtime`: the node's), their result applied at the track's next point or by
+`idle()`. A resampling's Metropolis-Hastings sweeps are owed instead of made in its step: the scheduler keeps the
+debt of each filter. Under `reproducible` a call makes them while its metered cost stays under SWEEP_BUDGET_US
+(slices.py: by the points alone, never the clock), at least one a point, and the rest at the points that follow;
+under `realtime` the caller makes them when it has time (`idle()` one, `catch_up()` all of them, else each
+following point one), and a worker check's move on its modes is owed too. Any of these moves keeps the posterior
+invariant, so when it is made changes no law.
+"""
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable
+from concurrent.futures import Future, wait
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+from weakref import WeakKeyDictionary
+
+import numpy as np
+
+from aoa_localizer.engine.inference.checks import CheckResult, CheckWorker
+from aoa_localizer.engine.rejections import Reason
+from aoa_localizer.engine.scheduling.slices import (
+    SWEEP_BUDGET_US,
+    Call,
+    SlicedJob,
+    Steps,
+    current_call,
+    metered_since,
+    spent_ns,
+)
+from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.resample_move import ResampleMove
+
+if TYPE_CHECKING:  # the tracks take the scheduler: the type only, for the checker
+    from aoa_localizer.engine.track.emitter_track import EmitterTrack
+
+log = logging.getLogger("aoa_localizer")
+
+SWEEPS_PER_POINT = 1  # owed sweeps a point makes when the caller gave no time for them
+# Under `reproducible` a larger cloud's sweep is made this many particles at a time (a random order per sweep), so
+# one sweep of a thousand particles over hundreds of points does not take a call by itself
+SWEEP_PART = 100
+
+
+@dataclass
+class Debt:
+    """What one filter owes: a global check's move on its modes, and a resampling's sweeps."""
+
+    modes: bool = False
+    sweeps: int = 0
+    # the sweep being made a part at a time: its order of the particles (None: none begun) and how many have moved
+    order: np.ndarray | None = None
+    at: int = 0
+    sweep_us: float = 0.0  # the metered cost of its last sweep (or part of one): what the next will cost
+
+    def __int__(self) -> int:
+        return int(self.modes) + self.sweeps
+
+
+class Scheduler:
+    """Runs the tracks' jobs inline or in the worker (`realtime`), and makes the moves they owe when asked."""
+
+    def __init__(self, realtime: bool, reject: Callable[[Reason], None]):
+        """`reject`: told of a move that failed (counted as an internal error, the track goes on)."""
+        self.worker = CheckWorker() if realtime else None
+        self.reject = reject
+        # Keyed by the filter that owes: a filter replaced (re-start, divergence) takes its debt with it.
+        self._debts: WeakKeyDictionary[ParticleFilter, Debt] = WeakKeyDictionary()
+
+    @property
+    def realtime(self) -> bool:
+        """Jobs go to the worker and moves are owed (else both are made in the call)."""
+        return self.worker is not None
+
+    @property
+    def failures(self) -> int:
+        """The worker's failed jobs in a row (0 inline)."""
+        return self.worker.failures if self.worker is not None else 0
+
+    def start(self, whole: Callable[[], CheckResult], steps: Steps[CheckResult], budget_us: float
+              ) -> Future | SlicedJob:
+        """A job: `whole` handed to the worker (its future); inline, or when the worker cannot take it, its `steps`
+        made a few pieces per point, up to `budget_us` a call (slices.py), the first call's pieces now."""
+        future = None if self.worker is None else self.worker.submit(whole)
+        if future is not None:
+            return future
+        job = SlicedJob(steps, budget_us)
+        job.advance()
+        return job
+
+    def finished(self, tracks: Iterable[EmitterTrack]) -> list[EmitterTrack]:
+        """The tracks whose job finished, its result applied now, that have a new estimate."""
+        return [t for t in tracks if t.collect() and t.estimating]
+
+    # -- the moves owed ------------------------------------------------------------------------------
+    def take(self, f: ParticleFilter) -> None:
+        """A new filter: its resamplings' sweeps are owed, not made in its step (a bounded step)."""
+        if isinstance(f, ResampleMove):
+            f.deferred = True
+
+    def debt(self, f: ParticleFilter | None) -> Debt:
+        """What `f` owes now (nothing for None)."""
+        if f is None:
+            return Debt()
+        return self._debts.setdefault(f, Debt())
+
+    def owe_modes(self, f: ParticleFilter) -> None:
+        """A check's move on its modes is owed by `f` (made between points, or at its next point)."""
+        self.debt(f).modes = True
+
+    def stepped(self, f: ParticleFilter) -> None:
+        """After `f` took a point: a new resampling's sweeps become owed, then the point makes some of the debt.
+        `realtime`: the sweeps still owed from the resampling before are made now (resamplings that come faster than
+        the caller's idle time pays get all their sweeps: the cloud would otherwise collapse onto a few copies), none
+        of the new one's, and without a resampling SWEEPS_PER_POINT of them. `reproducible`: as many as the call's
+        budget holds, at least one a call; a resampling's own sweeps replace what is left of the one before (a
+        bounded call: each resampling still gets at least one at once, unless the call already made one or a job's
+        pieces or spent half its budget, and the rest while no other comes)."""
+        if not isinstance(f, ResampleMove) or not f.deferred:
+            return
+        debt = self.debt(f)
+        if not self.realtime:
+            if f.resampled:
+                debt.sweeps, debt.order = f.sweeps, None
+            self._sweep_within_budget(f, debt, current_call())
+            return
+        if f.resampled:
+            made, debt.sweeps = debt.sweeps, f.sweeps
+        else:
+            made = min(debt.sweeps, SWEEPS_PER_POINT)
+            debt.sweeps -= made
+        if made:
+            f.move(made)
+
+    @staticmethod
+    def _sweep_within_budget(f: ResampleMove, debt: Debt, call: Call) -> None:
+        """The owed sweeps one at a time while the call's metered cost with one more sweep's stays under
+        SWEEP_BUDGET_US; at least one when the call made no sweep and no job's pieces yet and spent under half the
+        budget (a second point of one input, or a point after a job's pieces or a check's result applied, owes them
+        when the call is spent); a cloud of more than SWEEP_PART particles a part of a sweep at a time."""
+        first = not (call.swept or call.pieces) and call.cost() < 0.5 * SWEEP_BUDGET_US
+        while debt.sweeps and (first or call.cost() + debt.sweep_us < SWEEP_BUDGET_US):
+            first, call.swept = False, True
+            before = spent_ns()
+            if f.n <= SWEEP_PART:
+                f.move(1)
+                debt.sweeps -= 1
+            else:
+                if debt.order is None:
+                    debt.order, debt.at = f.rng.permutation(f.n), 0
+                f.move(1, debt.order[debt.at:debt.at + SWEEP_PART])
+                debt.at += SWEEP_PART
+                if debt.at >= f.n:
+                    debt.sweeps, debt.order = debt.sweeps - 1, None
+            debt.sweep_us = metered_since(before)
+
+    def settle(self, track: EmitterTrack) -> None:
+        """Every sweep the track's filter owes, made now (the end of data)."""
+        f = track.filter
+        debt = self.debt(f)
+        if debt.sweeps and isinstance(f, ResampleMove):
+            made, debt.sweeps, debt.order = debt.sweeps, 0, None  # a sweep made in parts is made whole
+            f.move(made)
+
+    def pay_modes(self, track: EmitterTrack) -> bool:
+        """The move on the last check's modes, if the track's filter owes one; True when it was made."""
+        f = track.filter
+        debt = self.debt(f)
+        if not debt.modes:
+            return False
+        debt.modes = False
+        return track.supervisor.move_on_modes()
+
+    def owed(self, track: EmitterTrack) -> int:
+        """Moves the track's filter owes."""
+        return int(self.debt(track.filter))
+
+    def move_one(self, tracks: Iterable[EmitterTrack]) -> bool:
+        """Between points (`realtime`): one owed move, for the track owing the most (the modes' move before the
+        sweeps); False when none was owed (or it failed: counted), and always under `reproducible`, whose moves
+        follow its points alone."""
+        if not self.realtime:
+            return False
+        owing = max(tracks, key=self.owed, default=None)
+        if owing is None or not self.owed(owing):
+            return False
+        f = owing.filter
+        if f is None or not f.finite():
+            return False
+        try:
+            if self.pay_modes(owing):
+                return True
+            debt = self.debt(f)
+            if not debt.sweeps or not isinstance(f, ResampleMove):
+                return False
+            debt.sweeps -= 1
+            f.move(1)
+            return True
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+            log.exception("a move sweep between points failed; skipped")
+            self.reject(Reason.INTERNAL_ERROR)
+            return False
+
+    def wait(self, tracks: Iterable[EmitterTrack]) -> None:
+        """Wait until the worker has finished the tracks' jobs (their results are applied at each one's next point,
+        as live)."""
+        wait([t.job.future for t in tracks if t.job is not None and isinstance(t.job.future, Future)])
+
+    def close(self) -> None:
+        """Stop the worker (a job running finishes; its result is dropped)."""
+        if self.worker is not None:
+            self.worker.close()

@@ -1,0 +1,190 @@
+"""The receiver as the bearings show it: the calibrated noise model, the point outlier share, the noise as latent
+hypotheses while the readings cannot calibrate it yet, and a learned constant bearing offset. Points are made with
+them; a new calibration rebuilds the track's points and re-weights its cloud."""
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.inference.checks import fit_noise
+from aoa_localizer.engine.inference.global_search import residuals
+from aoa_localizer.engine.inference.noise import NoiseModel, point_outlier_prob
+from aoa_localizer.engine.inference.receiver import NoiseGrid
+from aoa_localizer.engine.inference.receiver_pool import PooledNoise
+from aoa_localizer.engine.ingest.course import group_courses, turned
+from aoa_localizer.engine.ingest.point_batch import Built, PointBatch, offset_point, sigmas
+from aoa_localizer.engine.ingest.preprocess import columns, make_point
+from aoa_localizer.engine.rejections import Reason
+from aoa_localizer.engine.scheduling.slices import run_whole
+from aoa_localizer.engine.track.state import WindowEntry
+from aoa_localizer.engine.types import ObservationPoint, Reading
+
+if TYPE_CHECKING:
+    from aoa_localizer.engine.track.emitter_track import EmitterTrack
+
+log = logging.getLogger("aoa_localizer")
+
+_CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
+
+
+class Calibrator:
+    """One track's receiver calibration (noise.py, receiver.py, offset.py)."""
+
+    def __init__(self, track: EmitterTrack, cfg: LocalizerConfig):
+        self.track, self.cfg = track, cfg
+        self.noise = NoiseModel(cfg.outlier_prob)
+        self.outlier_prob = cfg.outlier_prob  # point level, in the likelihood
+        # The receiver's noise as latent hypotheses, marginalised with the position until the readings calibrate it
+        # (None: known, or calibrated)
+        self.grid: NoiseGrid | None = None
+        self.offset = 0.0  # a constant bearing offset the data determined (ENU rad, offset.py), taken off every point
+        # the bearings turn with the vehicle: each is turned by its course before the offset (course.py)
+        self.course = False
+        self.held_course = math.nan  # the course the newest point's readings ended on
+        if cfg.noise == "unknown" and cfg.likelihood == "mixture":
+            self.grid = NoiseGrid.for_config(cfg)
+        # The receiver's calibration pooled over its other channels (Channels.pooled_noise), asked once, at the
+        # track's first search; `pooled` what it said (None: nothing was pooled)
+        self.pool: Callable[[], PooledNoise | None] | None = None
+        self.pooled: PooledNoise | None = None
+        self._pool_asked = False
+        self._summary: tuple[NoiseModel, int, float, dict] | None = None  # (model, fits, share, summary)
+
+    def noise_prior(self) -> NoiseGrid | None:
+        """The latent noise the track's searches and filter use (None once the readings calibrated it): the weak
+        prior, or, from the track's first search on, the receiver's pooled calibration when other channels have
+        one. Taken once, so the searches and the filter always agree on it."""
+        if self.grid is not None and not self._pool_asked:
+            self._pool_asked = True
+            pooled = self.pool() if self.pool is not None else None
+            if pooled is not None:
+                self.grid, self.pooled = NoiseGrid.for_config(self.cfg, pooled), pooled
+        return self.grid
+
+    def sigmas(self, readings: list[Reading]) -> np.ndarray:
+        """Each reading's sigma under the calibrated noise model (the configured one until calibrated)."""
+        return sigmas(readings, self.noise if self.cfg.calibrate_noise else None)
+
+    def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
+        """The point of `readings` under the calibrated noise model (the readings' own sigmas until calibrated)."""
+        if self.course:
+            readings, self.held_course = turned(readings, self.held_course)
+        calibrated = self.cfg.calibrate_noise
+        made = make_point(readings, self.cfg, self.sigmas(readings) if calibrated else None,
+                          self.noise.heading_scale if calibrated else 1.0)
+        return offset_point(made, self.offset)
+
+    @property
+    def lik_outlier_prob(self) -> float:
+        """The outlier share the likelihood uses: the calibrated one for `likelihood: mixture`, 0 for the paper's
+        Gaussian (which then stays Gaussian, in the filter and in the searches)."""
+        return self.outlier_prob if self.cfg.likelihood == "mixture" else 0.0
+
+    def noise_summary(self, base_sigma_deg: Callable[[float], float]) -> dict:
+        """The calibrated noise's summary (NoiseModel.summary) with the point outlier share; every estimate carries
+        one, so it is made again only for another model, a new fit (a model changes only by fit(), which counts
+        them) or another share. The caller gets its own dicts."""
+        n, cached = self.noise, self._summary
+        if cached is None or cached[0] is not n or cached[1:3] != (n.fits, self.outlier_prob):
+            summary = n.summary(base_sigma_deg)
+            summary["point_outlier_prob"] = round(self.outlier_prob, 4)
+            cached = self._summary = (n, n.fits, self.outlier_prob, summary)
+        summary = cached[3]
+        return {**summary, "sigma_deg": dict(summary["sigma_deg"])}
+
+    def calibrate(self, candidates: list[np.ndarray], by_density: bool) -> bool:
+        """Fit position and noise jointly (checks.fit_noise) from the candidate places, then rebuild the points with
+        the fitted noise and re-weight the cloud. True if a calibration was applied."""
+        t = self.track
+        batch = PointBatch([e.readings for e in t.window], self.cfg)
+        fit = run_whole(fit_noise(batch, self.noise, t.robust(), candidates, by_density))
+        if fit is None:
+            return False
+        self.apply(fit.noise, fit.at, {}, fit.offset, fit.batch.course)
+        return True
+
+    def apply(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]], offset: float,
+              course: bool = False):
+        """Adopt `noise`, the bearing `offset` and `course` (bearings turned by the vehicle's course), fitted at the
+        place `at`: rebuild the kept points with them (`built`: points already made with them, by their group's
+        identity), re-estimate the point outlier share, re-weight the cloud by the change of posterior (a changed
+        offset moves the posterior: the check's re-start test that follows finds the new place)."""
+        t = self.track
+        self.noise = noise
+        window_courses = group_courses([columns(e.readings) for e in t.window]) if course else None
+        if course and not self.course:
+            self.course = True
+            self.offset = offset
+            t.events["course_learned"] += 1
+            log.warning("the bearings turn with the vehicle: they look measured from its forward axis, not from "
+                        "north; learned, and each is turned by the vehicle's course (%s)", self.offset_advice())
+        if offset != self.offset:
+            self.offset = offset
+            t.events["offset_learned"] += 1
+            if self.course:
+                log.warning("the bearings turned by the vehicle's course look %+.1f deg off: learned (%s)",
+                            self.offset_deg, self.offset_advice())
+            else:
+                log.warning("the bearings look %+.1f deg off the true bearings: learned, and taken off every bearing "
+                            "(%s)", self.offset_deg, self.offset_advice())
+        if window_courses is not None and window_courses.size:
+            self.held_course = float(window_courses[0])
+        f = t.filter  # None while waiting to start: only the points are rebuilt
+        old = f.log_target(f.x) if f is not None else None
+        built = dict(built)
+        late = [e.readings for e in t.window if (b := built.get(id(e.readings))) is None or b[0] is not e.readings]
+        if late and not self.course:  # (turned by the course, each point holds the course from the one before)
+            # The points that came after the check's snapshot, made together: one by one, they held up the call
+            batch = PointBatch(late, self.cfg).built(self.noise if self.cfg.calibrate_noise else None, self.offset)
+            built.update((id(g), (g, b)) for g, b in zip(late, batch, strict=True))
+        rebuilt: deque[WindowEntry] = deque()
+        delta = 0
+        for entry in t.window:
+            made = built.get(id(entry.readings))
+            point, kept = made[1] if made is not None and made[0] is entry.readings else self.make(entry.readings)
+            now = int((~kept).sum())
+            delta += now - entry.gated
+            rebuilt.append(WindowEntry(entry.readings, point, now))
+        if delta:
+            t.reject(Reason.POINT_OUTLIER, delta)
+        t.window = rebuilt
+        if window_courses is not None and window_courses.size:
+            self.held_course = float(window_courses[-1])
+        pts = t.points()
+        self.outlier_prob = point_outlier_prob(residuals(at, pts), pts.sigma, self.outlier_prob)
+        t.events["recalibrated"] += 1
+        self.grid = None  # the readings calibrated the noise: from now on it is taken as fitted
+        if f is not None:
+            t.model.history.data = pts.rows()
+            t.model.lik.outlier_prob = self.lik_outlier_prob
+            t.model.grid = None
+            f.reweight(f.log_target(f.x) - old)  # old is set whenever f is
+            if f.ess() < self.cfg.ess_threshold * f.n:
+                f.resample()
+                f.rejuvenate(_CALIBRATION_SWEEPS, t.proposal)
+
+    @property
+    def offset_deg(self) -> float:
+        """The learned offset as azimuth degrees: true azimuth = read azimuth + this."""
+        return math.degrees(self.offset)
+
+    def offset_advice(self) -> str:
+        """The setting that would take the learned offset off at the receiver, as a question."""
+        cfg = self.cfg
+        if self.course:
+            mount = self.offset_deg - 90.0 + (cfg.magnetic_declination_deg
+                                              if cfg.bearing_reference == "magnetic_north" else 0.0)
+            return (f"set bearing_reference to vehicle, heading_source to track (or imu) and mount_offset_deg to "
+                    f"{(mount + 180.0) % 360.0 - 180.0:.1f}?")
+        if cfg.bearing_reference == "vehicle":
+            return f"set mount_offset_deg to {cfg.mount_offset_deg + self.offset_deg:.1f}?"
+        if cfg.bearing_reference == "magnetic_north":
+            return f"set magnetic_declination_deg to {cfg.magnetic_declination_deg + self.offset_deg:.1f}?"
+        return ("a magnetic declination or mount offset not applied, or the DF's north reference set wrong "
+                "(bearing_reference, magnetic_declination_deg, mount_offset_deg)?")

@@ -1,0 +1,137 @@
+"""What a track's estimate reports beside its mean: a provisional sample's mean and ellipse, the posterior's modes
+and their masses, and the estimate's state with the warnings behind it (docs/interface.md, "Estimate states")."""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from aoa_localizer.engine.crlb import ELLIPSE_95
+from aoa_localizer.engine.inference.checks import ellipse_and_reach
+from aoa_localizer.engine.track.initiator import MAX_ELLIPSE_RANGE_SHARE
+from aoa_localizer.filters.base import ParticleFilter
+
+if TYPE_CHECKING:
+    from aoa_localizer.engine.track.emitter_track import EmitterTrack
+
+_ELLIPSE_MASS = 0.95  # the share of the posterior a provisional estimate's ELLIPSE_95 ellipse holds
+_MODE_MIN_MASS = 0.01  # modes reported
+_SUSPECT_WILD_SHARE = 0.4  # more bearings than this unexplained: the model does not fit (state `suspect`)
+_AMBIGUOUS_MASS = 0.2  # a second mode this heavy leaves the estimate poorly determined
+_MEDIAN_MAX_STEPS, _MEDIAN_TOL_M = 100, 1e-3  # Weiszfeld's iteration: it stops when a step is under a millimetre
+_MEDIAN_MIN_DISTANCE_M = 1e-6  # a particle at the iterate weighs as if this far (its own weight is then dominant)
+
+
+def cloud_estimate(f: ParticleFilter, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A wide posterior's estimate: `centre` (a place its tails along the rays do not drag out, as they drag its mean)
+    with the cloud's second moment about it, scaled so the 95 % ellipse holds 95 % of the cloud."""
+    centre = np.array(centre, float)
+    w, d = f.weights, f.x - centre
+    cov = (w[:, None] * d).T @ d
+    try:
+        d2 = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
+    except np.linalg.LinAlgError:
+        return centre, cov
+    order = np.argsort(d2)
+    at = min(int(np.searchsorted(np.cumsum(w[order]), _ELLIPSE_MASS)), len(order) - 1)
+    return centre, cov * max(float(d2[order][at]), 1e-12) / ELLIPSE_95
+
+
+def spatial_median(x: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The weighted cloud's spatial (geometric) median, the place of least expected distance to the emitter
+    (Weiszfeld's iteration from the mean): the mean for a symmetric cloud, and unmoved by a tail along a ray."""
+    m = w @ x
+    for _ in range(_MEDIAN_MAX_STEPS):
+        inv = w / np.maximum(np.hypot(x[:, 0] - m[0], x[:, 1] - m[1]), _MEDIAN_MIN_DISTANCE_M)
+        step = (inv @ x) / inv.sum() - m
+        m = m + step
+        if math.hypot(step[0], step[1]) < _MEDIAN_TOL_M:
+            break
+    return m
+
+
+def wide_for_range(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, float, float]:
+    """(whether the 95 % ellipse's semi-major axis is over MAX_ELLIPSE_RANGE_SHARE of the range from the track, the
+    semi-major axis, the range)."""
+    h = track.model.history.data
+    size, reach = ellipse_and_reach(mean, cov, h[:, 0], h[:, 1])
+    return size > MAX_ELLIPSE_RANGE_SHARE * reach, size, reach
+
+
+def mode_masses(track: EmitterTrack) -> list[tuple[float, float, float]]:
+    """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first; the particles
+    go to their nearest mode, and modes whose centres lie inside each other's 95 % ellipse are one place."""
+    f, modes = track.cloud, track.modes
+    w = f.weights
+    if len(modes) < 2:
+        mean = w @ f.x
+        return [(float(mean[0]), float(mean[1]), 1.0)]
+    d2 = np.stack([np.einsum("ni,ij,nj->n", f.x - m.mean, np.linalg.inv(m.cov), f.x - m.mean) for m in modes])
+    clusters = merge_overlapping(f.x, w, np.argmin(d2, axis=0))
+    out = [(float(c[0]), float(c[1]), mass) for c, _, mass in clusters if mass >= _MODE_MIN_MASS]
+    return sorted(out, key=lambda t: -t[2])
+
+
+def merge_overlapping(x: np.ndarray, w: np.ndarray, label: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Weighted particles `x`, `w` in the clusters `label` gives, as (centre, covariance, mass) each, after joining
+    any two clusters whose centres lie inside either one's 95 % ellipse (two hypotheses a metre apart are one)."""
+    label = label.copy()
+    while True:
+        stats = {}
+        for j in np.unique(label):
+            sel = label == j
+            mass = float(w[sel].sum())
+            if mass <= 0:
+                continue
+            c = (w[sel] @ x[sel]) / mass
+            d = x[sel] - c
+            stats[j] = (c, (w[sel, None] * d).T @ d / mass, mass)
+        pair = next(((i, j) for i in stats for j in stats if i < j
+                     and min(_inside(stats[i], stats[j][0]), _inside(stats[j], stats[i][0])) <= ELLIPSE_95), None)
+        if pair is None:
+            return list(stats.values())
+        label[label == pair[1]] = pair[0]
+
+
+def _inside(cluster: tuple[np.ndarray, np.ndarray, float], place: np.ndarray) -> float:
+    """The squared Mahalanobis distance of `place` from a cluster (inf for a cluster with no spread)."""
+    centre, cov, _ = cluster
+    try:
+        return float((place - centre) @ np.linalg.solve(cov, place - centre))
+    except np.linalg.LinAlgError:
+        return math.inf
+
+
+def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[str, list[str]]:
+    """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings,
+    `poorly_determined` when the posterior is proper but wide or multi-modal (or only a provisional sample), else
+    `tracking`."""
+    warnings = []
+    health, c = track.supervisor.health, track.calibration
+    if track.supervisor.alarm:
+        warnings.append(f"the estimate no longer explains the newest bearings ({sum(health.flags)} of the "
+                        f"last {len(health.flags)} points disagree): multipath, an emitter that moved, or a "
+                        "bearing reference or offset set wrong (bearing_reference, mount_offset_deg, "
+                        "magnetic_declination_deg)")
+    wild = max(c.outlier_prob if c.grid is None else 0.0, c.noise.reading_outlier_prob if c.noise.fits else 0.0)
+    if wild > _SUSPECT_WILD_SHARE:
+        warnings.append(f"{100 * wild:.0f} % of the bearings look wild: a bearing offset or reference set wrong "
+                        "(bearing_reference, mount_offset_deg, magnetic_declination_deg), or heavy multipath")
+    if c.course:
+        warnings.append("the bearings turn with the vehicle: they look measured from its forward axis, not from north; "
+                        f"learned, and each is turned by the vehicle's course: {c.offset_advice()}")
+    elif c.offset:
+        warnings.append(f"the bearings look {c.offset_deg:+.1f} deg off the true bearings (true azimuth = read "
+                        f"azimuth {c.offset_deg:+.1f} deg), learned and corrected: {c.offset_advice()}")
+    if warnings:
+        return "suspect", warnings
+    if track.filter is None:
+        why = track.status.removeprefix("poorly determined: ").removeprefix("waiting for geometry: ")
+        return "poorly_determined", [f"few or poorly crossing bearings: {why}"]
+    wide, size, reach = wide_for_range(track, mean, cov)
+    if wide:
+        return "poorly_determined", [f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]
+    if len(modes) > 1 and modes[1][2] >= _AMBIGUOUS_MASS:
+        return "poorly_determined", [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
+    return "tracking", []
