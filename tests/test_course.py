@@ -11,7 +11,7 @@ from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.ingest.course import courses, turned
 from aoa_localizer.engine.ingest.point_batch import PointBatch
 from aoa_localizer.engine.ingest.preprocess import Group, make_point
-from aoa_localizer.engine.types import Reading
+from aoa_localizer.engine.types import EstimateState, Reading
 from aoa_localizer.simulation.evaluation import run
 from aoa_localizer.simulation.scenarios import SCENARIOS, mounted, receiver_settings, robustness_cells, simulate
 
@@ -52,7 +52,7 @@ def test_vehicle_relative_bearings_configured_as_true_north_are_learned_and_the_
         est = res.estimates[-1]
         assert res.scores["error"] < 10.0 and res.scores["inside95"]
         course = [w for w in est.warnings if "turn with the vehicle" in w]
-        assert est.state == "suspect" and len(course) == 1
+        assert est.state is EstimateState.SUSPECT and len(course) == 1
         learned = re.search(r"mount_offset_deg to (-?[0-9.]+)\?", course[0])
         assert learned is not None and abs(float(learned.group(1)) - mount) < 3.0
 

@@ -14,7 +14,7 @@ from aoa_localizer.engine.ingest.preprocess import PointBuilder
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
 from aoa_localizer.engine.track.emitter_track import EmitterTrack
-from aoa_localizer.engine.types import Estimate
+from aoa_localizer.engine.types import Estimate, EstimateState
 
 DEFAULT = "default"  # the channel of records without a frequency
 # Carrier frequencies a DF receiver can report: above 0 and at most 1 THz (receivers stop near 50 GHz), so a
@@ -65,7 +65,7 @@ class Channel:
         """The estimate's place, once it is determined: a wide or provisional one's may lie by the road, and would
         cut points small for nothing."""
         est = self.estimate
-        return None if est is None or est.state == "poorly_determined" else (est.east, est.north)
+        return None if est is None or est.state == EstimateState.POORLY_DETERMINED else (est.east, est.north)
 
 
 class Channels:

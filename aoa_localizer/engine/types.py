@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -69,6 +70,14 @@ class ObservationPoint:
     gps_sigma: float = 0.0  # horizontal sigma of its antenna position (m), from the fixes' covariances
 
 
+class EstimateState(StrEnum):
+    """How far an estimate may be trusted (str-valued: JSON, /diagnostics and the tables carry the words)."""
+
+    TRACKING = "tracking"
+    POORLY_DETERMINED = "poorly_determined"  # proper but wide, multi-modal, or few bearings
+    SUSPECT = "suspect"  # the model does not fit the bearings
+
+
 @dataclass
 class Estimate:
     """The emitter estimate after a filter update: ENU metres at the datum, lat/lon and the 2x2 covariance."""
@@ -93,7 +102,7 @@ class Estimate:
     frequency_hz: float = float("nan")  # the channel's frequency (NaN: the default channel, no frequency)
     # `tracking`, `poorly_determined` (proper but wide, multi-modal, or few bearings) or `suspect` (the model does
     # not fit the bearings); `warnings`: plain sentences naming the likely cause and the setting to check
-    state: str = "tracking"
+    state: EstimateState = EstimateState.TRACKING
     warnings: list = field(default_factory=list)
     # The survey model's highest-density regions (level -> rings of (lat, lon)); None from the particle filter
     regions: dict | None = field(repr=False, default=None)

@@ -19,6 +19,7 @@ from scipy import stats
 
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
+from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.pooled.bias import BIAS_MIN_EMITTERS, Bias, learn_biases, residuals
 from aoa_localizer.pooled.grid import (
     CELLS,
@@ -54,7 +55,7 @@ class EmitterFix:
     lat: float
     lon: float
     cov: np.ndarray
-    state: str
+    state: EstimateState
     warnings: list
     stations: int
     readings: int
@@ -193,7 +194,7 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
          readings: int) -> EmitterFix:
     """The published fix: its state, and a warning for each station far off and for a misleading ellipse."""
     lat, lon, _ = geom.frame.to_geodetic(float(region.point[0]), float(region.point[1]))
-    warnings, state = [], "tracking"
+    warnings, state = [], EstimateState.TRACKING
     resid = np.degrees(wrap_pi(residuals(geom, region.point) - shift))
     expected = np.sqrt(scale_deg**2 + np.degrees(np.sqrt(geom.var + extra)) ** 2)
     for name, r, ex in zip(geom.names, resid, expected, strict=True):
@@ -203,24 +204,24 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
     a95 = ellipse_axes(region.cov)[0]
     ranges = np.hypot(geom.xy[:, 0] - region.point[0], geom.xy[:, 1] - region.point[1])
     if len(geom.xy) < 3:
-        state = "poorly_determined"
+        state = EstimateState.POORLY_DETERMINED
         warnings.append("bearings from two places only: nothing checks their crossing")
     elif len(geom.xy) == 3:
-        state = "poorly_determined"
+        state = EstimateState.POORLY_DETERMINED
         warnings.append("three stations: one wild bearing among them could not be told from the others")
     # the stations not named as off: do they meet within their spread? (a named one is the wild share's)
     z2 = (resid / expected) ** 2
     z2 = z2[z2 <= _OFF_Z**2]
     fit_p = float(stats.chi2.sf(float(z2.sum()), z2.size - 2)) if z2.size > 2 else 1.0
     if fit_p < _FIT_P:
-        state = "poorly_determined"
+        state = EstimateState.POORLY_DETERMINED
         warnings.append(f"the bearings do not meet within their expected spread (chi-square p = {fit_p:.2g}): one "
                         "of them may be wild")
     if a95 > float(np.median(ranges)):
-        state = "poorly_determined"
+        state = EstimateState.POORLY_DETERMINED
         warnings.append(f"the 95 % region ({a95:.3g} m) is wide for the range ({np.median(ranges):.3g} m)")
     if len(region.hpd[0.95]) > 1:
-        state = "poorly_determined"
+        state = EstimateState.POORLY_DETERMINED
         warnings.append(f"the 95 % region is in {len(region.hpd[0.95])} parts: see `hpd`")
     held = region.ellipse_mass[0.95]
     if not _HELD_LOW <= held <= _HELD_HIGH:

@@ -11,6 +11,7 @@ import numpy as np
 
 from aoa_localizer.engine.crlb import ellipse_points
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.types import EstimateState
 
 OFF_DEG = 30.0  # a bearing this far from the direction to the estimate is drawn as off (dashed, its angle named)
 _KEY_ROWS = 40  # the overview's key lists this many ids at most (more: numbers only, each id's own map names it)
@@ -50,7 +51,7 @@ def overview(path: Path, frame: LocalFrame, found: dict) -> None:
     for k, (ident, (est, rows)) in enumerate(found.items(), start=1):
         ring = ellipse_points((est.east, est.north), est.cov)
         ax.plot(ring[:, 0], ring[:, 1], color="tab:blue", lw=0.8, alpha=0.5)
-        ax.plot(est.east, est.north, "o", color="tab:red" if est.state != "tracking" else "tab:blue", ms=4)
+        ax.plot(est.east, est.north, "o", color="tab:red" if est.state != EstimateState.TRACKING else "tab:blue", ms=4)
         ax.annotate(str(k), (est.east, est.north), xytext=(3, 3), textcoords="offset points", fontsize=8)
         key.append(f"{k}  {_printable(ident)[:32]} ({est.state})")
         stations.update((round(r.lat, 7), round(r.lon, 7)) for r in rows)

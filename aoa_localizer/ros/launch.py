@@ -36,6 +36,7 @@ from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 from aoa_localizer.engine.crlb import nees as crlb_nees
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.scheduling.parent_death import die_with_parent
+from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
 from aoa_localizer.simulation.fleet import FLEETS
@@ -382,7 +383,7 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
     diag = state.get("diag", {})
     if diag.get("state"):
         figures["state"] = diag["state"]
-    if diag.get("state") == "suspect":  # the localizer says its model does not fit: never "converged"
+    if diag.get("state") == EstimateState.SUSPECT:  # the localizer says its model does not fit: never "converged"
         said = "; ".join(v for k, v in sorted(diag.items()) if k.startswith("warning_"))
         return False, f"the localizer calls its estimate suspect: {said or diag.get('message', '')}", figures
     if major > max_ellipse:

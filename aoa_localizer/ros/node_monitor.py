@@ -16,6 +16,7 @@ from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.inference.noise import sentence as noise_sentence
 from aoa_localizer.engine.ingest.input_guard import StampGaps
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
 from aoa_localizer.ros.node_outputs import PosteriorWork
 
@@ -131,7 +132,7 @@ class NodeMonitor:
         if est is not None:
             values["state"] = est.state
             warnings += [(f"warning_{i}", text, text) for i, text in enumerate(est.warnings)]
-        suspect = est is not None and est.state == "suspect"
+        suspect = est is not None and est.state == EstimateState.SUSPECT
         level = 2 if error else 1 if est is None or checking or warnings or suspect else 0
         return level, "; ".join([loc.status] + [words for _, _, words in warnings]), values
 

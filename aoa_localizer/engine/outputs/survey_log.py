@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.geodesy import LocalFrame, unturn
+from aoa_localizer.engine.types import EstimateState
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
 LIVE_GROWTH = 1.25  # a live survey fix is made again once the channel's bearings grew by this factor ...
@@ -47,7 +48,7 @@ class SurveyFix:
     lat: float
     lon: float
     cov: np.ndarray
-    state: str
+    state: EstimateState
     warnings: list
     bearings: int
     stations: int

@@ -10,6 +10,7 @@ import numpy as np
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.inference.checks import ellipse_and_reach
 from aoa_localizer.engine.track.initiator import MAX_ELLIPSE_RANGE_SHARE
+from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.filters.base import ParticleFilter
 
 if TYPE_CHECKING:
@@ -103,7 +104,7 @@ def _inside(cluster: tuple[np.ndarray, np.ndarray, float], place: np.ndarray) ->
         return math.inf
 
 
-def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[str, list[str]]:
+def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[EstimateState, list[str]]:
     """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings,
     `poorly_determined` when the posterior is proper but wide or multi-modal (or only a provisional sample), else
     `tracking`."""
@@ -125,13 +126,14 @@ def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) 
         warnings.append(f"the bearings look {c.offset_deg:+.1f} deg off the true bearings (true azimuth = read "
                         f"azimuth {c.offset_deg:+.1f} deg), learned and corrected: {c.offset_advice()}")
     if warnings:
-        return "suspect", warnings
+        return EstimateState.SUSPECT, warnings
     if track.filter is None:
         why = track.status.removeprefix("poorly determined: ").removeprefix("waiting for geometry: ")
-        return "poorly_determined", [f"few or poorly crossing bearings: {why}"]
+        return EstimateState.POORLY_DETERMINED, [f"few or poorly crossing bearings: {why}"]
     wide, size, reach = wide_for_range(track, mean, cov)
     if wide:
-        return "poorly_determined", [f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]
+        return EstimateState.POORLY_DETERMINED, [
+            f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]
     if len(modes) > 1 and modes[1][2] >= _AMBIGUOUS_MASS:
-        return "poorly_determined", [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
-    return "tracking", []
+        return EstimateState.POORLY_DETERMINED, [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
+    return EstimateState.TRACKING, []
