@@ -596,10 +596,10 @@ def test_a_place_like_error_that_follows_the_truths_range_leans_the_posterior_ou
     ox, oy, _ = out.cells()
     ogx, ogy = (g.ravel() for g in np.meshgrid(ox, oy))
     floor = 0.5 * src.hx / CELLS
-    q = displaced(src, p, out, stations, 0.3, 600.0, 1e6, floor)
+    q = displaced(src, p, out, stations, np.array([0.3]), np.array([1.0]), 600.0, 1e6, floor)
     assert q.sum() == pytest.approx(1.0)
     assert float(q @ ogy) > 330.0  # leans away from the stations (a constant kernel: about 300)
     assert abs(float(q @ ogx)) < 1.0  # the layout is symmetric east-west
-    still = displaced(src, p, out, stations, 0.0, 600.0, 1e6, floor)
+    still = displaced(src, p, out, stations, np.array([0.0]), np.array([1.0]), 600.0, 1e6, floor)
     cell = 2 * out.hy / CELLS
     assert abs(float(still @ ogy) - 300.0) < cell and abs(float(still @ ogx)) < cell

@@ -431,7 +431,7 @@ class Localizer:
                 log.live[channel.id] = made
             return made
         last = log.live.get(channel.id)
-        if not isinstance(last, Estimate):
+        if last is None:
             return None
         return self._announce(channel, replace(last, stamp=channel.track.last_stamp))
 

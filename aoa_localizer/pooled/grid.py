@@ -112,11 +112,15 @@ def mixture(lj: np.ndarray, log_z: np.ndarray, log_w: np.ndarray) -> np.ndarray:
     return p / p.sum()
 
 
+def heaviest(p: np.ndarray) -> np.ndarray:
+    """The indices of the fewest cells holding _KEEP of the mass `p`."""
+    order = np.argsort(p)[::-1]
+    return order[: int(np.searchsorted(np.cumsum(p[order]), _KEEP)) + 1]
+
+
 def mass_box(box: Box, p: np.ndarray) -> Box:
     """The smallest grid-aligned box holding _KEEP of the cells' mass, two cells wider each side."""
-    order = np.argsort(p)[::-1]
-    keep = order[: int(np.searchsorted(np.cumsum(p[order]), _KEEP)) + 1]
-    rows, cols = np.divmod(keep, CELLS)
+    rows, cols = np.divmod(heaviest(p), CELLS)
     x, y, _ = box.cells()
     dx, dy = 2 * box.hx / CELLS, 2 * box.hy / CELLS
     x0, x1 = x[cols.min()] - 2.5 * dx, x[cols.max()] + 2.5 * dx
@@ -187,23 +191,26 @@ def median_range(xy: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.median(np.hypot(x[None, :] - xy[:, :1], y[None, :] - xy[:, 1:]), axis=0)
 
 
-def displaced(src: Box, p: np.ndarray, out: Box, xy: np.ndarray, share: float, cap_m: float, scale: float,
-              floor_m: float) -> np.ndarray:
+def displaced(src: Box, p: np.ndarray, out: Box, xy: np.ndarray, shares: np.ndarray, weights: np.ndarray,
+              cap_m: float, scale: float, floor_m: float) -> np.ndarray:
     """The truth's posterior on `out` (C,) when the bearings point at an apparent place (posterior `p` on `src`)
-    displaced from the truth by an isotropic Gaussian whose sigma is `share` of the truth's own median range to
-    the stations `xy` (at most `cap_m`, at least `floor_m`): a truth farther out than the crossing is displaced
-    further, so the posterior leans outward. The apparent place's Cauchy prior (`scale`) is divided out and the
-    truth's applied."""
+    displaced from the truth by an isotropic Gaussian whose sigma is one of `shares` (prior `weights`) of the
+    truth's own median range to the stations `xy` (at most `cap_m`, at least `floor_m`): a truth farther out than
+    the crossing is displaced further, so the posterior leans outward. The apparent place's Cauchy prior (`scale`)
+    is divided out and the truth's applied."""
     sx, sy, _ = src.cells()
     ax, ay = (g.ravel() for g in np.meshgrid(sx, sy))
-    order = np.argsort(p)[::-1]
-    keep = order[: int(np.searchsorted(np.cumsum(p[order]), _KEEP)) + 1]  # the cells holding the mass
+    keep = heaviest(p)
     ax, ay = ax[keep], ay[keep]
     like = p[keep] / np.exp(log_prior_at(ax, ay, scale))
     ox, oy, _ = out.cells()
     gx, gy = (g.ravel() for g in np.meshgrid(ox, oy))
-    sigma = np.maximum(share * np.minimum(median_range(xy, gx, gy), cap_m), floor_m)
+    reach = np.minimum(median_range(xy, gx, gy), cap_m)
     d2 = (gx[:, None] - ax[None, :]) ** 2 + (gy[:, None] - ay[None, :]) ** 2
-    kernel = np.exp(-0.5 * d2 / sigma[:, None] ** 2) / sigma[:, None] ** 2
-    q = (kernel @ like) * np.exp(log_prior_at(gx, gy, scale))
+    prior = np.exp(log_prior_at(gx, gy, scale))
+    q = np.zeros(gx.size)
+    for share, weight in zip(shares, weights, strict=True):
+        var = np.maximum(share * reach, floor_m)[:, None] ** 2
+        one = ((np.exp(-0.5 * d2 / var) / var) @ like) * prior
+        q += weight * one / one.sum()  # each share's posterior, normalised, mixed by the shares' prior weights
     return q / q.sum()

@@ -179,8 +179,7 @@ def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
     out = widened(src, 3.0 * float(shares.max()) * cap)
     p = mixture(log_joint(geom, src, solved.shifts[e], solved.extra[e], noise), solved.log_z[e], solved.log_w)
     floor = 0.5 * min(src.hx, src.hy) / CELLS  # a share of 0 still moves the mass onto the wider grid
-    q = [displaced(src, p, out, geom.xy, s, cap, geom.prior_scale, floor) for s in shares]
-    return summarise(out, np.average(q, axis=0, weights=noise.shared_weight))
+    return summarise(out, displaced(src, p, out, geom.xy, shares, noise.shared_weight, cap, geom.prior_scale, floor))
 
 
 def _noise_summary(noise: NoiseGrid, log_w: np.ndarray, receivers: list[str], emitters: int) -> dict:
@@ -202,7 +201,7 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
             warnings.append(f"station {name or 'unnamed'}'s bearing is {r:+.0f} deg off the estimate (expected "
                             f"within +-{ex:.0f}): a reflection, a misread, or a different emitter")
     a95 = ellipse_axes(region.cov)[0]
-    ranges = np.hypot(geom.xy[:, 0] - region.point[0], geom.xy[:, 1] - region.point[1])
+    reach = float(median_range(geom.xy, region.point[:1], region.point[1:])[0])
     if len(geom.xy) < 3:
         state = EstimateState.POORLY_DETERMINED
         warnings.append("bearings from two places only: nothing checks their crossing")
@@ -217,9 +216,9 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
         state = EstimateState.POORLY_DETERMINED
         warnings.append(f"the bearings do not meet within their expected spread (chi-square p = {fit_p:.2g}): one "
                         "of them may be wild")
-    if a95 > float(np.median(ranges)):
+    if a95 > reach:
         state = EstimateState.POORLY_DETERMINED
-        warnings.append(f"the 95 % region ({a95:.3g} m) is wide for the range ({np.median(ranges):.3g} m)")
+        warnings.append(f"the 95 % region ({a95:.3g} m) is wide for the range ({reach:.3g} m)")
     if len(region.hpd[0.95]) > 1:
         state = EstimateState.POORLY_DETERMINED
         warnings.append(f"the 95 % region is in {len(region.hpd[0.95])} parts: see `hpd`")

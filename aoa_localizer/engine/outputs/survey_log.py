@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.geodesy import LocalFrame, unturn
-from aoa_localizer.engine.types import EstimateState
+from aoa_localizer.engine.types import Estimate, EstimateState
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
 LIVE_GROWTH = 1.25  # a live survey fix is made again once the channel's bearings grew by this factor ...
@@ -65,7 +65,7 @@ class SurveyLog:
         self.not_survey: set[str] = set()  # channels that used a bearing from a moving, densely fixed station
         self.places: dict[str, set] = defaultdict(set)  # each channel's antenna places (decimetres)
         self.solved: dict[str, tuple[int, int]] = {}  # (bearings, places) at a channel's last live fix
-        self.live: dict[str, object] = {}  # a channel's last live survey estimate (the Localizer's Estimate)
+        self.live: dict[str, Estimate] = {}  # a channel's last live survey estimate
 
     def add(self, channel: str, survey_like: bool, row: tuple) -> None:
         if channel in self.not_survey:
