@@ -274,6 +274,26 @@ class RawReader:
         self.lost = 0  # messages known to be lost (in chunks that failed their CRC check)
         self.recovered = 0  # messages read from the damaged part of a file
         self._checked: dict[Path, list[str]] = {}  # each file's chunks past their limits, looked for once
+        self._open: dict[Path, AnyReader] = {}
+        files.on_close(self.close)
+
+    def _reader(self, file: Path) -> AnyReader:
+        """rosbags' reader of one file, opened once for its topics and its messages: opening parses every
+        connection's QoS and message definition (seconds at 30,000 topics)."""
+        if file not in self._open:
+            reader = AnyReader([file], default_typestore=typestore())
+            reader.open()
+            self._open[file] = reader
+        return self._open[file]
+
+    def _release(self, file: Path):
+        reader = self._open.pop(file, None)
+        if reader is not None:
+            reader.close()
+
+    def close(self):
+        for file in list(self._open):
+            self._release(file)
 
     def topics(self) -> list[TopicInfo]:
         """The topics every file declares, with their message counts (a damaged file: as far as it can be read)."""
@@ -283,11 +303,11 @@ class RawReader:
             try:
                 if self._bombs(file):
                     raise BagError("chunks past their limits")
-                with AnyReader([file], default_typestore=typestore()) as reader:
-                    for c in reader.connections:
-                        seen[(c.topic, c.msgtype)] = seen.get((c.topic, c.msgtype), 0) + c.msgcount
-                        qos.setdefault((c.topic, c.msgtype), tuple(getattr(c.ext, "offered_qos_profiles", ())))
+                for c in self._reader(file).connections:
+                    seen[(c.topic, c.msgtype)] = seen.get((c.topic, c.msgtype), 0) + c.msgcount
+                    qos.setdefault((c.topic, c.msgtype), tuple(getattr(c.ext, "offered_qos_profiles", ())))
             except Exception:  # noqa: BLE001 - rosbags cannot open it: count what the record-by-record read finds
+                self._release(file)
                 for msg in self._salvaged(file, Salvage()):
                     seen[(msg.topic, msg.msgtype)] = seen.get((msg.topic, msg.msgtype), 0) + 1
         return [TopicInfo(name, msgtype, n, qos.get((name, msgtype), ()))
@@ -319,18 +339,20 @@ class RawReader:
             bombs = self._bombs(file)
             if bombs:
                 raise BagError("; ".join(bombs))
-            with AnyReader([file], default_typestore=typestore()) as reader:
-                conns = [c for c in reader.connections if c.topic in wanted]
-                if not conns:  # rosbags reads every connection when given none
-                    return
-                for conn, log_time, raw in reader.messages(connections=conns):
-                    msg = self._payload(RawMessage(conn.topic, conn.msgtype, log_time, raw))
-                    done += 1
-                    if msg is not None:
-                        yield msg
+            reader = self._reader(file)
+            conns = [c for c in reader.connections if c.topic in wanted]
+            if not conns:  # rosbags reads every connection when given none
+                return
+            for conn, log_time, raw in reader.messages(connections=conns):
+                msg = self._payload(RawMessage(conn.topic, conn.msgtype, log_time, raw))
+                done += 1
+                if msg is not None:
+                    yield msg
             return
         except Exception as exc:  # noqa: BLE001 - rosbags refuses or stops: the record-by-record read decides
             failure = exc
+        finally:
+            self._release(file)
         yield from self._after_failure(file, wanted, done, failure)
 
     def _after_failure(self, file: Path, wanted: set[str], done: int, failure: Exception) -> Iterator[RawMessage]:

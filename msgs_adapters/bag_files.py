@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,6 +54,7 @@ class BagFiles:
         self.not_compressed = 0  # messages of a bag that claims message compression stored plain
         self.skipped_files: list[str] = []  # compressed files that could not be read within their limit
         self._tmp: tempfile.TemporaryDirectory | None = None
+        self._closers: list[Callable[[], None]] = []
         self.files = self._find()
 
     def _find(self) -> list[Path]:
@@ -131,7 +133,13 @@ class BagFiles:
         except (zstandard.ZstdError, ValueError) as exc:
             raise BadPayload(f"a compressed message that cannot be read ({type(exc).__name__}: {exc})") from None
 
+    def on_close(self, closer: Callable[[], None]):
+        """Call `closer` at close(), before the temporary files go (a reader holding one open)."""
+        self._closers.append(closer)
+
     def close(self):
+        while self._closers:
+            self._closers.pop()()
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None

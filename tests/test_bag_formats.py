@@ -178,3 +178,31 @@ def test_a_bag_of_thousands_of_topics_is_described_in_a_line_of_its_busiest():
     assert len(text) < 2000 and text.startswith("/t29999 (std_msgs/msg/String, 29999 messages)")
     assert text.endswith(f"and {30_000 - DESCRIBED_TOPICS} more topics")
     assert describe_topics(topics[:2]) == "/t1 (std_msgs/msg/String, 1 messages), /t0 (std_msgs/msg/String, 0 messages)"
+
+
+@pytest.mark.parametrize("storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
+def test_each_storage_file_is_opened_once_and_closed_with_the_bag(tmp_path, data, storage, monkeypatch):
+    """Issue 51, item 13: rosbags parsed every topic's QoS and message definition twice (once for the topics, once
+    for the messages): 12.4 s before the first estimate at 30,000 topics, 7.4 s now."""
+    from rosbags.highlevel import AnyReader
+
+    from msgs_adapters.bag import RawReader
+    from msgs_adapters.bag_files import BagFiles
+
+    messages = _messages(data)
+    _split(tmp_path / "b", messages, storage)
+    opened: list[AnyReader] = []
+    real_open = AnyReader.open
+
+    def counted(self):
+        opened.append(self)
+        real_open(self)
+
+    monkeypatch.setattr(AnyReader, "open", counted)
+    assert len(list(read_bag(tmp_path / "b"))) == len(messages)
+    assert len(opened) == 2 and all(r.stack is None for r in opened)  # two files, each once, all closed
+    opened.clear()
+    with BagFiles(tmp_path / "b") as files:
+        RawReader(files).topics()  # no messages asked for: the open files wait for the bag's close
+        assert len(opened) == 2 and all(r.stack is not None for r in opened)
+    assert all(r.stack is None for r in opened)
