@@ -4,13 +4,13 @@ the emitter) and `paper` (as printed, for the papers' own models). Every module 
 module's `register` call is all it takes to add an algorithm (registry.py)."""
 import importlib
 import pkgutil
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from aoa_localizer.filters.base import FilterSettings, ParticleFilter
 from aoa_localizer.filters.registry import REGISTRY
-from aoa_localizer.filters.resample_move import ResampleMove
+from aoa_localizer.filters.resample_move import MoveKernel, ResampleMove
 from aoa_localizer.models.base import CAPABILITY_WORDS, StateSpaceModel
 
 for _module in pkgutil.iter_modules(__path__):
@@ -25,8 +25,9 @@ def make_filter(cfg: Any, rng: np.random.Generator, model: StateSpaceModel) -> P
     """The filter `cfg.algorithm` names (in its group's variant), with its own Generator, on `model`, given only the
     settings filters read. Raises ModelMismatch when the model lacks a capability the filter needs."""
     algorithm = REGISTRY[cfg.algorithm]
+    paper, mcmc = cast(type[ParticleFilter], algorithm.paper), cast(type[MoveKernel], algorithm.mcmc)
     variant = getattr(cfg, algorithm.group).variant
-    needs = (*ResampleMove.needs, *algorithm.mcmc.needs) if variant == "mcmc" else algorithm.paper.needs
+    needs = (*ResampleMove.needs, *mcmc.needs) if variant == "mcmc" else paper.needs
     missing = [CAPABILITY_WORDS[need] for need in needs if not isinstance(model, need)]
     if missing:
         hint = f" (the paper variant, {algorithm.group}.variant: paper, may run on it)" if variant == "mcmc" else ""
@@ -34,5 +35,5 @@ def make_filter(cfg: Any, rng: np.random.Generator, model: StateSpaceModel) -> P
                             f"{' and '.join(missing)}; {type(model).__name__} has not{hint}")
     settings = FilterSettings.of(cfg)
     if variant == "mcmc":
-        return ResampleMove(settings, rng, model, algorithm.mcmc())
-    return algorithm.paper(settings, rng, model)
+        return ResampleMove(settings, rng, model, mcmc())
+    return paper(settings, rng, model)

@@ -3,32 +3,28 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:  # the classes a filter module registers: their types only, for the checker
-    from aoa_localizer.filters.base import ParticleFilter
-    from aoa_localizer.filters.resample_move import MoveKernel
+from typing import Any
 
 
 @dataclass(frozen=True)
 class Algorithm:
     """One `algorithm` value: how the docs call it, its settings group (a frozen dataclass of `param()` fields whose
     `variant` picks the variant; two algorithms may share a group), its `paper` filter class and its `mcmc` move
-    kernel (a MoveKernel class: the variant is a ResampleMove sweeping with it)."""
+    kernel (a MoveKernel class: the variant is a ResampleMove sweeping with it). Both are typed `type`: the filter
+    modules import this one, so it names none of their classes."""
 
     name: str
     label: str
     group: str
     settings: type
-    paper: type[ParticleFilter]
-    mcmc: type[MoveKernel]
+    paper: type
+    mcmc: type
 
 
 REGISTRY: dict[str, Algorithm] = {}
 
 
-def register(name: str, label: str, group: str, settings: type, paper: type[ParticleFilter],
-             mcmc: type[MoveKernel]) -> None:
+def register(name: str, label: str, group: str, settings: type, paper: type, mcmc: type) -> None:
     """Make `name` an `algorithm` value; a group registered twice must hold the same settings class."""
     for other in REGISTRY.values():
         if other.group == group and other.settings is not settings:
