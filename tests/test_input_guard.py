@@ -263,13 +263,21 @@ def test_a_normal_runs_refusals_are_not_logged_as_faults(caplog):
     bad input still warns. Each is counted either way."""
     import logging
 
-    from aoa_localizer.engine.rejections import Rejections
+    from aoa_localizer.engine.rejections import Reason, Rejections
 
     rejections = Rejections()
     with caplog.at_level(logging.INFO, logger="aoa_localizer"):
-        for reason in ("before_first_fix", "point_outlier", "no_fix_after", "bad_azimuth"):
+        for reason in (Reason.BEFORE_FIRST_FIX, Reason.POINT_OUTLIER, Reason.NO_FIX_AFTER, Reason.BAD_AZIMUTH):
             rejections(reason)
     levels = {r.getMessage().split(":")[1].split()[0]: r.levelname for r in caplog.records}
     assert levels == {"before_first_fix": "INFO", "point_outlier": "INFO", "no_fix_after": "INFO",
                       "bad_azimuth": "WARNING"}
     assert rejections.counts["point_outlier"] == 1
+
+
+def test_the_fix_reasons_are_every_reason_a_fix_is_refused_for():
+    """/diagnostics counts refused fixes apart from bearings by FIX_REASONS (it summed names by their prefix)."""
+    from aoa_localizer.engine.rejections import FIX_REASONS, Reason
+
+    assert FIX_REASONS == {r for r in Reason if r.name.startswith("FIX_")}
+    assert "fix_no_fix" in FIX_REASONS and "gps_gap" not in FIX_REASONS  # the counter's plain strings find them

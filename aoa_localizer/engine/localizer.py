@@ -149,7 +149,7 @@ class Localizer:
     def status(self) -> str:
         """One line on the state: waiting for a fix, collecting bearings, waiting for geometry, tracking, checking;
         and, when more than half of the latest inputs were refused, the commonest reason."""
-        base = self.intake.waiting_line if self.intake.waiting_for_gps else self.latest.track.status
+        base = self.intake.waiting_line if self.intake.waiting_for_gps else self.latest.track.status.words()
         return base + self.rejections.refused_line()
 
     def track_status(self, channel: Channel | None = None) -> TrackStatus:

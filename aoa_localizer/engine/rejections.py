@@ -72,7 +72,10 @@ class Reason(StrEnum):
 
 
 REASONS = {reason.value: reason.words for reason in Reason}
-_BY_NAME = {reason.value: reason for reason in Reason}
+# The reasons a GPS fix is refused for (the rest refuse bearings and headings): /diagnostics counts them apart
+FIX_REASONS = frozenset({Reason.FIX_BAD_STAMP, Reason.FIX_NO_FIX, Reason.FIX_BAD_POSITION, Reason.FIX_OUT_OF_ORDER,
+                         Reason.FIX_REPEATED, Reason.FIX_STAMP_JUMP, Reason.FIX_BAD_ALTITUDE, Reason.FIX_NEAR_POLE,
+                         Reason.FIX_NULL_ISLAND, Reason.FIX_BEYOND_MAP, Reason.FIX_UNCONFIRMED})
 
 
 def table() -> str:
@@ -93,9 +96,8 @@ class Rejections:
         self.counts: Counter = Counter()
         self.recent: deque[Reason | None] = deque(maxlen=_RECENT_INPUTS)
 
-    def __call__(self, reason: Reason | str, count: int = 1) -> None:
-        """Count `count` inputs refused for `reason` (a KeyError for a name not in `Reason`: an engine bug)."""
-        reason = reason if isinstance(reason, Reason) else _BY_NAME[reason]
+    def __call__(self, reason: Reason, count: int = 1) -> None:
+        """Count `count` inputs refused for `reason`."""
         for _ in range(count):
             self.counts[reason.value] += 1  # plain strings: what programs print, compare and serialise
             self.recent.append(reason)

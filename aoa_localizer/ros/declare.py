@@ -58,7 +58,9 @@ def declare(node: Node, specs: list[ParameterSpec], check: bool = True) -> dict:
             else:
                 node.declare_parameter(p.name, p.default, d)
         except InvalidParameterTypeException as exc:  # rclpy's words name the type only: say what is valid
-            hint = " (YAML reads on/off/yes/no as booleans: quote them)" if "BOOL" in str(exc) else ""
+            given = _overrides(node).get(p.name)
+            was_bool = given is not None and given.type_ is Parameter.Type.BOOL
+            hint = " (YAML reads on/off/yes/no as booleans: quote them)" if was_bool else ""
             raise ConfigError(f"{p.name} must be {p.spec.describe()}{hint}; {exc}") from exc
         except InvalidParameterValueException as exc:  # outside the descriptor's range: the declaration's words
             given = _overrides(node).get(p.name)

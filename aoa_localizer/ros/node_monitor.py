@@ -16,6 +16,7 @@ from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.inference.noise import sentence as noise_sentence
 from aoa_localizer.engine.ingest.input_guard import StampGaps
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.rejections import FIX_REASONS
 from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
 from aoa_localizer.ros.node_outputs import PosteriorWork
@@ -146,8 +147,8 @@ class NodeMonitor:
                       bearings_used=sum(t.bearings_used for t in tracks),
                       points_used=sum(t.points_used for t in tracks),
                       unknown_quality=loc.unknown_quality, other_band=loc.other_band,
-                      bearings_rejected=sum(v for k, v in loc.rejected.items() if not k.startswith("fix_")),
-                      fixes_rejected=sum(v for k, v in loc.rejected.items() if k.startswith("fix_")))
+                      bearings_rejected=sum(v for k, v in loc.rejected.items() if k not in FIX_REASONS),
+                      fixes_rejected=sum(v for k, v in loc.rejected.items() if k in FIX_REASONS))
         values.update({f"rejected.{k}": v for k, v in sorted(loc.rejected.items())})
         if self.callback_s:
             values.update(callback_mean_ms=f"{1e3 * sum(self.callback_s) / len(self.callback_s):.3f}",

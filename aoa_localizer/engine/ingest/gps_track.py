@@ -34,8 +34,8 @@ class Where(Enum):
 
     OK = "ok"  # bracketed by two fixes close enough in time (or on a fix)
     WAIT = "wait"  # after the newest fix but within the gap: a later fix may still bracket it
-    GAP = Reason.GPS_GAP.value  # the fixes around it are farther apart than gps_max_gap_s
-    BEFORE = Reason.BEFORE_FIRST_FIX.value  # older than every fix kept
+    GAP = Reason.GPS_GAP  # the fixes around it are farther apart than gps_max_gap_s
+    BEFORE = Reason.BEFORE_FIRST_FIX  # older than every fix kept
 
 
 class GpsTrack:

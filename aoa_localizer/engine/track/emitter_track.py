@@ -34,7 +34,7 @@ from aoa_localizer.engine.scheduling.scheduler import Scheduler
 from aoa_localizer.engine.track.calibrator import Calibrator
 from aoa_localizer.engine.track.initiator import Initiator
 from aoa_localizer.engine.track.report import cloud_estimate, spatial_median, wide_for_range
-from aoa_localizer.engine.track.state import PendingJob, TrackState, TrackStatus, WindowEntry
+from aoa_localizer.engine.track.state import PendingJob, Phase, Status, TrackState, TrackStatus, WindowEntry
 from aoa_localizer.engine.track.supervisor import Supervisor
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
@@ -51,7 +51,7 @@ _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it t
 class EmitterTrack:
     """Points, filter and robustness state of one emitter. `reject(reason, count)` counts unused inputs."""
 
-    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject: Callable[[str, int], None],
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject: Callable[[Reason, int], None],
                  scheduler: Scheduler):
         """`scheduler`: where the start searches and global checks run (inline, or beside the filter)."""
         self.cfg, self.rng, self.reject, self.scheduler = cfg, rng, reject, scheduler
@@ -68,7 +68,7 @@ class EmitterTrack:
         self.modes: list[Mode] = []
         self.proposal: ModeProposal | None = None
         self.events: Counter = Counter()  # global_restart, emitter_moved, recalibrated, alarm, offset_learned
-        self.status = "collecting bearings"
+        self.status = Status(Phase.COLLECTING)
         self.points_seen = 0
         self.points_used = 0
         self.bearings_used = 0
@@ -164,7 +164,7 @@ class EmitterTrack:
     def _diverged(self):
         self.filter = None
         self.window.clear()
-        self.status = "filter diverged: restarting from new bearings"
+        self.status = Status(Phase.DIVERGED)
         log.error("filter %s diverged (non-finite particles or estimate); restarting", self.cfg.algorithm)
         self.reject(Reason.FILTER_DIVERGED, 1)
 

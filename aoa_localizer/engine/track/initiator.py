@@ -20,7 +20,7 @@ from aoa_localizer.engine.inference.start_grid import StartGrid
 from aoa_localizer.engine.inference.triangulation import initial_particles
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.slices import START_BUDGET_US
-from aoa_localizer.engine.track.state import PendingJob
+from aoa_localizer.engine.track.state import PendingJob, Phase, Status
 from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.base import ParticleFilter
@@ -66,7 +66,7 @@ class Initiator:
             t.window.popleft()
             t.reject(Reason.INIT_BUFFER_FULL, 1)
         if len(t.window) < (min(2, cfg.init_bearings) if final else cfg.init_bearings):
-            t.status = f"collecting bearings: {len(t.window)} of {cfg.init_bearings} points"
+            t.status = Status(Phase.COLLECTING, held=len(t.window), needed=cfg.init_bearings)
             return False
         if cfg.init_method == "triangulation":
             return self._from_triangulation()
@@ -104,11 +104,11 @@ class Initiator:
                           "points agree")
             self._hold(modes)
             return True
-        t.status = f"waiting for geometry: {res.why}"
+        t.status = Status(Phase.WAITING_FOR_GEOMETRY, res.why)
         if modes and res.sample is not None:
             # Proper but not determined: publish the search's sample of the posterior (wide, honest), not nothing
             t.provisional = self._provisional(modes, res.sample, res.searched)
-            t.status = f"poorly determined: {res.why}"
+            t.status = Status(Phase.POORLY_DETERMINED, res.why)
             self._hold(modes, groups)
         # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later); at
         # once when enough came while the worker searched: the stream may have ended, and no later point would ask
@@ -174,7 +174,7 @@ class Initiator:
         particles, why = initial_particles(pts, cfg.num_particles, cfg.init_min_crossing_deg, cfg.init_min_support,
                                            t.rng)
         if particles is None:
-            t.status = f"waiting for geometry: {why}"
+            t.status = Status(Phase.WAITING_FOR_GEOMETRY, why)
             return False
         mean = particles.mean(axis=0)
         sigma = _prior_sigma(mean, pts[-1])
@@ -213,7 +213,7 @@ class Initiator:
 
     def _started(self, how: str):
         t = self.track
-        t.status = "tracking"
+        t.status = Status(Phase.TRACKING)
         t.supervisor.started(len(t.window))
         log.info("filter %s started after %d observation points (%s)", self.cfg.algorithm, t.points_seen, how)
 

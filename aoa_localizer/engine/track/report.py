@@ -128,7 +128,7 @@ def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) 
     if warnings:
         return EstimateState.SUSPECT, warnings
     if track.filter is None:
-        why = track.status.removeprefix("poorly determined: ").removeprefix("waiting for geometry: ")
+        why = track.status.why or track.status.words()
         return EstimateState.POORLY_DETERMINED, [f"few or poorly crossing bearings: {why}"]
     wide, size, reach = wide_for_range(track, mean, cov)
     if wide:

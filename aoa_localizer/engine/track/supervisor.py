@@ -19,7 +19,7 @@ from aoa_localizer.engine.ingest.clock_check import ClockHint
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US
 from aoa_localizer.engine.track.initiator import MIN_INLIERS, START_SWEEPS
-from aoa_localizer.engine.track.state import PendingJob
+from aoa_localizer.engine.track.state import PendingJob, Phase, Status
 from aoa_localizer.engine.types import Reading
 
 if TYPE_CHECKING:
@@ -77,9 +77,9 @@ class Supervisor:
                         sum(self.health.flags), len(self.health.flags))
         if alarm:
             t.events["alarm_points"] += 1
-            t.status = f"checking: {sum(self.health.flags)} of the last {len(self.health.flags)} points disagree"
-        elif t.status.startswith("checking"):
-            t.status = "tracking"
+            t.status = Status(Phase.CHECKING, disagree=sum(self.health.flags), tested=len(self.health.flags))
+        elif t.status.phase is Phase.CHECKING:
+            t.status = Status(Phase.TRACKING)
         due = n >= self.next_search
         alarm_due = alarm and t.points_seen - self.last_search_point >= _ALARM_SEARCH_EVERY
         if (due or alarm_due) and t.job is None:  # (one still running: due again once it is applied)
@@ -179,5 +179,5 @@ class Supervisor:
                     min(lr_recent, lr_old))
         t.restart()
         if t.filter is not None:
-            t.status = f"tracking (emitter moved: re-started from the last {m} points)"
+            t.status = Status(Phase.TRACKING, restarted_from=m)
         return True
