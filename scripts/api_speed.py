@@ -83,7 +83,7 @@ def one_run(scenario: str, r: int, scheduling: str):
                 loc.add_bearing(row[0], row[1], row[2])
             spent += time.perf_counter() - t0
             if scheduling == "realtime":
-                loc.scheduler.wait(c.track for c in loc.channels.live.values())  # not idle work: the worker's
+                loc.wait_for_worker()  # not idle work: the worker's
                 t1 = time.perf_counter()
                 loc.catch_up()
                 idle += time.perf_counter() - t1

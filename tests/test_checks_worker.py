@@ -84,7 +84,7 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
         check_moves += debt().modes  # a worker's check applied: its move on the modes is owed too
         between += loc.catch_up()
         assert not debt().modes
-    assert loc.catch_up() == 0 and loc.scheduler.owed(track_of(loc)) == 0  # nothing left owed
+    assert loc.catch_up() == 0 and loc.scheduler.owed(track_of(loc).filter) == 0  # nothing left owed
     assert between >= 20 and at_points <= between // 10 and check_moves >= 1  # one scheduled check in these runs
     loc.flush()
     loc.finish()

@@ -1,5 +1,4 @@
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -272,9 +271,20 @@ def _sweeps_per_call(scheduler, f, made, points):
     return counts
 
 
-def _track(f):
-    """What the scheduler reads of a track: its filter, and a supervisor whose move on the modes succeeds."""
-    return SimpleNamespace(filter=f, supervisor=SimpleNamespace(move_on_modes=lambda: True))
+def _debtor(f, modes_moves):
+    """What the scheduler is given of a track: its filter, and a proposal whose moves (counted in `modes_moves`,
+    not made) stand for the move on a check's modes."""
+    proposal = object()
+    real = f.rejuvenate
+
+    def rejuvenate(sweeps, with_proposal=None):
+        if with_proposal is proposal:
+            modes_moves.append(sweeps)
+            return None
+        return real(sweeps, with_proposal)
+
+    f.rejuvenate = rejuvenate
+    return f, proposal
 
 
 def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_next_points():
@@ -289,18 +299,21 @@ def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_ne
     assert len(made) == 5 and scheduler.debt(f).sweeps == 5
 
     scheduler, f, made = _counting_filter(True)
-    track = _track(f)
+    modes_moves: list[int] = []
+    debtor = _debtor(f, modes_moves)
     _point(scheduler, f, 0)
-    assert not scheduler.move_one([track]) and not made  # nothing owed
+    assert not scheduler.move_one([debtor]) and not made  # nothing owed
     _resampled(scheduler, f)
-    assert scheduler.move_one([track]) and scheduler.move_one([track]) and len(made) == 2  # one per call
-    assert scheduler.owed(track) == 3
+    assert scheduler.move_one([debtor]) and scheduler.move_one([debtor]) and len(made) == 2  # one per call
+    assert scheduler.owed(f) == 3
     made.clear()
     _point(scheduler, f, 1)
-    assert len(made) == 1 and scheduler.owed(track) == 2  # the next point makes one of the rest
+    assert len(made) == 1 and scheduler.owed(f) == 2  # the next point makes one of the rest
     made.clear()
     scheduler.owe_modes(f)
-    assert scheduler.owed(track) == 3 and scheduler.move_one([track]) and not made  # the modes' move first
+    assert scheduler.owed(f) == 3 and scheduler.move_one([debtor]) and not made  # the modes' move first ...
+    assert modes_moves == [1] and scheduler.owed(f) == 2  # ... with the track's proposal
+    assert not scheduler.move_one([(None, None)])  # a track without a filter owes nothing
     assert scheduler.debt(_filter(n=200)).sweeps == 0  # a new filter owes nothing
 
 
@@ -336,11 +349,10 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
     assert not made and scheduler.debt(f).sweeps == 5
     _resampled(scheduler, f)  # the new resampling's five replace the 5 left: three of them now
     assert len(made) == 3 and scheduler.debt(f).sweeps == 2
-    track = _track(f)
     made.clear()
-    assert not scheduler.move_one([track]) and not made and scheduler.owed(track) == 2
-    scheduler.settle(track)
-    assert len(made) == 2 and scheduler.owed(track) == 0
+    assert not scheduler.move_one([(f, None)]) and not made and scheduler.owed(f) == 2
+    scheduler.settle(f)
+    assert len(made) == 2 and scheduler.owed(f) == 0
 
 
 def test_reproducible_sweeps_of_a_large_cloud_are_made_a_part_at_a_time(monkeypatch):
@@ -373,8 +385,8 @@ def test_reproducible_sweeps_of_a_large_cloud_are_made_a_part_at_a_time(monkeypa
     _point(scheduler, f, 1)  # the sweep goes on where it stopped, then the next begins
     assert made == [100, 50, 100] and scheduler.debt(f).sweeps == 3 and scheduler.debt(f).at == 100
     made.clear()
-    scheduler.settle(_track(f))
-    assert made == [250, 250, 250] and scheduler.owed(_track(f)) == 0
+    scheduler.settle(f)
+    assert made == [250, 250, 250] and scheduler.owed(f) == 0
 
 
 def test_the_cloud_summary_is_made_once_per_cloud_and_follows_a_replaced_cloud():

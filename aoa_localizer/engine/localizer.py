@@ -459,9 +459,9 @@ class Localizer:
         check it was due, and one owed move made, for the channel owing the most, so the points that follow carry
         none. Returns the estimates the results made (each also goes to `on_estimate`)."""
         live = list(self.channels.live.values())
-        done = self.scheduler.finished(c.track for c in live)
-        made = [est for est in (self._publish(c) for c in live if c.track in done) if est is not None]
-        self.scheduler.move_one(c.track for c in live)
+        done = [c for c in live if c.track.collect() and c.track.estimating]
+        made = [est for est in (self._publish(c) for c in done) if est is not None]
+        self.scheduler.move_one(c.track.debtor for c in live)
         return made
 
     @_one_at_a_time
@@ -469,12 +469,18 @@ class Localizer:
         """Wait for the worker's jobs, then make every owed move (`scheduling: realtime`; nothing otherwise): what a
         receiver's pace leaves time for between messages, so a replay runs live-like however fast it is fed. The
         jobs' results are applied at each channel's next point, as live. Returns how many moves it made."""
+        self.wait_for_worker()
         tracks = [c.track for c in self.channels.live.values()]
-        self.scheduler.wait(tracks)
         made = 0
-        while self.scheduler.move_one(tracks):
+        while self.scheduler.move_one(t.debtor for t in tracks):
             made += 1
         return made
+
+    @_one_at_a_time
+    def wait_for_worker(self) -> None:
+        """Wait until the check worker has finished the live channels' jobs (`scheduling: realtime`; nothing
+        otherwise); their results are applied at each channel's next point, or by idle() or catch_up()."""
+        self.scheduler.wait(c.track.job.future for c in self.channels.live.values() if c.track.job is not None)
 
     def close(self):
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""

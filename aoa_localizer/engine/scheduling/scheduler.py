@@ -16,12 +16,12 @@ import logging
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future, wait
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 from weakref import WeakKeyDictionary
 
 import numpy as np
 
 from aoa_localizer.engine.inference.checks import CheckResult, CheckWorker
+from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.slices import (
     SWEEP_BUDGET_US,
@@ -34,9 +34,6 @@ from aoa_localizer.engine.scheduling.slices import (
 )
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
-
-if TYPE_CHECKING:  # the tracks take the scheduler: the type only, for the checker
-    from aoa_localizer.engine.track.emitter_track import EmitterTrack
 
 log = logging.getLogger("aoa_localizer")
 
@@ -91,10 +88,6 @@ class Scheduler:
         job = SlicedJob(steps, budget_us)
         job.advance()
         return job
-
-    def finished(self, tracks: Iterable[EmitterTrack]) -> list[EmitterTrack]:
-        """The tracks whose job finished, its result applied now, that have a new estimate."""
-        return [t for t in tracks if t.collect() and t.estimating]
 
     # -- the moves owed ------------------------------------------------------------------------------
     def take(self, f: ParticleFilter) -> None:
@@ -158,41 +151,40 @@ class Scheduler:
                     debt.sweeps, debt.order = debt.sweeps - 1, None
             debt.sweep_us = metered_since(before)
 
-    def settle(self, track: EmitterTrack) -> None:
-        """Every sweep the track's filter owes, made now (the end of data)."""
-        f = track.filter
+    def settle(self, f: ParticleFilter | None) -> None:
+        """Every sweep `f` owes, made now (the end of data)."""
         debt = self.debt(f)
         if debt.sweeps and isinstance(f, ResampleMove):
             made, debt.sweeps, debt.order = debt.sweeps, 0, None  # a sweep made in parts is made whole
             f.move(made)
 
-    def pay_modes(self, track: EmitterTrack) -> bool:
-        """The move on the last check's modes, if the track's filter owes one; True when it was made."""
-        f = track.filter
+    def pay_modes(self, f: ParticleFilter | None, proposal: ModeProposal | None) -> bool:
+        """The move on the last check's modes (`proposal`: the track's, made from them), if `f` owes one; True when
+        it was made (an MH move: made late, it keeps the posterior)."""
         debt = self.debt(f)
         if not debt.modes:
             return False
         debt.modes = False
-        return track.supervisor.move_on_modes()
+        if f is None or proposal is None:
+            return False
+        f.rejuvenate(1, proposal)
+        return True
 
-    def owed(self, track: EmitterTrack) -> int:
-        """Moves the track's filter owes."""
-        return int(self.debt(track.filter))
+    def owed(self, f: ParticleFilter | None) -> int:
+        """Moves `f` owes."""
+        return int(self.debt(f))
 
-    def move_one(self, tracks: Iterable[EmitterTrack]) -> bool:
-        """Between points (`realtime`): one owed move, for the track owing the most (the modes' move before the
-        sweeps); False when none was owed (or it failed: counted), and always under `reproducible`, whose moves
-        follow its points alone."""
+    def move_one(self, debtors: Iterable[tuple[ParticleFilter | None, ModeProposal | None]]) -> bool:
+        """Between points (`realtime`): one owed move, for the filter owing the most (the modes' move, with its
+        track's proposal, before the sweeps); False when none was owed (or it failed: counted), and always under
+        `reproducible`, whose moves follow its points alone."""
         if not self.realtime:
             return False
-        owing = max(tracks, key=self.owed, default=None)
-        if owing is None or not self.owed(owing):
-            return False
-        f = owing.filter
-        if f is None or not f.finite():
+        f, proposal = max(debtors, key=lambda d: self.owed(d[0]), default=(None, None))
+        if f is None or not self.owed(f) or not f.finite():
             return False
         try:
-            if self.pay_modes(owing):
+            if self.pay_modes(f, proposal):
                 return True
             debt = self.debt(f)
             if not debt.sweeps or not isinstance(f, ResampleMove):
@@ -205,10 +197,11 @@ class Scheduler:
             self.reject(Reason.INTERNAL_ERROR)
             return False
 
-    def wait(self, tracks: Iterable[EmitterTrack]) -> None:
-        """Wait until the worker has finished the tracks' jobs (their results are applied at each one's next point,
-        as live)."""
-        wait([t.job.future for t in tracks if t.job is not None and isinstance(t.job.future, Future)])
+    @staticmethod
+    def wait(jobs: Iterable[Future | SlicedJob]) -> None:
+        """Wait until the worker has finished `jobs` (their results are applied at each track's next point, as
+        live); a job made in the calls has nothing to wait for."""
+        wait([job for job in jobs if isinstance(job, Future)])
 
     def close(self) -> None:
         """Stop the worker (a job running finishes; its result is dropped)."""

@@ -135,7 +135,7 @@ class EmitterTrack:
             if ok and f.finite():
                 self.supervisor.watch(logw_before)
                 if owed_before:
-                    self.scheduler.pay_modes(self)
+                    self.scheduler.pay_modes(self.filter, self.proposal)
             if self.filter is None:  # the emitter moved and the re-start waits for more points
                 return False
             f = self.running
@@ -176,7 +176,7 @@ class EmitterTrack:
         changed = False
         while self.job is not None:  # a stale start search is run again, over all the points: wait for that too
             changed = self.collect(wait=True) or changed
-        self.scheduler.settle(self)
+        self.scheduler.settle(self.filter)
         if self.filter is None:  # the end of data: the best estimate the points allow, never "collecting"
             self.initiator.next_start_try = 0
             changed = self.initiator.try_start(inline=True, final=True) or changed
@@ -231,6 +231,11 @@ class EmitterTrack:
             self.calibration.apply(res.noise, res.at, _by_group(groups, res.built), res.offset, res.course)
 
     # -- what the track holds -------------------------------------------------------------------------
+    @property
+    def debtor(self) -> tuple[ParticleFilter | None, ModeProposal | None]:
+        """What the scheduler's owed moves are made with: the filter, and the proposal of its last check's modes."""
+        return self.filter, self.proposal
+
     @property
     def running(self) -> ParticleFilter:
         """The filter, where the code runs only once it started."""

@@ -135,14 +135,6 @@ class Supervisor:
         else:  # realtime: the modes' move is owed, made between points (or at the next point)
             t.scheduler.owe_modes(f)
 
-    def move_on_modes(self) -> bool:
-        """A move on the last check's modes (an MH move: made late, it keeps the posterior); False without them."""
-        t = self.track
-        if t.filter is None or t.proposal is None:
-            return False
-        t.filter.rejuvenate(1, t.proposal)
-        return True
-
     def _emitter_moved(self) -> bool:
         """Recent disagreeing points fix a place the older points contradict, and the other way round:
         drop the older points and re-start from the recent ones."""
