@@ -17,6 +17,7 @@ from aoa_localizer.engine.ingest.preprocess import columns
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.track import initiator as initiator_module
 from aoa_localizer.engine.track import supervisor as supervisor_module
+from aoa_localizer.engine.track.initiator import Outcome
 from aoa_localizer.simulation.evaluation import scenario_config
 from aoa_localizer.simulation.scenarios import simulate
 
@@ -337,12 +338,10 @@ def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeyp
     assert snap is not None and t.filter is None and len(t.window) >= 40
     res = search_start(snap, initiator_module.MIN_INLIERS, initiator_module.MAX_ELLIPSE_RANGE_SHARE)
     assert res.determined and res.searched == 20
-    t.job = None
-    assert not t.initiator.apply_start(res, snap.groups) and t.filter is None  # stale: searched again
-    assert t.job is not None
-    t.job = None
-    assert t.initiator.apply_start(res, snap.groups) and t.filter is not None  # stale again: used
-    assert t.points_used == len(t.window)
+    held = len(t.window)
+    assert t.initiator.outcome(res, held) is Outcome.SEARCH_AGAIN  # stale: searched again, at once
+    assert t.initiator.search_due(held, searching=False)
+    assert t.initiator.outcome(res, held) is Outcome.START  # stale again: used
     loc.close()
 
 

@@ -225,7 +225,7 @@ def _counting_filter(realtime, sweep_cost_us=0.0, n=200):
     moved (each metered at `sweep_cost_us`, the model's own looks unmetered)."""
     scheduler = Scheduler(realtime, lambda reason: None)
     f = _filter(n=n)
-    scheduler.take(f)
+    scheduler.defer_moves(f)
     made = []
     real = f.sweep
 
@@ -321,7 +321,7 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
     """Under `reproducible` a call makes the owed sweeps while its metered cost and one more sweep's stay under
     SWEEP_BUDGET_US, at least one a call unless a job's pieces came first or the call spent half the budget; the rest
     at the points that follow. A resampling before the debt is paid owes its own sweeps instead. move_one() (idle
-    time) makes none: a reproducible run follows its points alone. settle() makes the rest."""
+    time) makes none: a reproducible run follows its points alone. pay_all() makes the rest."""
     monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)  # only the test's cost is metered
     sweep_us = 1500.0  # 5000 us holds three (4500), not four
     scheduler, f, made = _counting_filter(False, sweep_us, n=SWEEP_PART)  # whole sweeps
@@ -351,14 +351,14 @@ def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_p
     assert len(made) == 3 and scheduler.debt(f).sweeps == 2
     made.clear()
     assert not scheduler.move_one([(f, None)]) and not made and scheduler.owed(f) == 2
-    scheduler.settle(f)
+    scheduler.pay_all(f)
     assert len(made) == 2 and scheduler.owed(f) == 0
 
 
 def test_reproducible_sweeps_of_a_large_cloud_are_made_a_part_at_a_time(monkeypatch):
     """Under `reproducible` a cloud of more than SWEEP_PART particles is swept SWEEP_PART particles at a time (the
     budget counts the parts): a sweep's parts are a permutation of the cloud, and a part leaves every other
-    particle as it was. settle() makes the rest as whole sweeps."""
+    particle as it was. pay_all() makes the rest as whole sweeps."""
     monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)
     scheduler, f, made = _counting_filter(False, 1500.0, n=250)
     parts = []
@@ -385,7 +385,7 @@ def test_reproducible_sweeps_of_a_large_cloud_are_made_a_part_at_a_time(monkeypa
     _point(scheduler, f, 1)  # the sweep goes on where it stopped, then the next begins
     assert made == [100, 50, 100] and scheduler.debt(f).sweeps == 3 and scheduler.debt(f).at == 100
     made.clear()
-    scheduler.settle(f)
+    scheduler.pay_all(f)
     assert made == [250, 250, 250] and scheduler.owed(f) == 0
 
 

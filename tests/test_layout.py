@@ -130,3 +130,37 @@ def test_the_engine_keeps_its_rooms_and_at_most_15_modules_at_its_top():
     assert len(list(engine.glob("*.py"))) <= 15
     assert sorted(p.name for p in engine.iterdir() if (p / "__init__.py").exists()) == [
         "inference", "ingest", "outputs", "scheduling", "track"]
+
+
+def _module_graph(root: Path) -> dict[str, set[str]]:
+    """Each module of the package and the modules of it that it imports, at the top, inside functions or under
+    TYPE_CHECKING (`from pkg import name` counts `pkg.name` when that is a module, else `pkg`; a module's own
+    packages are left out: importing it imports them first anyway)."""
+    modules = {".".join(p.relative_to(root.parent).with_suffix("").parts).removesuffix(".__init__"): p
+               for p in root.rglob("*.py")}
+    graph = {}
+    for name, path in modules.items():
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                found |= {f"{node.module}.{a.name}" if f"{node.module}.{a.name}" in modules else node.module
+                          for a in node.names}
+        graph[name] = {m for m in found if m in modules and m != name and not name.startswith(m + ".")}
+    return graph
+
+
+@pytest.mark.slow
+def test_no_file_of_the_package_imports_one_that_imports_it_back():
+    """Architecture III (issue 52): the track and its parts (initiator, supervisor, calibrator, report) and the
+    scheduler imported each other in a circle held together by type-checking imports; the filter registry and
+    the filters another."""
+    import graphlib
+
+    graph = _module_graph(Path(aoa_localizer.__file__).parent)
+    assert len(graph) > 100 and "aoa_localizer.engine.track.emitter_track" in graph["aoa_localizer.engine.channels"]
+    try:
+        tuple(graphlib.TopologicalSorter(graph).static_order())
+    except graphlib.CycleError as exc:
+        pytest.fail(f"an import circle: {' -> '.join(exc.args[1])}")

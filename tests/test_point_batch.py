@@ -84,9 +84,10 @@ def test_a_calibration_remakes_the_points_after_its_snapshot_as_make_does():
         loc.feed(event)
     track = track_of(loc)
     cal = track.calibration
-    cal.apply(fitted(), np.array([100.0, 200.0]), {}, 0.05)  # none made by a check: all as a batch
-    assert len(track.window) > 10
-    for entry in track.window:
+    # none made by a check: all as a batch
+    rebuilt = cal.apply(fitted(), np.array([100.0, 200.0]), {}, 0.05, False, track.window).window
+    assert len(rebuilt) == len(track.window) > 10
+    for entry in rebuilt:
         ref, ref_kept = cal.make(entry.readings)
         for name in FIELDS:
             assert getattr(entry.point, name) == pytest.approx(getattr(ref, name), rel=1e-12, abs=1e-12), name

@@ -86,13 +86,13 @@ def test_the_provisional_sample_is_made_in_the_start_searchs_pieces(monkeypatch)
     data = simulate(robustness_cells()["wild20"], 1)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=1)))
     track = loc.channels.default.track
-    real_apply = track.initiator.apply_start
+    real_outcome = track.initiator.outcome
 
-    def apply(res, groups):
+    def outcome(res, held):
         applied.append(res)
-        return real_apply(res, groups)
+        return real_outcome(res, held)
 
-    monkeypatch.setattr(track.initiator, "apply_start", apply)
+    monkeypatch.setattr(track.initiator, "outcome", outcome)
     for event in data.inputs():
         loc.feed(event)
         if track.state is TrackState.PROVISIONAL:

@@ -80,6 +80,6 @@ def test_a_survey_whose_filter_is_wide_for_its_range_publishes_the_spatial_media
     f = track.filter
     assert est is not None and f is not None
     mean, cov = f.estimate()
-    assert wide_for_range(track, mean, cov)[0]
+    assert wide_for_range(track.model.history.data, mean, cov)[0]
     np.testing.assert_allclose([est.east, est.north], spatial_median(f.x, f.weights), atol=1e-6)
     assert np.hypot(est.east, est.north) < np.hypot(*mean)

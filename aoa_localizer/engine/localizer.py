@@ -34,7 +34,6 @@ from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
-from aoa_localizer.engine.track.report import assess, mode_masses
 from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
 
@@ -284,7 +283,7 @@ class Localizer:
         """A NavSatFix's content; `sigma_m` the horizontal position sigma from its covariance (NaN: unknown);
         `station` the station it places ("": the default one). Returns the newest estimate this fix made
         possible, if any."""
-        return self._use(self.intake.add_fix(stamp, lat, lon, alt, status, sigma_m, station))
+        return self._add_points(self.intake.add_fix(stamp, lat, lon, alt, status, sigma_m, station))
 
     @_one_at_a_time
     def add_heading(self, stamp, yaw_rad, station: str = "", variance_rad2=float("nan")) -> None:
@@ -359,9 +358,9 @@ class Localizer:
         admitted = self.intake.admit_bearing(stamp, azimuth_deg, quality, sigma, station, frequency_hz)
         room, self._room = self._room, []
         if admitted is None:
-            return self._use(room) if room else None
+            return self._add_points(room) if room else None
         st, now = admitted
-        return self._use(room + self._retire_silent(now) + self.intake.release(st))
+        return self._add_points(room + self._retire_silent(now) + self.intake.release(st))
 
     def _make_room(self, stamp: float) -> bool:
         """A record found every channel taken: the channels silent for channel_timeout_s before its stamp (the
@@ -388,7 +387,7 @@ class Localizer:
     @_one_at_a_time
     def flush(self) -> Estimate | None:
         """End of data: bearings still waiting for a fix are dropped, the open observation points are used."""
-        return self._use(self.intake.flush())
+        return self._add_points(self.intake.flush())
 
     @_one_at_a_time
     def finish(self) -> Estimate | None:
@@ -459,7 +458,7 @@ class Localizer:
         check it was due, and one owed move made, for the channel owing the most, so the points that follow carry
         none. Returns the estimates the results made (each also goes to `on_estimate`)."""
         live = list(self.channels.live.values())
-        done = [c for c in live if c.track.collect() and c.track.estimating]
+        done = [c for c in live if c.track.apply_job() and c.track.estimating]
         made = [est for est in (self._publish(c) for c in done) if est is not None]
         self.scheduler.move_one(c.track.debtor for c in live)
         return made
@@ -512,7 +511,7 @@ class Localizer:
             self.intake.frame = frame
 
     # -- estimates --------------------------------------------------------------------------------
-    def _use(self, closed: Closed) -> Estimate | None:
+    def _add_points(self, closed: Closed) -> Estimate | None:
         """The channels' tracks take the closed points in order, the points of one track within one call's budget
         for its jobs (slices.py; each track its own, so a channel's run never depends on another's); returns the
         newest estimate they made."""
@@ -544,8 +543,7 @@ class Localizer:
         lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
         from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         f = track.cloud
-        modes = mode_masses(track)
-        state, warnings = assess(track, np.asarray(mean), np.asarray(cov), modes)
+        modes, state, warnings = track.assess(np.asarray(mean), np.asarray(cov))
         estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
                             lon=float(lon), cov=np.array(cov), ground_cov=from_map @ np.asarray(cov) @ from_map.T,
                             bearings_used=track.bearings_used,

@@ -90,7 +90,7 @@ class Scheduler:
         return job
 
     # -- the moves owed ------------------------------------------------------------------------------
-    def take(self, f: ParticleFilter) -> None:
+    def defer_moves(self, f: ParticleFilter) -> None:
         """A new filter: its resamplings' sweeps are owed, not made in its step (a bounded step)."""
         if isinstance(f, ResampleMove):
             f.deferred = True
@@ -151,7 +151,7 @@ class Scheduler:
                     debt.sweeps, debt.order = debt.sweeps - 1, None
             debt.sweep_us = metered_since(before)
 
-    def settle(self, f: ParticleFilter | None) -> None:
+    def pay_all(self, f: ParticleFilter | None) -> None:
         """Every sweep `f` owes, made now (the end of data)."""
         debt = self.debt(f)
         if debt.sweeps and isinstance(f, ResampleMove):

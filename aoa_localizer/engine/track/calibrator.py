@@ -1,43 +1,48 @@
 """The receiver as the bearings show it: the calibrated noise model, the point outlier share, the noise as latent
 hypotheses while the readings cannot calibrate it yet, and a learned constant bearing offset. Points are made with
-them; a new calibration rebuilds the track's points and re-weights its cloud."""
+them; a new calibration returns the track's points rebuilt with it (the track adopts them and re-weights its
+cloud)."""
 from __future__ import annotations
 
 import logging
 import math
 from collections import deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import fit_noise
-from aoa_localizer.engine.inference.global_search import residuals
+from aoa_localizer.engine.inference.global_search import Robust, residuals
 from aoa_localizer.engine.inference.noise import NoiseModel, point_outlier_prob
 from aoa_localizer.engine.inference.receiver import NoiseGrid
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.ingest.course import group_courses, turned
-from aoa_localizer.engine.ingest.point_batch import Built, PointBatch, offset_point, sigmas
+from aoa_localizer.engine.ingest.point_batch import Built, PointBatch, offset_point, points_of, sigmas
 from aoa_localizer.engine.ingest.preprocess import columns, make_point
-from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.slices import run_whole
 from aoa_localizer.engine.track.state import WindowEntry
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
-if TYPE_CHECKING:
-    from aoa_localizer.engine.track.emitter_track import EmitterTrack
-
 log = logging.getLogger("aoa_localizer")
 
-_CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
+
+@dataclass
+class Recalibration:
+    """What a new calibration makes of a track's points: them rebuilt with it, how many more of their readings it
+    gates out (fewer: negative), and the events it counts (recalibrated, offset_learned, course_learned)."""
+
+    window: deque[WindowEntry]
+    gated: int
+    events: list[str] = field(default_factory=list)
 
 
 class Calibrator:
     """One track's receiver calibration (noise.py, receiver.py, offset.py)."""
 
-    def __init__(self, track: EmitterTrack, cfg: LocalizerConfig):
-        self.track, self.cfg = track, cfg
+    def __init__(self, cfg: LocalizerConfig):
+        self.cfg = cfg
         self.noise = NoiseModel(cfg.outlier_prob)
         self.outlier_prob = cfg.outlier_prob  # point level, in the likelihood
         # The receiver's noise as latent hypotheses, marginalised with the position until the readings calibrate it
@@ -98,35 +103,34 @@ class Calibrator:
         summary = cached[3]
         return {**summary, "sigma_deg": dict(summary["sigma_deg"])}
 
-    def calibrate(self, candidates: list[np.ndarray], by_density: bool) -> bool:
-        """Fit position and noise jointly (checks.fit_noise) from the candidate places, then rebuild the points with
-        the fitted noise and re-weight the cloud. True if a calibration was applied."""
-        t = self.track
-        batch = PointBatch([e.readings for e in t.window], self.cfg)
-        fit = run_whole(fit_noise(batch, self.noise, t.robust(), candidates, by_density))
+    def calibrate(self, window: deque[WindowEntry], robust: Robust, candidates: list[np.ndarray],
+                  by_density: bool) -> Recalibration | None:
+        """Fit position and noise jointly (checks.fit_noise) from the candidate places, then adopt the fit: the
+        `window`'s points rebuilt with it; None when no fit was made."""
+        batch = PointBatch([e.readings for e in window], self.cfg)
+        fit = run_whole(fit_noise(batch, self.noise, robust, candidates, by_density))
         if fit is None:
-            return False
-        self.apply(fit.noise, fit.at, {}, fit.offset, fit.batch.course)
-        return True
+            return None
+        return self.apply(fit.noise, fit.at, {}, fit.offset, fit.batch.course, window)
 
     def apply(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]], offset: float,
-              course: bool = False):
+              course: bool, window: deque[WindowEntry]) -> Recalibration:
         """Adopt `noise`, the bearing `offset` and `course` (bearings turned by the vehicle's course), fitted at the
-        place `at`: rebuild the kept points with them (`built`: points already made with them, by their group's
-        identity), re-estimate the point outlier share, re-weight the cloud by the change of posterior (a changed
-        offset moves the posterior: the check's re-start test that follows finds the new place)."""
-        t = self.track
+        place `at`: the `window`'s points rebuilt with them (`built`: points already made with them, by their
+        group's identity), and the point outlier share re-estimated on them (a changed offset moves the posterior:
+        the check's re-start test that follows finds the new place)."""
+        events = ["recalibrated"]
         self.noise = noise
-        window_courses = group_courses([columns(e.readings) for e in t.window]) if course else None
+        window_courses = group_courses([columns(e.readings) for e in window]) if course else None
         if course and not self.course:
             self.course = True
             self.offset = offset
-            t.events["course_learned"] += 1
+            events.append("course_learned")
             log.warning("the bearings turn with the vehicle: they look measured from its forward axis, not from "
                         "north; learned, and each is turned by the vehicle's course (%s)", self.offset_advice())
         if offset != self.offset:
             self.offset = offset
-            t.events["offset_learned"] += 1
+            events.append("offset_learned")
             if self.course:
                 log.warning("the bearings turned by the vehicle's course look %+.1f deg off: learned (%s)",
                             self.offset_deg, self.offset_advice())
@@ -135,39 +139,26 @@ class Calibrator:
                             "(%s)", self.offset_deg, self.offset_advice())
         if window_courses is not None and window_courses.size:
             self.held_course = float(window_courses[0])
-        f = t.filter  # None while waiting to start: only the points are rebuilt
-        old = f.log_target(f.x) if f is not None else None
         built = dict(built)
-        late = [e.readings for e in t.window if (b := built.get(id(e.readings))) is None or b[0] is not e.readings]
+        late = [e.readings for e in window if (b := built.get(id(e.readings))) is None or b[0] is not e.readings]
         if late and not self.course:  # (turned by the course, each point holds the course from the one before)
             # The points that came after the check's snapshot, made together: one by one, they held up the call
             batch = PointBatch(late, self.cfg).built(self.noise if self.cfg.calibrate_noise else None, self.offset)
             built.update((id(g), (g, b)) for g, b in zip(late, batch, strict=True))
         rebuilt: deque[WindowEntry] = deque()
         delta = 0
-        for entry in t.window:
+        for entry in window:
             made = built.get(id(entry.readings))
             point, kept = made[1] if made is not None and made[0] is entry.readings else self.make(entry.readings)
             now = int((~kept).sum())
             delta += now - entry.gated
             rebuilt.append(WindowEntry(entry.readings, point, now))
-        if delta:
-            t.reject(Reason.POINT_OUTLIER, delta)
-        t.window = rebuilt
         if window_courses is not None and window_courses.size:
             self.held_course = float(window_courses[-1])
-        pts = t.points()
+        pts = points_of([e.point for e in rebuilt])
         self.outlier_prob = point_outlier_prob(residuals(at, pts), pts.sigma, self.outlier_prob)
-        t.events["recalibrated"] += 1
         self.grid = None  # the readings calibrated the noise: from now on it is taken as fitted
-        if f is not None:
-            t.model.history.data = pts.rows()
-            t.model.lik.outlier_prob = self.lik_outlier_prob
-            t.model.grid = None
-            f.reweight(f.log_target(f.x) - old)  # old is set whenever f is
-            if f.ess() < self.cfg.ess_threshold * f.n:
-                f.resample()
-                f.rejuvenate(_CALIBRATION_SWEEPS, t.proposal)
+        return Recalibration(rebuilt, delta, events)
 
     @property
     def offset_deg(self) -> float:

@@ -1,92 +1,60 @@
 """One emitter's track: observation points -> start -> filter updates, with the robustness layer around any filter.
 
 The Localizer pairs readings with the GPS track and groups them; a track turns each group into an observation
-point and keeps the estimate honest on messy data, with three parts:
+point and keeps the estimate honest on messy data. The track is the one owner of its state (its points, filter,
+provisional sample, modes, job and status): three parts decide, and it acts on what they return:
 
-* the initiator (initiator.py) starts the filter: a global search of the robust posterior over every buffered point,
-  the first cloud an importance sample of it (every mode in proportion to its mass); or triangulation, or the prior;
-* the supervisor (supervisor.py) watches each new point's health, runs global checks on a growing schedule and on
-  alarm (inline, or their expensive part in a worker process: checks.py), moves the cloud from the modes or
-  re-starts it, and drops the older points when the emitter moved;
+* the initiator (initiator.py) says when to search for a start and what a search found, and makes the filters: an
+  importance sample of the robust posterior from the search's modes (every mode in proportion to its mass), a
+  provisional sample, or triangulation or the prior;
+* the supervisor (supervisor.py) watches each new point's health, says when a global check is due (made inline, or
+  its expensive part in a worker process: checks.py) and what its modes make of the cloud (a move, or a re-start),
+  and whether the emitter moved;
 * the calibrator (calibrator.py) holds the receiver as the data show it (noise, outlier share, latent noise, bearing
-  offset): points are made with it, and a new calibration rebuilds them and re-weights the cloud.
+  offset): points are made with it, and a new calibration returns the points rebuilt with it.
 """
 from __future__ import annotations
 
 import logging
-import math
 import time
-from collections import Counter, deque
+from collections import deque
 from collections.abc import Callable, Iterable
-from typing import cast
 
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.inference.checks import CheckResult, Snapshot
-from aoa_localizer.engine.inference.emitter_model import EmitterModel
-from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
-from aoa_localizer.engine.inference.offset import marginalise, prior_sd
-from aoa_localizer.engine.inference.safety import ModeProposal
-from aoa_localizer.engine.ingest.point_batch import Built, points_of, rows_of
+from aoa_localizer.engine.inference.checks import CheckResult, refined
+from aoa_localizer.engine.inference.global_search import Mode, find_modes
+from aoa_localizer.engine.inference.noise import NoiseModel
+from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
+from aoa_localizer.engine.ingest.point_batch import Built
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
-from aoa_localizer.engine.track.calibrator import Calibrator
-from aoa_localizer.engine.track.initiator import Initiator
-from aoa_localizer.engine.track.report import cloud_estimate, spatial_median, wide_for_range
-from aoa_localizer.engine.track.state import PendingJob, Phase, Status, TrackState, TrackStatus, WindowEntry
-from aoa_localizer.engine.track.supervisor import Supervisor
+from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
+from aoa_localizer.engine.track.calibrator import Recalibration
+from aoa_localizer.engine.track.held import Held
+from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
+from aoa_localizer.engine.track.state import PendingJob, Phase, Status, WindowEntry
+from aoa_localizer.engine.track.supervisor import CheckVerdict, Moved, Supervisor, Watch
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
 
 log = logging.getLogger("aoa_localizer")
 
-# The radio-range prior's scale: this many times the antennas' spread, at least this many metres (a transmitter a
-# DF receiver hears is often kilometres away; at 100 m a short baseline's posterior kept an emitter 1.4 km out along
-# its ray under 3 % of its mass)
-_REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
-_CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
+_CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
 
 
-class EmitterTrack:
-    """Points, filter and robustness state of one emitter. `reject(reason, count)` counts unused inputs."""
+class EmitterTrack(Held):
+    """The life of one emitter's estimate: points in, the filter started, supervised and calibrated; the one
+    owner of what it holds (held.py). `reject(reason, count)` counts unused inputs."""
 
     def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject: Callable[[Reason, int], None],
                  scheduler: Scheduler):
         """`scheduler`: where the start searches and global checks run (inline, or beside the filter)."""
-        self.cfg, self.rng, self.reject, self.scheduler = cfg, rng, reject, scheduler
-        self.calibration = Calibrator(self, cfg)
-        self.initiator = Initiator(self, cfg)
-        self.supervisor = Supervisor(self, cfg)
-        self.job: PendingJob | None = None  # a start search or global check running in the worker
-        # The points waiting for a start, then the filter's history
-        self.window: deque[WindowEntry] = deque()
-        self.filter: ParticleFilter | None = None
-        # A sample of the posterior while it is proper but not determined enough to start the filter from: the
-        # estimate (state `poorly_determined`) until the filter starts
-        self.provisional: ParticleFilter | None = None
-        self.modes: list[Mode] = []
-        self.proposal: ModeProposal | None = None
-        self.events: Counter = Counter()  # global_restart, emitter_moved, recalibrated, alarm, offset_learned
-        self.status = Status(Phase.COLLECTING)
-        self.points_seen = 0
-        self.points_used = 0
-        self.bearings_used = 0
-        self.last_update_s = float("nan")
-        self.last_stamp = float("nan")  # stamp of the newest observation point
-        self.last_kept = np.zeros(0, bool)  # which readings the newest point kept (the report's trace)
-
-    @property
-    def state(self) -> TrackState:
-        if self.filter is not None:
-            return TrackState.TRACKING
-        return TrackState.COLLECTING if self.provisional is None else TrackState.PROVISIONAL
-
-    def summary(self) -> TrackStatus:
-        """The track as programs read it (Localizer.track_status)."""
-        sup = self.supervisor
-        return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used,
-                           self.last_update_s)
+        super().__init__(cfg, rng, scheduler)
+        self.reject = reject
+        self.initiator = Initiator(cfg, rng, scheduler)
+        self.supervisor = Supervisor(cfg)
 
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:
@@ -97,7 +65,7 @@ class EmitterTrack:
         owed_before = self.scheduler.debt(self.filter).modes
         if self.job is not None:
             self.job.release()
-        applied = self.collect()  # a job's findings first: they may change the noise the point is made with
+        applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
@@ -107,17 +75,17 @@ class EmitterTrack:
         if self.filter is None:
             self.window.append(entry)
             # (a provisional sample applied above is a new estimate even when no search finishes now)
-            took = self.initiator.try_start() or (applied and self.estimating)
+            took = self._try_start() or (applied and self.estimating)
         else:
-            took = self.update(entry, owed_before)
+            took = self._update(entry, owed_before)
         if self.job is not None:
             self.job.advance()
-            if self.collect():  # one that finished now is applied now, as at a point
+            if self.apply_job():  # one that finished now is applied now, as at a point
                 took = self.estimating
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took
 
-    def update(self, entry: WindowEntry, owed_before: bool = False) -> bool:
+    def _update(self, entry: WindowEntry, owed_before: bool = False) -> bool:
         """The running filter's update with one point (and the moves it owes the scheduler), then the supervisor's
         watch; False when it did not take it. `owed_before`: a check's move on the modes was owed before the point
         came (and was not made between points): made now."""
@@ -133,7 +101,7 @@ class EmitterTrack:
                 while len(self.window) > len(self.model.history):
                     self.window.popleft()
             if ok and f.finite():
-                self.supervisor.watch(logw_before)
+                self._watch(f, logw_before)
                 if owed_before:
                     self.scheduler.pay_modes(self.filter, self.proposal)
             if self.filter is None:  # the emitter moved and the re-start waits for more points
@@ -153,13 +121,13 @@ class EmitterTrack:
         self.bearings_used += entry.point.n_readings
         return True
 
-    def restart(self):
+    def _restart(self):
         """Drop the filter (the emitter moved) and start again from the points kept."""
         self.filter = None
         self.modes, self.proposal = [], None
         self.points_used = 0
         self.bearings_used = 0
-        self.initiator.try_start()
+        self._try_start()
 
     def _diverged(self):
         self.filter = None
@@ -175,29 +143,19 @@ class EmitterTrack:
         t0 = time.perf_counter()
         changed = False
         while self.job is not None:  # a stale start search is run again, over all the points: wait for that too
-            changed = self.collect(wait=True) or changed
-        self.scheduler.settle(self.filter)
+            changed = self.apply_job(wait=True) or changed
+        self.scheduler.pay_all(self.filter)
         if self.filter is None:  # the end of data: the best estimate the points allow, never "collecting"
-            self.initiator.next_start_try = 0
-            changed = self.initiator.try_start(inline=True, final=True) or changed
+            self.initiator.search_now()
+            changed = self._try_start(inline=True, final=True) or changed
         if self.filter is not None and self.cfg.global_safety and self.supervisor.last_search_point != self.points_seen:
-            self.supervisor.global_check(inline=True)
-            self.collect(wait=True)  # the start search of an emitter-moved re-start
+            self._global_check(inline=True)
+            self.apply_job(wait=True)  # the start search of an emitter-moved re-start
             changed = True
         self.last_update_s = time.perf_counter() - t0
         return changed and self.estimating
 
-    # -- the check worker -----------------------------------------------------------------------------
-    def snapshot(self) -> Snapshot:
-        """What a start search or global check needs, copied: it may run in the worker while the track goes on."""
-        f = self.filter
-        best = f.x[np.argmax(f.log_target(f.x))].copy() if f is not None and self.cfg.calibrate_noise else None
-        c = self.calibration
-        return Snapshot(self.cfg, [e.readings for e in self.window], rows_of([e.point for e in self.window]),
-                        c.noise.copy(), c.outlier_prob, self.robust(), best, [m.mean.copy() for m in self.modes[:1]],
-                        c.offset, c.course)
-
-    def collect(self, wait: bool = False) -> bool:
+    def apply_job(self, wait: bool = False) -> bool:
         """Apply the worker's result once it is ready (`wait`: wait for it); True when one was applied. A result for
         a filter that has since been replaced (re-start, divergence) is dropped."""
         job = self.job
@@ -215,8 +173,8 @@ class EmitterTrack:
             return False
         try:
             if job.is_start:
-                return self.initiator.apply_start(result, job.groups)
-            self.supervisor.apply_check(result, job.groups)
+                return self._apply_start(result, job.groups)
+            self._apply_check(result, job.groups)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError):
             log.exception("applying a global check failed; skipped")
             self.reject(Reason.INTERNAL_ERROR, 1)
@@ -225,111 +183,200 @@ class EmitterTrack:
             self._diverged()
         return True
 
-    def apply_fit(self, res: CheckResult, groups: list[list[Reading]]):
+    def _apply_fit(self, res: CheckResult, groups: list[list[Reading]]):
         """A search's noise and offset fit, if it made one, adopted by the calibrator."""
         if res.noise is not None and res.at is not None:
-            self.calibration.apply(res.noise, res.at, _by_group(groups, res.built), res.offset, res.course)
+            self._recalibrate(res.noise, res.at, _by_group(groups, res.built), res.offset, res.course)
 
-    # -- what the track holds -------------------------------------------------------------------------
-    @property
-    def debtor(self) -> tuple[ParticleFilter | None, ModeProposal | None]:
-        """What the scheduler's owed moves are made with: the filter, and the proposal of its last check's modes."""
-        return self.filter, self.proposal
+    # -- starts ---------------------------------------------------------------------------------------
+    def _try_start(self, inline: bool = False, final: bool = False) -> bool:
+        """Start the filter once the points allow (`inline`: the start search here, even with a worker; `final`: the
+        end of data, with whatever points there are)."""
+        cfg, ini = self.cfg, self.initiator
+        if cfg.has_prior:
+            return self._start_then_replay(*ini.prior(), "prior")
+        if len(self.window) > cfg.init_max_points:
+            self.window.popleft()
+            self.reject(Reason.INIT_BUFFER_FULL, 1)
+        if len(self.window) < (min(2, cfg.init_bearings) if final else cfg.init_bearings):
+            self.status = Status(Phase.COLLECTING, held=len(self.window), needed=cfg.init_bearings)
+            return False
+        if cfg.init_method == "triangulation":
+            made = ini.triangulation([e.point for e in self.window])
+            if isinstance(made, str):
+                self.status = Status(Phase.WAITING_FOR_GEOMETRY, made)
+                return False
+            return self._start_then_replay(*made, "triangulation")
+        if not final and not ini.search_due(len(self.window), self.job is not None):
+            return False
+        snap = self.snapshot()
+        whole, steps = ini.search_job(snap, final)
+        if inline:
+            return self._apply_start(whole(), snap.groups)
+        self.job = PendingJob(self.scheduler.start(whole, steps, START_BUDGET_US), None, snap.groups)
+        return self.apply_job()  # a sliced search small enough to finish in its first call starts the filter now
 
-    @property
-    def running(self) -> ParticleFilter:
-        """The filter, where the code runs only once it started."""
-        if self.filter is None:
-            raise RuntimeError("no filter running")  # an engine bug, never bad input
-        return self.filter
-
-    @property
-    def cloud(self) -> ParticleFilter:
-        """The particles the estimate comes from: the running filter, or the provisional sample before it."""
-        if self.filter is not None:
-            return self.filter
-        if self.provisional is None:
-            raise RuntimeError("no estimate yet")  # an engine bug, never bad input
-        return self.provisional
-
-    @property
-    def cloud_is_current(self) -> bool:
-        """Whether the cloud describes the points held now: a running filter's always; a provisional sample's while it
-        holds all but a tenth of them (a start search that finds no place leaves the last sample standing)."""
-        if self.filter is not None:
+    def _apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
+        """Start the filter from a start search's modes over the points held now (a background search's snapshot
+        may have fewer): an importance sample of the posterior, then MH sweeps; or hold a provisional sample and
+        wait for more points (searching again at once when enough came while it ran)."""
+        outcome = self.initiator.outcome(res, len(self.window))
+        if outcome is Outcome.SEARCH_AGAIN:
+            return self._try_start()
+        self._apply_fit(res, groups)
+        modes = res.modes
+        if outcome is Outcome.START:
+            self.provisional = None
+            self.filter, self.proposal = self.initiator.sample_posterior(modes, self._holding())
+            self._started(f"global search: best of {len(modes)} mode(s), {modes[0].inliers} of {len(self.window)} "
+                          "points agree")
+            self._hold_modes(modes)
             return True
-        return self.provisional is not None and self.provisional.k >= _CURRENT_SHARE * len(self.window)
+        self.status = Status(Phase.WAITING_FOR_GEOMETRY, res.why)
+        if modes and res.sample is not None:
+            # Proper but not determined: publish the search's sample of the posterior (wide, honest), not nothing
+            self.provisional, self.proposal = self.initiator.provisional(modes, res.sample, res.searched,
+                                                                         self._holding())
+            self.status = Status(Phase.POORLY_DETERMINED, res.why)
+            self._hold_modes(modes, groups)
+        searched_again = len(self.window) >= self.initiator.next_start_try and self._try_start()
+        return searched_again or bool(modes)
 
-    @property
-    def estimating(self) -> bool:
-        """Whether there is an estimate: a running filter or a provisional sample."""
-        return self.state is not TrackState.COLLECTING
+    def _holding(self) -> Holding:
+        c = self.calibration
+        return Holding([e.point for e in self.window], self.reach(), c.lik_outlier_prob, c.noise_prior())
 
-    @property
-    def model(self) -> EmitterModel:
-        """The running filter's emitter model (the track always builds one)."""
-        return cast(EmitterModel, self.running.model)
+    def _hold_modes(self, modes: list[Mode], searched: list[list[Reading]] | None = None):
+        """The track's modes and its estimate's points: every point waiting (none before: a start holds all), or
+        those of them the search drew a provisional sample over (`searched`: their readings)."""
+        self.modes = modes
+        held = list(self.window)
+        if searched is not None:
+            ids = {id(g) for g in searched}
+            held = [e for e in held if id(e.readings) in ids]
+        self.points_used = len(held)
+        self.bearings_used = sum(e.used for e in held)
 
-    def used_points(self) -> np.ndarray:
-        """(K, 5) rows east, north, theta, sigma, gps sigma of the points the running filter keeps; (0, 5) before."""
-        if self.filter is None:
-            return np.zeros((0, 5))
-        return np.array(self.model.history.data, float).reshape(-1, 5)
+    def _start_then_replay(self, particles: np.ndarray, mean: np.ndarray, cov: np.ndarray, how: str) -> bool:
+        """A filter started from `particles` (the paper's start, or the prior), then every point held updates it."""
+        c = self.calibration
+        self.filter = self.initiator.replayed_filter(particles, mean, cov, c.noise_prior(), c.lik_outlier_prob)
+        waiting, self.window = list(self.window), deque()
+        self._started(how)
+        result = False
+        for entry in waiting:
+            result = self._update(entry) or result
+        return result
 
-    def points(self) -> Points:
-        return points_of([e.point for e in self.window])
+    def _started(self, how: str):
+        self.status = Status(Phase.TRACKING)
+        self.supervisor.started(len(self.window))
+        log.info("filter %s started after %d observation points (%s)", self.cfg.algorithm, self.points_seen, how)
 
-    def posterior_points(self) -> Points:
-        """The points the estimate's posterior is over: the running filter's, else the ones held."""
-        return Points.of(self.model.history.data) if self.filter is not None else self.points()
+    # -- supervision ----------------------------------------------------------------------------------
+    def _watch(self, f: ParticleFilter, logw_before: np.ndarray):
+        """The supervisor's watch of the point `f` just took, acted on: a calibration, the alarm's status and
+        events, a global check, or the moves while in alarm."""
+        watch: Watch = self.supervisor.watch(f, logw_before, len(self.window), self.points_seen,
+                                             self.calibration.outlier_prob, self.job)
+        if watch.calibrate:
+            best = f.x[np.argmax(f.log_target(f.x))]
+            self._calibrate([refined(best, self.points(), self.robust())], False)
+            return
+        if watch.alarm_began:
+            self.events["alarm"] += 1
+        if watch.alarm:
+            self.events["alarm_points"] += 1
+            flags = self.supervisor.health.flags
+            self.status = Status(Phase.CHECKING, disagree=sum(flags), tested=len(flags))
+        elif self.status.phase is Phase.CHECKING:
+            self.status = Status(Phase.TRACKING)
+        if watch.check:
+            self._global_check()
+        elif watch.sweeps:
+            f.rejuvenate(watch.sweeps, self.proposal)
 
-    def robust(self, prior: bool = True) -> Robust:
-        """The robust posterior's settings the searches use: the calibrated outlier share and latent noise, with the
-        filter's prior, the configured one, or (before a start) the radio-range prior of the points held."""
-        c, cfg = self.calibration, self.cfg
-        if prior and self.filter is not None and self.model.prior_prec.any():
-            return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, self.model.prior_mean, self.model.prior_prec,
-                          c.noise_prior(), self.model.reach)
-        if prior and cfg.prior_east is not None and cfg.prior_north is not None and cfg.prior_sigma_m is not None:
-            return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, np.array([cfg.prior_east, cfg.prior_north]),
-                          np.eye(2) / cfg.prior_sigma_m**2, c.noise_prior())
-        reach = (self.reach() if self.filter is None else self.model.reach) if prior else None
-        return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, grid=c.noise_prior(), reach=reach)
+    def _global_check(self, inline: bool = False):
+        """Noise calibration, emitter-moved test, global search, MH move or re-start: whole here (`inline`), or its
+        expensive part handed to the worker or made a few pieces per point (applied by apply_job() once finished:
+        here when it finished in its first call)."""
+        snap = self.snapshot()
+        whole, steps = self.supervisor.check_job(snap, self.points_seen)
+        if inline:
+            self._apply_check(whole(), snap.groups)
+            return
+        self.job = PendingJob(self.scheduler.start(whole, steps, CHECK_BUDGET_US), self.running, snap.groups)
+        self.apply_job()
 
-    def reach(self) -> tuple[float, float, float] | None:
-        """The radio-range prior of the points held (global_search.Robust.reach): centred on their antennas, its
-        scale twice their spread (at least _REACH_MIN_M)."""
-        if not self.window:
-            return None
-        pos = np.array([[e.point.east, e.point.north] for e in self.window])
-        centre = pos.mean(axis=0)
-        spread = float(np.max(np.hypot(*(pos - centre).T)))
-        return float(centre[0]), float(centre[1]), max(_REACH_MIN_M, _REACH_FACTOR * spread)
+    def _apply_check(self, res: CheckResult, groups: list[list[Reading]]):
+        """The cheap part of a global check, on the current cloud and points: re-weight by the fitted noise,
+        emitter-moved test (in alarm), then the modes' MH move or a re-start from a far better mode."""
+        self._apply_fit(res, groups)
+        if self.supervisor.alarm:
+            moved = self.supervisor.moved(self.points(), self.points_seen, self.running,
+                                          self.calibration.lik_outlier_prob, bool(self.calibration.noise.fits))
+            if moved is not None:
+                self._emitter_moved(moved)
+                return
+        if not res.modes:
+            return
+        f = self.running
+        self.modes = res.modes
+        self.proposal = ModeProposal.over(res.modes, self.points())
+        verdict = self.supervisor.verdict(res, f, self.points(), self.robust(), self.scheduler.realtime)
+        if verdict is CheckVerdict.RESTART:
+            self.events["global_restart"] += 1
+            f.replace_cloud(importance_sample(f.log_target, self.proposal, f.n, self.rng))
+            f.rejuvenate(START_SWEEPS, self.proposal)
+        elif verdict is CheckVerdict.MOVE:
+            f.rejuvenate(1, self.proposal)
+        else:  # realtime: the modes' move is owed, made between points (or at the next point)
+            self.scheduler.owe_modes(f)
 
-    # -- estimates ------------------------------------------------------------------------------------
-    def estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """The published place and covariance, marginalised over the residual bearing offset the points cannot tell
-        from a place (offset.marginalise): a running filter's mean and covariance, or where its ellipse is wide for
-        the range (its tails along the rays drag the mean out), its spatial median with the ellipse holding 95 % of
-        the cloud; a provisional sample's highest-density place (its best mode) with that ellipse."""
-        if self.filter is None:
-            mean, cov = cloud_estimate(self.cloud, self.modes[0].mean)
-        else:
-            mean, cov = self.filter.estimate()
-            if wide_for_range(self, mean, cov)[0]:
-                mean, cov = cloud_estimate(self.filter, spatial_median(self.filter.x, self.filter.weights))
-        sd = math.inf if self.calibration.offset else prior_sd(self.cfg)
-        if sd == 0.0:
-            return mean, cov
-        pts = self.posterior_points()
-        shift, spread = marginalise(pts, mean, self.robust(), sd)
-        return mean + shift, cov + spread
+    def _emitter_moved(self, moved: Moved):
+        """Drop the points from before the move and re-start from the recent ones."""
+        dropped = [self.window.popleft() for _ in range(len(self.window) - moved.recent)]
+        self.reject(Reason.EMITTER_MOVED, sum(e.used for e in dropped))
+        self.events["emitter_moved"] += 1
+        self._restart()
+        if self.filter is not None:
+            self.status = Status(Phase.TRACKING, restarted_from=moved.recent)
+
+    # -- calibration ----------------------------------------------------------------------------------
+    def _calibrate(self, candidates: list[np.ndarray], by_density: bool) -> bool:
+        """A joint fit of position and noise from the candidate places, adopted; True when one was made."""
+        recalibration = self.calibration.calibrate(self.window, self.robust(), candidates, by_density)
+        if recalibration is not None:
+            self._adopt(recalibration)
+        return recalibration is not None
+
+    def _recalibrate(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]],
+                     offset: float, course: bool):
+        self._adopt(self.calibration.apply(noise, at, built, offset, course, self.window))
+
+    def _adopt(self, recalibration: Recalibration):
+        """The points rebuilt with a new calibration, and the cloud re-weighted by the change of posterior."""
+        f = self.filter  # None while waiting to start: only the points are rebuilt
+        old = f.log_target(f.x) if f is not None else None
+        if recalibration.gated:
+            self.reject(Reason.POINT_OUTLIER, recalibration.gated)
+        self.window = recalibration.window
+        self.events.update(recalibration.events)
+        if f is None or old is None:
+            return
+        self.model.history.data = self.points().rows()
+        self.model.lik.outlier_prob = self.calibration.lik_outlier_prob
+        self.model.grid = None
+        f.reweight(f.log_target(f.x) - old)
+        if f.ess() < self.cfg.ess_threshold * f.n:
+            f.resample()
+            f.rejuvenate(_CALIBRATION_SWEEPS, self.proposal)
 
     def batch_estimate(self) -> Mode | None:
         """Robust batch maximum likelihood over every point held (no filter): global search, joint noise
         calibration, Gauss-Newton; the best mode with its Laplace covariance. The benchmark's reference."""
         modes = find_modes(self.points(), self.robust(), by_density=True)
-        if modes and self.cfg.calibrate_noise and self.calibration.calibrate([m.mean for m in modes[:2]], True):
+        if modes and self.cfg.calibrate_noise and self._calibrate([m.mean for m in modes[:2]], True):
             modes = find_modes(self.points(), self.robust(), by_density=True)
         return modes[0] if modes else None
 

@@ -1,32 +1,32 @@
 """How a track's filter starts: from the global search's modes over every buffered point (an importance sample of
 the robust posterior, every mode in proportion to its mass), from crossings of the bearings (the paper's start), or
-from the configured prior; or a provisional sample while the posterior is proper but not determined enough."""
+from the configured prior; or a provisional sample while the posterior is proper but not determined enough. The
+initiator says when to search and what a search's result means, and makes the filters; the track adopts them."""
 from __future__ import annotations
 
 import logging
 import math
-from collections import deque
+from dataclasses import dataclass
+from enum import Enum
 from functools import partial
-from typing import TYPE_CHECKING, cast
+from typing import cast
 
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.inference.checks import CheckResult, search_start, start_search
+from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, search_start, start_search
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode
+from aoa_localizer.engine.inference.receiver import NoiseGrid
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.inference.start_grid import StartGrid
 from aoa_localizer.engine.inference.triangulation import initial_particles
-from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.scheduling.slices import START_BUDGET_US
-from aoa_localizer.engine.track.state import PendingJob, Phase, Status
-from aoa_localizer.engine.types import ObservationPoint, Reading
+from aoa_localizer.engine.ingest.point_batch import points_of
+from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.scheduling.slices import Steps
+from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.base import ParticleFilter
-
-if TYPE_CHECKING:
-    from aoa_localizer.engine.track.emitter_track import EmitterTrack
 
 log = logging.getLogger("aoa_localizer")
 
@@ -44,178 +44,151 @@ _START_RETRY_MAX = 5  # most points between two start attempts that found no det
 _STALE_MIN, _STALE_SHARE = 4, 2
 
 
-class Initiator:
-    """Starts one track's filter once its points allow (`try_start`), and makes the filters the track runs."""
+class Outcome(Enum):
+    """What a start search's result means for a track holding its points now: search again over all of them (it
+    was stale), start the filter from its modes, or wait (holding a provisional sample when it drew one)."""
 
-    def __init__(self, track: EmitterTrack, cfg: LocalizerConfig):
-        self.track, self.cfg = track, cfg
+    SEARCH_AGAIN = "search again"
+    START = "start"
+    WAIT = "wait"
+
+
+@dataclass(frozen=True)
+class Holding:
+    """What a filter made over a track's held points needs of the track: the points, the radio-range prior
+    (global_search.Robust.reach), the likelihood's outlier share and the latent noise (None: calibrated)."""
+
+    points: list[ObservationPoint]
+    reach: tuple[float, float, float] | None
+    outlier_prob: float
+    noise: NoiseGrid | None
+
+
+class Initiator:
+    """When one track's start searches run and what their results mean, and the filters a start makes."""
+
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, scheduler: Scheduler):
+        """`rng`: the track's generator (the filters' and the starts' draws); `scheduler`: it takes each new
+        filter (its moves owed)."""
+        self.cfg, self.rng, self.scheduler = cfg, rng, scheduler
         self.next_start_try = 0  # points the window must hold before the next start search
         self.start_cloud: np.ndarray | None = None  # the particles of the latest start
         self.searched_again = False  # the pending start search was made again because the one before was stale
         self.start_grid: StartGrid | None = None  # the last start search's grid and sums (start_grid.py)
         # The provisional samples' seeds: a stream of their own, so drawing them leaves the filter's stream as it is
-        self.sample_seeds = track.rng.spawn(1)[0]
+        self.sample_seeds = rng.spawn(1)[0]
 
-    def try_start(self, inline: bool = False, final: bool = False) -> bool:
-        """Start the filter once the points allow (`inline`: the start search here, even with a worker; `final`: the
-        end of data, with whatever points there are)."""
-        t, cfg = self.track, self.cfg
-        if cfg.has_prior:
-            return self._from_prior()
-        if len(t.window) > cfg.init_max_points:
-            t.window.popleft()
-            t.reject(Reason.INIT_BUFFER_FULL, 1)
-        if len(t.window) < (min(2, cfg.init_bearings) if final else cfg.init_bearings):
-            t.status = Status(Phase.COLLECTING, held=len(t.window), needed=cfg.init_bearings)
-            return False
-        if cfg.init_method == "triangulation":
-            return self._from_triangulation()
-        if not final and (len(t.window) < self.next_start_try or t.job is not None):
-            return False
-        snap = t.snapshot()
+    def search_due(self, held: int, searching: bool) -> bool:
+        """Whether a start search over `held` points is due now (not while one is `searching`)."""
+        return held >= self.next_start_try and not searching
+
+    def search_now(self):
+        """The next start search is due at once, whatever the points held (the end of data)."""
+        self.next_start_try = 0
+
+    def search_job(self, snap: Snapshot, final: bool) -> tuple[partial[CheckResult], Steps[CheckResult]]:
+        """A start search of `snap` (`final`: the end of data, with whatever points there are): made whole (the
+        worker's, or inline), and as pieces."""
         snap.start_grid, snap.sample_seed = self.start_grid, int(self.sample_seeds.integers(2**63))
-        job = partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
-        if inline:
-            return self.apply_start(job(), snap.groups)
-        steps = start_search(snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
-        t.job = PendingJob(t.scheduler.start(job, steps, START_BUDGET_US), None, snap.groups)
-        return t.collect()  # a sliced search small enough to finish in its first call starts the filter now
+        return (partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final),
+                start_search(snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final))
 
-    def apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
-        """Start the filter from a start search's modes over the points held now (a background search's snapshot
-        may have fewer): an importance sample of the posterior, then MH sweeps; or wait for more points."""
-        t = self.track
+    def outcome(self, res: CheckResult, held: int) -> Outcome:
+        """What `res` means with `held` points held now. Points may come far faster than the worker searched (a bag
+        replayed at full speed): a mode of the few points searched is no start for the many held now, so a stale
+        result is searched again, over all of them, once; when that search is stale too, the worker is the
+        bottleneck (hundreds of channels queue behind it), and searching again would never end: its modes still
+        propose for every point held now."""
         self.start_grid = res.start_grid
-        stale = len(t.window) > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE)
+        stale = held > res.searched + max(_STALE_MIN, res.searched // _STALE_SHARE)
         if stale and not self.searched_again:
-            # Points came far faster than the worker searched (a bag replayed at full speed): a mode of the few
-            # points searched is no start for the many held now. Search again, over all of them, once: when that
-            # search is stale too, the worker is the bottleneck (hundreds of channels queue behind it), and
-            # searching again would never end; its modes still propose for every point held now.
             self.next_start_try, self.searched_again = 0, True
-            return self.try_start()
+            return Outcome.SEARCH_AGAIN
         self.searched_again = False
-        t.apply_fit(res, groups)
-        modes = res.modes
-        if modes and res.determined:
-            t.provisional, self.start_grid = None, None
-            t.filter = self._sample_posterior(modes)
-            self._started(f"global search: best of {len(modes)} mode(s), {modes[0].inliers} of {len(t.window)} "
-                          "points agree")
-            self._hold(modes)
-            return True
-        t.status = Status(Phase.WAITING_FOR_GEOMETRY, res.why)
-        if modes and res.sample is not None:
-            # Proper but not determined: publish the search's sample of the posterior (wide, honest), not nothing
-            t.provisional = self._provisional(modes, res.sample, res.searched)
-            t.status = Status(Phase.POORLY_DETERMINED, res.why)
-            self._hold(modes, groups)
+        if res.modes and res.determined:
+            self.start_grid = None
+            return Outcome.START
         # Search again when the points searched have grown by a tenth (at most _START_RETRY_MAX points later); at
         # once when enough came while the worker searched: the stream may have ended, and no later point would ask
         # again (the live node kept emitters of its last seconds without an estimate).
         self.next_start_try = res.searched + min(_START_RETRY_MAX, max(1, res.searched // 10))
-        searched_again = len(t.window) >= self.next_start_try and self.try_start()
-        return searched_again or bool(modes)
+        return Outcome.WAIT
 
-    def _hold(self, modes: list[Mode], searched: list[list[Reading]] | None = None):
-        """The track's modes and its estimate's points: every point waiting (none before: a start holds all), or
-        those of them the search drew a provisional sample over (`searched`: their readings)."""
-        t = self.track
-        t.modes = modes
-        held = list(t.window)
-        if searched is not None:
-            ids = {id(g) for g in searched}
-            held = [e for e in held if id(e.readings) in ids]
-        t.points_used = len(held)
-        t.bearings_used = sum(e.used for e in held)
-
-    def _holding_points(self, modes: list[Mode], particles: int | None = None
+    def _holding_points(self, modes: list[Mode], held: Holding, particles: int | None = None
                         ) -> tuple[ParticleFilter, ModeProposal]:
         """A new filter whose model holds every point waiting for a start, on the posterior the start search scored:
         the likelihood under the radio-range prior (no Gaussian at the best mode: at a mode by the track, ten times
         its few metres of range held the cloud there and cut off the far end of its ray); and the modes' proposal,
         the track's from now on."""
-        t = self.track
-        f = self.new_filter(particles)
+        f = self.new_filter(held.noise, particles)
         model = cast(EmitterModel, f.model)
-        model.reach = t.reach()
-        model.lik.outlier_prob = t.calibration.lik_outlier_prob
-        for e in t.window:
-            model.observe(e.point)
-        f.k = len(t.window)
-        t.proposal = proposal = ModeProposal.over(modes, t.points())
-        return f, proposal
+        model.reach = held.reach
+        model.lik.outlier_prob = held.outlier_prob
+        for point in held.points:
+            model.observe(point)
+        f.k = len(held.points)
+        return f, ModeProposal.over(modes, points_of(held.points))
 
-    def _sample_posterior(self, modes: list[Mode]) -> ParticleFilter:
+    def sample_posterior(self, modes: list[Mode], held: Holding) -> tuple[ParticleFilter, ModeProposal]:
         """The filter's start: an importance sample of the posterior from the modes, resampled, then MH sweeps (kept
-        as `start_cloud`)."""
-        t = self.track
-        f, proposal = self._holding_points(modes)
-        f.initialise(importance_sample(f.log_target, proposal, f.n, t.rng))
+        as `start_cloud`); with the modes' proposal."""
+        f, proposal = self._holding_points(modes, held)
+        f.initialise(importance_sample(f.log_target, proposal, f.n, self.rng))
         self.start_cloud = f.x.copy()
         f.rejuvenate(START_SWEEPS, proposal)
-        return f
+        return f, proposal
 
-    def _provisional(self, modes: list[Mode], sample: tuple[np.ndarray, np.ndarray], searched: int) -> ParticleFilter:
+    def provisional(self, modes: list[Mode], sample: tuple[np.ndarray, np.ndarray], searched: int, held: Holding
+                    ) -> tuple[ParticleFilter, ModeProposal]:
         """A provisional sample: the start search's weighted draws (provisional.py), read, never stepped (no
         resampling and no moves to spread duplicates), over the `searched` points it drew them for."""
         particles, logw = sample
-        f, _ = self._holding_points(modes, max(self.cfg.num_particles, len(particles)))
+        f, proposal = self._holding_points(modes, held, max(self.cfg.num_particles, len(particles)))
         f.initialise(particles)
         if np.isfinite(logw.max()):
             f.logw = logw - logw.max()
         f.k = searched
-        return f
+        return f, proposal
 
-    def _from_triangulation(self) -> bool:
-        """The paper's start (sec. 3.3): crossings of sorted pairs; then every buffered point updates the filter."""
-        t, cfg = self.track, self.cfg
-        pts = [e.point for e in t.window]
+    def triangulation(self, pts: list[ObservationPoint]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | str:
+        """The paper's start (sec. 3.3): particles from crossings of sorted pairs, with the broad prior's mean and
+        covariance; or why the geometry allows none yet."""
+        cfg = self.cfg
         particles, why = initial_particles(pts, cfg.num_particles, cfg.init_min_crossing_deg, cfg.init_min_support,
-                                           t.rng)
+                                           self.rng)
         if particles is None:
-            t.status = Status(Phase.WAITING_FOR_GEOMETRY, why)
-            return False
+            return why
         mean = particles.mean(axis=0)
         sigma = _prior_sigma(mean, pts[-1])
-        return self._start_then_replay(particles, mean, sigma**2 * np.eye(2), "triangulation")
+        return particles, mean, sigma**2 * np.eye(2)
 
-    def _from_prior(self) -> bool:
+    def prior(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Particles from the configured prior, with its mean and covariance."""
         cfg = self.cfg
         mean = np.array([cfg.prior_east, cfg.prior_north])
         sigma = cast(float, cfg.prior_sigma_m)  # set, as has_prior says
-        particles = mean + sigma * self.track.rng.standard_normal((cfg.num_particles, 2))
-        return self._start_then_replay(particles, mean, sigma**2 * np.eye(2), "prior")
+        particles = mean + sigma * self.rng.standard_normal((cfg.num_particles, 2))
+        return particles, mean, sigma**2 * np.eye(2)
 
-    def _start_then_replay(self, particles, mean, cov, how: str) -> bool:
-        t = self.track
-        f = t.filter = self.new_filter()
-        t.model.lik.outlier_prob = t.calibration.lik_outlier_prob
+    def replayed_filter(self, particles: np.ndarray, mean: np.ndarray, cov: np.ndarray, noise: NoiseGrid | None,
+                        outlier_prob: float) -> ParticleFilter:
+        """A filter started from `particles` under a Gaussian prior, to take the points held one by one (kept as
+        `start_cloud`)."""
+        f = self.new_filter(noise)
+        cast(EmitterModel, f.model).lik.outlier_prob = outlier_prob
         f.initialise(particles, mean, cov)
         self.start_cloud = f.x.copy()
-        waiting, t.window = list(t.window), deque()
-        self._started(how)
-        result = False
-        for entry in waiting:
-            result = t.update(entry) or result
-        return result
-
-    def new_filter(self, particles: int | None = None) -> ParticleFilter:
-        """A filter on a new emitter model (with the latent noise while it is latent); `particles`: N if not the
-        configured one."""
-        t = self.track
-        model = EmitterModel(self.cfg)
-        model.grid = t.calibration.noise_prior()
-        cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
-        f = make_filter(cfg, t.rng, model)
-        t.scheduler.take(f)
         return f
 
-    def _started(self, how: str):
-        t = self.track
-        t.status = Status(Phase.TRACKING)
-        t.supervisor.started(len(t.window))
-        log.info("filter %s started after %d observation points (%s)", self.cfg.algorithm, t.points_seen, how)
+    def new_filter(self, noise: NoiseGrid | None, particles: int | None = None) -> ParticleFilter:
+        """A filter on a new emitter model (with the latent `noise` while it is latent); `particles`: N if not the
+        configured one."""
+        model = EmitterModel(self.cfg)
+        model.grid = noise
+        cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
+        f = make_filter(cfg, self.rng, model)
+        self.scheduler.defer_moves(f)
+        return f
 
 
 def _prior_sigma(start: np.ndarray, last: ObservationPoint) -> float:

@@ -3,18 +3,18 @@ and their masses, and the estimate's state with the warnings behind it (docs/int
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.inference.checks import ellipse_and_reach
+from aoa_localizer.engine.inference.global_search import Mode
+from aoa_localizer.engine.inference.safety import HealthMonitor
+from aoa_localizer.engine.track.calibrator import Calibrator
 from aoa_localizer.engine.track.initiator import MAX_ELLIPSE_RANGE_SHARE
+from aoa_localizer.engine.track.state import Status
 from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.filters.base import ParticleFilter
-
-if TYPE_CHECKING:
-    from aoa_localizer.engine.track.emitter_track import EmitterTrack
 
 _ELLIPSE_MASS = 0.95  # the share of the posterior a provisional estimate's ELLIPSE_95 ellipse holds
 _MODE_MIN_MASS = 0.01  # modes reported
@@ -52,18 +52,18 @@ def spatial_median(x: np.ndarray, w: np.ndarray) -> np.ndarray:
     return m
 
 
-def wide_for_range(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, float, float]:
-    """(whether the 95 % ellipse's semi-major axis is over MAX_ELLIPSE_RANGE_SHARE of the range from the track, the
-    semi-major axis, the range)."""
-    h = track.model.history.data
+def wide_for_range(history: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, float, float]:
+    """(whether the 95 % ellipse's semi-major axis is over MAX_ELLIPSE_RANGE_SHARE of the range from the antennas of
+    the filter's `history` rows, the semi-major axis, the range)."""
+    h = history
     size, reach = ellipse_and_reach(mean, cov, h[:, 0], h[:, 1])
     return size > MAX_ELLIPSE_RANGE_SHARE * reach, size, reach
 
 
-def mode_masses(track: EmitterTrack) -> list[tuple[float, float, float]]:
-    """(east, north, mass) of each mode holding at least 1 % of the cloud's weight, heaviest first; the particles
-    go to their nearest mode, and modes whose centres lie inside each other's 95 % ellipse are one place."""
-    f, modes = track.cloud, track.modes
+def mode_masses(f: ParticleFilter, modes: list[Mode]) -> list[tuple[float, float, float]]:
+    """(east, north, mass) of each of the search's `modes` holding at least 1 % of the cloud's weight, heaviest
+    first; the particles go to their nearest mode, and modes whose centres lie inside each other's 95 % ellipse are
+    one place."""
     w = f.weights
     if len(modes) < 2:
         mean = w @ f.x
@@ -104,13 +104,14 @@ def _inside(cluster: tuple[np.ndarray, np.ndarray, float], place: np.ndarray) ->
         return math.inf
 
 
-def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) -> tuple[EstimateState, list[str]]:
-    """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings,
-    `poorly_determined` when the posterior is proper but wide or multi-modal (or only a provisional sample), else
-    `tracking`."""
+def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor, c: Calibrator, status: Status,
+           history: np.ndarray | None) -> tuple[EstimateState, list[str]]:
+    """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings (the
+    supervisor's `health` in alarm, the calibration `c` finding many wild or offset bearings), `poorly_determined`
+    when the posterior is proper but wide or multi-modal, or only a provisional sample (no filter `history`: the
+    track's `status` says why), else `tracking`."""
     warnings = []
-    health, c = track.supervisor.health, track.calibration
-    if track.supervisor.alarm:
+    if health.alarm_since is not None:
         warnings.append(f"the estimate no longer explains the newest bearings ({sum(health.flags)} of the "
                         f"last {len(health.flags)} points disagree): multipath, an emitter that moved, or a "
                         "bearing reference or offset set wrong (bearing_reference, mount_offset_deg, "
@@ -127,10 +128,10 @@ def assess(track: EmitterTrack, mean: np.ndarray, cov: np.ndarray, modes: list) 
                         f"azimuth {c.offset_deg:+.1f} deg), learned and corrected: {c.offset_advice()}")
     if warnings:
         return EstimateState.SUSPECT, warnings
-    if track.filter is None:
-        why = track.status.why or track.status.words()
+    if history is None:
+        why = status.why or status.words()
         return EstimateState.POORLY_DETERMINED, [f"few or poorly crossing bearings: {why}"]
-    wide, size, reach = wide_for_range(track, mean, cov)
+    wide, size, reach = wide_for_range(history, mean, cov)
     if wide:
         return EstimateState.POORLY_DETERMINED, [
             f"the 95 % ellipse ({size:.0f} m) is wide for the range ({reach:.0f} m)"]

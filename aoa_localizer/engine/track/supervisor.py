@@ -1,29 +1,29 @@
 """What keeps a running filter honest on messy data: the health of each new point (the share the cloud explains
 only as outliers, against the calibrated rate); global checks on a growing schedule and on alarm (noise calibration,
 global search, then the modes' MH move or a re-start from a far better mode), inline or in the check worker; moves
-at every point while in alarm (unless a check is being made in the calls); and the emitter-moved test."""
+at every point while in alarm (unless a check is being made in the calls); and the emitter-moved test. The
+supervisor decides; the track acts on its decisions."""
 from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass
+from enum import Enum
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import cast
 
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.inference.checks import CheckResult, check, refined, run_check
-from aoa_localizer.engine.inference.global_search import Robust, find_modes, inlier_share, log_posterior
-from aoa_localizer.engine.inference.safety import HealthMonitor, ModeProposal, importance_sample
+from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, check, run_check
+from aoa_localizer.engine.inference.emitter_model import EmitterModel
+from aoa_localizer.engine.inference.global_search import Points, Robust, find_modes, inlier_share, log_posterior
+from aoa_localizer.engine.inference.safety import HealthMonitor
 from aoa_localizer.engine.ingest.clock_check import ClockHint
-from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US
-from aoa_localizer.engine.track.initiator import MIN_INLIERS, START_SWEEPS
-from aoa_localizer.engine.track.state import PendingJob, Phase, Status
-from aoa_localizer.engine.types import Reading
-
-if TYPE_CHECKING:
-    from aoa_localizer.engine.track.emitter_track import EmitterTrack
+from aoa_localizer.engine.scheduling.slices import Steps
+from aoa_localizer.engine.track.initiator import MIN_INLIERS
+from aoa_localizer.engine.track.state import PendingJob
+from aoa_localizer.filters.base import ParticleFilter
 
 log = logging.getLogger("aoa_localizer")
 
@@ -34,11 +34,42 @@ _ALARM_SEARCH_EVERY = 5  # points between global searches while in alarm
 _MOVED_MAX_OLD_SHARE = 0.2  # most recent points that may still agree with the old place in a move
 
 
-class Supervisor:
-    """One track's health monitor, global-check schedule and emitter-moved test."""
+@dataclass(frozen=True)
+class Watch:
+    """What a new point's health asks of the track: `alarm` (the cloud no longer explains the newest points;
+    `alarm_began` at this point), a calibration now (the filters alone: `calibrate`), a global check now (`check`),
+    or `sweeps` moves now (in alarm, no check due)."""
 
-    def __init__(self, track: EmitterTrack, cfg: LocalizerConfig):
-        self.track, self.cfg = track, cfg
+    alarm: bool = False
+    alarm_began: bool = False
+    calibrate: bool = False
+    check: bool = False
+    sweeps: int = 0
+
+
+class CheckVerdict(Enum):
+    """What a global check's modes make of the cloud: a re-start from the best mode (far better than any particle),
+    one move on the modes now, or that move owed (made between points)."""
+
+    RESTART = "restart"
+    MOVE = "move"
+    OWE = "owe"
+
+
+@dataclass(frozen=True)
+class Moved:
+    """The emitter moved: the last `recent` points agree on `place`, which the older ones contradict by `log_odds`."""
+
+    recent: int
+    place: np.ndarray
+    log_odds: float
+
+
+class Supervisor:
+    """One track's health monitor, global-check schedule, re-start test and emitter-moved test."""
+
+    def __init__(self, cfg: LocalizerConfig):
+        self.cfg = cfg
         self.health = HealthMonitor(cfg.health_window, cfg.health_p_value)
         self.next_search = 0  # kept points at which the next scheduled global check is due
         self.last_search_point = -1  # the point (points_seen) of the last global check
@@ -54,122 +85,89 @@ class Supervisor:
         self.health.clear()
         self.next_search = max(2 * points, self.cfg.init_bearings)
 
-    def watch(self, logw_before: np.ndarray):
-        """Health of the newest point, scheduled and alarm-driven global checks, moves while in alarm and no check is
-        being made in the calls."""
-        t, cfg = self.track, self.cfg
-        f, n = t.running, len(t.window)
+    def watch(self, f: ParticleFilter, logw_before: np.ndarray, held: int, seen: int, outlier_prob: float,
+              job: PendingJob | None) -> Watch:
+        """The newest point's health (`f` has just taken it; `logw_before`: its log weights before) with `held`
+        points kept of `seen`, against the calibrated `outlier_prob`; whether a scheduled or alarm-driven global
+        check is due (not while `job` runs: due again once it is applied), else the moves while in alarm (one while
+        a check is made in the calls: two left it a piece a point, and an emitter that moved was noticed late)."""
+        cfg = self.cfg
         if not cfg.global_safety:
-            if cfg.calibrate_noise and n >= self.next_search:
-                self.next_search = min(int(math.ceil(n * _SEARCH_GROWTH)), n + _SEARCH_EVERY_MAX)
-                best = f.x[np.argmax(f.log_target(f.x))]
-                t.calibration.calibrate([refined(best, t.points(), t.robust())], False)
-            return
+            if cfg.calibrate_noise and held >= self.next_search:
+                self._schedule(held)
+                return Watch(calibrate=True)
+            return Watch()
         w = np.exp(logw_before - logw_before.max())
-        eps = t.model.lik.outlier_prob
+        eps = cast(EmitterModel, f.model).lik.outlier_prob
         floor = math.log(max(eps, 1e-300) / (2 * math.pi)) if eps else -np.inf
         outlier_resp = float(w @ np.exp(np.minimum(floor - f.last_ll, 0.0)) / w.sum())
         was = self.alarm
-        alarm = self.health.push(outlier_resp > 0.5, t.points_seen, t.calibration.outlier_prob)
+        alarm = self.health.push(outlier_resp > 0.5, seen, outlier_prob)
         if alarm and not was:
-            t.events["alarm"] += 1
             log.warning("the cloud no longer explains the newest points (%d of the last %d look wild); searching",
                         sum(self.health.flags), len(self.health.flags))
-        if alarm:
-            t.events["alarm_points"] += 1
-            t.status = Status(Phase.CHECKING, disagree=sum(self.health.flags), tested=len(self.health.flags))
-        elif t.status.phase is Phase.CHECKING:
-            t.status = Status(Phase.TRACKING)
-        due = n >= self.next_search
-        alarm_due = alarm and t.points_seen - self.last_search_point >= _ALARM_SEARCH_EVERY
-        if (due or alarm_due) and t.job is None:  # (one still running: due again once it is applied)
+        due = held >= self.next_search
+        alarm_due = alarm and seen - self.last_search_point >= _ALARM_SEARCH_EVERY
+        if (due or alarm_due) and job is None:
             if due:
-                self.next_search = min(int(math.ceil(n * _SEARCH_GROWTH)), n + _SEARCH_EVERY_MAX)
-            self.global_check()
-        elif alarm:
-            # (one while a check is made in the calls: two left it a piece a point, and an emitter that moved was
-            # noticed late)
-            f.rejuvenate(1 if t.job is not None and t.job.in_calls else ALARM_SWEEPS, t.proposal)
+                self._schedule(held)
+            return Watch(alarm, alarm and not was, check=True)
+        sweeps = (1 if job is not None and job.in_calls else ALARM_SWEEPS) if alarm else 0
+        return Watch(alarm, alarm and not was, sweeps=sweeps)
 
-    def global_check(self, inline: bool = False):
-        """Noise calibration, emitter-moved test, global search, MH move or re-start: whole here (`inline`), or its
-        expensive part handed to the worker or made a few pieces per point (applied by the track's collect once
-        finished: here when it finished in its first call)."""
-        t = self.track
-        self.last_search_point = t.points_seen
-        snap = t.snapshot()
-        if inline:
-            self.apply_check(run_check(snap), snap.groups)
-            return
-        t.job = PendingJob(t.scheduler.start(partial(run_check, snap), check(snap), CHECK_BUDGET_US), t.running,
-                           snap.groups)
-        t.collect()
+    def _schedule(self, held: int):
+        self.next_search = min(int(math.ceil(held * _SEARCH_GROWTH)), held + _SEARCH_EVERY_MAX)
 
-    def apply_check(self, res: CheckResult, groups: list[list[Reading]]):
-        """The cheap part of a global check, on the current cloud and points: re-weight by the fitted noise,
-        emitter-moved test (in alarm), then the modes' MH move or a re-start from a far better mode."""
-        t = self.track
-        t.apply_fit(res, groups)
-        if self.alarm and self._emitter_moved():
-            return
-        modes = res.modes
-        if not modes:
-            return
-        f = t.running
-        t.modes = modes
+    def check_job(self, snap: Snapshot, seen: int) -> tuple[partial[CheckResult], Steps[CheckResult]]:
+        """A global check of `snap` at point `seen`: made whole (the worker's, or inline), and as pieces."""
+        self.last_search_point = seen
+        return partial(run_check, snap), check(snap)
+
+    def verdict(self, res: CheckResult, f: ParticleFilter, pts: Points, robust: Robust, realtime: bool
+                ) -> CheckVerdict:
+        """A check's modes against the cloud over the points held now (`pts`): a re-start when the best mode beats
+        every particle by restart_log_odds (a worker's check scored again over the points held now)."""
         self.clock_hint = res.hint
-        t.proposal = ModeProposal.over(modes, t.points())
         best_particle = float(np.max(f.log_target(f.x)))
-        best_mode = modes[0].log_post
-        if res.searched != len(t.window):  # a worker's check: the mode scored over the points held now
-            best_mode = float(log_posterior(modes[0].mean, t.points(), t.robust()))
+        best_mode = res.modes[0].log_post
+        if res.searched != len(pts):
+            best_mode = float(log_posterior(res.modes[0].mean, pts, robust))
         if best_mode > best_particle + self.cfg.restart_log_odds:
-            t.events["global_restart"] += 1
             log.warning("re-start: a mode at E %.1f N %.1f explains the points far better (log odds %.1f) than the "
-                        "cloud", modes[0].mean[0], modes[0].mean[1], best_mode - best_particle)
-            f.replace_cloud(importance_sample(f.log_target, t.proposal, f.n, t.rng))
-            f.rejuvenate(START_SWEEPS, t.proposal)
+                        "cloud", res.modes[0].mean[0], res.modes[0].mean[1], best_mode - best_particle)
             self.health.clear()
-        elif not t.scheduler.realtime:
-            f.rejuvenate(1, t.proposal)
-        else:  # realtime: the modes' move is owed, made between points (or at the next point)
-            t.scheduler.owe_modes(f)
+            return CheckVerdict.RESTART
+        return CheckVerdict.OWE if realtime else CheckVerdict.MOVE
 
-    def _emitter_moved(self) -> bool:
-        """Recent disagreeing points fix a place the older points contradict, and the other way round:
-        drop the older points and re-start from the recent ones."""
-        t, cfg = self.track, self.cfg
+    def moved(self, pts: Points, seen: int, f: ParticleFilter, outlier_prob: float, noise_fits: bool
+              ) -> Moved | None:
+        """In alarm: whether recent disagreeing points fix a place the older points of `pts` contradict, and the
+        other way round (`outlier_prob`: the likelihood's; `noise_fits`: the noise was calibrated)."""
+        cfg = self.cfg
         since = self.health.alarm_since
-        m = t.points_seen - since + 1 if since is not None else 0
-        if m < cfg.moved_min_points or m >= len(t.window):
-            return False
-        if cfg.calibrate_noise and not t.calibration.noise.fits:
-            return False  # disagreement means nothing before the outlier rate is known
-        pts = t.points()
+        m = seen - since + 1 if since is not None else 0
+        if m < cfg.moved_min_points or m >= len(pts):
+            return None
+        if cfg.calibrate_noise and not noise_fits:
+            return None  # disagreement means nothing before the outlier rate is known
         k = len(pts)
         recent, old = pts.take(np.arange(k - m, k)), pts.take(np.arange(k - m))
-        rob = Robust(t.calibration.lik_outlier_prob, cfg.gps_sigma_m)
+        rob = Robust(outlier_prob, cfg.gps_sigma_m)
         modes = find_modes(recent, rob, by_density=True)
         if not modes or modes[0].crossing_deg < cfg.init_min_crossing_deg or modes[0].inliers < MIN_INLIERS:
-            return False
+            return None
         x_new = modes[0].mean
-        x_old = t.running.estimate()[0]
+        x_old = f.estimate()[0]
         # A moved emitter leaves (almost) no recent point agreeing with the old place; a second, stationary
         # source (a reflection) keeps about its share of them: that is a second mode, not a move.
         if inlier_share(x_old, recent, rob) > _MOVED_MAX_OLD_SHARE:
-            return False
+            return None
         pair = np.stack([x_new, x_old])
         lr_recent = float(np.subtract(*log_posterior(pair, recent, rob)))
         lr_old = -float(np.subtract(*log_posterior(pair, old, rob)))
         if min(lr_recent, lr_old) < cfg.moved_log_odds:
-            return False
-        dropped = [t.window.popleft() for _ in range(k - m)]
-        t.reject(Reason.EMITTER_MOVED, sum(e.used for e in dropped))
-        t.events["emitter_moved"] += 1
+            return None
         log.warning("the emitter moved: the last %d points agree on E %.1f N %.1f, which the older %d contradict "
                     "(log odds %.1f); re-starting from the recent points", m, x_new[0], x_new[1], k - m,
                     min(lr_recent, lr_old))
-        t.restart()
-        if t.filter is not None:
-            t.status = Status(Phase.TRACKING, restarted_from=m)
-        return True
+        return Moved(m, x_new, min(lr_recent, lr_old))

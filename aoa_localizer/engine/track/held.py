@@ -1,0 +1,182 @@
+"""What an emitter track holds and what is read off it: its points, its filter or provisional sample, the last
+search's modes and their proposal, the receiver's calibration, its status; the estimate, the robust posterior's
+settings and the snapshot a search takes of it. EmitterTrack (emitter_track.py) is the only class that changes it."""
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from typing import cast
+
+import numpy as np
+
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.inference.checks import Snapshot
+from aoa_localizer.engine.inference.emitter_model import EmitterModel
+from aoa_localizer.engine.inference.global_search import Mode, Points, Robust
+from aoa_localizer.engine.inference.offset import marginalise, prior_sd
+from aoa_localizer.engine.inference.safety import ModeProposal
+from aoa_localizer.engine.ingest.point_batch import points_of, rows_of
+from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.track.calibrator import Calibrator
+from aoa_localizer.engine.track.report import assess, cloud_estimate, mode_masses, spatial_median, wide_for_range
+from aoa_localizer.engine.track.state import PendingJob, Phase, Status, TrackState, TrackStatus, WindowEntry
+from aoa_localizer.engine.track.supervisor import Supervisor
+from aoa_localizer.engine.types import EstimateState
+from aoa_localizer.filters.base import ParticleFilter
+
+# The radio-range prior's scale: this many times the antennas' spread, at least this many metres (a transmitter a
+# DF receiver hears is often kilometres away; at 100 m a short baseline's posterior kept an emitter 1.4 km out along
+# its ray under 3 % of its mass)
+_REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
+_CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
+
+
+class Held:
+    """One emitter track's state, and the values read off it."""
+
+    supervisor: Supervisor  # the track's (EmitterTrack makes it): its health is part of what the track reports
+
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, scheduler: Scheduler):
+        self.cfg, self.rng, self.scheduler = cfg, rng, scheduler
+        self.calibration = Calibrator(cfg)
+        self.job: PendingJob | None = None  # a start search or global check running in the worker
+        # The points waiting for a start, then the filter's history
+        self.window: deque[WindowEntry] = deque()
+        self.filter: ParticleFilter | None = None
+        # A sample of the posterior while it is proper but not determined enough to start the filter from: the
+        # estimate (state `poorly_determined`) until the filter starts
+        self.provisional: ParticleFilter | None = None
+        self.modes: list[Mode] = []
+        self.proposal: ModeProposal | None = None
+        self.events: Counter = Counter()  # global_restart, emitter_moved, recalibrated, alarm, offset_learned
+        self.status = Status(Phase.COLLECTING)
+        self.points_seen = 0
+        self.points_used = 0
+        self.bearings_used = 0
+        self.last_update_s = float("nan")
+        self.last_stamp = float("nan")  # stamp of the newest observation point
+        self.last_kept = np.zeros(0, bool)  # which readings the newest point kept (the report's trace)
+
+    @property
+    def state(self) -> TrackState:
+        if self.filter is not None:
+            return TrackState.TRACKING
+        return TrackState.COLLECTING if self.provisional is None else TrackState.PROVISIONAL
+
+    def summary(self) -> TrackStatus:
+        """The track as programs read it (Localizer.track_status)."""
+        sup = self.supervisor
+        return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used,
+                           self.last_update_s)
+
+    def snapshot(self) -> Snapshot:
+        """What a start search or global check needs, copied: it may run in the worker while the track goes on."""
+        f = self.filter
+        best = f.x[np.argmax(f.log_target(f.x))].copy() if f is not None and self.cfg.calibrate_noise else None
+        c = self.calibration
+        return Snapshot(self.cfg, [e.readings for e in self.window], rows_of([e.point for e in self.window]),
+                        c.noise.copy(), c.outlier_prob, self.robust(), best, [m.mean.copy() for m in self.modes[:1]],
+                        c.offset, c.course)
+
+    # -- what the track holds -------------------------------------------------------------------------
+    @property
+    def debtor(self) -> tuple[ParticleFilter | None, ModeProposal | None]:
+        """What the scheduler's owed moves are made with: the filter, and the proposal of its last check's modes."""
+        return self.filter, self.proposal
+
+    @property
+    def running(self) -> ParticleFilter:
+        """The filter, where the code runs only once it started."""
+        if self.filter is None:
+            raise RuntimeError("no filter running")  # an engine bug, never bad input
+        return self.filter
+
+    @property
+    def cloud(self) -> ParticleFilter:
+        """The particles the estimate comes from: the running filter, or the provisional sample before it."""
+        if self.filter is not None:
+            return self.filter
+        if self.provisional is None:
+            raise RuntimeError("no estimate yet")  # an engine bug, never bad input
+        return self.provisional
+
+    @property
+    def cloud_is_current(self) -> bool:
+        """Whether the cloud describes the points held now: a running filter's always; a provisional sample's while it
+        holds all but a tenth of them (a start search that finds no place leaves the last sample standing)."""
+        if self.filter is not None:
+            return True
+        return self.provisional is not None and self.provisional.k >= _CURRENT_SHARE * len(self.window)
+
+    @property
+    def estimating(self) -> bool:
+        """Whether there is an estimate: a running filter or a provisional sample."""
+        return self.state is not TrackState.COLLECTING
+
+    @property
+    def model(self) -> EmitterModel:
+        """The running filter's emitter model (the track always builds one)."""
+        return cast(EmitterModel, self.running.model)
+
+    def used_points(self) -> np.ndarray:
+        """(K, 5) rows east, north, theta, sigma, gps sigma of the points the running filter keeps; (0, 5) before."""
+        if self.filter is None:
+            return np.zeros((0, 5))
+        return np.array(self.model.history.data, float).reshape(-1, 5)
+
+    def points(self) -> Points:
+        return points_of([e.point for e in self.window])
+
+    def posterior_points(self) -> Points:
+        """The points the estimate's posterior is over: the running filter's, else the ones held."""
+        return Points.of(self.model.history.data) if self.filter is not None else self.points()
+
+    def robust(self, prior: bool = True) -> Robust:
+        """The robust posterior's settings the searches use: the calibrated outlier share and latent noise, with the
+        filter's prior, the configured one, or (before a start) the radio-range prior of the points held."""
+        c, cfg = self.calibration, self.cfg
+        if prior and self.filter is not None and self.model.prior_prec.any():
+            return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, self.model.prior_mean, self.model.prior_prec,
+                          c.noise_prior(), self.model.reach)
+        if prior and cfg.prior_east is not None and cfg.prior_north is not None and cfg.prior_sigma_m is not None:
+            return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, np.array([cfg.prior_east, cfg.prior_north]),
+                          np.eye(2) / cfg.prior_sigma_m**2, c.noise_prior())
+        reach = (self.reach() if self.filter is None else self.model.reach) if prior else None
+        return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, grid=c.noise_prior(), reach=reach)
+
+    def reach(self) -> tuple[float, float, float] | None:
+        """The radio-range prior of the points held (global_search.Robust.reach): centred on their antennas, its
+        scale twice their spread (at least _REACH_MIN_M)."""
+        if not self.window:
+            return None
+        pos = np.array([[e.point.east, e.point.north] for e in self.window])
+        centre = pos.mean(axis=0)
+        spread = float(np.max(np.hypot(*(pos - centre).T)))
+        return float(centre[0]), float(centre[1]), max(_REACH_MIN_M, _REACH_FACTOR * spread)
+
+    # -- estimates ------------------------------------------------------------------------------------
+    def estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """The published place and covariance, marginalised over the residual bearing offset the points cannot tell
+        from a place (offset.marginalise): a running filter's mean and covariance, or where its ellipse is wide for
+        the range (its tails along the rays drag the mean out), its spatial median with the ellipse holding 95 % of
+        the cloud; a provisional sample's highest-density place (its best mode) with that ellipse."""
+        if self.filter is None:
+            mean, cov = cloud_estimate(self.cloud, self.modes[0].mean)
+        else:
+            mean, cov = self.filter.estimate()
+            if wide_for_range(self.model.history.data, mean, cov)[0]:
+                mean, cov = cloud_estimate(self.filter, spatial_median(self.filter.x, self.filter.weights))
+        sd = math.inf if self.calibration.offset else prior_sd(self.cfg)
+        if sd == 0.0:
+            return mean, cov
+        pts = self.posterior_points()
+        shift, spread = marginalise(pts, mean, self.robust(), sd)
+        return mean + shift, cov + spread
+
+    def assess(self, mean: np.ndarray, cov: np.ndarray) -> tuple[list, EstimateState, list[str]]:
+        """The estimate's modes (east, north, mass), its state and the warnings behind it (report.py)."""
+        modes = mode_masses(self.cloud, self.modes)
+        history = self.model.history.data if self.filter is not None else None
+        state, warnings = assess(mean, cov, modes, self.supervisor.health, self.calibration, self.status, history)
+        return modes, state, warnings
+
