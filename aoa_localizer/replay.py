@@ -2,9 +2,10 @@
 loads is common/start_up.py's."""
 import sys
 
-from aoa_localizer.common.start_up import program
+from aoa_localizer.common.start_up import program, renamed
 
 main = program("replay", "aoa_localizer.tools.replay", interrupted=130)
+legacy_main = renamed(main, "replay", "aoa_replay")  # the console script's old name
 
 if __name__ == "__main__":
     sys.exit(main())

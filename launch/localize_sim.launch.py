@@ -15,7 +15,7 @@ def _nodes(context):
     return [
         Node(package="aoa_localizer", executable="aoa_localizer", name="aoa_localizer", output="screen",
              parameters=node_params),
-        Node(package="aoa_localizer", executable="sim_vehicle", name="sim_vehicle", output="screen",
+        Node(package="aoa_localizer", executable="aoa_sim_vehicle", name="sim_vehicle", output="screen",
              parameters=[{"scenario": LaunchConfiguration("scenario").perform(context),
                           "speedup": float(LaunchConfiguration("speedup").perform(context))}]),
     ]

@@ -35,7 +35,7 @@ def test_the_launch_file_parses_and_starts_the_installed_programs_with_its_argum
     calls = [c for c in ast.walk(tree) if isinstance(c, ast.Call)]
     keywords = [{k.arg: k.value for k in c.keywords} for c in calls]
     executables = {k["executable"].value for k in keywords if "executable" in k}
-    assert executables == {"aoa_localizer", "sim_vehicle"} <= set(PYPROJECT["project"]["scripts"])
+    assert executables == {"aoa_localizer", "aoa_sim_vehicle"} <= set(PYPROJECT["project"]["scripts"])
     arguments = {
         c.args[0].value: {k.arg: k.value.value for k in c.keywords if isinstance(k.value, ast.Constant)}
         for c in calls
@@ -132,3 +132,20 @@ def test_the_nodes_help_names_every_output():
     for topic in ("emitter/pose", "emitter/fix", "emitter/posterior", "emitter/next_goal", "emitter/datum",
                   "emitter/channels", "/diagnostics", "cot_url"):
         assert topic in text, topic
+
+
+def test_every_console_script_is_namespaced_and_an_old_name_says_its_new_one(capsys):
+    """Issue 53, part 4: `replay` and `sim_vehicle` were generic names on a user's PATH. Each command is aoa_*; the
+    round-3 names still run, saying the new name first."""
+    from aoa_localizer import replay
+
+    scripts = PYPROJECT["project"]["scripts"]
+    new = {name for name, target in scripts.items() if not target.endswith(":legacy_main")}
+    assert all(name.startswith("aoa_") for name in new) and len(new) == 8
+    old = {name: target for name, target in scripts.items() if target.endswith(":legacy_main")}
+    assert {f"aoa_{name}" for name in old} <= new
+    with pytest.raises(SystemExit) as stop:
+        replay.legacy_main(["--help"])
+    out = capsys.readouterr()
+    assert stop.value.code == 0 and "usage" in out.out
+    assert out.err.startswith("replay: this command is now `aoa_replay`")

@@ -30,3 +30,13 @@ def program(name: str, home: str, interrupted: int) -> Callable[..., Any]:
         return main(*args, **kwargs)
 
     return run
+
+
+def renamed(main: Callable[..., Any], old: str, new: str) -> Callable[..., Any]:
+    """A command's old name: one line on stderr that says its new name, then the program."""
+
+    def run(*args: Any, **kwargs: Any) -> Any:
+        print(f"{old}: this command is now `{new}`; the name `{old}` goes in the next release", file=sys.stderr)
+        return main(*args, **kwargs)
+
+    return run

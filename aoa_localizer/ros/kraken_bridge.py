@@ -1,6 +1,6 @@
 """KrakenSDR bridge (`kraken_bridge`): polls the Kraken App output of krakensdr_doa and publishes DF records.
 
-    python -m aoa_localizer.kraken_bridge --url http://HOST:8081/DOA_value.html --gps [--ros-args -r ...]
+    python -m aoa_localizer.kraken_bridge --url http://HOST:8081/DOA_value.html --gps [--record DIR] [--ros-args -r ...]
 
 Each new line (one per VFO) becomes a DF record on `df/bearing` (geometry_msgs/Vector3Stamped): the stamp at the
 middle of the acquisition interval, `vector.x` the azimuth, `vector.y` a quality from the confidence (40 at
@@ -17,8 +17,10 @@ Lines that repeat (the page holds a line until the next CPI), go backwards or ar
 skipped, never fatal. Each poll is bounded (`--timeout` for the whole answer, `--max-bytes` of page; a redirect is
 refused with its target): a dead, slow or hostile server is retried every second with one log line per outage.
 The lines of one CPI (one per VFO) share their GPS position, which goes out on `gps/fix` once. While every line is
-skipped for want of a GPS heading, a warning says so every 30 s. Exit 0 on Ctrl-C or SIGTERM (within a second,
-whatever the server does), with the counts; 2 for bad options.
+skipped for want of a GPS heading, a warning says so every 30 s. `--record DIR` records every topic of the graph
+(the bridge's records and fixes, and a node's outputs if one runs) into a rosbag2 MCAP bag, for `replay --offline`
+and `report` afterwards (docs/kraken_drive.md). Exit 0 on Ctrl-C or SIGTERM (within a second, whatever the server
+does), with the counts; 2 for bad options.
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ import argparse
 import sys
 import time
 from collections import Counter
+from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
@@ -58,7 +61,11 @@ def parse_args(argv) -> argparse.Namespace:
                         help=f"the longest a whole poll may take, s (default 2, at most {TIMEOUT_MAX_S:g})")
     parser.add_argument("--max-bytes", type=int, default=DEFAULT_MAX_BYTES,
                         help=f"the largest page taken, bytes (default {DEFAULT_MAX_BYTES}); a larger one is skipped")
+    parser.add_argument("--record", metavar="DIR", help="record every topic into this rosbag2 MCAP bag directory (it "
+                        "must not exist yet)")
     args = parser.parse_args(own)
+    if args.record is not None and Path(args.record).exists():
+        parser.error(f"--record {args.record} exists: a bag is recorded into a new directory")
     if not args.url.startswith(("http://", "https://")):
         parser.error(f"--url must be an http(s) address, got {args.url!r}")
     if not (0 < args.rate <= 1000 and 0 < args.timeout <= TIMEOUT_MAX_S and 1024 <= args.max_bytes <= 2**30):
@@ -84,6 +91,12 @@ class KrakenBridge(Node):
         self.skipped_said = time.monotonic()
         self.counts_said = (0, 0)  # (no_gps_heading, published) when the skipped lines were last looked at
         self.stop = Stop()  # run()'s, from run_node: SIGINT or SIGTERM
+        self.recorder = None
+        if args.record is not None:
+            from msgs_adapters.recorder import BagRecorder
+
+            self.recorder = BagRecorder(self, args.record)
+            self.recorder.poll()  # its own topics, before the first line
         self.get_logger().info(
             f"polling {args.url} at {args.rate:g} Hz; publishing "
             + ("azimuths from true north (DoA + the line's heading)" if args.azimuth == "true"
@@ -154,6 +167,8 @@ class KrakenBridge(Node):
         period = 1.0 / self.args.rate
         while not self.stop.requested:
             t0 = time.monotonic()
+            if self.recorder is not None:
+                self.recorder.poll()  # topics that appeared since (a node's outputs)
             text = self.fetch()
             if text is not None and not self.stop.requested:
                 self.take(text)
@@ -164,6 +179,11 @@ class KrakenBridge(Node):
 
     def destroy_node(self):
         counts = dict(self.counts, **{k: v for k, v in self.filter.dropped.items() if v})
+        if self.recorder is not None:
+            self.recorder.close()
+            counts["recorded"] = self.recorder.count
+            if self.recorder.failed:
+                print(f"kraken_bridge: recording stopped: {self.recorder.failed}", file=sys.stderr, flush=True)
         print("kraken_bridge: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()) if v), file=sys.stderr,
               flush=True)
         return super().destroy_node()
