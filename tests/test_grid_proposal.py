@@ -86,6 +86,7 @@ def _share_beyond(pts, rob, radius: float) -> float:
     return float(w[r > radius].sum() / w.sum())
 
 
+@pytest.mark.slow
 def test_on_a_ray_the_grid_keeps_more_draws_and_the_sample_reaches_the_far_end():
     pts, rob = _parallel_bearings()
     grid = StartGrid()

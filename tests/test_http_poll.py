@@ -44,6 +44,7 @@ def test_a_stop_request_ends_a_poll_at_once(server):
     assert time.monotonic() - start < 0.3 + 3 * WATCH_S
 
 
+@pytest.mark.slow
 def test_nothing_listening_and_bad_addresses_are_reasons():
     import socket
 

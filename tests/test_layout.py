@@ -44,6 +44,7 @@ def project_imports(path: Path) -> set[str]:
     return found
 
 
+@pytest.mark.slow
 def test_each_package_imports_only_the_layers_below_it_even_inside_functions():
     root = Path(aoa_localizer.__file__).parent
     assert sorted(p.name for p in root.iterdir() if (p / "__init__.py").exists()) == sorted(LAYERS)

@@ -44,6 +44,7 @@ def test_candidates_and_thinning():
     assert len(x) <= MAX_PARTICLES and w.sum() == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_the_localizer_gives_a_goal_within_the_radius_once_it_has_an_estimate():
     loc = Localizer(LocalizerConfig(seed=1))
     assert loc.vehicle_place() is None and loc.next_goal((0.0, 0.0), 500.0) is None

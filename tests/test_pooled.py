@@ -252,6 +252,7 @@ def test_real_bearings_every_collar_located_about_as_often_inside_as_the_ellipse
     assert tracking_out == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("distance_km", [10, 300, 3000])
 def test_an_id_far_from_the_files_first_row_is_located_as_it_is_on_its_own(tmp_path, cli, distance_km):
     """Each id is solved in a frame at its own stations: a second observer's id 10, 300 or 3000 km from the file's
@@ -317,6 +318,7 @@ def test_locate_skips_a_sigma_no_bearing_has_by_line_and_the_api_says_so_too(tmp
     assert res.refused == {"x": "all its bearings come from one place: a direction, but no range"}
 
 
+@pytest.mark.slow
 def test_an_id_with_control_characters_still_gives_a_kml_that_parses(tmp_path, cli):
     import xml.dom.minidom
 

@@ -148,6 +148,7 @@ def test_a_dense_stream_still_refuses_a_far_stamp_the_next_fix_contradicts_and_t
     assert len(loc.stations[""].gps) == 23
 
 
+@pytest.mark.slow
 def test_locate_reads_a_survey_csv_skips_a_bad_row_by_line_and_writes_one_line_per_id(tmp_path, cli):
     frame = LocalFrame(*DATUM)
     survey = _three_station_survey()
