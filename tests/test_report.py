@@ -12,7 +12,7 @@ import pytest
 
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.types import Estimate
+from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 from aoa_localizer.reporting.export import KML_NS, geojson, kml
 from aoa_localizer.reporting.report import main as report_main
 
@@ -252,3 +252,27 @@ def test_the_map_draws_the_posterior_grid_where_it_lies(tmp_path, monkeypatch):
     (main,), (zoom,) = figures[0].axes[0].images, figures[0].axes[1].images
     assert main.get_extent() == pytest.approx([grid.east0, grid.east0 + side, grid.north0, grid.north0 + side])
     assert zoom.get_extent()[0] == pytest.approx(grid.east0 - est.east)
+
+
+def test_each_transmitter_of_a_shared_frequency_is_a_point_and_an_ellipse_in_kml_and_geojson(estimate):
+    """Issue 54: a channel two transmitters share draws both, named "transmitter k of n", with share and state."""
+    from dataclasses import replace
+
+    def transmitter(east, north, share):
+        lat, lon, _ = FRAME.to_geodetic(east, north)
+        return Transmitter(east, north, float(lat), float(lon), np.eye(2) * 25.0, share, EstimateState.TRACKING)
+
+    est = replace(estimate, transmitter_count=2, count_probability=0.99,
+                  transmitters=[transmitter(1200.0, 800.0, 0.6), transmitter(600.0, 1300.0, 0.4)])
+    features = geojson(FRAME, [est], {})["features"]
+    named = {f["properties"]["name"]: f for f in features}
+    second = named["emitter estimate: transmitter 2 of 2"]
+    e, n = FRAME.to_enu(second["geometry"]["coordinates"][1], second["geometry"]["coordinates"][0])
+    assert math.hypot(e - 600.0, n - 1300.0) < 0.01 and second["properties"]["share"] == 0.4
+    assert "95 % error ellipse: transmitter 2 of 2" in named and len(features) == 6
+    root = ET.fromstring(kml(FRAME, [est], {}))
+    names = [p.findtext(f"{{{KML_NS}}}name") for p in root.iter(f"{{{KML_NS}}}Placemark")]
+    assert names.count("emitter estimate: transmitter 1 of 2") == 1 and len(names) == 6
+    line = json.loads(json.dumps(est.to_json_dict()))
+    assert line["transmitter_count"] == 2 and line["count_probability"] == 0.99
+    assert [t["share"] for t in line["transmitters"]] == [0.6, 0.4] and line["transmitters"][1]["state"] == "tracking"

@@ -826,6 +826,7 @@ def test_two_stations_and_two_emitters_each_get_their_topics_summary_and_status(
             cid = f"f{int(f)}"
             entry = got["summary"]["channels"][cid]
             assert entry["topics"] == f"emitter/{cid}/" and entry["frequency_hz"] == f and entry["state"] == "live"
+            assert entry["transmitter_count"] == 1 and entry["transmitters"] == []  # one transmitter a frequency
             e, n = frame.to_enu(entry["lat"], entry["lon"])
             assert math.hypot(e - truth[0], n - truth[1]) < 15.0
             assert got[cid].header.frame_id == "map"

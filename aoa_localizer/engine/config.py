@@ -166,6 +166,10 @@ class LocalizerConfig(GroupAccess):
         64, "most frequency channels tracked at once; a record that would open one more is refused "
         "(`channel_limit`)", low=1, high=10_000,
     )
+    max_emitters_per_channel: int = param(
+        3, "most transmitters counted on one channel's frequency (co-channel: they take turns, push-to-talk); the "
+        "count is said on each estimate (`transmitter_count`, `transmitters`); 1: never counted", low=1, high=5,
+    )
     channel_timeout_s: float = param(
         300.0, "a frequency channel silent this long (DF time) is retired, its last estimate kept (s; 0: never)",
         low=0.0,

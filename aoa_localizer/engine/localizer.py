@@ -34,8 +34,9 @@ from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.track.report import co_channel
 from aoa_localizer.engine.track.state import TrackStatus
-from aoa_localizer.engine.types import Estimate, Input, Reading
+from aoa_localizer.engine.types import Estimate, Input, Reading, Transmitter
 
 log = logging.getLogger("aoa_localizer")
 
@@ -544,6 +545,16 @@ class Localizer:
         from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         f = track.cloud
         modes, state, warnings = track.assess(np.asarray(mean), np.asarray(cov))
+        count = track.count_transmitters(final=end_of_data)
+        transmitters: list[Transmitter] = []
+        if count is not None:
+            antennas = np.array([[g[0].east, g[0].north] for g in track.heard])
+            places, said = co_channel(count, antennas, self.cfg.max_emitters_per_channel)
+            warnings = warnings + said
+            for place, place_state in places:
+                t_lat, t_lon, _ = frame.to_geodetic(place.mean[0], place.mean[1])
+                transmitters.append(Transmitter(float(place.mean[0]), float(place.mean[1]), float(t_lat),
+                                                float(t_lon), place.cov.copy(), place.share, place_state))
         estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
                             lon=float(lon), cov=np.array(cov), ground_cov=from_map @ np.asarray(cov) @ from_map.T,
                             bearings_used=track.bearings_used,
@@ -552,7 +563,9 @@ class Localizer:
                             particles=f.x.copy(), weights=f.weights.copy(), modes=modes,
                             noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,
                             channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
-                            end_of_data=end_of_data)
+                            end_of_data=end_of_data, transmitter_count=count.count if count is not None else 1,
+                            count_probability=count.probability if count is not None else float("nan"),
+                            transmitters=transmitters)
         return self._announce(channel, estimate)
 
     def _announce(self, channel: Channel, estimate: Estimate) -> Estimate:

@@ -78,6 +78,26 @@ class EstimateState(StrEnum):
     SUSPECT = "suspect"  # the model does not fit the bearings
 
 
+@dataclass(frozen=True)
+class Transmitter:
+    """One of the transmitters a channel's bearings come from when several share its frequency (co-channel):
+    ENU metres at the datum, lat/lon, the 2x2 covariance (m^2), the share of the channel's readings it explains and
+    how far it may be trusted."""
+
+    east: float
+    north: float
+    lat: float
+    lon: float
+    cov: np.ndarray
+    share: float
+    state: EstimateState
+
+    def to_json_dict(self) -> dict:
+        return {"lat": self.lat, "lon": self.lon, "east": self.east, "north": self.north,
+                "cov": [[float(v) for v in row] for row in self.cov], "share": round(self.share, 4),
+                "state": self.state}
+
+
 @dataclass
 class Estimate:
     """The emitter estimate after a filter update: ENU metres at the datum, lat/lon and the 2x2 covariance."""
@@ -109,6 +129,11 @@ class Estimate:
     # The covariance as east/north at the emitter itself (m^2, emitter/fix's): `cov` is the map plane's, which
     # the meridian convergence turns and, far from the datum, foreshortens; None: take `cov`
     ground_cov: np.ndarray | None = field(repr=False, default=None)
+    # How many transmitters the channel's bearings come from (co-channel, issue 54) and that count's probability
+    # (NaN: not counted yet); with two or more, each in `transmitters`, the most heard first
+    transmitter_count: int = 1
+    count_probability: float = float("nan")
+    transmitters: list = field(default_factory=list)
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of docs/interface.md (offline replay output)."""
@@ -130,6 +155,9 @@ class Estimate:
             "frequency_hz": self.frequency_hz if math.isfinite(self.frequency_hz) else None,
             "state": self.state,
             "warnings": list(self.warnings),
+            "transmitter_count": self.transmitter_count,
+            "count_probability": round(self.count_probability, 4) if math.isfinite(self.count_probability) else None,
+            "transmitters": [t.to_json_dict() for t in self.transmitters],
             **({"hpd": {f"{100 * lvl:.0f}": [[[round(float(a), 8), round(float(b), 8)] for a, b in ring]
                                             for ring in rings] for lvl, rings in self.regions.items()}}
                if self.regions else {}),

@@ -1,11 +1,12 @@
 """The estimates for GIS tools: GeoJSON and KML with, per emitter (channel), the point and the 95 % ellipse as a
-real lat/lon polygon, and each station's track; time, algorithm, bearing count, channel and frequency as
-properties."""
+real lat/lon polygon (and the same for each transmitter of a channel several share), and each station's track;
+time, algorithm, bearing count, channel and frequency as properties."""
 from __future__ import annotations
 
 import datetime
 import re
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 
 import numpy as np
 
@@ -39,6 +40,23 @@ def names(est: Estimate) -> tuple[str, str]:
         return "emitter estimate", "95 % error ellipse"
     mhz = f" ({est.frequency_hz / 1e6:.3f} MHz)" if np.isfinite(est.frequency_hz) else ""
     return f"emitter {est.channel}{mhz}", f"95 % error ellipse {est.channel}"
+
+
+def shown(estimates: list[Estimate]) -> list[tuple[Estimate, str, str, dict]]:
+    """What is drawn for each estimate, with its point's and ellipse's names and properties of its own: the
+    estimate, then each transmitter of a channel that several share (co-channel), as an estimate at its place."""
+    out: list[tuple[Estimate, str, str, dict]] = []
+    for est in estimates:
+        point_name, ellipse_name = names(est)
+        out.append((est, point_name, ellipse_name, {}))
+        for k, t in enumerate(est.transmitters, start=1):
+            view = replace(est, east=t.east, north=t.north, lat=t.lat, lon=t.lon, cov=t.cov, transmitters=[],
+                           regions=None)
+            out.append((view, f"{point_name}: transmitter {k} of {len(est.transmitters)}",
+                        f"{ellipse_name}: transmitter {k} of {len(est.transmitters)}",
+                        {"share": round(t.share, 4), "state": str(t.state),
+                         "count_probability": round(est.count_probability, 4)}))
+    return out
 
 
 def track_name(station: str) -> str:
@@ -77,9 +95,8 @@ def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.n
             features.append({"type": "Feature",
                              "geometry": {"type": "MultiPolygon", "coordinates": [[r] for r in rings]},
                              "properties": {"name": name, "channel": est.channel}})
-    for est in estimates:
-        props = properties(est)
-        point_name, ellipse_name = names(est)
+    for est, point_name, ellipse_name, own in shown(estimates):
+        props = {**properties(est), **own}
         features += [
             {"type": "Feature", "geometry": {"type": "Point", "coordinates": [est.lon, est.lat]},
              "properties": {"name": point_name, **props}},
@@ -118,9 +135,8 @@ def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarr
         return pm
 
     coords = lambda pts: " ".join(f"{lon:.8f},{lat:.8f},0" for lon, lat in pts)  # noqa: E731
-    for est in estimates:
-        props = properties(est)
-        point_name, ellipse_name = names(est)
+    for est, point_name, ellipse_name, own in shown(estimates):
+        props = {**properties(est), **own}
         point = ET.SubElement(placemark(point_name, props), q("Point"))
         ET.SubElement(point, q("coordinates")).text = coords([[est.lon, est.lat]])
         poly = ET.SubElement(placemark(ellipse_name, props), q("Polygon"))

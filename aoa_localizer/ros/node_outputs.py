@@ -171,7 +171,12 @@ class NodeOutputs:
                 "state": "retired" if channel.retired else "live",
                 "stamp": est.stamp, "lat": est.lat, "lon": est.lon, "east": round(est.east, 2),
                 "north": round(est.north, 2), "ellipse95_major_m": round(float(ellipse_axes(est.cov)[0]), 2),
-                "points_used": est.points_used,
+                "points_used": est.points_used, "transmitter_count": est.transmitter_count,
+                "count_probability": (round(est.count_probability, 4) if math.isfinite(est.count_probability)
+                                      else None),
+                "transmitters": [{"lat": t.lat, "lon": t.lon, "east": round(t.east, 2), "north": round(t.north, 2),
+                                  "ellipse95_major_m": round(float(ellipse_axes(t.cov)[0]), 2),
+                                  "share": round(t.share, 4), "state": str(t.state)} for t in est.transmitters],
             }
         return out
 

@@ -61,6 +61,12 @@ class Scenario:
     mount_offset_deg: float | None = None
     # Filter settings this scenario asks for (the prior of `straight`, the receiver calibration of `urban`).
     filter_overrides: dict = field(default_factory=dict)
+    # Other transmitters on the emitter's frequency (co-channel): their places, the air-time shares of the emitter
+    # and each of them (equal when empty), and how they take turns: push-to-talk bursts of uniform length in
+    # `bursts_s` (each burst one transmitter, drawn by the shares), or None: interleaved, reading by reading.
+    co_channel: tuple[tuple[float, float], ...] = ()
+    co_shares: tuple[float, ...] = ()
+    bursts_s: tuple[float, float] | None = (5.0, 30.0)
 
 
 SCENARIOS = {
@@ -147,6 +153,9 @@ class ScenarioData:
     wild: np.ndarray  # (B,) bool
     emitter_enu: np.ndarray  # (2,)
     emitter_lat_lon: tuple[float, float]
+    # Which transmitter each bearing came from (0: the emitter, k: co_channel[k - 1]); every transmitter's place
+    source: np.ndarray | None = None
+    transmitters_enu: np.ndarray | None = None
 
     @property
     def frame(self) -> LocalFrame:
@@ -229,8 +238,47 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
     fixes = gps_fixes(sc, frame, rng, t_gps, traj.at(t_gps))
     sensor = traj.at(t_df)
     bearings, sigma, wild, emitter = df_records(sc, frame, rng, t_df, sensor, traj.course(t_df))
+    source = np.zeros(t_df.size, int)
+    if sc.co_channel:  # drawn after everything else: a scenario without them keeps its data to the bit
+        source = co_channel_records(sc, frame, rng, bearings, sensor, sigma, wild)
     e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1])
-    return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)))
+    return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)), source,
+                        np.array([emitter, *sc.co_channel], float))
+
+
+def on_air(sc: Scenario, rng: np.random.Generator, t: np.ndarray) -> np.ndarray:
+    """Which transmitter (0: the emitter, k: co_channel[k - 1]) is heard at each time `t`: push-to-talk bursts of
+    uniform length in `bursts_s`, each drawn by the air-time shares, or (None) each reading drawn on its own."""
+    k = 1 + len(sc.co_channel)
+    shares = np.array(sc.co_shares or [1.0] * k, float)
+    shares /= shares.sum()
+    if sc.bursts_s is None:
+        return rng.choice(k, size=t.size, p=shares)
+    lo, hi = sc.bursts_s
+    edges, who = [], []
+    at = float(t.min()) - rng.uniform(0.0, hi)
+    while at <= t.max():
+        edges.append(at)
+        who.append(rng.choice(k, p=shares))
+        at += rng.uniform(lo, hi)
+    return np.array(who)[np.searchsorted(np.array(edges), t, side="right") - 1]
+
+
+def co_channel_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, bearings: np.ndarray,
+                       sensor: np.ndarray, sigma: np.ndarray, wild: np.ndarray) -> np.ndarray:
+    """The bearings taken while another transmitter on the frequency was on the air point at it instead (with
+    the same noise; wild ones stay wild), in place; which transmitter each came from. Azimuths from true north
+    only (no mount offset)."""
+    if sc.mount_offset_deg is not None:
+        raise ValueError("co-channel transmitters are simulated with azimuths from true north (no mount offset)")
+    source = on_air(sc, rng, bearings[:, 0])
+    s_lat, s_lon, _ = frame.to_geodetic(sensor[:, 0], sensor[:, 1])
+    noise = np.degrees(sigma * rng.standard_normal(sigma.size))
+    for j, place in enumerate(sc.co_channel, start=1):
+        theirs = (source == j) & ~wild
+        az = _azimuths(frame, sensor, s_lat, s_lon, np.array(place, float)) + noise
+        bearings[theirs, 1] = wrap_360(az[theirs])
+    return source
 
 
 def gps_fixes(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_gps: np.ndarray,

@@ -16,6 +16,7 @@ provisional sample, modes, job and status): three parts decide, and it acts on w
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
@@ -24,7 +25,8 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import CheckResult, refined
-from aoa_localizer.engine.inference.global_search import Mode, find_modes
+from aoa_localizer.engine.inference.co_channel import Count, Readings, count_transmitters
+from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.ingest.point_batch import Built
@@ -42,6 +44,10 @@ from aoa_localizer.filters.base import ParticleFilter
 log = logging.getLogger("aoa_localizer")
 
 _CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
+COUNT_MIN_READINGS = 30  # the transmitters are counted from this many readings on ...
+_COUNT_GROWTH = 2.0  # ... and again when the readings heard doubled (a count costs 0.01-0.3 s)
+COUNT_MAX_READINGS = 1500  # more heard: every k-th point's readings (whole points: a bin's readings stay together)
+_COUNT_OUTLIER_PROB = 0.2  # the modes the count starts from are sought under at least this wild share
 
 
 class EmitterTrack(Held):
@@ -66,6 +72,8 @@ class EmitterTrack(Held):
         if self.job is not None:
             self.job.release()
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
+        self.heard.append(readings)
+        self.heard_readings += len(readings)
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
@@ -371,6 +379,33 @@ class EmitterTrack(Held):
         if f.ess() < self.cfg.ess_threshold * f.n:
             f.resample()
             f.rejuvenate(_CALIBRATION_SWEEPS, self.proposal)
+
+    def count_transmitters(self, final: bool = False) -> Count | None:
+        """How many transmitters the channel's bearings come from (co_channel.py), counted again when the readings
+        heard doubled since the last count (the end of data: `final`, whenever they grew); None before
+        COUNT_MIN_READINGS, with `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
+        cfg, c = self.cfg, self.calibration
+        grown = self.heard_readings > self.counted_readings
+        due = grown and (final or self.heard_readings >= _COUNT_GROWTH * self.counted_readings)
+        if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < COUNT_MIN_READINGS or not due
+                or not self.estimating):
+            return self.counted
+        groups = list(self.heard)
+        stride = math.ceil(sum(len(g) for g in groups) / COUNT_MAX_READINGS)
+        readings = [r for g in groups[::-1][::stride][::-1] for r in g]  # the newest point always in
+        # The readings as heard, with their own sigmas (the configured model): a receiver calibrated on two
+        # transmitters' bearings reads them as one wide noise or an offset; the count fits its own of both
+        rows = np.array([[r.stamp, r.east, r.north, r.theta, r.sigma, r.quality] for r in readings])
+        heard = Readings(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], np.maximum(rows[:, 4], 1e-4), rows[:, 5])
+
+        def modes(scale: float) -> list[np.ndarray]:
+            rows = np.column_stack([heard.east, heard.north, heard.theta, scale * heard.sigma, np.zeros(len(heard))])
+            return [m.mean for m in find_modes(Points.of(rows), Robust(_COUNT_OUTLIER_PROB), by_density=True)]
+
+        first = self.filter.estimate()[0] if self.filter is not None else self.modes[0].mean
+        self.counted = count_transmitters(heard, first, modes, cfg.max_emitters_per_channel, c.offset)
+        self.counted_readings = self.heard_readings
+        return self.counted
 
     def batch_estimate(self) -> Mode | None:
         """Robust batch maximum likelihood over every point held (no filter): global search, joint noise

@@ -11,6 +11,7 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import Snapshot
+from aoa_localizer.engine.inference.co_channel import Count
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
@@ -21,7 +22,7 @@ from aoa_localizer.engine.track.calibrator import Calibrator
 from aoa_localizer.engine.track.report import assess, cloud_estimate, mode_masses, spatial_median, wide_for_range
 from aoa_localizer.engine.track.state import PendingJob, Phase, Status, TrackState, TrackStatus, WindowEntry
 from aoa_localizer.engine.track.supervisor import Supervisor
-from aoa_localizer.engine.types import EstimateState
+from aoa_localizer.engine.types import EstimateState, Reading
 from aoa_localizer.filters.base import ParticleFilter
 
 # The radio-range prior's scale: this many times the antennas' spread, at least this many metres (a transmitter a
@@ -29,6 +30,7 @@ from aoa_localizer.filters.base import ParticleFilter
 # its ray under 3 % of its mass)
 _REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
 _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
+HEARD_POINTS = 2000  # the newest points whose readings the transmitter count looks at (a few MB at most)
 
 
 class Held:
@@ -56,6 +58,13 @@ class Held:
         self.last_update_s = float("nan")
         self.last_stamp = float("nan")  # stamp of the newest observation point
         self.last_kept = np.zeros(0, bool)  # which readings the newest point kept (the report's trace)
+        # Every point's readings as heard (the transmitter count's: the window drops points when the emitter moved,
+        # which is what transmitters taking turns look like), their number, and the last count with the readings
+        # it was made from
+        self.heard: deque[list[Reading]] = deque(maxlen=HEARD_POINTS)
+        self.heard_readings = 0
+        self.counted: Count | None = None
+        self.counted_readings = 0
 
     @property
     def state(self) -> TrackState:

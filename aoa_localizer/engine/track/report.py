@@ -8,6 +8,7 @@ import numpy as np
 
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.inference.checks import ellipse_and_reach
+from aoa_localizer.engine.inference.co_channel import Count, Place
 from aoa_localizer.engine.inference.global_search import Mode
 from aoa_localizer.engine.inference.safety import HealthMonitor
 from aoa_localizer.engine.track.calibrator import Calibrator
@@ -138,3 +139,32 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
     if len(modes) > 1 and modes[1][2] >= _AMBIGUOUS_MASS:
         return EstimateState.POORLY_DETERMINED, [f"a second place holds {100 * modes[1][2]:.0f} % of the posterior"]
     return EstimateState.TRACKING, []
+
+
+_COUNT_SURE = 0.9  # a count this probable: its transmitters may be `tracking`
+
+
+def co_channel(count: Count, antennas: np.ndarray, max_k: int) -> tuple[list[tuple[Place, EstimateState]], list[str]]:
+    """The transmitters of a channel's count with their states (`tracking` when the count is sure and the place's
+    95 % ellipse is narrow for its range from the `antennas` (N, 2)), and the warnings the count makes: several
+    transmitters; a place whose bearings interleave with the estimate's; more transmitters than `max_k`."""
+    out, warnings = [], []
+    for place in count.transmitters:
+        size, reach = ellipse_and_reach(place.mean, place.cov, antennas[:, 0], antennas[:, 1])
+        sure = count.probability >= _COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
+        out.append((place, EstimateState.TRACKING if sure else EstimateState.POORLY_DETERMINED))
+    if count.count >= 2:
+        places = ", ".join(f"E {p.mean[0]:.0f} N {p.mean[1]:.0f} ({100 * p.share:.0f} %)" for p in count.transmitters)
+        warnings.append(f"{count.count} transmitters on this frequency (p = {count.probability:.2f}), taking turns: "
+                        f"{places}; each is in `transmitters`, this estimate is the track's")
+    for ghost in count.ghosts:
+        where = f"a second place, E {ghost.mean[0]:.0f} N {ghost.mean[1]:.0f}, explains {100 * ghost.share:.0f} %"
+        if count.probabilities.get(2, 0.0) >= 1.0 - _COUNT_SURE:  # the turns and the interleaving fit alike
+            warnings.append(f"{where} of the bearings: a second transmitter taking turns, or a reflection; the "
+                            f"readings are too far apart in time to tell (p = {count.probabilities[2]:.2f} for two)")
+        else:
+            warnings.append(f"{where} of the bearings, interleaved with this one's: a reflection, or another carrier "
+                            "on the air at the same time (bearings alone cannot tell which)")
+    if count.more_than_allowed:
+        warnings.append(f"more transmitters than max_emitters_per_channel ({max_k}) seem to be on this frequency")
+    return out, warnings

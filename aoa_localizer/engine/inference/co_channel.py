@@ -1,0 +1,325 @@
+"""How many transmitters one channel's bearings come from, and where each is (issue 54; docs/design.md,
+"Co-channel transmitters").
+
+Each reading comes from one of K static transmitters, or is wild (a uniform share). Transmitters on one frequency
+take turns (push-to-talk, a repeater's users): readings close in time come from the same one. A reflection's ghost
+comes with its direct path, reading by reading. So for each K two models are fitted by EM, over time bins of
+BIN_S seconds: **in turns** (a bin's readings share one transmitter, the bins independent) and **interleaved**
+(every reading its own draw). Each model fits its own scale of the readings' sigmas (per quality band): a receiver
+calibrated on two transmitters' bearings reads them as one wide noise. A bearing offset the receiver's calibration
+learned is tried beside none (it may come from that confusion too). The count's posterior weighs every model by
+its BIC:
+K = 1; K in turns (K transmitters); K interleaved (one transmitter and K - 1 ghosts, or carriers on the air at
+once, which bearings alone cannot tell apart: counted as one, and said). Where no bin holds two readings the two
+models are the same and the count stays at 1 with its probability near a half: the bearings cannot tell.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
+
+BIN_S = 2.0  # readings within one such bin of time are taken as one transmitter's (in turns)
+MIN_SHARE = 0.08  # a transmitter (or a ghost) explains at least this share of the readings
+_EM_ITERATIONS = 40
+_EM_TOL = 1e-6  # stop when the log-likelihood gains less than this (relative)
+_GN_STEPS = 2  # Gauss-Newton steps of each place per EM iteration
+_OUTLIER_START, _OUTLIER_MIN = 0.1, 1e-3
+_MAX_STARTS = 4  # places (modes) combined into starts for K > 1
+_SCALE_RANGE = (0.1, 100.0)  # the fitted scale of the readings' sigmas stays within these
+_QUALITY_BANDS = (55.0, 70.0, 85.0)  # the sigmas' scale is fitted per band of quality (and one for unknown quality)
+_UNEXPLAINED_MIN = 6  # readings off the one place, from which a second start is sought
+_WILD_MADS = 2.5  # a reading this many robust sigmas off the one place is another transmitter's, or wild
+_START_APART_M = 30.0  # starts nearer than this to an earlier one are the same start
+# The places keep to the radio range of the antennas: a Gaussian prior at their centroid, this many times their
+# spread wide and at least _REACH_MIN_M (the engine's radio-range prior's scale), so a transmitter heard from one
+# side is not fitted at infinity along its rays
+_REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
+# One place that explains the readings without widening their sigmas more than this, whose wild readings do not
+# meet anywhere with another transmitter's share, is one transmitter (the other fits are skipped: a single
+# emitter's count costs one fit and one search of its wild readings); a wider one may be two read as one wide noise
+_QUIET_SCALE = 2.0
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Place:
+    """One transmitter (or ghost) of a fit: its place (east, north, m), Laplace covariance (m^2), the share of the
+    readings it explains and how many readings it holds (responsibility over a half)."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    share: float
+    readings: int
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One model's maximum-likelihood fit."""
+
+    k: int
+    in_turns: bool
+    places: list[Place]
+    outlier_share: float
+    scale: np.ndarray  # each reading's, from its quality band's
+    offset: float  # rad, taken off every bearing
+    loglik: float
+    bic: float
+
+
+@dataclass(frozen=True)
+class Count:
+    """The count of transmitters and what else the bearings show.
+
+    `count` with its posterior `probability`; `transmitters` (count >= 2: each, the heaviest first; else empty);
+    `ghosts`: places whose readings interleave with the transmitter's (a reflection, or a second carrier on at the
+    same time), when the interleaved model is the likeliest; `probabilities` by count; `more_than_allowed`: a fit
+    with one more transmitter than `max_k` is likelier than every allowed one."""
+
+    count: int
+    probability: float
+    transmitters: list[Place]
+    ghosts: list[Place]
+    probabilities: dict[int, float]
+    more_than_allowed: bool
+
+
+@dataclass(frozen=True)
+class Readings:
+    """A channel's readings as arrays: stamp (s), antenna east, north (m), bearing theta (ENU rad), sigma (rad) and
+    quality (0-100, NaN unknown: its band is the sigmas' scale's)."""
+
+    stamp: np.ndarray
+    east: np.ndarray
+    north: np.ndarray
+    theta: np.ndarray
+    sigma: np.ndarray
+    quality: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.stamp)
+
+    @property
+    def band(self) -> np.ndarray:
+        """Each reading's quality band (len(_QUALITY_BANDS) + 1 for an unknown quality)."""
+        q = self.quality
+        return np.where(np.isnan(q), len(_QUALITY_BANDS) + 1, np.digitize(np.nan_to_num(q), _QUALITY_BANDS))
+
+
+def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float], list[np.ndarray]], max_k: int,
+                       offset: float = 0.0) -> Count | None:
+    """The count of transmitters behind `r` (1 to `max_k`): one fitted from `first` (the estimate) and the bearing
+    `offset` the receiver's calibration learned (and from no offset), more from the candidate places `starts(scale)`
+    gives (the robust posterior's modes with the sigmas scaled, best first), asked only when the one leaves a
+    transmitter's share of the readings unexplained; None with fewer than ten readings."""
+    if len(r) < 10:
+        return None
+    bins = np.unique(np.floor((r.stamp - r.stamp.min()) / BIN_S), return_inverse=True)[1]
+    first = np.asarray(first, float)
+    offsets = sorted({0.0, offset})
+    one = max((_best_fit(r, bins, [first], True, _first_scale(r, first, o), o) for o in offsets),
+              key=lambda f: f.loglik)
+    unexplained = _unexplained(r, one)
+    need = max(MIN_SHARE * len(r), _UNEXPLAINED_MIN)  # readings another transmitter would send, at least
+    crossings = _wild_crossings(r, one, unexplained) if unexplained.sum() >= _UNEXPLAINED_MIN else []
+    if np.median(one.scale) <= _QUIET_SCALE and not any(m.inliers >= need / 2 for m in crossings):
+        # One place explains them at their own noise, and the rest do not meet anywhere: no room for another
+        return Count(1, 1.0, [], [], {1: 1.0}, False)
+    wide = float(np.median(one.scale))
+    candidates = [one.places[0].mean, *(m.mean for m in crossings)]  # the one, then where its wild ones cross
+    candidates += [np.asarray(s, float) for s in starts(1.0) + starts(wide)]
+    starts_k = _distinct(candidates, _START_APART_M)[:_MAX_STARTS]
+    fits = [one]
+    for k in range(2, min(max_k + 1, len(starts_k)) + 1):
+        for in_turns in (True, False):
+            fit = _best_of(r, bins, [list(c) for c in itertools.combinations(starts_k, k)], in_turns, one.scale,
+                           offsets)
+            if fit is not None and min(p.share for p in fit.places) >= MIN_SHARE:
+                fits.append(fit)
+    allowed = [f for f in fits if f.k <= max_k]
+    by_count: dict[int, float] = {}
+    for f, w in zip(allowed, _bic_weights([f.bic for f in allowed]), strict=True):
+        n = f.k if f.in_turns else 1
+        by_count[n] = by_count.get(n, 0.0) + float(w)
+    by_count = dict(sorted(by_count.items()))
+    count = max(by_count, key=lambda n: (by_count[n], -n))  # a tie goes to fewer transmitters
+    best = min((f for f in allowed if (f.k if f.in_turns else 1) == count), key=lambda f: f.bic)
+    transmitters = sorted(best.places, key=lambda p: -p.share) if count >= 2 else []
+    ghosts = sorted(best.places, key=lambda p: -p.share)[1:] if not best.in_turns else []
+    beyond = min(fits, key=lambda f: f.bic)
+    return Count(count, by_count[count], transmitters, ghosts, by_count, beyond.k > max_k and beyond.in_turns)
+
+
+def _bic_weights(bics: list[float]) -> np.ndarray:
+    b = np.array(bics)
+    w = np.exp(-0.5 * (b - b.min()))
+    return w / w.sum()
+
+
+def _turned(r: Readings, offset: float) -> Readings:
+    """The readings with `offset` taken off their bearings."""
+    return replace(r, theta=(r.theta - offset + np.pi) % (2.0 * np.pi) - np.pi) if offset else r
+
+
+def _first_scale(r: Readings, x: np.ndarray, offset: float) -> np.ndarray:
+    """The sigmas' scale the residuals at place x suggest (their median absolute value, robustly), every reading's."""
+    resid, _ = _jacobian(_turned(r, offset), x)
+    return np.full(len(r), float(np.clip(np.median(np.abs(resid) / r.sigma) / 0.6745, 1.0, _SCALE_RANGE[1])))
+
+
+def _unexplained(r: Readings, one: Fit) -> np.ndarray:
+    """Which readings lie off the one-transmitter fit's place: more than _WILD_MADS robust sigmas (the median
+    absolute residual of their quality band, which another transmitter's readings cannot widen as they widen the
+    fit's own scale)."""
+    resid, _ = _jacobian(_turned(r, one.offset), one.places[0].mean)
+    z = np.abs(resid) / r.sigma
+    band = r.band
+    mad = np.array([np.median(z[band == b]) if np.any(band == b) else 1.0 for b in range(band.max() + 1)]) / 0.6745
+    return z > _WILD_MADS * np.maximum(mad, 1e-9)[band]
+
+
+def _wild_crossings(r: Readings, one: Fit, wild: np.ndarray) -> list[Mode]:
+    """Where the readings the one-transmitter fit calls wild cross (the best two modes, with the readings each
+    explains): a second transmitter's start that the modes of all the readings missed (its crossing drowned in the
+    first's)."""
+    turned = _turned(r, one.offset)
+    rows = np.column_stack([r.east, r.north, turned.theta, one.scale * r.sigma, np.zeros(len(r))])[wild]
+    return find_modes(Points.of(rows), Robust(0.2), by_density=True)[:2]
+
+
+def _distinct(places: list[np.ndarray], apart_m: float) -> list[np.ndarray]:
+    """`places` without those within `apart_m` of one before them."""
+    out: list[np.ndarray] = []
+    for p in places:
+        if all(np.hypot(*(p - q)) > apart_m for q in out):
+            out.append(p)
+    return out
+
+
+def _best_of(r: Readings, bins: np.ndarray, combos: list[list[np.ndarray]], in_turns: bool, scale: np.ndarray,
+             offsets: list[float]) -> Fit | None:
+    fits = [_best_fit(r, bins, c, in_turns, scale, o) for c in combos for o in offsets]
+    fits = [f for f in fits if f is not None]
+    return max(fits, key=lambda f: f.loglik) if fits else None
+
+
+def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns: bool, scale: np.ndarray,
+              offset: float) -> Fit:
+    """EM from `places` and the sigmas' `scale`, with the bearing `offset` taken off: the responsibilities of each
+    transmitter (per bin in turns, per reading interleaved) and the wild share; each place by weighted Gauss-Newton;
+    the shares and the scales; then BIC."""
+    r, band = _turned(r, offset), r.band
+    k = len(places)
+    x = np.array(places, float)
+    share = np.full(k, 1.0 / k)
+    eps = _OUTLIER_START
+    previous = -np.inf
+    loglik = -np.inf
+    for _ in range(_EM_ITERATIONS):
+        log_in, log_e = _emissions(r, x, eps, scale)  # (N, K) log of the inlier part, of the whole emission
+        resp, loglik = _responsibilities(log_e, share, bins, in_turns)
+        inlier = resp * np.exp(log_in - log_e)  # each reading's weight for each place as an inlier
+        share = np.maximum(resp.mean(axis=0), 1e-12)
+        share /= share.sum()
+        eps = float(np.clip(1.0 - inlier.sum() / len(r), _OUTLIER_MIN, 0.5))
+        for j in range(k):
+            x[j] = _gauss_newton(r, x[j], inlier[:, j], scale)
+        scale = _scale(r, x, inlier, band)
+        if abs(loglik - previous) <= _EM_TOL * abs(loglik):
+            break
+        previous = loglik
+    log_in, log_e = _emissions(r, x, eps, scale)
+    resp, loglik = _responsibilities(log_e, share, bins, in_turns)
+    inlier = resp * np.exp(log_in - log_e)
+    out = [Place(x[j].copy(), _covariance(r, x[j], inlier[:, j], scale), float(resp[:, j].mean()),
+                 int((resp[:, j] > 0.5).sum())) for j in range(k)]
+    params = 2 * k + (k - 1) + 1 + len(np.unique(band))  # places, shares, the wild share, the scales
+    return Fit(k, in_turns, out, eps, scale, offset, loglik, -2.0 * loglik + params * math.log(len(r)))
+
+
+def _scale(r: Readings, x: np.ndarray, inlier: np.ndarray, band: np.ndarray) -> np.ndarray:
+    """Each reading's sigma scale: its quality band's inliers' weighted RMS residual in sigmas at the places `x`."""
+    z2 = np.zeros(len(r))
+    for j in range(len(x)):
+        resid, _ = _jacobian(r, x[j])
+        z2 += inlier[:, j] * (resid / r.sigma) ** 2
+    weight = inlier.sum(axis=1)
+    sums = np.bincount(band, z2, minlength=band.max() + 1)
+    counts = np.bincount(band, weight, minlength=band.max() + 1)
+    scales = np.sqrt(np.divide(sums, counts, out=np.ones_like(sums), where=counts > 1.0))
+    return np.clip(scales, *_SCALE_RANGE)[band]
+
+
+def _emissions(r: Readings, x: np.ndarray, eps: float, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """log((1 - eps) N(residual; scale sigma)) and log of it plus the wild share's eps / 2 pi, (N, K)."""
+    bearing = np.arctan2(x[None, :, 1] - r.north[:, None], x[None, :, 0] - r.east[:, None])
+    resid = (r.theta[:, None] - bearing + np.pi) % (2.0 * np.pi) - np.pi
+    s = (scale * r.sigma)[:, None]
+    log_in = math.log1p(-eps) - 0.5 * (resid / s) ** 2 - np.log(s) - 0.5 * _LOG_2PI
+    return log_in, np.logaddexp(log_in, math.log(eps) - _LOG_2PI)
+
+
+def _responsibilities(log_e: np.ndarray, share: np.ndarray, bins: np.ndarray, in_turns: bool
+                      ) -> tuple[np.ndarray, float]:
+    """Each reading's responsibility of each place (N, K) and the model's log-likelihood: in turns, a bin's
+    readings share one place (their log emissions summed per bin); interleaved, each reading its own."""
+    log_share = np.log(share)[None, :]
+    if not in_turns:
+        joint = log_e + log_share
+        norm = np.logaddexp.reduce(joint, axis=1)
+        return np.exp(joint - norm[:, None]), float(norm.sum())
+    per_bin = np.zeros((bins.max() + 1, log_e.shape[1]))
+    np.add.at(per_bin, bins, log_e)
+    joint = per_bin + log_share
+    norm = np.logaddexp.reduce(joint, axis=1)
+    return np.exp(joint - norm[:, None])[bins], float(norm.sum())
+
+
+def _jacobian(r: Readings, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (theta - bearing) and d bearing / d x (N, 2) at place x."""
+    dx, dy = x[0] - r.east, x[1] - r.north
+    r2 = np.maximum(dx * dx + dy * dy, 1e-6)
+    resid = (r.theta - np.arctan2(dy, dx) + np.pi) % (2.0 * np.pi) - np.pi
+    return resid, np.column_stack([-dy / r2, dx / r2])
+
+
+def _reach(r: Readings) -> tuple[np.ndarray, float]:
+    """The radio-range prior's centre (the antennas' centroid) and its information (1 / its scale^2)."""
+    centre = np.array([r.east.mean(), r.north.mean()])
+    spread = float(np.max(np.hypot(r.east - centre[0], r.north - centre[1])))
+    return centre, 1.0 / max(_REACH_MIN_M, _REACH_FACTOR * spread) ** 2
+
+
+def _gauss_newton(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """x moved to raise the weighted bearings' likelihood under the radio-range prior, a few steps (unchanged when
+    they cannot fix it)."""
+    centre, prior = _reach(r)
+    for _ in range(_GN_STEPS):
+        resid, jac = _jacobian(r, x)
+        a = w / (scale * r.sigma) ** 2
+        info = (jac * a[:, None]).T @ jac + prior * np.eye(2)
+        grad = jac.T @ (a * resid) + prior * (centre - x)
+        try:
+            step = np.linalg.solve(info, grad)
+        except np.linalg.LinAlgError:
+            return x
+        if not np.all(np.isfinite(step)):
+            return x
+        x = x + step
+    return x
+
+
+def _covariance(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """The Laplace covariance of a place from the readings it explains and the radio-range prior (the inverse of
+    their information)."""
+    _, jac = _jacobian(r, x)
+    info = (jac * (w / (scale * r.sigma) ** 2)[:, None]).T @ jac + _reach(r)[1] * np.eye(2)
+    try:
+        return np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return np.full((2, 2), np.inf)

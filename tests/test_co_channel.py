@@ -1,0 +1,109 @@
+"""Counting the transmitters on one frequency (engine/inference/co_channel.py) on readings made here: transmitters
+taking turns are counted and placed, a reflection's interleaved ghost is not a transmitter, one transmitter's
+readings cost one fit, and what the bearings cannot tell stays one, with its probability near a half."""
+import math
+
+import numpy as np
+import pytest
+
+from aoa_localizer.engine.inference.co_channel import Readings, count_transmitters
+
+SIGMA = math.radians(2.0)
+PLACES = np.array([[1200.0, 800.0], [500.0, 1300.0], [1600.0, 1500.0]])
+
+
+def readings(sources: np.ndarray, rng: np.random.Generator, every_s: float = 1.0) -> Readings:
+    """A drive around the places (a 2 km square's edge), a reading every `every_s` from the place `sources` says."""
+    n = len(sources)
+    t = np.arange(n) * every_s
+    s = np.linspace(0.0, 8000.0, n) % 8000.0
+    side, along = (s // 2000).astype(int), s % 2000
+    east = np.choose(side, [along, np.full(n, 2000.0), 2000.0 - along, np.zeros(n)])
+    north = np.choose(side, [np.zeros(n), along, np.full(n, 2000.0), 2000.0 - along])
+    target = PLACES[sources]
+    theta = np.arctan2(target[:, 1] - north, target[:, 0] - east) + SIGMA * rng.standard_normal(n)
+    return Readings(t, east, north, theta, np.full(n, SIGMA), np.full(n, 80.0))
+
+
+def bursts(n: int, places: int, rng: np.random.Generator, length: int = 12) -> np.ndarray:
+    """Which place each of n readings comes from: turns of `length` readings, each a random place."""
+    return np.repeat(rng.integers(0, places, n // length + 1), length)[:n]
+
+
+def starts(r: Readings):
+    return lambda scale: [PLACES[0] + 50.0, PLACES[1] - 50.0, PLACES[2] + 30.0]
+
+
+@pytest.mark.slow
+def test_two_transmitters_taking_turns_are_counted_and_each_placed():
+    rng = np.random.default_rng(1)
+    r = readings(bursts(300, 2, rng), rng)
+    count = count_transmitters(r, PLACES[0] + 80.0, starts(r), 3)
+    assert count is not None and count.count == 2 and count.probability > 0.99 and not count.ghosts
+    found = sorted((t.mean for t in count.transmitters), key=lambda p: p[0])
+    for place, truth in zip(found, [PLACES[1], PLACES[0]], strict=True):
+        assert np.hypot(*(place - truth)) < 20.0
+    assert sum(t.share for t in count.transmitters) == pytest.approx(1.0, abs=0.02)
+
+
+@pytest.mark.slow
+def test_a_ghost_interleaved_with_its_transmitter_is_not_a_second_transmitter():
+    rng = np.random.default_rng(2)
+    r = readings((rng.random(300) < 0.25).astype(int), rng)  # a quarter of the readings, one by one
+    count = count_transmitters(r, PLACES[0], starts(r), 3)
+    assert count is not None and count.count == 1 and not count.transmitters
+    assert len(count.ghosts) == 1 and np.hypot(*(count.ghosts[0].mean - PLACES[1])) < 30.0
+    assert count.ghosts[0].share == pytest.approx(0.25, abs=0.05)
+
+
+def test_one_transmitter_is_one_fit_and_a_sure_one():
+    rng = np.random.default_rng(3)
+    r = readings(np.zeros(400, int), rng)
+    asked = []
+    count = count_transmitters(r, PLACES[0] + 100.0, lambda scale: asked.append(1) or [], 3)
+    assert count is not None and count.count == 1 and count.probability == 1.0 and not asked  # no modes sought
+
+
+@pytest.mark.slow
+def test_with_one_reading_per_bin_turns_and_interleaving_cannot_be_told_apart():
+    rng = np.random.default_rng(4)
+    r = readings(bursts(200, 2, rng, length=4), rng, every_s=3.0)  # readings 3 s apart: every bin holds one
+    count = count_transmitters(r, PLACES[0], starts(r), 3)
+    assert count is not None and count.count == 1 and count.probability == pytest.approx(0.5, abs=0.05)
+    assert count.probabilities[2] == pytest.approx(0.5, abs=0.05) and count.ghosts
+
+
+@pytest.mark.slow
+def test_more_transmitters_than_allowed_are_said():
+    rng = np.random.default_rng(5)
+    r = readings(bursts(450, 3, rng), rng)
+    count = count_transmitters(r, PLACES[0], starts(r), 2)
+    assert count is not None and count.count == 2 and count.more_than_allowed
+    assert count_transmitters(r, PLACES[0], starts(r), 3).count == 3
+
+
+def test_too_few_readings_are_not_counted():
+    rng = np.random.default_rng(6)
+    assert count_transmitters(readings(np.zeros(9, int), rng), PLACES[0], lambda scale: [], 3) is None
+
+
+@pytest.mark.slow
+def test_a_drive_hearing_two_transmitters_in_turns_gives_both_through_the_api():
+    """End to end (Localizer.run): a robustness-cell drive on which a second transmitter 700 m away takes half the
+    air time in 5-30 s bursts; the final estimate counts two, places each near its truth, and warns."""
+    from dataclasses import replace
+
+    from aoa_localizer import Localizer, LocalizerConfig
+    from aoa_localizer.simulation.scenarios import robustness_cells, simulate
+
+    sc = replace(robustness_cells()["wild0"], co_channel=((600.0, 1300.0),), co_shares=(0.5, 0.5))
+    data = simulate(sc, 1)
+    final = [e for e in Localizer(LocalizerConfig(seed=1)).run(data.inputs()) if e is not None][-1]
+    assert final.transmitter_count == 2 and final.count_probability > 0.99
+    for t in final.transmitters:
+        assert min(np.hypot(t.east - x, t.north - y) for x, y in data.transmitters_enu) < 25.0
+    assert {round(t.share, 1) for t in final.transmitters} <= {0.4, 0.5, 0.6}
+    assert any(w.startswith("2 transmitters on this frequency") for w in final.warnings)
+    one = [e for e in Localizer(LocalizerConfig(seed=1, max_emitters_per_channel=1)).run(
+        simulate(sc, 1).inputs()) if e is not None][-1]
+    assert one.transmitter_count == 1 and math.isnan(one.count_probability)  # 1: never counted
