@@ -107,3 +107,25 @@ def test_a_drive_hearing_two_transmitters_in_turns_gives_both_through_the_api():
     one = [e for e in Localizer(LocalizerConfig(seed=1, max_emitters_per_channel=1)).run(
         simulate(sc, 1).inputs()) if e is not None][-1]
     assert one.transmitter_count == 1 and math.isnan(one.count_probability)  # 1: never counted
+
+
+@pytest.mark.slow
+def test_simulate_puts_a_second_transmitter_on_the_frequency_and_says_the_count(cli):
+    from aoa_localizer.tools.simulate import main
+
+    res = cli(main, "--co-channel", "600,1300")
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "transmitters on the frequency: 2 counted" in res.stdout and "transmitter 2: E" in res.stdout
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--co-channel", "600"], "a place is EAST_M,NORTH_M"),
+    (["--co-channel", "600,1300", "--co-shares", "1"], "--co-shares needs 2 positive shares"),
+    (["--co-channel", "600,1300", "--mount-offset-deg", "30"], "azimuths from true north"),
+    (["--co-channel", "600,1300", "--emitters", "433e6,1200,800"], "one vehicle and one frequency"),
+])
+def test_simulate_refuses_a_co_channel_it_cannot_make(cli, args, words):
+    from aoa_localizer.tools.simulate import main
+
+    res = cli(main, *args)
+    assert res.returncode == 2 and words in res.stderr

@@ -7,6 +7,11 @@ repeats exactly. Exit 0 when the final error is within 5x the scenario's Cramer-
 each) run every station and emitter through one localizer and print each channel's estimate and error; exit 0
 when every emitter has an estimate whose error is inside 3 times its 95 % ellipse.
 
+`--co-channel E,N ...` puts more transmitters on the emitter's frequency (ENU places, m), taking turns in push-to-talk
+bursts of 5-30 s (`--interleaved`: reading by reading, as a reflection's ghost comes) with equal air time (or
+`--co-shares`); it prints the count of transmitters and each one's error, and exits 0 when the count is right
+and each is inside 3 times its 95 % ellipse (interleaved: when the count is one).
+
 `--mount-offset-deg DEG` records the azimuths from the vehicle's forward axis, as an array mounted with its zero DEG
 clockwise from that axis measures them, and sets the localizer to read them so (bearing_reference vehicle,
 heading_source track, mount_offset_deg DEG); a -p for one of those wins, e.g. -p mount_offset_deg=0 shows what a
@@ -17,6 +22,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -41,6 +47,17 @@ def emitter_value(text: str) -> tuple[float, tuple[float, float]]:
     if not (f > 0 and math.isfinite(f) and math.isfinite(e) and math.isfinite(n)):
         raise argparse.ArgumentTypeError(f"an emitter needs a frequency > 0 and a finite place, got {text!r}")
     return f, (e, n)
+
+
+def place_value(text: str) -> tuple[float, float]:
+    """argparse type of --co-channel E,N: a finite ENU place (m)."""
+    try:
+        e, n = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a place is EAST_M,NORTH_M, got {text!r}") from None
+    if not (math.isfinite(e) and math.isfinite(n)):
+        raise argparse.ArgumentTypeError(f"a place needs finite numbers, got {text!r}")
+    return e, n
 
 
 def finite_degrees(text: str) -> float:
@@ -71,13 +88,29 @@ def main(argv=None) -> int:
     parser.add_argument("--mount-offset-deg", type=finite_degrees, metavar="DEG",
                         help="azimuths from the vehicle's forward axis, the array's zero DEG clockwise from it "
                         "(unset: from true north); the localizer is set to match unless -p says otherwise")
+    parser.add_argument("--co-channel", nargs="+", type=place_value, metavar="E,N", default=[],
+                        help="more transmitters on the emitter's frequency (ENU m), taking turns")
+    parser.add_argument("--co-shares", nargs="+", type=float, metavar="SHARE",
+                        help="air-time shares of the emitter and each --co-channel transmitter (default: equal)")
+    parser.add_argument("--interleaved", action="store_true",
+                        help="--co-channel transmitters interleaved reading by reading, not in bursts")
     parser.add_argument("--write-bag", metavar="DIR", help="also write the simulated run as a rosbag2 MCAP bag")
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
     if args.scenario in FLEETS or args.emitters:
+        if args.co_channel:
+            parser.error("--co-channel is for one vehicle and one frequency (not with --emitters or pair)")
         return run_fleet(args)
-    data = simulate(mounted(SCENARIOS[args.scenario], args.mount_offset_deg), args.data_seed)
+    if args.co_channel and args.mount_offset_deg is not None:
+        parser.error("--co-channel transmitters are simulated with azimuths from true north (no --mount-offset-deg)")
+    shares = tuple(args.co_shares or ())
+    if shares and (len(shares) != 1 + len(args.co_channel) or not all(v > 0 and math.isfinite(v) for v in shares)):
+        parser.error(f"--co-shares needs {1 + len(args.co_channel)} positive shares (the emitter's, then each "
+                     "--co-channel transmitter's)")
+    scenario = replace(mounted(SCENARIOS[args.scenario], args.mount_offset_deg), co_channel=tuple(args.co_channel),
+                       co_shares=shares, bursts_s=None if args.interleaved else (5.0, 30.0))
+    data = simulate(scenario, args.data_seed)
     try:
         cfg = config_from_args(args, receiver_config(args.mount_offset_deg))
         if cfg.seed is None:  # no seed given: the benchmark's pairing, a reproducible demo
@@ -110,7 +143,27 @@ def main(argv=None) -> int:
           f"{', '.join(f'{k} {v}' for k, v in sorted(loc.rejected.items())) or 'none'}")
     for line in loc.robustness_lines():
         print(line)
+    if args.co_channel:
+        return co_channel_verdict(data, est, args.interleaved)
     ok = s["error"] <= 5 * s["crlb"] + 1.0 and math.isfinite(s["error"])
+    return 0 if ok else 1
+
+
+def co_channel_verdict(data, est, interleaved: bool) -> int:
+    """The count of transmitters and each one's error against the nearest truth; 0 when the count is right (one
+    when interleaved) and each is inside 3 times its 95 % ellipse."""
+    truths = data.transmitters_enu
+    expected = 1 if interleaved else len(truths)
+    print(f"transmitters on the frequency: {est.transmitter_count} counted (p = {est.count_probability:.2f}), "
+          f"{len(truths)} on the air{' interleaved' if interleaved else ''}")
+    ok = est.transmitter_count == expected
+    for k, t in enumerate(est.transmitters, start=1):
+        error = min((np.array([t.east, t.north]) - truth for truth in truths), key=lambda d: float(np.hypot(*d)))
+        inside = inside_ellipse(error, t.cov, 9 * ELLIPSE_95)
+        ok = ok and inside
+        print(f"transmitter {k}: E {t.east:.1f} N {t.north:.1f}, share {100 * t.share:.0f} %, 95% ellipse "
+              f"semi-major {ellipse_axes(t.cov)[0]:.1f} m, error {float(np.hypot(*error)):.2f} m to the nearest "
+              f"truth, {t.state}")
     return 0 if ok else 1
 
 
