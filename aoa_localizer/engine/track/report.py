@@ -156,7 +156,8 @@ def co_channel(count: Count, antennas: np.ndarray, max_k: int) -> tuple[list[tup
     if count.count >= 2:
         places = ", ".join(f"E {p.mean[0]:.0f} N {p.mean[1]:.0f} ({100 * p.share:.0f} %)" for p in count.transmitters)
         warnings.append(f"{count.count} transmitters on this frequency (p = {count.probability:.2f}), taking turns: "
-                        f"{places}; each is in `transmitters`, this estimate is the track's")
+                        f"{places}; each is in `transmitters`, this estimate is the track's (a reflection heard "
+                        "alone while the direct path was blocked looks the same)")
     for ghost in count.ghosts:
         where = f"a second place, E {ghost.mean[0]:.0f} N {ghost.mean[1]:.0f}, explains {100 * ghost.share:.0f} %"
         if count.probabilities.get(2, 0.0) >= 1.0 - _COUNT_SURE:  # the turns and the interleaving fit alike
