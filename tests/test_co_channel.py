@@ -129,3 +129,29 @@ def test_simulate_refuses_a_co_channel_it_cannot_make(cli, args, words):
 
     res = cli(main, *args)
     assert res.returncode == 2 and words in res.stderr
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_two_transmitters_in_a_bag_are_counted_by_the_live_node_and_reported_by_the_launcher(tmp_path, domain, cli):
+    """Through the graph: a simulated drive with a second transmitter taking turns, written to a bag and replayed
+    into the node; emitter/channels (the launcher's --result) counts two, each near its truth."""
+    import json
+
+    from test_ros_graph import launch
+
+    from aoa_localizer.engine.geodesy import LocalFrame
+    from aoa_localizer.simulation.scenarios import DATUM
+    from aoa_localizer.tools.simulate import main
+
+    bag = tmp_path / "bag"
+    made = cli(main, "--co-channel", "600,1300", "--write-bag", bag)
+    assert made.returncode == 0, made.stdout + made.stderr
+    res = launch(["--bag", bag, "--rate", 25, "--seed", 1, "--domain-id", domain, "--result", tmp_path / "r.json"])
+    assert "2 transmitters on its frequency" in res.stdout, res.stdout + res.stderr
+    entry = json.loads((tmp_path / "r.json").read_text())["channels"]["default"]
+    assert entry["transmitter_count"] == 2 and entry["count_probability"] > 0.99
+    frame = LocalFrame(*DATUM)
+    for t in entry["transmitters"]:
+        east, north = frame.to_enu(t["lat"], t["lon"])
+        assert min(math.hypot(east - x, north - y) for x, y in [(1200.0, 800.0), (600.0, 1300.0)]) < 25.0

@@ -249,6 +249,7 @@ class Monitor:
         self.T, self.latched = T, latched
         self.channel_poses: dict[str, Any] = {}
         self.channel_truths: dict[str, Any] = {}
+        self.summary: dict[str, dict] = {}  # the latest emitter/channels: each channel's entry
         self.node.create_subscription(T.String, "emitter/channels", self._on_channels, latched)
         self.diagnostics_seen = 0
         self.crowded = ""  # the node's first input_publishers warning: another source on its inputs
@@ -267,7 +268,8 @@ class Monitor:
                 self.recorder.poll()
 
     def _on_channels(self, msg) -> None:
-        for channel in json.loads(msg.data).get("channels", {}):
+        self.summary = json.loads(msg.data).get("channels", {})
+        for channel in self.summary:
             if channel in self.channel_poses or channel == "default":
                 continue
             self.channel_poses[channel] = None
@@ -295,6 +297,12 @@ class Monitor:
                 inside = "inside" if crlb_nees(err, np.array(cov)) <= ELLIPSE_95 else "outside"
                 line += f"; error against its truth {float(np.hypot(*err)):.2f} m ({inside} its ellipse)"
             lines.append(line)
+        for channel, entry in sorted(self.summary.items()):
+            if entry.get("transmitter_count", 1) >= 2:
+                places = "; ".join(f"E {t['east']:.1f} N {t['north']:.1f} ({100 * t['share']:.0f} %, {t['state']})"
+                                   for t in entry["transmitters"])
+                lines.append(f"channel {channel}: {entry['transmitter_count']} transmitters on its frequency "
+                             f"(p = {entry['count_probability']:.2f}): {places}")
         return lines
 
     def _on_diagnostics(self, msg) -> None:
@@ -429,7 +437,8 @@ def parse_args(argv) -> argparse.Namespace:
                         help="wall seconds before giving up")
     parser.add_argument("--max-ellipse", type=finite_number(0.0, low_open=True), default=50.0, metavar="M",
                         help="widest 95 %% ellipse (m) called converged")
-    parser.add_argument("--result", type=Path, metavar="FILE", help="write the final estimate and verdict as JSON")
+    parser.add_argument("--result", type=Path, metavar="FILE",
+                        help="write the final estimate, the verdict and every channel (emitter/channels) as JSON")
     parser.add_argument("--keep-logs", action="store_true",
                         help="keep the processes' logs after a converged run too (a run that did not converge, or "
                              "was stopped, always keeps them)")
@@ -575,7 +584,8 @@ class Run:
         for line in monitor.channel_lines():  # the verdict is the primary channel's; every channel is reported
             print(line)
         if args.result:
-            args.result.write_text(json.dumps({"converged": ok, "reason": why, **figures}, indent=1))
+            args.result.write_text(json.dumps({"converged": ok, "reason": why, **figures,
+                                               "channels": monitor.summary}, indent=1))
         return 0 if ok else 1
 
     def watch(self, node: Child, source: Child) -> str | None:
