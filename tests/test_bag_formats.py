@@ -180,6 +180,7 @@ def test_a_bag_of_thousands_of_topics_is_described_in_a_line_of_its_busiest():
     assert describe_topics(topics[:2]) == "/t1 (std_msgs/msg/String, 1 messages), /t0 (std_msgs/msg/String, 0 messages)"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
 def test_each_storage_file_is_opened_once_and_closed_with_the_bag(tmp_path, data, storage, monkeypatch):
     """Issue 51, item 13: rosbags parsed every topic's QoS and message definition twice (once for the topics, once

@@ -70,6 +70,7 @@ def test_a_start_from_a_mode_by_the_road_does_not_hold_the_filter_there():
     assert res.scores["inside95"], res.scores
 
 
+@pytest.mark.slow
 def test_the_provisional_sample_is_made_in_the_start_searchs_pieces(monkeypatch):
     """`wild20` seed 1: the first search whose best mode is not determined draws the provisional sample (max(N, 2000)
     weighted draws) in its last pieces, over the points it searched, the same to the bit as the search made whole;
