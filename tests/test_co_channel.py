@@ -149,8 +149,13 @@ def test_two_transmitters_in_a_bag_are_counted_by_the_live_node_and_reported_by_
     assert made.returncode == 0, made.stdout + made.stderr
     res = launch(["--bag", bag, "--rate", 25, "--seed", 1, "--domain-id", domain, "--result", tmp_path / "r.json"])
     assert "2 transmitters on its frequency" in res.stdout, res.stdout + res.stderr
-    entry = json.loads((tmp_path / "r.json").read_text())["channels"]["default"]
+    result = json.loads((tmp_path / "r.json").read_text())
+    entry = result["channels"]["default"]
     assert entry["transmitter_count"] == 2 and entry["count_probability"] > 0.99
+    poses = result["transmitter_poses"]  # each on emitter/transmitter_<k>/pose, where the summary puts it
+    assert set(poses) == {"emitter/transmitter_1/pose", "emitter/transmitter_2/pose"}
+    for k, t in enumerate(entry["transmitters"], start=1):
+        assert poses[f"emitter/transmitter_{k}/pose"] == pytest.approx([t["east"], t["north"]], abs=0.01)
     frame = LocalFrame(*DATUM)
     for t in entry["transmitters"]:
         east, north = frame.to_enu(t["lat"], t["lon"])

@@ -130,7 +130,7 @@ def test_the_nodes_help_names_every_output():
 
     text = usage()
     for topic in ("emitter/pose", "emitter/fix", "emitter/posterior", "emitter/next_goal", "emitter/datum",
-                  "emitter/channels", "/diagnostics", "cot_url"):
+                  "emitter/channels", "transmitter_<k>/pose", "/diagnostics", "cot_url"):
         assert topic in text, topic
 
 

@@ -250,6 +250,7 @@ class Monitor:
         self.channel_poses: dict[str, Any] = {}
         self.channel_truths: dict[str, Any] = {}
         self.summary: dict[str, dict] = {}  # the latest emitter/channels: each channel's entry
+        self.transmitter_poses: dict[str, Any] = {}  # topic: the latest pose of a co-channel transmitter
         self.node.create_subscription(T.String, "emitter/channels", self._on_channels, latched)
         self.diagnostics_seen = 0
         self.crowded = ""  # the node's first input_publishers warning: another source on its inputs
@@ -269,6 +270,14 @@ class Monitor:
 
     def _on_channels(self, msg) -> None:
         self.summary = json.loads(msg.data).get("channels", {})
+        for entry in self.summary.values():
+            for k in range(1, len(entry.get("transmitters", [])) + 1):
+                topic = f"{entry['topics']}transmitter_{k}/pose"
+                if topic not in self.transmitter_poses:
+                    self.transmitter_poses[topic] = None
+                    self.node.create_subscription(self.T.PoseWithCovarianceStamped, topic,
+                                                  functools.partial(self.transmitter_poses.__setitem__, topic),
+                                                  self.latched)
         for channel in self.summary:
             if channel in self.channel_poses or channel == "default":
                 continue
@@ -584,8 +593,10 @@ class Run:
         for line in monitor.channel_lines():  # the verdict is the primary channel's; every channel is reported
             print(line)
         if args.result:
+            poses = {topic: None if pose is None else [pose.pose.pose.position.x, pose.pose.pose.position.y]
+                     for topic, pose in monitor.transmitter_poses.items()}
             args.result.write_text(json.dumps({"converged": ok, "reason": why, **figures,
-                                               "channels": monitor.summary}, indent=1))
+                                               "channels": monitor.summary, "transmitter_poses": poses}, indent=1))
         return 0 if ok else 1
 
     def watch(self, node: Child, source: Child) -> str | None:

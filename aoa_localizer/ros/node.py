@@ -5,7 +5,8 @@
 Inputs `gps/fix`, `df/bearing` (sensor-data QoS: reliable and best-effort publishers both connect), or
 `NAME/gps/fix`, `NAME/df/bearing` per station of `stations`; outputs `emitter/pose` (latched), `emitter/fix`,
 `emitter/particles`, `emitter/markers`, `emitter/posterior` (while listened to), `emitter/next_goal` and its marker,
-the same under `emitter/<channel>/` per frequency channel, the latched summary `emitter/channels`, the latched
+the same under `emitter/<channel>/` per frequency channel (and `transmitter_<k>/pose` for each of several
+transmitters sharing it), the latched summary `emitter/channels`, the latched
 `emitter/datum`, `/diagnostics` at 1 Hz, and Cursor-on-Target to TAK with `cot_url`; services `~/reset` and
 `~/reset_datum`. Every
 LocalizerConfig field is a parameter (a filter's own settings as `<filter>.*`); a changed parameter restarts the

@@ -6,7 +6,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 from typing import Any
 
@@ -53,6 +53,7 @@ class NodeOutputs:
         self._grid_turn = 0  # the listened channel the next round of grids starts with
         self._grid_sent: dict[str, float] = {}  # per channel: when its grid last went out (monotonic s)
         self.datum_sent: Any = None  # the LocalFrame last published on emitter/datum
+        self.transmitter_pubs: dict[tuple[str, int], Any] = {}  # (channel, k): its k-th transmitter's pose
 
     def _channel_publishers(self, prefix: str) -> SimpleNamespace:
         """pose (latched), fix, particles and markers under `prefix` (emitter/ or emitter/<channel>/). A frequency
@@ -77,6 +78,7 @@ class NodeOutputs:
         if pubs is None:
             pubs = self.channel_pubs[est.channel] = self._channel_publishers(f"emitter/{est.channel}/")
         self._publish_on(loc, pubs, est, marker_rays)
+        self._transmitters(est)
         if est.channel != DEFAULT and getattr(loc.channels.primary(), "id", None) == est.channel:
             self._publish_on(loc, self.channel_pubs[DEFAULT], est, marker_rays)  # emitter/ carries the primary
 
@@ -92,6 +94,18 @@ class NodeOutputs:
             rays = loc.recent_points(marker_rays, est.channel)[:, :3]
             ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
             pubs.markers.publish(build.markers(T, est, rays, ring, frame))
+
+    def _transmitters(self, est):
+        """Each transmitter of a channel several share (co-channel), on `emitter/<channel>/transmitter_<k>/pose`
+        (`emitter/transmitter_<k>/pose` for the default channel; latched; k from 1, the most heard first)."""
+        prefix = "emitter/" if est.channel == DEFAULT else f"emitter/{est.channel}/"
+        for k, t in enumerate(est.transmitters, start=1):
+            pub = self.transmitter_pubs.get((est.channel, k))
+            if pub is None:
+                pub = self.transmitter_pubs[(est.channel, k)] = self.node.create_publisher(
+                    self.types.PoseWithCovarianceStamped, f"{prefix}transmitter_{k}/pose", LATCHED)
+            place = replace(est, east=t.east, north=t.north, lat=t.lat, lon=t.lon, cov=t.cov, transmitters=[])
+            pub.publish(build.emitter_pose(self.types, place, self.map_frame))
 
     def posteriors(self, loc: Localizer, budget_s: float, period_s: float) -> PosteriorWork:
         """Each channel's posterior grid on its emitter/<channel>/posterior, and the primary channel's on
