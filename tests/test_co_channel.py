@@ -160,3 +160,19 @@ def test_two_transmitters_in_a_bag_are_counted_by_the_live_node_and_reported_by_
     for t in entry["transmitters"]:
         east, north = frame.to_enu(t["lat"], t["lon"])
         assert min(math.hypot(east - x, north - y) for x, y in [(1200.0, 800.0), (600.0, 1300.0)]) < 25.0
+
+
+@pytest.mark.slow
+def test_the_sample_co_channel_bag_replays_offline_to_two_transmitters(tmp_path, cli):
+    import json
+    from pathlib import Path
+
+    from aoa_localizer.tools.replay import main
+
+    bag = Path(__file__).resolve().parent.parent / "bags" / "co_channel"
+    res = cli(main, bag, "--offline", "--output", tmp_path / "out.jsonl", "--seed", "1")
+    assert res.returncode == 0, res.stderr
+    last = json.loads((tmp_path / "out.jsonl").read_text().splitlines()[-1])
+    assert last["transmitter_count"] == 2 and len(last["transmitters"]) == 2
+    assert "2 transmitters on this frequency" in res.stdout + res.stderr
+    assert "the transmitter nearest the bag's truth" in res.stdout + res.stderr

@@ -48,6 +48,15 @@ def _estimate_lines(loc: Localizer, est, truth, datum) -> list[str]:
     if truth is not None and datum is not None:
         lines.append(f"error against the bag's truth (E {truth[1]:.1f} m, N {truth[2]:.1f} m, same frame): "
                      f"{math.hypot(e - truth[1], n - truth[2]):.2f} m")
+    if est.transmitters:
+        frame = LocalFrame(*datum) if truth is not None and datum is not None else loc.datum_frame()
+        places = [(frame.to_enu(t.lat, t.lon), t) for t in est.transmitters]
+        lines.append(f"{est.transmitter_count} transmitters on this frequency (p = {est.count_probability:.2f}): "
+                     + "; ".join(f"E {te:.1f} m, N {tn:.1f} m ({100 * t.share:.0f} %, {t.state})"
+                                 for (te, tn), t in places))
+        if truth is not None and datum is not None:
+            nearest = min(math.hypot(te - truth[1], tn - truth[2]) for (te, tn), _ in places)
+            lines.append(f"the transmitter nearest the bag's truth: {nearest:.2f} m from it")
     return lines
 
 
