@@ -176,3 +176,32 @@ def test_the_sample_co_channel_bag_replays_offline_to_two_transmitters(tmp_path,
     assert last["transmitter_count"] == 2 and len(last["transmitters"]) == 2
     assert "2 transmitters on this frequency" in res.stdout + res.stderr
     assert "the transmitter nearest the bag's truth" in res.stdout + res.stderr
+
+
+@pytest.mark.slow
+def test_a_channel_keeps_a_bounded_share_of_what_it_heard_for_the_count(monkeypatch):
+    """The count reads the newest HEARD_READINGS readings (whole points), so a long run's memory stays flat; it is
+    made again as those grow, not only when everything heard doubled."""
+    from aoa_localizer import Localizer, LocalizerConfig
+    from aoa_localizer.engine.track import emitter_track
+    from aoa_localizer.simulation.scenarios import simulate
+
+    monkeypatch.setattr(emitter_track, "HEARD_READINGS", 100)
+    loc = Localizer(LocalizerConfig(seed=1))
+    track = loc.channels.default.track
+    at: list[int] = []
+    real = emitter_track.count_transmitters
+
+    def counted(r, *args):
+        at.append(track.heard_readings)
+        return real(r, *args)
+
+    monkeypatch.setattr(emitter_track, "count_transmitters", counted)
+    for _ in loc.run(simulate("seed", 1).inputs()):
+        pass
+    assert track.heard_readings == 300 and 95 <= track.heard_held <= 100  # points of 5 readings
+    assert sum(len(g) for g in track.heard) == track.heard_held
+    assert track.counted is not None and track.counted.count == 1
+    steps = np.diff(at)
+    # the first once the track has an estimate, then every 100 readings (not only when they doubled), and the last
+    assert at[-1] == 300 and len(at) >= 3 and all(s <= 100 + 5 for s in steps), at

@@ -34,7 +34,7 @@ from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
 from aoa_localizer.engine.track.calibrator import Recalibration
-from aoa_localizer.engine.track.held import Held
+from aoa_localizer.engine.track.held import HEARD_READINGS, Held
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
 from aoa_localizer.engine.track.state import PendingJob, Phase, Status, WindowEntry
 from aoa_localizer.engine.track.supervisor import CheckVerdict, Moved, Supervisor, Watch
@@ -74,6 +74,9 @@ class EmitterTrack(Held):
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         self.heard.append(readings)
         self.heard_readings += len(readings)
+        self.heard_held += len(readings)
+        while self.heard_held > HEARD_READINGS and len(self.heard) > 1:
+            self.heard_held -= len(self.heard.popleft())
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
@@ -382,11 +385,13 @@ class EmitterTrack(Held):
 
     def count_transmitters(self, final: bool = False) -> Count | None:
         """How many transmitters the channel's bearings come from (co_channel.py), counted again when the readings
-        heard doubled since the last count (the end of data: `final`, whenever they grew); None before
-        COUNT_MIN_READINGS, with `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
+        heard doubled since the last count or grew by HEARD_READINGS (so a long run's newest are counted), and at
+        the end of data (`final`) whenever they grew; None before COUNT_MIN_READINGS, with
+        `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
         cfg, c = self.cfg, self.calibration
         grown = self.heard_readings > self.counted_readings
-        due = grown and (final or self.heard_readings >= _COUNT_GROWTH * self.counted_readings)
+        due = grown and (final or self.heard_readings >= min(_COUNT_GROWTH * self.counted_readings,
+                                                              self.counted_readings + HEARD_READINGS))
         if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < COUNT_MIN_READINGS or not due
                 or not self.estimating):
             return self.counted

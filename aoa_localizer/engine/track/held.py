@@ -30,7 +30,7 @@ from aoa_localizer.filters.base import ParticleFilter
 # its ray under 3 % of its mass)
 _REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
 _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
-HEARD_POINTS = 2000  # the newest points whose readings the transmitter count looks at (a few MB at most)
+HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter count looks at: about 1 MB a channel
 
 
 class Held:
@@ -61,8 +61,9 @@ class Held:
         # Every point's readings as heard (the transmitter count's: the window drops points when the emitter moved,
         # which is what transmitters taking turns look like), their number, and the last count with the readings
         # it was made from
-        self.heard: deque[list[Reading]] = deque(maxlen=HEARD_POINTS)
-        self.heard_readings = 0
+        self.heard: deque[list[Reading]] = deque()
+        self.heard_held = 0  # readings in `heard`
+        self.heard_readings = 0  # readings heard since the start
         self.counted: Count | None = None
         self.counted_readings = 0
 
