@@ -205,3 +205,19 @@ def test_a_channel_keeps_a_bounded_share_of_what_it_heard_for_the_count(monkeypa
     steps = np.diff(at)
     # the first once the track has an estimate, then every 100 readings (not only when they doubled), and the last
     assert at[-1] == 300 and len(at) >= 3 and all(s <= 100 + 5 for s in steps), at
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_simulated_vehicle_plays_co_channel_transmitters_into_the_node(tmp_path, domain):
+    """sim_vehicle's co_channel through the launcher: the node counts two; a co_channel it cannot play is refused."""
+    import json
+
+    from test_ros_graph import launch
+
+    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 1, "--domain-id", domain,
+                  "--vehicle-param", "co_channel=[600.0, 1300.0]", "--result", tmp_path / "r.json"])
+    entry = json.loads((tmp_path / "r.json").read_text())["channels"]["default"]
+    assert entry["transmitter_count"] == 2, res.stdout + res.stderr
+    bad = launch(["--scenario", "seed", "--domain-id", domain, "--vehicle-param", "co_channel=[600.0]"])
+    assert bad.returncode == 2 and "co_channel needs finite e, n pairs" in bad.stdout + bad.stderr

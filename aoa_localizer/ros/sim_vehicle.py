@@ -49,6 +49,10 @@ OVERRIDES = [
     ParameterSpec("emitters", None, Spec("transmitters instead of the scenario's one, as a flat list f0, e0, n0, f1, "
                                          "... (frequency Hz > 0, east and north m in map): each on its frequency, "
                                          "a channel each", list, optional=True)),
+    ParameterSpec("co_channel", None, Spec("more transmitters on the emitter's frequency, as a flat list e0, n0, e1, "
+                                           "n1, ... (m, map), taking turns with it in 5-30 s push-to-talk bursts "
+                                           "at equal air time (co-channel; azimuths from true north)", list,
+                                           optional=True)),
     ParameterSpec("speed", None, _number("vehicle speed (m/s)", low=0.0, low_open=True, high=100.0)),
     ParameterSpec("points", None, _number("observation points (stop-and-go); 0: drive without stopping", int,
                                           low=0, high=100_000)),
@@ -112,6 +116,11 @@ def scenario_from(name: str, o: dict):
         if len(flat) < 4 or len(flat) % 2:
             raise ValueError("track needs an even number of values (e, n pairs), at least two points")
         changes["track"] = tuple(zip(flat[::2], flat[1::2], strict=False))
+    if o.get("co_channel") is not None:
+        flat = [float(v) for v in o["co_channel"]]
+        if not flat or len(flat) % 2 or not all(math.isfinite(v) for v in flat):
+            raise ValueError("co_channel needs finite e, n pairs (e0, n0, e1, n1, ...)")
+        changes["co_channel"] = tuple(zip(flat[::2], flat[1::2], strict=False))
     for key in ("speed", "points", "readings_per_point", "wild_share", "gps_rate_hz", "gps_noise_m",
                 "gps_dropout_prob", "df_rate_hz"):
         if o.get(key) is not None:
@@ -183,6 +192,8 @@ class SimVehicle(Node):
             raise ConfigError(f"drive goal: one vehicle follows the goal; {self.scenario_name} has several stations")
         if overrides.get("emitters") is not None:
             raise ConfigError("drive goal: the goal is one emitter's; emitters gives several")
+        if overrides.get("co_channel") is not None:
+            raise ConfigError("drive goal: the goal is one transmitter's; co_channel puts more on its frequency")
         sc = mounted(scenario_from(self.scenario_name, overrides), overrides.get("mount_offset_deg"))
         if not sc.points:
             raise ConfigError(f"drive goal: {self.scenario_name} drives without stopping; goal driving is stop-and-go "
@@ -217,6 +228,9 @@ class SimVehicle(Node):
         `sigma_of` (each bearing's noise, for the pose encoding); returns the station names ("" for one vehicle)."""
         fleet = FLEETS.get(self.scenario_name)
         emitters, mount = overrides.pop("emitters", None), overrides.pop("mount_offset_deg", None)
+        if emitters is not None and overrides.get("co_channel") is not None:
+            raise ConfigError("co_channel puts more transmitters on one vehicle's one frequency; emitters gives each "
+                              "its own frequency: set one of them")
         if emitters is not None:
             stations = fleet.stations if fleet is not None else {"": scenario_from(self.scenario_name, overrides)}
             fleet, overrides = Fleet(stations, emitters_from(emitters)), {}
