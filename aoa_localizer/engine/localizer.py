@@ -548,7 +548,8 @@ class Localizer:
         count = track.count_transmitters(final=end_of_data)
         transmitters: list[Transmitter] = []
         if count is not None:
-            antennas = np.array([[g[0].east, g[0].north] for g in track.heard])
+            # the antennas only rate the transmitters' ellipses: a single transmitter (most channels) skips them
+            antennas = np.array([[g[0].east, g[0].north] for g in track.heard]) if count.transmitters else None
             places, said = co_channel(count, antennas, self.cfg.max_emitters_per_channel)
             warnings = warnings + said
             for place, place_state in places:

@@ -22,7 +22,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
+from aoa_localizer.engine.geodesy import wrap_pi
+from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes, radio_reach
 
 BIN_S = 2.0  # readings within one such bin of time are taken as one transmitter's (in turns)
 MIN_SHARE = 0.08  # a transmitter (or a ghost) explains at least this share of the readings
@@ -36,10 +37,6 @@ _QUALITY_BANDS = (55.0, 70.0, 85.0)  # the sigmas' scale is fitted per band of q
 _UNEXPLAINED_MIN = 6  # readings off the one place, from which a second start is sought
 _WILD_MADS = 2.5  # a reading this many robust sigmas off the one place is another transmitter's, or wild
 _START_APART_M = 30.0  # starts nearer than this to an earlier one are the same start
-# The places keep to the radio range of the antennas: a Gaussian prior at their centroid, this many times their
-# spread wide and at least _REACH_MIN_M (the engine's radio-range prior's scale), so a transmitter heard from one
-# side is not fitted at infinity along its rays
-_REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
 # One place that explains the readings without widening their sigmas more than this, whose wild readings do not
 # meet anywhere with another transmitter's share, is one transmitter (the other fits are skipped: a single
 # emitter's count costs one fit and one search of its wild readings); a wider one may be two read as one wide noise
@@ -49,13 +46,12 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 @dataclass(frozen=True)
 class Place:
-    """One transmitter (or ghost) of a fit: its place (east, north, m), Laplace covariance (m^2), the share of the
-    readings it explains and how many readings it holds (responsibility over a half)."""
+    """One transmitter (or ghost) of a fit: its place (east, north, m), Laplace covariance (m^2) and the share of
+    the readings it explains."""
 
     mean: np.ndarray
     cov: np.ndarray
     share: float
-    readings: int
 
 
 @dataclass(frozen=True)
@@ -65,7 +61,6 @@ class Fit:
     k: int
     in_turns: bool
     places: list[Place]
-    outlier_share: float
     scale: np.ndarray  # each reading's, from its quality band's
     offset: float  # rad, taken off every bearing
     loglik: float
@@ -163,7 +158,7 @@ def _bic_weights(bics: list[float]) -> np.ndarray:
 
 def _turned(r: Readings, offset: float) -> Readings:
     """The readings with `offset` taken off their bearings."""
-    return replace(r, theta=(r.theta - offset + np.pi) % (2.0 * np.pi) - np.pi) if offset else r
+    return replace(r, theta=wrap_pi(r.theta - offset)) if offset else r
 
 
 def _first_scale(r: Readings, x: np.ndarray, offset: float) -> np.ndarray:
@@ -236,10 +231,10 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
     log_in, log_e = _emissions(r, x, eps, scale)
     resp, loglik = _responsibilities(log_e, share, bins, in_turns)
     inlier = resp * np.exp(log_in - log_e)
-    out = [Place(x[j].copy(), _covariance(r, x[j], inlier[:, j], scale), float(resp[:, j].mean()),
-                 int((resp[:, j] > 0.5).sum())) for j in range(k)]
+    out = [Place(x[j].copy(), _covariance(r, x[j], inlier[:, j], scale), float(resp[:, j].mean()))
+           for j in range(k)]
     params = 2 * k + (k - 1) + 1 + len(np.unique(band))  # places, shares, the wild share, the scales
-    return Fit(k, in_turns, out, eps, scale, offset, loglik, -2.0 * loglik + params * math.log(len(r)))
+    return Fit(k, in_turns, out, scale, offset, loglik, -2.0 * loglik + params * math.log(len(r)))
 
 
 def _scale(r: Readings, x: np.ndarray, inlier: np.ndarray, band: np.ndarray) -> np.ndarray:
@@ -258,7 +253,7 @@ def _scale(r: Readings, x: np.ndarray, inlier: np.ndarray, band: np.ndarray) -> 
 def _emissions(r: Readings, x: np.ndarray, eps: float, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """log((1 - eps) N(residual; scale sigma)) and log of it plus the wild share's eps / 2 pi, (N, K)."""
     bearing = np.arctan2(x[None, :, 1] - r.north[:, None], x[None, :, 0] - r.east[:, None])
-    resid = (r.theta[:, None] - bearing + np.pi) % (2.0 * np.pi) - np.pi
+    resid = wrap_pi(r.theta[:, None] - bearing)
     s = (scale * r.sigma)[:, None]
     log_in = math.log1p(-eps) - 0.5 * (resid / s) ** 2 - np.log(s) - 0.5 * _LOG_2PI
     return log_in, np.logaddexp(log_in, math.log(eps) - _LOG_2PI)
@@ -284,15 +279,15 @@ def _jacobian(r: Readings, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Residuals (theta - bearing) and d bearing / d x (N, 2) at place x."""
     dx, dy = x[0] - r.east, x[1] - r.north
     r2 = np.maximum(dx * dx + dy * dy, 1e-6)
-    resid = (r.theta - np.arctan2(dy, dx) + np.pi) % (2.0 * np.pi) - np.pi
+    resid = wrap_pi(r.theta - np.arctan2(dy, dx))
     return resid, np.column_stack([-dy / r2, dx / r2])
 
 
 def _reach(r: Readings) -> tuple[np.ndarray, float]:
-    """The radio-range prior's centre (the antennas' centroid) and its information (1 / its scale^2)."""
-    centre = np.array([r.east.mean(), r.north.mean()])
-    spread = float(np.max(np.hypot(r.east - centre[0], r.north - centre[1])))
-    return centre, 1.0 / max(_REACH_MIN_M, _REACH_FACTOR * spread) ** 2
+    """The places keep to the antennas' radio range (global_search.radio_reach) as a Gaussian, so a transmitter
+    heard from one side is not fitted at infinity along its rays: its centre and its information (1 / scale^2)."""
+    east, north, scale = radio_reach(np.column_stack([r.east, r.north]))
+    return np.array([east, north]), 1.0 / scale**2
 
 
 def _gauss_newton(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import Snapshot
 from aoa_localizer.engine.inference.co_channel import Count
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
-from aoa_localizer.engine.inference.global_search import Mode, Points, Robust
+from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, radio_reach
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.ingest.point_batch import points_of, rows_of
@@ -25,10 +25,6 @@ from aoa_localizer.engine.track.supervisor import Supervisor
 from aoa_localizer.engine.types import EstimateState, Reading
 from aoa_localizer.filters.base import ParticleFilter
 
-# The radio-range prior's scale: this many times the antennas' spread, at least this many metres (a transmitter a
-# DF receiver hears is often kilometres away; at 100 m a short baseline's posterior kept an emitter 1.4 km out along
-# its ray under 3 % of its mass)
-_REACH_FACTOR, _REACH_MIN_M = 2.0, 1000.0
 _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
 HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter count looks at: about 1 MB a channel
 
@@ -155,14 +151,10 @@ class Held:
         return Robust(c.lik_outlier_prob, cfg.gps_sigma_m, grid=c.noise_prior(), reach=reach)
 
     def reach(self) -> tuple[float, float, float] | None:
-        """The radio-range prior of the points held (global_search.Robust.reach): centred on their antennas, its
-        scale twice their spread (at least _REACH_MIN_M)."""
+        """The radio-range prior of the points held (global_search.radio_reach); None before any."""
         if not self.window:
             return None
-        pos = np.array([[e.point.east, e.point.north] for e in self.window])
-        centre = pos.mean(axis=0)
-        spread = float(np.max(np.hypot(*(pos - centre).T)))
-        return float(centre[0]), float(centre[1]), max(_REACH_MIN_M, _REACH_FACTOR * spread)
+        return radio_reach(np.array([[e.point.east, e.point.north] for e in self.window]))
 
     # -- estimates ------------------------------------------------------------------------------------
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:

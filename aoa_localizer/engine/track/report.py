@@ -144,12 +144,15 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
 _COUNT_SURE = 0.9  # a count this probable: its transmitters may be `tracking`
 
 
-def co_channel(count: Count, antennas: np.ndarray, max_k: int) -> tuple[list[tuple[Place, EstimateState]], list[str]]:
+def co_channel(count: Count, antennas: np.ndarray | None, max_k: int
+               ) -> tuple[list[tuple[Place, EstimateState]], list[str]]:
     """The transmitters of a channel's count with their states (`tracking` when the count is sure and the place's
-    95 % ellipse is narrow for its range from the `antennas` (N, 2)), and the warnings the count makes: several
-    transmitters; a place whose bearings interleave with the estimate's; more transmitters than `max_k`."""
+    95 % ellipse is narrow for its range from the `antennas` (N, 2), given whenever there are transmitters), and
+    the warnings the count makes: several transmitters; a place whose bearings interleave with the estimate's; more
+    transmitters than `max_k`."""
     out, warnings = [], []
     for place in count.transmitters:
+        assert antennas is not None  # given whenever there are transmitters
         size, reach = ellipse_and_reach(place.mean, place.cov, antennas[:, 0], antennas[:, 1])
         sure = count.probability >= _COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
         out.append((place, EstimateState.TRACKING if sure else EstimateState.POORLY_DETERMINED))
