@@ -31,11 +31,11 @@ def __getattr__(name: str) -> Any:
     return value
 
 
-def _survey_model(records, receiver_class):
+def _survey_model(records, receiver_class, max_k):
     """The engine's end-of-data survey model (aoa_localizer.pooled), imported when first needed."""
     from aoa_localizer.pooled.end_of_data import solve
 
-    return solve(records, receiver_class)
+    return solve(records, receiver_class, max_k)
 
 
 install_solver(_survey_model)

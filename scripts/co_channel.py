@@ -1,17 +1,19 @@
 """Co-channel transmitters (issue 54), measured: the count, each transmitter's error against the CRLB of its own
 readings and its 95 % ellipse's coverage, a second transmitter reported where there is one, and the count's cost.
 
-    python scripts/co_channel.py [--runs 20] [--jobs 2]
+    python scripts/co_channel.py [--runs 20] [--jobs 2] [--cells "two 50/50,three 40/30/30"] [--no-cost]
 
 Cells on the robustness cells' drive (120 points 10 s apart, 3 readings each, quality U(40, 100), 1-8 deg linear
 in quality), the default configuration, run r on data seed r and filter seed 1000 + r:
 * `two 50/50`, `two 80/20`: a second transmitter on the frequency 300, 650 or 1000 m from the first (by run), in a
   direction that turns with the run; push-to-talk bursts of 5-30 s, air-time shares 50/50 or 80/20;
 * `two interleaved`: the same at 50/50, reading by reading (bearings alone cannot tell it from a reflection);
+* `three 40/30/30`: a second and a third transmitter, 300, 650 or 1000 m from the first (the third a step further
+  in that list), 120 deg apart around it, in bursts;
 * `one`, `wild 20 %`, `reflector 20 %`: one transmitter, clean, with 20 % wild bearings, with a reflection's ghost.
-Each transmitter of a count of two is matched to the nearer truth; its error is scored against the CRLB of the
-readings it sent (crlb_rmse). The cost rows run the public scenarios with `max_emitters_per_channel` 1 (never
-counted) and 3 (the default).
+Each transmitter of a right count is matched to a truth (the pairing of least total distance); its error is scored
+against the CRLB of the readings it sent (crlb_rmse). The cost rows run the public scenarios with
+`max_emitters_per_channel` 1 (never counted) and 3 (the default).
 """
 from __future__ import annotations
 
@@ -38,15 +40,19 @@ def cells() -> dict[str, Scenario]:
     base = robust["wild0"]
     return {"two 50/50": replace(base, co_shares=(0.5, 0.5)), "two 80/20": replace(base, co_shares=(0.8, 0.2)),
             "two interleaved": replace(base, co_shares=(0.5, 0.5), bursts_s=None),
+            "three 40/30/30": replace(base, co_shares=(0.4, 0.3, 0.3)),
             "one": base, "wild 20 %": robust["wild20"], "reflector 20 %": robust["reflector"]}
 
 
 def placed(sc: Scenario, run: int) -> Scenario:
-    """A two-transmitter cell's second transmitter for run `run` (none for the one-transmitter cells)."""
+    """A co-channel cell's other transmitters for run `run` (none for the one-transmitter cells)."""
     if not sc.co_shares:
         return sc
-    d, angle = DISTANCES_M[run % 3], 2.0 * math.pi * run / 20.0
-    return replace(sc, co_channel=((sc.emitter[0] + d * math.cos(angle), sc.emitter[1] + d * math.sin(angle)),))
+    others = []
+    for k in range(len(sc.co_shares) - 1):
+        d, angle = DISTANCES_M[(run + k) % 3], 2.0 * math.pi * run / 20.0 + k * 2.0 * math.pi / 3.0
+        others.append((sc.emitter[0] + d * math.cos(angle), sc.emitter[1] + d * math.sin(angle)))
+    return replace(sc, co_channel=tuple(others))
 
 
 def one_run(name: str, run: int) -> dict:
@@ -61,10 +67,11 @@ def one_run(name: str, run: int) -> dict:
         return {"count": 0}
     out: dict = {"count": final.transmitter_count, "p": final.count_probability,
                  "ghost": any("interleaved" in w for w in final.warnings)}
-    if final.transmitter_count == 2 and data.transmitters_enu is not None and len(data.transmitters_enu) == 2:
-        truths = data.transmitters_enu
+    truths = data.transmitters_enu
+    if truths is not None and final.transmitter_count == len(truths) >= 2:
+        n = len(truths)
         ours = [np.array([t.east, t.north]) for t in final.transmitters]
-        order = min(itertools.permutations(range(2)),
+        order = min(itertools.permutations(range(n)),
                     key=lambda p: sum(np.hypot(*(ours[i] - truths[j])) for i, j in enumerate(p)))
         scored = []
         for i, j in enumerate(order):
@@ -95,14 +102,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--cells", help="a comma-separated subset of the cells (default: all)")
+    ap.add_argument("--no-cost", action="store_true", help="skip the public scenarios' cost rows")
     args = ap.parse_args()
+    chosen = {n: sc for n, sc in cells().items() if not args.cells or n in args.cells.split(",")}
     print("| cell | count right | count (runs) | median p | error / CRLB (RMS, each transmitter) | inside 95 % | "
           "ghost said |")
     print("|---|---|---|---|---|---|---|")
     with ProcessPoolExecutor(args.jobs) as pool:
-        for name, sc in cells().items():
+        for name, sc in chosen.items():
             res = list(pool.map(one_run, [name] * args.runs, range(args.runs)))
-            truth = 2 if sc.co_shares and sc.bursts_s is not None else 1
+            truth = len(sc.co_shares) if sc.co_shares and sc.bursts_s is not None else 1
             counts = [r["count"] for r in res]
             tally = ", ".join(f"{c}: {counts.count(c)}" for c in sorted(set(counts)))
             ps = [r["p"] for r in res if "p" in r and math.isfinite(r["p"])]
@@ -113,6 +123,8 @@ def main() -> None:
             print(f"| {name} | {counts.count(truth)}/{len(res)} | {tally} | "
                   f"{statistics.median(ps) if ps else float('nan'):.2f} | {ratio:.2f} | {inside} | "
                   f"{sum(r.get('ghost', False) for r in res)}/{len(res)} |", flush=True)
+    if args.no_cost:
+        return
     print("\n| public scenario | s per run, never counted (max 1) | s per run, counted (max 3) | ratio |")
     print("|---|---|---|---|")
     for name in SCENARIOS:

@@ -29,7 +29,7 @@ from aoa_localizer.engine.ingest.station import Station
 from aoa_localizer.engine.outputs import survey_solver
 from aoa_localizer.engine.outputs.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid, posterior_grid
-from aoa_localizer.engine.outputs.survey_log import SurveyFix, survey_sentence
+from aoa_localizer.engine.outputs.survey_log import SurveyFix, counted, survey_sentence
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
@@ -411,7 +411,7 @@ class Localizer:
         if solve is None or self.intake.frame is None:
             return {}
         records = self.intake.survey_log.survey_records(self.intake.frame)
-        return solve(records, self.cfg.receiver_class) if records else {}
+        return solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel) if records else {}
 
     def _live_survey(self, channel: Channel) -> Estimate | None:
         """A survey-like channel's estimate while the data come (every bearing from a fixed site or a standing
@@ -422,8 +422,7 @@ class Localizer:
         if log.due(channel.id):
             log.mark_solved(channel.id)
             solve = survey_solver.solver()
-            fix = solve(log.survey_records(self.datum_frame(), only=channel.id), self.cfg.receiver_class).get(
-                channel.id) if solve is not None else None
+            fix = self._live_fix(solve, channel.id) if solve is not None else None
             made = self._publish_survey(channel, fix, end_of_data=False) if fix is not None else None
             if made is None:
                 log.live.pop(channel.id, None)
@@ -434,6 +433,22 @@ class Localizer:
         if last is None:
             return None
         return self._announce(channel, replace(last, stamp=channel.track.last_stamp))
+
+    def _live_fix(self, solve: survey_solver.SurveySolver, channel: str) -> SurveyFix | None:
+        """The survey model's fix of one channel's bearings, its transmitters counted again when due
+        (SurveyLog.count_due) and otherwise the last count's."""
+        log = self.intake.survey_log
+        records = log.survey_records(self.datum_frame(), only=channel)
+        if log.count_due(channel):
+            fix = solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel).get(channel)
+            log.counted[channel] = (len(records), fix.count if fix is not None else None)
+            return fix
+        fix = solve(records, self.cfg.receiver_class, 1).get(channel)
+        last = log.counted[channel][1]
+        if fix is None or last is None:
+            return fix
+        state, warnings = last.applied(fix.state, fix.warnings)
+        return replace(fix, state=state, warnings=warnings, count=last)
 
     def _publish_survey(self, channel: Channel, fix: SurveyFix, end_of_data: bool = True) -> Estimate | None:
         """A survey-like channel's estimate from the survey model, in the map frame."""
@@ -449,7 +464,8 @@ class Localizer:
                             bearings_used=fix.bearings, points_used=track.points_used,
                             ess=float("nan"), algorithm="survey", modes=[(float(east), float(north), 1.0)],
                             noise=fix.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
-                            warnings=list(fix.warnings), end_of_data=end_of_data, regions=fix.regions)
+                            warnings=list(fix.warnings), end_of_data=end_of_data, regions=fix.regions,
+                            **counted(fix.count, frame))
         return self._announce(channel, estimate)
 
     @_one_at_a_time

@@ -12,12 +12,14 @@ from aoa_localizer.pooled.solver import PooledResult, locate_pooled
 from aoa_localizer.pooled.stations import SurveyReading
 
 
-def solve(records: list[SurveyRecord], receiver_class: str) -> dict[str, SurveyFix]:
-    """The survey model's fix of every channel it can locate (a channel it refuses keeps the filter's)."""
-    readings = [SurveyReading(r.channel, r.lat, r.lon, r.azimuth_deg, r.station, "", r.sigma_deg) for r in records]
-    result = locate_pooled(readings, receiver_class)
+def solve(records: list[SurveyRecord], receiver_class: str, max_k: int) -> dict[str, SurveyFix]:
+    """The survey model's fix of every channel it can locate (a channel it refuses keeps the filter's), its
+    transmitters counted up to `max_k`."""
+    readings = [SurveyReading(r.channel, r.lat, r.lon, r.azimuth_deg, r.station, "", r.sigma_deg, r.stamp)
+                for r in records]
+    result = locate_pooled(readings, receiver_class, max_k)
     return {e: SurveyFix(f.lat, f.lon, f.cov, f.state, list(f.warnings), f.readings, f.stations,
-                         calibration(result, f.receivers), f.hpd)
+                         calibration(result, f.receivers), f.hpd, f.count)
             for e, f in result.fixes.items()}
 
 

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import math
 from collections import Counter, defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats
 
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
+from aoa_localizer.engine.outputs.survey_log import SurveyCount, SurveyTransmitter
 from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.pooled.bias import BIAS_MIN_EMITTERS, Bias, learn_biases, residuals
 from aoa_localizer.pooled.grid import (
@@ -36,6 +37,7 @@ from aoa_localizer.pooled.grid import (
 from aoa_localizer.pooled.noise_family import NoiseGrid, expected_error, logsumexp, noise_grid, quantile_of
 from aoa_localizer.pooled.region import LEVELS, Region, summarise
 from aoa_localizer.pooled.stations import Station, SurveyReading, make_stations, pooled_scatter, station_variance
+from aoa_localizer.pooled.transmitters import count_id
 
 _ROUNDS = 2  # fixes made without biases, then again with the biases the first fixes showed
 _OFF_Z = 3.0  # a station further off than this many of its expected errors is named
@@ -62,6 +64,7 @@ class EmitterFix:
     receivers: list
     hpd: dict
     ellipse_mass: dict
+    count: SurveyCount | None = None  # how many transmitters its bearings come from (None: not counted)
 
     def semi_axes(self, level: float = 0.95) -> tuple[float, float]:
         """The covariance's ellipse at this level: semi-major, semi-minor (m)."""
@@ -232,6 +235,19 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
                       sorted(set(geom.receivers)), hpd, dict(region.ellipse_mass))
 
 
+def _part_fix(readings: list[SurveyReading], receiver_class: str) -> SurveyTransmitter | None:
+    """One transmitter of an id that several share, fixed by this model from the readings it took (not counted
+    again), or None where it has no fix."""
+    fix = locate_pooled(readings, receiver_class, max_k=1).fixes.get(readings[0].emitter) if readings else None
+    return None if fix is None else SurveyTransmitter(fix.lat, fix.lon, fix.cov, math.nan, fix.state)
+
+
+def _with_count(fix: EmitterFix, count: SurveyCount) -> EmitterFix:
+    """The fix with its id's transmitter count."""
+    state, warnings = count.applied(fix.state, fix.warnings)
+    return replace(fix, state=state, warnings=warnings, count=count)
+
+
 def _calibrations(geoms: dict[str, Geometry], biases: dict[str, Bias]) -> dict[str, ReceiverCalibration]:
     heard: dict[str, set] = defaultdict(set)
     stations: Counter = Counter()
@@ -246,9 +262,9 @@ def _calibrations(geoms: dict[str, Geometry], biases: dict[str, Bias]) -> dict[s
     return out
 
 
-def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown") -> PooledResult:
-    """Every emitter's fix from a survey's readings (docs/interface.md, "locate"); a ValueError for an unknown
-    receiver class."""
+def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown", max_k: int = 3) -> PooledResult:
+    """Every emitter's fix from a survey's readings (docs/interface.md, "locate"), each id's transmitters counted
+    up to `max_k` (1: not counted); a ValueError for an unknown receiver class."""
     noise = noise_grid(receiver_class)
     stations, warnings = make_stations(readings)
     result = PooledResult(warnings=warnings)
@@ -264,6 +280,9 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
         else:
             geoms[e] = g
     counts = Counter(r.emitter for r in readings)
+    heard: dict[str, list[SurveyReading]] = defaultdict(list)
+    for r in readings:
+        heard[r.emitter].append(r)
     for names in _groups(geoms):
         group = {e: geoms[e] for e in names}
         solved = _solve(group, noise)
@@ -271,8 +290,11 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
                                  len(group))
         result.noise.append(summary)
         for e, g in group.items():
-            result.fixes[e] = _fix(g, _displaced(g, solved, noise), solved.shifts[e], solved.extra[e],
-                                   summary["scale_deg"], counts[e])
+            region = _displaced(g, solved, noise)
+            fix = _fix(g, region, solved.shifts[e], solved.extra[e], summary["scale_deg"], counts[e])
+            counted = count_id(heard[e], g, region.point, math.radians(summary["scale_deg"]), max_k,
+                               lambda part: _part_fix(part, receiver_class))
+            result.fixes[e] = fix if counted is None else _with_count(fix, counted)
         result.receivers.update(_calibrations(group, solved.biases))
     result.warnings += _receiver_warnings(result.receivers)
     return result

@@ -27,7 +27,7 @@ SIGMA_RANGE_DEG = (1e-3, 180.0)  # a reading's own sigma outside this is no bear
 @dataclass(frozen=True)
 class SurveyReading:
     """One bearing: the emitter it is of, the receiver and station that took it (WGS84), its azimuth from true
-    north, and optionally its own sigma (deg)."""
+    north, and optionally its own sigma (deg) and its time (s; the co-channel count needs every reading's)."""
 
     emitter: str
     lat: float
@@ -36,6 +36,7 @@ class SurveyReading:
     station: str = ""
     receiver: str = ""
     sigma_deg: float = math.nan
+    stamp: float = math.nan
 
 
 @dataclass(frozen=True)

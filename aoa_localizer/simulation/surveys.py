@@ -17,6 +17,7 @@ from aoa_localizer.engine.geodesy import LocalFrame, wrap_360
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.site_bearings import SiteBearing, locate_bearings, survey_config
 from aoa_localizer.engine.types import Estimate
+from aoa_localizer.pooled.stations import SurveyReading
 
 DATUM = (46.5, -84.3, 200.0)  # a western-hemisphere datum, away from the vehicle scenarios'
 @dataclass(frozen=True)
@@ -144,3 +145,52 @@ def hand_held_set(rng: np.random.Generator, emitters: int = 60) -> SurveySet:
         pts.append(s.stations + off)
         az.append(s.azimuth_deg)
     return SurveySet(names, stations, np.vstack(pts), np.concatenate(az), truth)
+
+
+@dataclass(frozen=True)
+class SharedFrequency:
+    """Fixed stations' readings of transmitters that share one frequency: per reading its stamp (s), station index
+    and azimuth (deg from true north); the stations and the transmitters (ENU m at DATUM), and each reading's
+    transmitter."""
+
+    stamps: np.ndarray
+    station: np.ndarray
+    azimuth_deg: np.ndarray
+    stations: np.ndarray
+    transmitters: np.ndarray
+    source: np.ndarray
+
+    def readings(self, emitter: str = "x") -> list[SurveyReading]:
+        """As the survey model's readings (aoa_localizer.pooled), one id, each station named s<i>."""
+        frame = LocalFrame(*DATUM)
+        places = [frame.to_geodetic(e, n)[:2] for e, n in self.stations]
+        return [SurveyReading(emitter, float(places[s][0]), float(places[s][1]), float(az), f"s{s}", stamp=float(t))
+                for t, s, az in zip(self.stamps, self.station, self.azimuth_deg, strict=True)]
+
+
+def shared_frequency(rng: np.random.Generator, transmitters: int = 2, together: bool = True, seconds: float = 600.0,
+                     shares: tuple[float, ...] | None = None, apart_m: float = 600.0, stations: int = 6,
+                     bias_deg: float = 3.0, scatter_deg: float = 1.5) -> SharedFrequency:
+    """Fixed stations 2 km out hearing `transmitters` on one frequency (the first `apart_m` from the last, on a
+    line through the centre), each station with a steady bias N(0, bias_deg) and a reading's scatter. `together`:
+    every station reads once a second for `seconds` while the transmitters take turns of 5-30 s, each turn's by
+    `shares` (air time; equal by default); else a surveyor's stops at each station in turn, 5 min apart, a minute
+    of readings at each, turns of 5-20 s."""
+    ang = np.arange(stations) * 2.0 * math.pi / stations + rng.uniform(0.0, 2.0 * math.pi / stations)
+    st = 2000.0 * np.column_stack([np.cos(ang), np.sin(ang)])
+    along = np.linspace(-0.5, 0.5, transmitters) * apart_m if transmitters > 1 else np.zeros(1)
+    tx = np.column_stack([along, 0.3 * along])
+    bias = rng.normal(0.0, bias_deg, stations)
+    p = np.asarray(shares if shares is not None else np.full(transmitters, 1.0 / transmitters), float)
+    rows: list[tuple[float, int, int]] = []
+    for stop in [None] if together else range(stations):
+        t, end = (0.0, seconds) if stop is None else (300.0 * stop, 300.0 * stop + 60.0)
+        while t < end:
+            length, who = rng.uniform(5.0, 30.0 if stop is None else 20.0), int(rng.choice(transmitters, p=p))
+            for u in np.arange(t, t + length):
+                rows += [(u + 0.1 * s, s, who) for s in (range(stations) if stop is None else [stop])]
+            t += length + rng.uniform(1.0, 10.0)
+    stamp, station, source = (np.array(c) for c in zip(*rows, strict=True))
+    d = tx[source] - st[station]
+    az = np.degrees(np.arctan2(d[:, 0], d[:, 1])) + bias[station] + scatter_deg * rng.standard_normal(len(rows))
+    return SharedFrequency(stamp, station, wrap_360(az), st, tx, source)

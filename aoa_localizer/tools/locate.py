@@ -32,6 +32,7 @@ from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.outputs.survey_log import counted
 from aoa_localizer.engine.site_bearings import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.pooled import SurveyReading, locate_pooled
@@ -231,7 +232,9 @@ def check_outputs(source: Path, output: Path | None, report: Path | None):
 def record(ident: str, est: Estimate, rows: int) -> dict:
     return {"id": ident, "lat": est.lat, "lon": est.lon, "east": est.east, "north": est.north,
             "cov": [[float(v) for v in r] for r in est.cov], "state": est.state, "warnings": list(est.warnings),
-            "bearings_used": est.bearings_used, "bearings_given": rows, "modes": est.to_json_dict()["modes"]}
+            "bearings_used": est.bearings_used, "bearings_given": rows, "modes": est.to_json_dict()["modes"],
+            **{k: v for k, v in est.to_json_dict().items()
+               if k in ("transmitter_count", "count_probability", "transmitters")}}
 
 
 def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):
@@ -277,11 +280,11 @@ def _print_row(ident: str, est: Estimate):
           f"{est.state}" + "".join(f"\n{'':<12} {w}" for w in est.warnings))
 
 
-def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class: str):
+def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class: str, max_k: int):
     """--model pooled: every id at once, each receiver calibrated over the ids it heard (aoa_localizer.pooled)."""
-    readings = [SurveyReading(row.id, row.lat, row.lon, row.azimuth_deg, row.station, row.receiver, row.sigma_deg)
-                for group in groups.values() for row in group]
-    result = locate_pooled(readings, receiver_class)
+    readings = [SurveyReading(row.id, row.lat, row.lon, row.azimuth_deg, row.station, row.receiver, row.sigma_deg,
+                              row.stamp) for group in groups.values() for row in group]
+    result = locate_pooled(readings, receiver_class, max_k)
     for warning in result.warnings:
         print(f"locate: warning: {warning}", file=sys.stderr)
     found: dict[str, tuple[Estimate, list[Row]]] = {}
@@ -295,7 +298,8 @@ def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class:
         east, north = frame.to_enu(fix.lat, fix.lon)
         est = Estimate(group[-1].stamp, float(east), float(north), fix.lat, fix.lon, fix.cov, fix.readings,
                        fix.stations, float("nan"), "pooled", modes=[(float(east), float(north), 1.0)],
-                       channel=ident or "default", state=fix.state, warnings=list(fix.warnings), regions=fix.hpd)
+                       channel=ident or "default", state=fix.state, warnings=list(fix.warnings), regions=fix.hpd,
+                       **counted(fix.count, frame))
         found[ident] = (est, group)
         _print_row(ident, est)
         lines.append(json.dumps(pooled_record(ident, est, fix, len(group), result)))
@@ -406,7 +410,7 @@ def _main(argv=None) -> int:
     if args.model == "filter":
         found, lines, failed = _filter_run(groups, cfg, datum)
     else:
-        found, lines, failed = _pooled_run(groups, frame, args.receiver_class)
+        found, lines, failed = _pooled_run(groups, frame, args.receiver_class, cfg.max_emitters_per_channel)
     if args.output:
         write_staged(args.output, "".join(line + "\n" for line in lines))
     if args.report and found:

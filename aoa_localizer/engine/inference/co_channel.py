@@ -25,6 +25,7 @@ import numpy as np
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes, radio_reach
 
+MIN_READINGS = 30  # a channel's transmitters are counted from this many readings on
 BIN_S = 2.0  # readings within one such bin of time are taken as one transmitter's (in turns)
 MIN_SHARE = 0.08  # a transmitter (or a ghost) explains at least this share of the readings
 _EM_ITERATIONS = 40
@@ -36,6 +37,7 @@ _SCALE_RANGE = (0.1, 100.0)  # the fitted scale of the readings' sigmas stays wi
 _QUALITY_BANDS = (55.0, 70.0, 85.0)  # the sigmas' scale is fitted per band of quality (and one for unknown quality)
 _UNEXPLAINED_MIN = 6  # readings off the one place, from which a second start is sought
 _WILD_MADS = 2.5  # a reading this many robust sigmas off the one place is another transmitter's, or wild
+_STARTS_OUTLIER_PROB = 0.2  # the modes the count starts from are sought under at least this wild share
 _START_APART_M = 30.0  # starts nearer than this to an earlier one are the same start
 # One place that explains the readings without widening their sigmas more than this, whose wild readings do not
 # meet anywhere with another transmitter's share, is one transmitter (the other fits are skipped: a single
@@ -62,9 +64,10 @@ class Fit:
     in_turns: bool
     places: list[Place]
     scale: np.ndarray  # each reading's, from its quality band's
-    offset: float  # rad, taken off every bearing
+    shift: np.ndarray  # rad, taken off each reading's bearing: the receiver's offset and its site's bias
     loglik: float
     bic: float
+    resp: np.ndarray  # (N, K): each reading's responsibility of each place
 
 
 @dataclass(frozen=True)
@@ -74,7 +77,8 @@ class Count:
     `count` with its posterior `probability`; `transmitters` (count >= 2: each, the heaviest first; else empty);
     `ghosts`: places whose readings interleave with the transmitter's (a reflection, or a second carrier on at the
     same time), when the interleaved model is the likeliest; `probabilities` by count; `more_than_allowed`: a fit
-    with one more transmitter than `max_k` is likelier than every allowed one."""
+    with one more transmitter than `max_k` is likelier than every allowed one; `assigned`: each reading's most
+    likely transmitter (an index into `transmitters`; empty below two)."""
 
     count: int
     probability: float
@@ -82,12 +86,16 @@ class Count:
     ghosts: list[Place]
     probabilities: dict[int, float]
     more_than_allowed: bool
+    assigned: np.ndarray
 
 
 @dataclass(frozen=True)
 class Readings:
     """A channel's readings as arrays: stamp (s), antenna east, north (m), bearing theta (ENU rad), sigma (rad) and
-    quality (0-100, NaN unknown: its band is the sigmas' scale's)."""
+    quality (0-100, NaN unknown: its band is the sigmas' scale's). `site` (a survey's fixed stations: each
+    reading's, from 0) gives every site a steady bias of prior sd `site_sd` (rad), fitted in every model: a site's
+    readings then weigh as one site, and a biased site cannot pass for a second transmitter (only a site whose own
+    readings turn between two places can show one)."""
 
     stamp: np.ndarray
     east: np.ndarray
@@ -95,6 +103,8 @@ class Readings:
     theta: np.ndarray
     sigma: np.ndarray
     quality: np.ndarray
+    site: np.ndarray | None = None
+    site_sd: float = 0.0
 
     def __len__(self) -> int:
         return len(self.stamp)
@@ -124,7 +134,7 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     crossings = _wild_crossings(r, one, unexplained) if unexplained.sum() >= _UNEXPLAINED_MIN else []
     if np.median(one.scale) <= _QUIET_SCALE and not any(m.inliers >= need / 2 for m in crossings):
         # One place explains them at their own noise, and the rest do not meet anywhere: no room for another
-        return Count(1, 1.0, [], [], {1: 1.0}, False)
+        return Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int))
     wide = float(np.median(one.scale))
     candidates = [one.places[0].mean, *(m.mean for m in crossings)]  # the one, then where its wild ones cross
     candidates += [np.asarray(s, float) for s in starts(1.0) + starts(wide)]
@@ -144,10 +154,23 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     by_count = dict(sorted(by_count.items()))
     count = max(by_count, key=lambda n: (by_count[n], -n))  # a tie goes to fewer transmitters
     best = min((f for f in allowed if (f.k if f.in_turns else 1) == count), key=lambda f: f.bic)
-    transmitters = sorted(best.places, key=lambda p: -p.share) if count >= 2 else []
-    ghosts = sorted(best.places, key=lambda p: -p.share)[1:] if not best.in_turns else []
+    order = sorted(range(best.k), key=lambda j: -best.places[j].share)
+    places = [best.places[j] for j in order]
+    transmitters = places if count >= 2 else []
+    ghosts = places[1:] if not best.in_turns else []
+    assigned = np.argmax(best.resp[:, order], axis=1) if count >= 2 else np.zeros(0, int)
     beyond = min(fits, key=lambda f: f.bic)
-    return Count(count, by_count[count], transmitters, ghosts, by_count, beyond.k > max_k and beyond.in_turns)
+    return Count(count, by_count[count], transmitters, ghosts, by_count, beyond.k > max_k and beyond.in_turns,
+                 assigned)
+
+
+def mode_starts(r: Readings) -> Callable[[float], list[np.ndarray]]:
+    """The candidate places of `count_transmitters`: the robust posterior's modes of the readings with their sigmas
+    scaled by the given factor, best first."""
+    def modes(scale: float) -> list[np.ndarray]:
+        rows = np.column_stack([r.east, r.north, r.theta, scale * r.sigma, np.zeros(len(r))])
+        return [m.mean for m in find_modes(Points.of(rows), Robust(_STARTS_OUTLIER_PROB), by_density=True)]
+    return modes
 
 
 def _bic_weights(bics: list[float]) -> np.ndarray:
@@ -156,9 +179,9 @@ def _bic_weights(bics: list[float]) -> np.ndarray:
     return w / w.sum()
 
 
-def _turned(r: Readings, offset: float) -> Readings:
-    """The readings with `offset` taken off their bearings."""
-    return replace(r, theta=wrap_pi(r.theta - offset)) if offset else r
+def _turned(r: Readings, shift: np.ndarray | float) -> Readings:
+    """The readings with `shift` (rad: one for all, or each reading's) taken off their bearings."""
+    return replace(r, theta=wrap_pi(r.theta - shift)) if np.any(shift) else r
 
 
 def _first_scale(r: Readings, x: np.ndarray, offset: float) -> np.ndarray:
@@ -171,7 +194,7 @@ def _unexplained(r: Readings, one: Fit) -> np.ndarray:
     """Which readings lie off the one-transmitter fit's place: more than _WILD_MADS robust sigmas (the median
     absolute residual of their quality band, which another transmitter's readings cannot widen as they widen the
     fit's own scale)."""
-    resid, _ = _jacobian(_turned(r, one.offset), one.places[0].mean)
+    resid, _ = _jacobian(_turned(r, one.shift), one.places[0].mean)
     z = np.abs(resid) / r.sigma
     band = r.band
     mad = np.array([np.median(z[band == b]) if np.any(band == b) else 1.0 for b in range(band.max() + 1)]) / 0.6745
@@ -182,7 +205,7 @@ def _wild_crossings(r: Readings, one: Fit, wild: np.ndarray) -> list[Mode]:
     """Where the readings the one-transmitter fit calls wild cross (the best two modes, with the readings each
     explains): a second transmitter's start that the modes of all the readings missed (its crossing drowned in the
     first's)."""
-    turned = _turned(r, one.offset)
+    turned = _turned(r, one.shift)
     rows = np.column_stack([r.east, r.north, turned.theta, one.scale * r.sigma, np.zeros(len(r))])[wild]
     return find_modes(Points.of(rows), Robust(0.2), by_density=True)[:2]
 
@@ -207,34 +230,70 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
               offset: float) -> Fit:
     """EM from `places` and the sigmas' `scale`, with the bearing `offset` taken off: the responsibilities of each
     transmitter (per bin in turns, per reading interleaved) and the wild share; each place by weighted Gauss-Newton;
-    the shares and the scales; then BIC."""
-    r, band = _turned(r, offset), r.band
+    the shares, the scales and the sites' biases; then BIC (the biases, a prior's random effects, enter the
+    log-likelihood with their prior's density, not as parameters)."""
+    band = r.band
     k = len(places)
     x = np.array(places, float)
     share = np.full(k, 1.0 / k)
+    bias = np.zeros(int(r.site.max()) + 1 if r.site is not None else 0)
     eps = _OUTLIER_START
     previous = -np.inf
     loglik = -np.inf
     for _ in range(_EM_ITERATIONS):
-        log_in, log_e = _emissions(r, x, eps, scale)  # (N, K) log of the inlier part, of the whole emission
+        shifted = _turned(r, _shift(r, offset, bias))
+        log_in, log_e = _emissions(shifted, x, eps, scale)  # (N, K) log of the inlier part, of the whole emission
         resp, loglik = _responsibilities(log_e, share, bins, in_turns)
+        loglik += _bias_prior(r, bias)
         inlier = resp * np.exp(log_in - log_e)  # each reading's weight for each place as an inlier
         share = np.maximum(resp.mean(axis=0), 1e-12)
         share /= share.sum()
         eps = float(np.clip(1.0 - inlier.sum() / len(r), _OUTLIER_MIN, 0.5))
         for j in range(k):
-            x[j] = _gauss_newton(r, x[j], inlier[:, j], scale)
-        scale = _scale(r, x, inlier, band)
+            x[j] = _gauss_newton(shifted, x[j], inlier[:, j], scale)
+        scale = _scale(shifted, x, inlier, band)
+        bias = _site_biases(_turned(r, offset), x, inlier, scale, len(bias))
         if abs(loglik - previous) <= _EM_TOL * abs(loglik):
             break
         previous = loglik
-    log_in, log_e = _emissions(r, x, eps, scale)
+    shift = _shift(r, offset, bias)
+    shifted = _turned(r, shift)
+    log_in, log_e = _emissions(shifted, x, eps, scale)
     resp, loglik = _responsibilities(log_e, share, bins, in_turns)
+    loglik += _bias_prior(r, bias)
     inlier = resp * np.exp(log_in - log_e)
-    out = [Place(x[j].copy(), _covariance(r, x[j], inlier[:, j], scale), float(resp[:, j].mean()))
+    out = [Place(x[j].copy(), _covariance(shifted, x[j], inlier[:, j], scale), float(resp[:, j].mean()))
            for j in range(k)]
     params = 2 * k + (k - 1) + 1 + len(np.unique(band))  # places, shares, the wild share, the scales
-    return Fit(k, in_turns, out, scale, offset, loglik, -2.0 * loglik + params * math.log(len(r)))
+    return Fit(k, in_turns, out, scale, shift, loglik, -2.0 * loglik + params * math.log(len(r)), resp)
+
+
+def _shift(r: Readings, offset: float, bias: np.ndarray) -> np.ndarray:
+    """Each reading's shift: the receiver's offset and its site's bias."""
+    return offset + (bias[r.site] if r.site is not None else np.zeros(len(r)))
+
+
+def _bias_prior(r: Readings, bias: np.ndarray) -> float:
+    """The log density of the sites' biases under their prior (0 without sites)."""
+    if r.site is None:
+        return 0.0
+    sd = max(r.site_sd, 1e-6)
+    return float(np.sum(-0.5 * (bias / sd) ** 2 - math.log(sd) - 0.5 * _LOG_2PI))
+
+
+def _site_biases(r: Readings, x: np.ndarray, inlier: np.ndarray, scale: np.ndarray, sites: int) -> np.ndarray:
+    """Each site's bias: its readings' inlier-weighted mean residual at the places `x`, shrunk by the prior (the
+    maximum of the posterior of a Gaussian bias); none without sites."""
+    if r.site is None:
+        return np.zeros(0)
+    num, den = np.zeros(len(r)), np.zeros(len(r))
+    for j in range(len(x)):
+        resid, _ = _jacobian(r, x[j])
+        a = inlier[:, j] / (scale * r.sigma) ** 2
+        num += a * resid
+        den += a
+    prec = 1.0 / max(r.site_sd, 1e-6) ** 2
+    return np.bincount(r.site, num, minlength=sites) / (np.bincount(r.site, den, minlength=sites) + prec)
 
 
 def _scale(r: Readings, x: np.ndarray, inlier: np.ndarray, band: np.ndarray) -> np.ndarray:
@@ -311,9 +370,20 @@ def _gauss_newton(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray) 
 
 def _covariance(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """The Laplace covariance of a place from the readings it explains and the radio-range prior (the inverse of
-    their information)."""
+    their information); with sites, each site's readings inform as one bearing whose bias is unknown (their
+    information on the bias marginalised under its prior), so a place heard by few sites keeps their biases' spread."""
     _, jac = _jacobian(r, x)
-    info = (jac * (w / (scale * r.sigma) ** 2)[:, None]).T @ jac + _reach(r)[1] * np.eye(2)
+    a = w / (scale * r.sigma) ** 2
+    prior = _reach(r)[1] * np.eye(2)
+    if r.site is None:
+        info = (jac * a[:, None]).T @ jac + prior
+    else:
+        sites = int(r.site.max()) + 1
+        weight = np.bincount(r.site, a, minlength=sites)
+        mean_jac = np.column_stack([np.bincount(r.site, a * jac[:, i], minlength=sites) for i in (0, 1)]
+                                   ) / np.maximum(weight, 1e-300)[:, None]
+        kept = weight / (1.0 + weight * r.site_sd**2)  # a site's information once its bias is unknown
+        info = (mean_jac * kept[:, None]).T @ mean_jac + prior
     try:
         return np.linalg.inv(info)
     except np.linalg.LinAlgError:

@@ -19,10 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.geodesy import LocalFrame, unturn
-from aoa_localizer.engine.types import Estimate, EstimateState
+from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
 LIVE_GROWTH = 1.25  # a live survey fix is made again once the channel's bearings grew by this factor ...
+COUNT_GROWTH = 2.0  # a live fix counts the transmitters again once the bearings grew by this factor
 LIVE_PLACES = 3  # ... or a place joined, from this many places on (fewer: no crossing, the filter's estimate)
 
 
@@ -41,6 +42,39 @@ class SurveyRecord:
 
 
 @dataclass(frozen=True)
+class SurveyTransmitter:
+    """One of the transmitters a survey id's bearings come from when several share it (co-channel): WGS84, the
+    covariance (m^2, east/north), the share of the readings it explains and its state."""
+
+    lat: float
+    lon: float
+    cov: np.ndarray
+    share: float
+    state: EstimateState
+
+    def placed(self, frame: LocalFrame) -> Transmitter:
+        """The transmitter in `frame`'s ENU metres."""
+        east, north = frame.to_enu(self.lat, self.lon)
+        return Transmitter(float(east), float(north), self.lat, self.lon, self.cov, self.share, self.state)
+
+
+@dataclass(frozen=True)
+class SurveyCount:
+    """How many transmitters an id's bearings come from (aoa_localizer.pooled.transmitters): the count, its
+    probability, each transmitter (two or more, the most heard first) and the warnings the count makes."""
+
+    count: int
+    probability: float
+    transmitters: tuple[SurveyTransmitter, ...]
+    warnings: tuple[str, ...]
+
+    def applied(self, state: EstimateState, warnings: list[str]) -> tuple[EstimateState, list[str]]:
+        """A fix's state and warnings once the count is known: with two or more transmitters the fix, of every
+        bearing, lies between them (poorly determined)."""
+        return (state if self.count < 2 else EstimateState.POORLY_DETERMINED), [*warnings, *self.warnings]
+
+
+@dataclass(frozen=True)
 class SurveyFix:
     """The survey model's answer for one channel: WGS84, the covariance (m^2, east/north), state, warnings, how
     many bearings and stations it used, the calibration it pooled and its highest-density regions."""
@@ -54,6 +88,15 @@ class SurveyFix:
     stations: int
     noise: dict  # the pooled calibration of the fix's group: station error, wild share, receivers' biases
     regions: dict  # level -> rings of (lat, lon): the highest-density regions
+    count: SurveyCount | None = None  # how many transmitters its bearings come from (None: not counted)
+
+
+def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:
+    """An Estimate's count fields (transmitter_count, count_probability, transmitters in `frame`) from a count."""
+    if count is None:
+        return {}
+    return {"transmitter_count": count.count, "count_probability": count.probability,
+            "transmitters": [t.placed(frame) for t in count.transmitters]}
 
 
 class SurveyLog:
@@ -66,13 +109,14 @@ class SurveyLog:
         self.places: dict[str, set] = defaultdict(set)  # each channel's antenna places (decimetres)
         self.solved: dict[str, tuple[int, int]] = {}  # (bearings, places) at a channel's last live fix
         self.live: dict[str, Estimate] = {}  # a channel's last live survey estimate
+        self.counted: dict[str, tuple[int, SurveyCount | None]] = {}  # bearings at its last count, and the count
 
     def add(self, channel: str, survey_like: bool, row: tuple) -> None:
         if channel in self.not_survey:
             return
         if not survey_like or len(self.records[channel]) >= MAX_RECORDS:
             self.not_survey.add(channel)
-            for kept in (self.records, self.places, self.solved, self.live):
+            for kept in (self.records, self.places, self.solved, self.live, self.counted):
                 kept.pop(channel, None)
             return
         self.records[channel].append(row)
@@ -86,6 +130,12 @@ class SurveyLog:
         last = self.solved.get(channel)
         now = (len(self.records[channel]), len(self.places[channel]))
         return last is None or now[1] > last[1] or now[0] >= LIVE_GROWTH * last[0]
+
+    def count_due(self, channel: str) -> bool:
+        """Whether a live fix counts the channel's transmitters again: its first, then whenever its bearings
+        doubled (a count costs 0.05-1 s; between, the last one holds)."""
+        last = self.counted.get(channel)
+        return last is None or len(self.records[channel]) >= COUNT_GROWTH * last[0]
 
     def mark_solved(self, channel: str) -> None:
         self.solved[channel] = (len(self.records[channel]), len(self.places[channel]))
@@ -107,7 +157,7 @@ class SurveyLog:
         return out
 
     def clear(self) -> None:
-        for kept in (self.records, self.not_survey, self.places, self.solved, self.live):
+        for kept in (self.records, self.not_survey, self.places, self.solved, self.live, self.counted):
             kept.clear()
 
 

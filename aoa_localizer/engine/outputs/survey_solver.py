@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from aoa_localizer.engine.outputs.survey_log import SurveyFix, SurveyRecord
 
-    SurveySolver = Callable[[list[SurveyRecord], str], dict[str, SurveyFix]]
+    SurveySolver = Callable[[list[SurveyRecord], str, int], dict[str, SurveyFix]]
 
 _solver: list[SurveySolver] = []
 

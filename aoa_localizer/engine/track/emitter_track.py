@@ -25,8 +25,8 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import CheckResult, refined
-from aoa_localizer.engine.inference.co_channel import Count, Readings, count_transmitters
-from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
+from aoa_localizer.engine.inference.co_channel import MIN_READINGS, Count, Readings, count_transmitters, mode_starts
+from aoa_localizer.engine.inference.global_search import Mode, find_modes
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.ingest.point_batch import Built
@@ -44,10 +44,8 @@ from aoa_localizer.filters.base import ParticleFilter
 log = logging.getLogger("aoa_localizer")
 
 _CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
-COUNT_MIN_READINGS = 30  # the transmitters are counted from this many readings on ...
-_COUNT_GROWTH = 2.0  # ... and again when the readings heard doubled (a count costs 0.01-0.3 s)
+_COUNT_GROWTH = 2.0  # counted from MIN_READINGS on, again when the readings heard doubled (a count costs 0.01-0.3 s)
 COUNT_MAX_READINGS = 1500  # more heard: every k-th point's readings (whole points: a bin's readings stay together)
-_COUNT_OUTLIER_PROB = 0.2  # the modes the count starts from are sought under at least this wild share
 
 
 class EmitterTrack(Held):
@@ -386,13 +384,13 @@ class EmitterTrack(Held):
     def count_transmitters(self, final: bool = False) -> Count | None:
         """How many transmitters the channel's bearings come from (co_channel.py), counted again when the readings
         heard doubled since the last count or grew by HEARD_READINGS (so a long run's newest are counted), and at
-        the end of data (`final`) whenever they grew; None before COUNT_MIN_READINGS, with
+        the end of data (`final`) whenever they grew; None before MIN_READINGS, with
         `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
         cfg, c = self.cfg, self.calibration
         grown = self.heard_readings > self.counted_readings
         due = grown and (final or self.heard_readings >= min(_COUNT_GROWTH * self.counted_readings,
                                                               self.counted_readings + HEARD_READINGS))
-        if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < COUNT_MIN_READINGS or not due
+        if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < MIN_READINGS or not due
                 or not self.estimating):
             return self.counted
         groups = list(self.heard)
@@ -403,12 +401,8 @@ class EmitterTrack(Held):
         rows = np.array([[r.stamp, r.east, r.north, r.theta, r.sigma, r.quality] for r in readings])
         heard = Readings(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], np.maximum(rows[:, 4], 1e-4), rows[:, 5])
 
-        def modes(scale: float) -> list[np.ndarray]:
-            rows = np.column_stack([heard.east, heard.north, heard.theta, scale * heard.sigma, np.zeros(len(heard))])
-            return [m.mean for m in find_modes(Points.of(rows), Robust(_COUNT_OUTLIER_PROB), by_density=True)]
-
         first = self.filter.estimate()[0] if self.filter is not None else self.modes[0].mean
-        self.counted = count_transmitters(heard, first, modes, cfg.max_emitters_per_channel, c.offset)
+        self.counted = count_transmitters(heard, first, mode_starts(heard), cfg.max_emitters_per_channel, c.offset)
         self.counted_readings = self.heard_readings
         return self.counted
 

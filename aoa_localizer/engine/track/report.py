@@ -3,6 +3,7 @@ and their masses, and the estimate's state with the warnings behind it (docs/int
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -144,12 +145,15 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
 _COUNT_SURE = 0.9  # a count this probable: its transmitters may be `tracking`
 
 
-def co_channel(count: Count, antennas: np.ndarray | None, max_k: int
+def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
+               name: Callable[[np.ndarray], str] | None = None, estimate_is: str = "the track's"
                ) -> tuple[list[tuple[Place, EstimateState]], list[str]]:
     """The transmitters of a channel's count with their states (`tracking` when the count is sure and the place's
     95 % ellipse is narrow for its range from the `antennas` (N, 2), given whenever there are transmitters), and
     the warnings the count makes: several transmitters; a place whose bearings interleave with the estimate's; more
-    transmitters than `max_k`."""
+    transmitters than `max_k`. `name` words a place (default: its east and north), `estimate_is` what the
+    channel's own estimate is."""
+    name = name or (lambda x: f"E {x[0]:.0f} N {x[1]:.0f}")
     out, warnings = [], []
     for place in count.transmitters:
         assert antennas is not None  # given whenever there are transmitters
@@ -157,12 +161,12 @@ def co_channel(count: Count, antennas: np.ndarray | None, max_k: int
         sure = count.probability >= _COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
         out.append((place, EstimateState.TRACKING if sure else EstimateState.POORLY_DETERMINED))
     if count.count >= 2:
-        places = ", ".join(f"E {p.mean[0]:.0f} N {p.mean[1]:.0f} ({100 * p.share:.0f} %)" for p in count.transmitters)
+        places = ", ".join(f"{name(p.mean)} ({100 * p.share:.0f} %)" for p in count.transmitters)
         warnings.append(f"{count.count} transmitters on this frequency (p = {count.probability:.2f}), taking turns: "
-                        f"{places}; each is in `transmitters`, this estimate is the track's (a reflection heard "
+                        f"{places}; each is in `transmitters`, this estimate is {estimate_is} (a reflection heard "
                         "alone while the direct path was blocked looks the same)")
     for ghost in count.ghosts:
-        where = f"a second place, E {ghost.mean[0]:.0f} N {ghost.mean[1]:.0f}, explains {100 * ghost.share:.0f} %"
+        where = f"a second place, {name(ghost.mean)}, explains {100 * ghost.share:.0f} %"
         if count.probabilities.get(2, 0.0) >= 1.0 - _COUNT_SURE:  # the turns and the interleaving fit alike
             warnings.append(f"{where} of the bearings: a second transmitter taking turns, or a reflection; the "
                             f"readings are too far apart in time to tell (p = {count.probabilities[2]:.2f} for two)")
