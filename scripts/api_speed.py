@@ -98,7 +98,7 @@ def one_run(scenario: str, r: int, scheduling: str):
     pts = loc.recent_points()
     start = loc.start_cloud
     mean, cov = start.mean(axis=0), 2.0 * np.cov(start.T)
-    _, ibis_steps = particles_peers.run_ibis(pts, mean, cov, 100, loc.cfg.outlier_prob, 10000 + r)
+    _, ibis_steps = particles_peers.run_ibis(pts, mean, cov, 100, loc.config.outlier_prob, 10000 + r)
     return per_point, geo_share / max(total, 1e-12), ibis_steps, idle / max(len(per_point), 1)
 
 

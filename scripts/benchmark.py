@@ -65,7 +65,7 @@ def peer_runs(data, res, truth_engine, n, seed):
     """Run the particles peers on the points our filter used; returns {name: (estimates, step_s)}."""
     loc = res.localizer
     points = loc.recent_points()
-    cfg = loc.cfg
+    cfg = loc.config
     if cfg.has_prior:
         mean, cov = np.array([cfg.prior_east, cfg.prior_north]), cfg.prior_sigma_m**2 * np.eye(2)
         # The scenario prior is in the scenario frame; our engine frame may be shifted (datum = first fix).

@@ -163,7 +163,7 @@ def ibis(loc: Localizer, data: ScenarioData, prior: tuple[np.ndarray, np.ndarray
     """(total seconds, slowest step, final error m) of IBIS over our observation points (in the localizer's frame;
     `prior` too)."""
     estimates, steps = particles_peers.run_ibis(loc.recent_points(), prior[0], prior[1], particles,
-                                                loc.cfg.outlier_prob,
+                                                loc.config.outlier_prob,
                                                 seed)
     error = float(np.hypot(*(in_scenario_frame(loc, data, estimates[-1]) - data.emitter_enu)))
     return float(np.sum(steps)), float(np.max(steps)), error

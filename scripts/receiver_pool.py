@@ -44,12 +44,12 @@ def one_run(seed: int, noise_x: float, share: float) -> tuple | None:
     loc.flush()
     loc.finish()
     loc.close()
-    channel = loc.channels.live.get(channels.channel_id(BRIEF)) or loc.channels.retired.get(channels.channel_id(BRIEF))
+    channel = loc.channel(channels.channel_id(BRIEF))
     if channel is None or channel.estimate is None:
         return None
     est = channel.estimate
     err = np.array(LocalFrame(*sc.datum).to_enu(est.lat, est.lon)) - np.array(EMITTERS[BRIEF])
-    pooled = channel.track.calibration.pooled
+    pooled = channel.pooled_start
     return float(np.hypot(*err)), bool(inside_ellipse(err, est.ground_cov)), ellipse_axes(est.ground_cov)[0], \
         pooled.scale if pooled else None
 

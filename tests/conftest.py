@@ -91,7 +91,7 @@ def frame():
 def track_of(loc, channel=None):
     """A channel's emitter track (None: the latest estimate's channel), for the tests that check the engine's
     internals."""
-    return (channel or loc.latest).track
+    return (channel or loc.channel()).track
 
 
 def open_point(loc, station=""):

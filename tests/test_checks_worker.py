@@ -76,7 +76,7 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling="realtime")))
     between = at_points = check_moves = 0
     def debt():
-        return loc.scheduler.debt(track_of(loc).filter)
+        return loc._scheduler.debt(track_of(loc).filter)
 
     for event in data.inputs():
         owed = debt().sweeps
@@ -85,7 +85,7 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
         check_moves += debt().modes  # a worker's check applied: its move on the modes is owed too
         between += loc.catch_up()
         assert not debt().modes
-    assert loc.catch_up() == 0 and loc.scheduler.owed(track_of(loc).filter) == 0  # nothing left owed
+    assert loc.catch_up() == 0 and loc._scheduler.owed(track_of(loc).filter) == 0  # nothing left owed
     assert between >= 20 and at_points <= between // 10 and check_moves >= 1  # one scheduled check in these runs
     loc.flush()
     loc.finish()
@@ -97,13 +97,13 @@ def test_sweeps_made_between_points_leave_the_points_without_sweeps_and_the_elli
 
 @pytest.mark.slow
 def test_the_default_is_reproducible_from_python_and_realtime_in_the_node():
-    assert not Localizer(LocalizerConfig()).scheduler.realtime
+    assert not Localizer(LocalizerConfig())._scheduler.realtime
     live = Localizer(LocalizerConfig(seed=3), live=True)
-    assert live.scheduler.realtime
+    assert live._scheduler.realtime
     play(live, simulate("seed", 2))
     assert track_of(live).running.deferred
     live.close()
-    assert not Localizer(LocalizerConfig(scheduling="reproducible"), live=True).scheduler.realtime
+    assert not Localizer(LocalizerConfig(scheduling="reproducible"), live=True)._scheduler.realtime
     with pytest.raises(ConfigError, match="scheduling"):
         LocalizerConfig(scheduling="off")  # YAML would read an on/off choice as a boolean: not offered
 
@@ -144,7 +144,7 @@ def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inl
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data)
-    assert loc.scheduler.worker.unusable == "its process died 3 times in a row"
+    assert loc._scheduler.worker.unusable == "its process died 3 times in a row"
     assert loc.rejected["internal_error"] == 3 and track_of(loc).filter is not None  # started inline
     said = [r for r in caplog.records if r.exc_info]
     assert len(said) == 1  # one traceback, not one per job
@@ -203,7 +203,7 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
     err, nees = error_and_nees(loc, data)
     assert track_of(loc).job is None and track_of(loc).events["recalibrated"] >= 2
     assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.rejected
-    assert len(starts) == 1 and loc.scheduler.worker.unusable == "cannot start a process"
+    assert len(starts) == 1 and loc._scheduler.worker.unusable == "cannot start a process"
     said = [r.getMessage() for r in caplog.records if "check worker is given up" in r.getMessage()]
     assert len(said) == 1 and "__main__" in said[0]
 
@@ -214,7 +214,7 @@ def realtime_run_in_a_pool_worker(r: int) -> tuple[str, float]:
     data = simulate("seed", r)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)
-    return loc.scheduler.worker.unusable, error_and_nees(loc, data)[0]
+    return loc._scheduler.worker.unusable, error_and_nees(loc, data)[0]
 
 
 @pytest.mark.slow
@@ -328,7 +328,7 @@ def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeyp
 
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
-    monkeypatch.setattr(loc.scheduler.worker, "submit", lambda job: Future())  # a worker that never answers
+    monkeypatch.setattr(loc._scheduler.worker, "submit", lambda job: Future())  # a worker that never answers
     snap = None
     for event in data.inputs():
         loc.feed(event)

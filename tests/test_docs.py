@@ -109,3 +109,18 @@ def test_the_readmes_python_example_runs_as_written_and_finds_the_emitter(capsys
     assert inside_ellipse(error, est.cov, 9 * ELLIPSE_95) and distance < 20.0
     assert names["loc"].status == "tracking" and not names["loc"].rejected
     assert "emitter at 39.10" in capsys.readouterr().out
+
+
+def test_the_localizers_public_members_are_the_documented_face():
+    """Issue 52: docs/interface.md lists the Localizer's public face; a public member outside it (a program reaching
+    inside, or a member added without its contract) fails here, and so does a listed name the class lacks."""
+    from aoa_localizer import Localizer
+
+    table = INTERFACE[INTERFACE.index("**The Localizer's public face.**"):INTERFACE.index("From Python the work is")]
+    members = [line.split("|")[2] for line in table.splitlines() if line.startswith("| ") and "members" not in line]
+    listed = {re.match(r"[a-z_]+", m).group() for row in members for m in re.findall(r"`([^`]+)`", row)}
+    channel_fields = {"all", "id", "frequency_hz", "retired", "pooled_start", "batch_estimate"}
+    loc = Localizer()
+    public = {n for n in dir(loc) if not n.startswith("_")}
+    loc.close()
+    assert public == listed - channel_fields

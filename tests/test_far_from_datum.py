@@ -72,4 +72,4 @@ def test_a_fix_beyond_the_maps_reach_is_refused_and_named():
     loc.add_fix(1.0, float(lat), float(lon), 5.0)
     assert loc.rejected["fix_beyond_map"] == 1
     loc.add_fix(2.0, 39.2, 117.3, 5.0)
-    assert loc.rejected["fix_beyond_map"] == 1 and len(loc.intake.stations[""].gps) == 1
+    assert loc.rejected["fix_beyond_map"] == 1 and len(loc.stations[""].gps) == 1

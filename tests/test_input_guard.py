@@ -124,7 +124,7 @@ def test_bearings_waiting_for_a_fix_age_out_when_the_gps_stops():
     loc.add_fix(0.0, 39.1, 117.2, 5.0)
     for k in range(20_000):  # 100 s at 200 Hz, no fix
         loc.add_bearing(0.5 + k / 200.0, 45.0, 90.0)
-    assert len(loc.stations[""].pending) <= 2 * loc.cfg.gps_max_gap_s * 200 + 1
+    assert len(loc.stations[""].pending) <= 2 * loc.config.gps_max_gap_s * 200 + 1
     assert loc.rejected["gps_gap"] >= 20_000 - len(loc.stations[""].pending)
 
 

@@ -47,7 +47,7 @@ def test_a_cloud_locked_1_km_off_under_the_outlier_floor(safety):
     truth = truth_in_engine(loc, data)
     assert np.hypot(*(np.array([loc.estimate.east, loc.estimate.north]) - truth)) < 30
     wrong = truth + np.array([-800.0, -600.0])
-    jitter = 3.0 * np.random.default_rng(0).standard_normal((loc.cfg.num_particles, 2))
+    jitter = 3.0 * np.random.default_rng(0).standard_normal((loc.config.num_particles, 2))
     track_of(loc).filter.replace_cloud(wrong + jitter)
     estimates = feed(loc, data, after_s=half)
     errors = [np.hypot(e.east - truth[0], e.north - truth[1]) for e in estimates]
@@ -80,7 +80,7 @@ def test_each_estimate_carries_the_noise_summary_of_its_moment():
         est = loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         if est is None:
             continue
-        fresh = track_of(loc).calibration.noise.summary(lambda q: math.degrees(reading_sigma(q, loc.cfg)))
+        fresh = track_of(loc).calibration.noise.summary(lambda q: math.degrees(reading_sigma(q, loc.config)))
         fresh["point_outlier_prob"] = round(track_of(loc).calibration.outlier_prob, 4)
         assert est.noise == fresh
         seen.append(repr(est.noise))

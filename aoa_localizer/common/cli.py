@@ -141,7 +141,7 @@ def add_engine_args(parser: argparse.ArgumentParser, particles: int = LocalizerC
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="any LocalizerConfig parameter, e.g. -p afsa.variant=paper -p quality_min=50",
+        help="any LocalizerConfig parameter, e.g. -p afsa.variant=paper -p quality_min=50 (ROS 2's NAME:=VALUE too)",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log the engine's decisions")
 
@@ -169,11 +169,11 @@ def load_params_file(path: str) -> dict:
 
 
 def param_changes(items: list[str]) -> dict:
-    """`-p NAME=VALUE` items as config changes, each value read as JSON where it parses (numbers, booleans) and as
-    text otherwise; raises ConfigError for an item without `=`."""
+    """`-p NAME=VALUE` items (or ROS 2's NAME:=VALUE) as config changes, each value read as JSON where it parses
+    (numbers, booleans) and as text otherwise; raises ConfigError for an item without `=`."""
     changes = {}
     for item in items:
-        name, sep, text = item.partition("=")
+        name, sep, text = item.partition(":=") if ":=" in item else item.partition("=")
         if not sep:
             raise ConfigError(f"-p takes NAME=VALUE, got {item!r}")
         changes[name.strip()] = _value(text.strip())

@@ -9,6 +9,7 @@ import zlib
 import numpy as np
 
 from aoa_localizer.engine.config import FREQUENCY_MAX_HZ, LocalizerConfig
+from aoa_localizer.engine.inference.global_search import Mode
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise, pooled_noise
 from aoa_localizer.engine.ingest.preprocess import PointBuilder
 from aoa_localizer.engine.rejections import Reason
@@ -60,6 +61,17 @@ class Channel:
         place = self._place()
         for b in self.builders.values():
             b.emitter = place
+
+    @property
+    def pooled_start(self) -> PooledNoise | None:
+        """The receiver's noise pooled over its other channels that this channel's calibration started from (None:
+        it started from the configured model)."""
+        return self.track.calibration.pooled
+
+    def batch_estimate(self) -> Mode | None:
+        """The robust batch maximum-likelihood place of every point the channel holds (no filter): the benchmarks'
+        reference (EmitterTrack.batch_estimate)."""
+        return self.track.batch_estimate()
 
     def _place(self) -> tuple[float, float] | None:
         """The estimate's place, once it is determined: a wide or provisional one's may lie by the road, and would

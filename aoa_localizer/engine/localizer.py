@@ -86,114 +86,125 @@ class Localizer:
         that makes it); `estimate` always holds the latest one (None before the first). `live`: a node's
         Localizer, scheduled `realtime` under `scheduling: auto`."""
         self._lock = threading.RLock()  # the calls below are made one at a time (_one_at_a_time)
-        self.cfg = cfg = config or LocalizerConfig()
+        self._cfg = cfg = config or LocalizerConfig()
         self.on_estimate = on_estimate
         keep_freed_memory()  # the particle temporaries are reused, not mapped afresh (memory.py)
-        self.rng = np.random.default_rng(cfg.seed)
+        self._rng = np.random.default_rng(cfg.seed)
         frame = None
         if cfg.datum_lat is not None and cfg.datum_lon is not None:
             frame = LocalFrame(cfg.datum_lat, cfg.datum_lon, cfg.datum_alt or 0.0)
-        self.rejections = Rejections()
-        self.scheduler = Scheduler(cfg.scheduling == "realtime" or (cfg.scheduling == "auto" and live), self.rejections)
-        self.channels = Channels(cfg, self.rng, self.rejections, self.scheduler)
-        self.intake = Intake(cfg, self.channels, self.rejections, frame, observer)
-        self.intake.make_room = self._make_room
+        self._rejections = Rejections()
+        realtime = cfg.scheduling == "realtime" or (cfg.scheduling == "auto" and live)
+        self._scheduler = Scheduler(realtime, self._rejections)
+        self.channels = Channels(cfg, self._rng, self._rejections, self._scheduler)
+        self._intake = Intake(cfg, self.channels, self._rejections, frame, observer)
+        self._intake.make_room = self._make_room
         self._room: Closed = []  # points of channels retired to make room for a record, used with its call
         self._fixed_stations: dict[str, tuple[float, float, float, float] | None] = {}  # configured positions
         self._start_tracks()
 
     def _start_tracks(self):
         """The state of a fresh start on the current channels (the fixed stations placed again)."""
-        self.latest: Channel = self.channels.default  # the channel of the latest estimate (the default before one)
+        self._latest: Channel = self.channels.default  # the channel of the latest estimate (the default before one)
         self._retire_check = -math.inf  # DF stamp of the last look for silent channels
         self.estimate: Estimate | None = None
         for name, position in self._fixed_stations.items():
-            self.intake.add_station(name, fixed=True)
+            self._intake.add_station(name, fixed=True)
             if position is not None:
-                self.intake.place(name, *position)
+                self._intake.place(name, *position)
 
     # -- what programs read ------------------------------------------------------------------------
     @property
+    def config(self) -> LocalizerConfig:
+        """The configuration the Localizer runs with (read-only: a change is a new Localizer, or `reset`)."""
+        return self._cfg
+
+    def channel(self, cid: str | None = None) -> Channel | None:
+        """The channel `cid` (its id, "default" for readings without a frequency), None if it is not heard; without
+        `cid`, the channel of the latest estimate (the default channel before one). A retired channel is found too."""
+        return self._latest if cid is None else next((c for c in self.channels.all() if c.id == cid), None)
+
+    @property
     def rejected(self) -> Counter:
         """Inputs not used, by reason (rejections.Reason: docs/design.md's table)."""
-        return self.rejections.counts
+        return self._rejections.counts
 
     @property
     def frame(self) -> LocalFrame | None:
         """The map frame at the datum; None before it is set."""
-        return self.intake.frame
+        return self._intake.frame
 
     @property
     def stations(self) -> dict[str, Station]:
-        return self.intake.stations
+        return self._intake.stations
 
     @property
     def unknown_quality(self) -> int:
         """Readings used with NaN quality (no correction, the default sigma)."""
-        return self.intake.unknown_quality
+        return self._intake.unknown_quality
 
     @property
     def other_band(self) -> int:
         """DF records outside `frequency_band_hz` (another node's band), not used and not refused."""
-        return self.intake.other_band
+        return self._intake.other_band
 
     @property
     def observer(self) -> Observer | None:
-        return self.intake.observer
+        return self._intake.observer
 
     @observer.setter
     def observer(self, observer: Observer | None):
-        self.intake.observer = observer
+        self._intake.observer = observer
 
     @property
     def status(self) -> str:
         """One line on the state: waiting for a fix, collecting bearings, waiting for geometry, tracking, checking;
         and, when more than half of the latest inputs were refused, the commonest reason."""
-        base = self.intake.waiting_line if self.intake.waiting_for_gps else self.latest.track.status.words()
-        return base + self.rejections.refused_line()
+        base = self._intake.waiting_line if self._intake.waiting_for_gps else self._latest.track.status.words()
+        return base + self._rejections.refused_line()
 
     def track_status(self, channel: Channel | None = None) -> TrackStatus:
         """The state of `channel`'s track (None: the channel of the latest estimate)."""
-        return (channel or self.latest).track.summary()
+        return (channel or self._latest).track.summary()
 
     def recent_points(self, n: int | None = None, channel: str | None = None) -> np.ndarray:
         """The latest `n` (all: None) observation points the filter of `channel` (None: the latest estimate's) uses,
         oldest first, as rows of antenna east, north (m), bearing theta (ENU rad), its sigma (rad) and the antenna
         position's sigma (m); (0, 5) before the start."""
-        found = self.latest if channel is None else self.channels.live.get(channel)
+        found = self._latest if channel is None else self.channels.live.get(channel)
         rows = found.track.used_points() if found is not None else np.zeros((0, 5))
         return rows if n is None else rows[len(rows) - min(n, len(rows)):]
 
     @property
     def start_cloud(self) -> np.ndarray | None:
         """The particles the latest estimate's filter started from (after its latest start or re-start), or None."""
-        return self.latest.track.initiator.start_cloud
+        return self._latest.track.initiator.start_cloud
 
     @property
     def events(self) -> Counter:
         """Robustness events (alarm, global_restart, emitter_moved, recalibrated) and input events
         (fix_clock_jump, df_clock_jump)."""
-        return self.latest.track.events + self.intake.input_events
+        return self._latest.track.events + self._intake.input_events
 
     def noise_summary(self, channel: Channel | None = None) -> dict:
         """The self-calibrated noise of a channel (default: the latest estimate's): sigma (deg) per quality band with
         data, reading and point outlier rates."""
-        cfg = self.cfg
-        return (channel or self.latest).track.calibration.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
+        cfg = self._cfg
+        return (channel or self._latest).track.calibration.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
 
     def clock_hint_sentence(self) -> str | None:
         """Words for a DF clock offset the bearings point to (from the last global check), or None."""
-        hint = self.latest.track.supervisor.clock_hint
+        hint = self._latest.track.supervisor.clock_hint
         if hint is None:
             return None
         return (f"the bearings fit the track far better with the DF stamps shifted by {hint.shift_s:+.2f} s "
                 f"(log-likelihood +{hint.gain:.0f}): a receiver delay or clock offset? try df_time_offset_s = "
-                f"{self.cfg.df_time_offset_s + hint.shift_s:.2f}")
+                f"{self._cfg.df_time_offset_s + hint.shift_s:.2f}")
 
     def receiver_noise(self) -> PooledNoise | None:
         """The receiver's noise pooled over the channels that calibrated theirs (receiver_pool.py), when more than
         one frequency was heard (with one, its own calibration says it all); None otherwise."""
-        if sum(not math.isnan(c.frequency_hz) for c in self.channels.all()) < 2 or not self.cfg.calibrate_noise:
+        if sum(not math.isnan(c.frequency_hz) for c in self.channels.all()) < 2 or not self._cfg.calibrate_noise:
             return None
         return self.channels.pooled_noise()
 
@@ -203,7 +214,7 @@ class Localizer:
         est = self.estimate
         if est is not None and est.algorithm == "survey" and est.noise:
             lines.append(survey_sentence(est.noise))
-        elif self.cfg.calibrate_noise:
+        elif self._cfg.calibrate_noise:
             lines.append(noise_sentence(self.noise_summary()))
         pooled = self.receiver_noise()
         if pooled is not None:
@@ -222,7 +233,7 @@ class Localizer:
     def posterior_grid(self, channel: Channel | None = None) -> PosteriorGrid | None:
         """The posterior of `channel`'s track (None: the latest estimate's channel) on a map grid around its
         estimate (engine/outputs/posterior_grid.py); None before its first estimate."""
-        channel = channel or self.latest
+        channel = channel or self._latest
         track, est = channel.track, channel.estimate
         if est is None or not track.estimating:
             return None
@@ -233,7 +244,7 @@ class Localizer:
     def vehicle_place(self, station: str = "") -> tuple[float, float] | None:
         """A moving station's newest accepted fix (east, north in the map frame, m); None before one, or for a fixed
         site."""
-        st = self.intake.stations.get(station)
+        st = self._intake.stations.get(station)
         if st is None or not isinstance(st.gps, GpsTrack) or not len(st.gps):
             return None
         return st.gps.e[-1], st.gps.n[-1]
@@ -244,7 +255,7 @@ class Localizer:
         `channel` (None: the latest estimate's) most (engine/outputs/next_goal.py), for a bearing as noisy as the
         median of the points used; None before its first estimate, and while a provisional one is behind the points
         held (the vehicle should drive on, across its bearings)."""
-        channel = channel or self.latest
+        channel = channel or self._latest
         track, est = channel.track, channel.estimate
         if est is None or not track.cloud_is_current:
             return None
@@ -253,7 +264,7 @@ class Localizer:
 
     def datum_frame(self) -> LocalFrame:
         """The map frame at the datum (ENU metres); raises RuntimeError before the datum is set."""
-        return self.intake.datum_frame()
+        return self._intake.datum_frame()
 
     # -- inputs -----------------------------------------------------------------------------------
     def add_station(self, name: str, fixed: bool = False) -> Station:
@@ -261,21 +272,21 @@ class Localizer:
         move; its position comes from `set_station_position` or its fixes (the newest wins), not a track."""
         if fixed:
             self._fixed_stations.setdefault(name, None)
-        return self.intake.add_station(name, fixed)
+        return self._intake.add_station(name, fixed)
 
     @_one_at_a_time
     def set_station_position(self, name: str, lat, lon, alt=float("nan"), sigma_m=0.0) -> bool:
         """A fixed station's position (kept across reset()); it sets the datum when none is set yet. False (the
         reason counted) for a position a fix could not have."""
         lat, lon, alt, sigma_m = map(as_float, (lat, lon, alt, sigma_m))
-        why = self.intake.bad_position(lat, lon, alt)
+        why = self._intake.bad_position(lat, lon, alt)
         if why:
-            self.rejections(why)
+            self._rejections(why)
             return False
         self.add_station(name, fixed=True)
         position = (lat, lon, alt, sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 else 0.0)
         self._fixed_stations[name] = position
-        self.intake.place(name, *position)
+        self._intake.place(name, *position)
         return True
 
     @_one_at_a_time
@@ -284,14 +295,14 @@ class Localizer:
         """A NavSatFix's content; `sigma_m` the horizontal position sigma from its covariance (NaN: unknown);
         `station` the station it places ("": the default one). Returns the newest estimate this fix made
         possible, if any."""
-        return self._add_points(self.intake.add_fix(stamp, lat, lon, alt, status, sigma_m, station))
+        return self._add_points(self._intake.add_fix(stamp, lat, lon, alt, status, sigma_m, station))
 
     @_one_at_a_time
     def add_heading(self, stamp, yaw_rad, station: str = "", variance_rad2=float("nan")) -> None:
         """The vehicle's heading from an IMU: REP-103 yaw (rad, counter-clockwise from east, ENU at the vehicle), as
         sensor_msgs/Imu gives it, and the yaw's variance (rad^2; NaN, 0 or negative: not known, taken as exact). Used
         with `bearing_reference: vehicle` and `heading_source: imu`."""
-        self.intake.add_heading(stamp, yaw_rad, station, variance_rad2)
+        self._intake.add_heading(stamp, yaw_rad, station, variance_rad2)
 
     @_one_at_a_time
     def add_bearing(self, stamp, azimuth_deg, quality=float("nan"), station: str = "",
@@ -345,7 +356,7 @@ class Localizer:
         try:
             for event in source:
                 estimate = self.feed(event)
-                if self.scheduler.realtime:
+                if self._scheduler.realtime:
                     self.catch_up()
                 if estimate is not None:
                     yield estimate
@@ -356,12 +367,12 @@ class Localizer:
             self.close()
 
     def _add_bearing(self, stamp, azimuth_deg, quality, sigma, station, frequency_hz) -> Estimate | None:
-        admitted = self.intake.admit_bearing(stamp, azimuth_deg, quality, sigma, station, frequency_hz)
+        admitted = self._intake.admit_bearing(stamp, azimuth_deg, quality, sigma, station, frequency_hz)
         room, self._room = self._room, []
         if admitted is None:
             return self._add_points(room) if room else None
         st, now = admitted
-        return self._add_points(room + self._retire_silent(now) + self.intake.release(st))
+        return self._add_points(room + self._retire_silent(now) + self._intake.release(st))
 
     def _make_room(self, stamp: float) -> bool:
         """A record found every channel taken: the channels silent for channel_timeout_s before its stamp (the
@@ -388,7 +399,7 @@ class Localizer:
     @_one_at_a_time
     def flush(self) -> Estimate | None:
         """End of data: bearings still waiting for a fix are dropped, the open observation points are used."""
-        return self._add_points(self.intake.flush())
+        return self._add_points(self._intake.flush())
 
     @_one_at_a_time
     def finish(self) -> Estimate | None:
@@ -397,7 +408,7 @@ class Localizer:
         `end_of_data` set. Returns the last of them (None if no filter runs, or the last points just had a check).
         A live node never sees the end of data and never calls it."""
         estimate = None
-        surveyed = self._survey_end() if self.cfg.end_of_data_model == "survey" else {}
+        surveyed = self._survey_end() if self._cfg.end_of_data_model == "survey" else {}
         for channel in self.channels.all():  # a survey's channels may have retired between its bearings
             if channel.id in surveyed:
                 estimate = self._publish_survey(channel, surveyed[channel.id]) or estimate
@@ -408,17 +419,17 @@ class Localizer:
     def _survey_end(self) -> dict[str, SurveyFix]:
         """The survey model's fixes of the survey-like channels (survey_log.py), {} without any or a solver."""
         solve = survey_solver.solver()
-        if solve is None or self.intake.frame is None:
+        if solve is None or self._intake.frame is None:
             return {}
-        records = self.intake.survey_log.survey_records(self.intake.frame)
-        return solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel) if records else {}
+        records = self._intake.survey_log.survey_records(self._intake.frame)
+        return solve(records, self._cfg.receiver_class, self._cfg.max_emitters_per_channel) if records else {}
 
     def _live_survey(self, channel: Channel) -> Estimate | None:
         """A survey-like channel's estimate while the data come (every bearing from a fixed site or a standing
         antenna, from three places on): the survey model's fix of its bearings alone, made again as they grow
         (SurveyLog.due) and otherwise the last one, restamped; None (the filter's estimate) for any other channel
         or while the model has no fix for it. The end of data pools every survey-like channel (finish)."""
-        log = self.intake.survey_log
+        log = self._intake.survey_log
         if log.due(channel.id):
             log.mark_solved(channel.id)
             solve = survey_solver.solver()
@@ -437,13 +448,13 @@ class Localizer:
     def _live_fix(self, solve: survey_solver.SurveySolver, channel: str) -> SurveyFix | None:
         """The survey model's fix of one channel's bearings, its transmitters counted again when due
         (SurveyLog.count_due) and otherwise the last count's."""
-        log = self.intake.survey_log
+        log = self._intake.survey_log
         records = log.survey_records(self.datum_frame(), only=channel)
         if log.count_due(channel):
-            fix = solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel).get(channel)
+            fix = solve(records, self._cfg.receiver_class, self._cfg.max_emitters_per_channel).get(channel)
             log.counted[channel] = (len(records), fix.count if fix is not None else None)
             return fix
-        fix = solve(records, self.cfg.receiver_class, 1).get(channel)
+        fix = solve(records, self._cfg.receiver_class, 1).get(channel)
         last = log.counted[channel][1]
         if fix is None or last is None:
             return fix
@@ -453,7 +464,7 @@ class Localizer:
     def _publish_survey(self, channel: Channel, fix: SurveyFix, end_of_data: bool = True) -> Estimate | None:
         """A survey-like channel's estimate from the survey model, in the map frame."""
         if not _positive_definite(fix.cov):
-            self.rejections(Reason.COVARIANCE_DEGENERATE)
+            self._rejections(Reason.COVARIANCE_DEGENERATE)
             return None
         frame = self.datum_frame()
         east, north = frame.to_enu(fix.lat, fix.lon)
@@ -477,7 +488,7 @@ class Localizer:
         live = list(self.channels.live.values())
         done = [c for c in live if c.track.apply_job() and c.track.estimating]
         made = [est for est in (self._publish(c) for c in done) if est is not None]
-        self.scheduler.move_one(c.track.debtor for c in live)
+        self._scheduler.move_one(c.track.debtor for c in live)
         return made
 
     @_one_at_a_time
@@ -488,7 +499,7 @@ class Localizer:
         self.wait_for_worker()
         tracks = [c.track for c in self.channels.live.values()]
         made = 0
-        while self.scheduler.move_one(t.debtor for t in tracks):
+        while self._scheduler.move_one(t.debtor for t in tracks):
             made += 1
         return made
 
@@ -496,11 +507,11 @@ class Localizer:
     def wait_for_worker(self) -> None:
         """Wait until the check worker has finished the live channels' jobs (`scheduling: realtime`; nothing
         otherwise); their results are applied at each channel's next point, or by idle() or catch_up()."""
-        self.scheduler.wait(c.track.job.future for c in self.channels.live.values() if c.track.job is not None)
+        self._scheduler.wait(c.track.job.future for c in self.channels.live.values() if c.track.job is not None)
 
     def close(self):
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""
-        self.scheduler.close()
+        self._scheduler.close()
 
     def __reduce_ex__(self, protocol):
         """A Localizer holds a worker process, locks and generators mid-run: it is neither pickled nor copied
@@ -514,18 +525,18 @@ class Localizer:
         configured positions (the node's ~/reset). The datum is kept, so the map frame stays put, unless
         `drop_datum` and it was not configured: then the next confirmed fix sets a new one (the way out of a datum
         taken from a bad fix)."""
-        if drop_datum and not self.cfg.has_datum:
-            self.intake.frame = None
-        self.channels = Channels(self.cfg, self.rng, self.rejections, self.scheduler)
-        self.intake.reset(self.channels)
+        if drop_datum and not self._cfg.has_datum:
+            self._intake.frame = None
+        self.channels = Channels(self._cfg, self._rng, self._rejections, self._scheduler)
+        self._intake.reset(self.channels)
         self._start_tracks()
 
     @_one_at_a_time
     def adopt_datum(self, frame: LocalFrame | None):
         """Keep the map frame of an earlier Localizer (a datum it took from a fix) so that a restart with new
         settings does not move the map; a configured datum (datum_lat, datum_lon) wins and is kept."""
-        if frame is not None and not self.cfg.has_datum and self.frame is None and not self.stations:
-            self.intake.frame = frame
+        if frame is not None and not self._cfg.has_datum and self.frame is None and not self.stations:
+            self._intake.frame = frame
 
     # -- estimates --------------------------------------------------------------------------------
     def _add_points(self, closed: Closed) -> Estimate | None:
@@ -538,8 +549,8 @@ class Localizer:
             track = channel.track
             with slices.one_call(calls.setdefault(id(track), slices.Call())):
                 took = track.add(readings)
-            if self.intake.observer is not None:
-                self.intake.observer.on_point(readings, track.last_kept)
+            if self._intake.observer is not None:
+                self._intake.observer.on_point(readings, track.last_kept)
             if took:
                 estimate = self._publish(channel) or estimate
         return estimate
@@ -547,14 +558,14 @@ class Localizer:
     def _publish(self, channel: Channel, end_of_data: bool = False) -> Estimate | None:
         """The channel's new estimate, kept and handed to `on_estimate`; None (counted) when its covariance is not
         positive definite. A survey-like channel's is the survey model's while it has a fix (_live_survey)."""
-        if not end_of_data and self.cfg.end_of_data_model == "survey":
+        if not end_of_data and self._cfg.end_of_data_model == "survey":
             live = self._live_survey(channel)
             if live is not None:
                 return live
         track = channel.track
         mean, cov = track.estimate()
         if not _positive_definite(cov):
-            self.rejections(Reason.COVARIANCE_DEGENERATE)
+            self._rejections(Reason.COVARIANCE_DEGENERATE)
             return None
         frame = self.datum_frame()
         lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
@@ -566,7 +577,7 @@ class Localizer:
         if count is not None:
             # the antennas only rate the transmitters' ellipses: a single transmitter (most channels) skips them
             antennas = np.array([[g[0].east, g[0].north] for g in track.heard]) if count.transmitters else None
-            places, said = co_channel(count, antennas, self.cfg.max_emitters_per_channel)
+            places, said = co_channel(count, antennas, self._cfg.max_emitters_per_channel)
             warnings = warnings + said
             for place, place_state in places:
                 t_lat, t_lon, _ = frame.to_geodetic(place.mean[0], place.mean[1])
@@ -575,10 +586,10 @@ class Localizer:
         estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
                             lon=float(lon), cov=np.array(cov), ground_cov=from_map @ np.asarray(cov) @ from_map.T,
                             bearings_used=track.bearings_used,
-                            points_used=track.points_used, ess=f.ess(), algorithm=self.cfg.algorithm,
+                            points_used=track.points_used, ess=f.ess(), algorithm=self._cfg.algorithm,
                             # the user's own copies: the filter's arrays are read-only and shared
                             particles=f.x.copy(), weights=f.weights.copy(), modes=modes,
-                            noise=self.noise_summary(channel) if self.cfg.calibrate_noise else None,
+                            noise=self.noise_summary(channel) if self._cfg.calibrate_noise else None,
                             channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
                             end_of_data=end_of_data, transmitter_count=count.count if count is not None else 1,
                             count_probability=count.probability if count is not None else float("nan"),
@@ -589,7 +600,7 @@ class Localizer:
         """Keep a channel's new estimate as its and the newest, and hand it to `on_estimate`."""
         channel.published(estimate)
         self.estimate = estimate
-        self.latest = channel
+        self._latest = channel
         if self.on_estimate is not None:
             self.on_estimate(estimate)
         return estimate

@@ -143,7 +143,7 @@ class NodeMonitor:
         # Totals over every channel kept (each channel's own are in its status, channel_diagnostics)
         tracks = [loc.track_status(channel) for channel in loc.channels.all()] or [track]
         values: dict[str, Any] = dict(self.counts)
-        values.update(status=loc.status, algorithm=loc.cfg.algorithm,
+        values.update(status=loc.status, algorithm=loc.config.algorithm,
                       bearings_used=sum(t.bearings_used for t in tracks),
                       points_used=sum(t.points_used for t in tracks),
                       unknown_quality=loc.unknown_quality, other_band=loc.other_band,
@@ -224,7 +224,7 @@ class NodeMonitor:
     def _robustness_values(loc: Localizer) -> dict:
         """Self-calibrated noise, modes, the health test and the robustness events, as diagnostic values."""
         values: dict[str, Any] = {}
-        if loc.cfg.calibrate_noise:
+        if loc.config.calibrate_noise:
             noise = loc.noise_summary()
             values["noise"] = noise_sentence(noise)
             values.update({f"noise.sigma_deg.q{k}": v for k, v in noise["sigma_deg"].items()})

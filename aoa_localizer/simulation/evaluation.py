@@ -77,7 +77,8 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
     t0 = time.perf_counter()
     feed(loc, data)
     loc.flush()  # no finish(): no filter runs; the batch estimate is the end-of-data search
-    mode = loc.latest.track.batch_estimate()
+    channel = loc.channel()
+    mode = channel.batch_estimate() if channel is not None else None
     wall = time.perf_counter() - t0
     truth = data.emitter_enu
     bound = crlb_rmse(truth, data.sensor_enu[~data.wild], data.sigma[~data.wild])

@@ -133,7 +133,7 @@ def main(argv=None) -> int:
         return 1
     est = res.estimates[-1]
     a, b, _ = ellipse_axes(est.cov)
-    print(f"estimate ({loc.cfg.algorithm}, N={loc.cfg.num_particles}): lat {est.lat:.7f} lon {est.lon:.7f}, "
+    print(f"estimate ({loc.config.algorithm}, N={loc.config.num_particles}): lat {est.lat:.7f} lon {est.lon:.7f}, "
           f"95% ellipse semi-axes {a:.1f} m x {b:.1f} m")
     print(f"error {s['error']:.2f} m (east {s['err_east']:+.2f}, north {s['err_north']:+.2f}); "
           f"Cramer-Rao bound {s['crlb']:.2f} m; truth inside the ellipse: {'yes' if s['inside95'] else 'no'}")
