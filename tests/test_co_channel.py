@@ -131,37 +131,6 @@ def test_simulate_refuses_a_co_channel_it_cannot_make(cli, args, words):
     assert res.returncode == 2 and words in res.stderr
 
 
-@pytest.mark.ros
-@pytest.mark.slow
-def test_two_transmitters_in_a_bag_are_counted_by_the_live_node_and_reported_by_the_launcher(tmp_path, domain, cli):
-    """Through the graph: a simulated drive with a second transmitter taking turns, written to a bag and replayed
-    into the node; emitter/channels (the launcher's --result) counts two, each near its truth."""
-    import json
-
-    from test_ros_graph import launch
-
-    from aoa_localizer.engine.geodesy import LocalFrame
-    from aoa_localizer.simulation.scenarios import DATUM
-    from aoa_localizer.tools.simulate import main
-
-    bag = tmp_path / "bag"
-    made = cli(main, "--co-channel", "600,1300", "--write-bag", bag)
-    assert made.returncode == 0, made.stdout + made.stderr
-    res = launch(["--bag", bag, "--rate", 25, "--seed", 1, "--domain-id", domain, "--result", tmp_path / "r.json"])
-    assert "2 transmitters on its frequency" in res.stdout, res.stdout + res.stderr
-    result = json.loads((tmp_path / "r.json").read_text())
-    entry = result["channels"]["default"]
-    assert entry["transmitter_count"] == 2 and entry["count_probability"] > 0.99
-    poses = result["transmitter_poses"]  # each on emitter/transmitter_<k>/pose, where the summary puts it
-    assert set(poses) == {"emitter/transmitter_1/pose", "emitter/transmitter_2/pose"}
-    for k, t in enumerate(entry["transmitters"], start=1):
-        assert poses[f"emitter/transmitter_{k}/pose"] == pytest.approx([t["east"], t["north"]], abs=0.01)
-    frame = LocalFrame(*DATUM)
-    for t in entry["transmitters"]:
-        east, north = frame.to_enu(t["lat"], t["lon"])
-        assert min(math.hypot(east - x, north - y) for x, y in [(1200.0, 800.0), (600.0, 1300.0)]) < 25.0
-
-
 @pytest.mark.slow
 def test_the_sample_co_channel_bag_replays_offline_to_two_transmitters(tmp_path, cli):
     import json
@@ -210,14 +179,30 @@ def test_a_channel_keeps_a_bounded_share_of_what_it_heard_for_the_count(monkeypa
 @pytest.mark.ros
 @pytest.mark.slow
 def test_the_simulated_vehicle_plays_co_channel_transmitters_into_the_node(tmp_path, domain):
-    """sim_vehicle's co_channel through the launcher: the node counts two; a co_channel it cannot play is refused."""
+    """Through the graph: sim_vehicle's co_channel (a second transmitter taking turns) played into the node through
+    the launcher; emitter/channels (the launcher's --result) counts two, each near its truth and on its own latched
+    emitter/transmitter_<k>/pose; a co_channel the vehicle cannot play is refused. (A bag of the same drive replays
+    offline to two: test_the_sample_co_channel_bag_replays_offline_to_two_transmitters.)"""
     import json
 
     from test_ros_graph import launch
 
+    from aoa_localizer.engine.geodesy import LocalFrame
+    from aoa_localizer.simulation.scenarios import DATUM
+
     res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 1, "--domain-id", domain,
                   "--vehicle-param", "co_channel=[600.0, 1300.0]", "--result", tmp_path / "r.json"])
-    entry = json.loads((tmp_path / "r.json").read_text())["channels"]["default"]
-    assert entry["transmitter_count"] == 2, res.stdout + res.stderr
+    assert "2 transmitters on its frequency" in res.stdout, res.stdout + res.stderr
+    result = json.loads((tmp_path / "r.json").read_text())
+    entry = result["channels"]["default"]
+    assert entry["transmitter_count"] == 2 and entry["count_probability"] > 0.99
+    poses = result["transmitter_poses"]  # each on emitter/transmitter_<k>/pose, where the summary puts it
+    assert set(poses) == {"emitter/transmitter_1/pose", "emitter/transmitter_2/pose"}
+    for k, t in enumerate(entry["transmitters"], start=1):
+        assert poses[f"emitter/transmitter_{k}/pose"] == pytest.approx([t["east"], t["north"]], abs=0.01)
+    frame = LocalFrame(*DATUM)
+    for t in entry["transmitters"]:
+        east, north = frame.to_enu(t["lat"], t["lon"])
+        assert min(math.hypot(east - x, north - y) for x, y in [(1200.0, 800.0), (600.0, 1300.0)]) < 25.0
     bad = launch(["--scenario", "seed", "--domain-id", domain, "--vehicle-param", "co_channel=[600.0]"])
     assert bad.returncode == 2 and "co_channel needs finite e, n pairs" in bad.stdout + bad.stderr
