@@ -87,7 +87,7 @@ def test_the_launcher_refuses_unknown_or_malformed_parameters_before_starting_an
 
     cases = [(["-p", "num_particle=5"], "num_particle: unknown parameter; did you mean num_particles?"),
              (["-p", "num_particles"], "-p takes NAME=VALUE"),
-             (["-p", "num_particles:=-5"], "num_particles"),  # ROS 2's := is read as = (the value refused)
+             (["-p", "num_particle:=5"], "num_particle: unknown parameter; did you mean num_particles?"),  # ROS 2's :=
              (["--vehicle-param", "gps_dropout=0.1"], "did you mean gps_dropout_prob?"),
              (["--params-file", tmp_path / "none.yaml"], "no params file at"),
              (["--vehicle-param", "gps_dropout_prob=2"], "gps_dropout_prob must be a finite number in [0, 1)"),

@@ -86,7 +86,7 @@ def no_process_with(marker: str) -> bool:
 
 def test_vehicle_and_node_converge_and_the_launcher_leaves_no_process(tmp_path, domain):
     marker = f"marker_rays:={40 + domain}"  # a node argument no other test uses
-    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 2, "--domain-id", domain,
+    res = launch(["--scenario", "seed", "--speedup", 80, "--seed", 2, "--domain-id", domain,
                   "-p", marker.replace(":=", "="), "--result", tmp_path / "r.json", "--keep-logs"])
     assert res.returncode == 0, res.stdout + res.stderr
     result = json.loads((tmp_path / "r.json").read_text())
@@ -103,7 +103,7 @@ def test_the_two_car_scenario_plays_both_cars_into_one_node_and_its_bag_replays(
     """`--scenario pair`: the vehicle plays car1 and car2 on their own topics, the launcher gives the node
     `stations: [car1, car2]`; the ellipse is the fused one (each car alone: 21-23 m long, tests/test_stations.py).
     The sample bag replays live the same way, its stations read from its topic names (no --scenario)."""
-    for args in (["--scenario", "pair", "--speedup", 40], ["--bag", ROOT / "bags/pair", "--rate", 0]):
+    for args in (["--scenario", "pair", "--speedup", 80], ["--bag", ROOT / "bags/pair", "--rate", 0]):
         res = launch([*args, "--seed", 1, "--domain-id", domain, "--result", tmp_path / "r.json"])
         assert res.returncode == 0, res.stdout + res.stderr
         result = json.loads((tmp_path / "r.json").read_text())
@@ -113,7 +113,7 @@ def test_the_two_car_scenario_plays_both_cars_into_one_node_and_its_bag_replays(
 def test_a_vehicle_with_its_array_mounted_at_an_offset_is_read_as_mounted(tmp_path, domain):
     """`--vehicle-param mount_offset_deg=30`: the vehicle publishes azimuths from its forward axis and the launcher
     tells the node so (read as true-north azimuths they would point 30-120 deg away)."""
-    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 4, "--domain-id", domain,
+    res = launch(["--scenario", "seed", "--speedup", 80, "--seed", 4, "--domain-id", domain,
                   "--vehicle-param", "mount_offset_deg=30", "--result", tmp_path / "r.json"])
     assert res.returncode == 0, res.stdout + res.stderr
     assert json.loads((tmp_path / "r.json").read_text())["error_m"] < 10.0
@@ -857,7 +857,7 @@ def test_a_full_disk_stops_the_recording_not_the_run(tmp_path, domain):
         resource.setrlimit(resource.RLIMIT_FSIZE, (150_000, 150_000))
 
     bag = tmp_path / "full"
-    res = subprocess.run([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "seed", "--speedup", "40",
+    res = subprocess.run([sys.executable, "-m", "aoa_localizer.launch", "--scenario", "seed", "--speedup", "80",
                           "--seed", "2", "--domain-id", str(domain), "--record", str(bag)], cwd=ROOT,
                          capture_output=True, text=True, timeout=180, preexec_fn=small_files)
     assert res.returncode == 0, res.stdout + res.stderr
@@ -1122,7 +1122,7 @@ def test_the_launcher_reports_every_transmitter_against_its_own_truth(domain):
     """Issue 53, items 2 and 5: `--vehicle-param emitters=[433.92e6,...]` (numbers YAML 1.1 reads as text, as
     `simulate --emitters` takes them) plays two transmitters; the vehicle publishes each one's truth on
     sim/<channel>/truth and the launcher reports every channel against its own."""
-    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 1, "--domain-id", domain, "--vehicle-param",
+    res = launch(["--scenario", "seed", "--speedup", 80, "--seed", 1, "--domain-id", domain, "--vehicle-param",
                   "emitters=[433.92e6,1200,800,446e6,400,1100]"])
     assert res.returncode == 0, res.stdout + res.stderr
     for channel in ("f433920000", "f446000000"):

@@ -85,10 +85,10 @@ def ros_value(v) -> str:
 
 
 def parse_params(items, option: str = "-p") -> dict:
-    """NAME=VALUE items as a dict; ValueError naming the option for one without '='."""
+    """NAME=VALUE items (or ROS 2's NAME:=VALUE) as a dict; ValueError naming the option for one without '='."""
     out = {}
     for item in items:
-        name, sep, value = item.partition("=")
+        name, sep, value = item.partition(":=") if ":=" in item else item.partition("=")
         if not sep:
             raise ValueError(f"{option} takes NAME=VALUE, got {item!r}")
         out[name.strip()] = value.strip()
@@ -221,7 +221,9 @@ def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dic
 class Monitor:
     """The launcher's own node: follows emitter/pose, sim/truth, /diagnostics; records if asked."""
 
-    def __init__(self, record: Path | None):
+    def __init__(self, record: Path | None, co_channel: list[tuple[float, float]] | None = None):
+        """`co_channel`: the vehicle's other transmitters on the emitter's frequency (east, north in the simulation's
+        map, as sim/truth's), each a truth the channel's estimate and transmitters may be nearest."""
         import rclpy
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -234,6 +236,7 @@ class Monitor:
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pose = self.truth = self.diag = None
+        self.co_channel = list(co_channel or [])
         self.node.create_subscription(
             T.PoseWithCovarianceStamped, "emitter/pose", lambda m: setattr(self, "pose", m), latched
         )
@@ -306,9 +309,14 @@ class Monitor:
                 inside = "inside" if crlb_nees(err, np.array(cov)) <= ELLIPSE_95 else "outside"
                 line += f"; error against its truth {float(np.hypot(*err)):.2f} m ({inside} its ellipse)"
             lines.append(line)
+        truths = [t for t in [self.truth_in_node_frame(), *self.co_channel_truths()] if t is not None]
         for channel, entry in sorted(self.summary.items()):
             if entry.get("transmitter_count", 1) >= 2:
-                places = "; ".join(f"E {t['east']:.1f} N {t['north']:.1f} ({100 * t['share']:.0f} %, {t['state']})"
+                # the default channel's transmitters against the vehicle's transmitters on its frequency
+                near = truths if channel == "default" and len(truths) > 1 else []
+                places = "; ".join(f"E {t['east']:.1f} N {t['north']:.1f} ({100 * t['share']:.0f} %, {t['state']}"
+                                   + (f", {_nearest(t['east'], t['north'], near)[1]:.1f} m from the nearest truth"
+                                      if near else "") + ")"
                                    for t in entry["transmitters"])
                 lines.append(f"channel {channel}: {entry['transmitter_count']} transmitters on its frequency "
                              f"(p = {entry['count_probability']:.2f}): {places}")
@@ -356,6 +364,7 @@ class Monitor:
         truth = self.truth_in_node_frame()
         if truth is not None:
             out["truth"] = truth
+            out["truths"] = [truth, *self.co_channel_truths()]
         if self.node_datum is not None:  # what east and north are measured from
             out["datum"] = (self.node_datum.latitude, self.node_datum.longitude)
         return out
@@ -365,11 +374,19 @@ class Monitor:
         the error is measured in one frame; None until the truth and both datums are known."""
         return self._in_node_frame(self.truth)
 
+    def co_channel_truths(self) -> list[tuple[float, float]]:
+        """The vehicle's other transmitters on the emitter's frequency in the node's map ([] until both datums are
+        known, or without them)."""
+        return [t for t in (self._enu_in_node_frame(e, n) for e, n in self.co_channel) if t is not None]
+
     def _in_node_frame(self, truth) -> tuple[float, float] | None:
-        if truth is None or self.sim_datum is None or self.node_datum is None:
+        return None if truth is None else self._enu_in_node_frame(truth.point.x, truth.point.y)
+
+    def _enu_in_node_frame(self, east: float, north: float) -> tuple[float, float] | None:
+        if self.sim_datum is None or self.node_datum is None:
             return None
         sim = LocalFrame(self.sim_datum.latitude, self.sim_datum.longitude, self.sim_datum.altitude)
-        lat, lon, _ = sim.to_geodetic(truth.point.x, truth.point.y)
+        lat, lon, _ = sim.to_geodetic(east, north)
         node = LocalFrame(self.node_datum.latitude, self.node_datum.longitude, self.node_datum.altitude)
         east, north = node.to_enu(lat, lon, self.node_datum.altitude)
         return float(east), float(north)
@@ -379,6 +396,13 @@ class Monitor:
             self.recorder.close()
         self.node.destroy_node()
         self.rclpy.try_shutdown()
+
+
+def _nearest(east: float, north: float, truths: list) -> tuple[int, float]:
+    """The index of the truth nearest (east, north), and its distance (m)."""
+    dist = [float(np.hypot(east - t[0], north - t[1])) for t in truths]
+    k = int(np.argmin(dist))
+    return k, dist[k]
 
 
 def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
@@ -406,7 +430,12 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
     if major > max_ellipse:
         return False, f"95 % ellipse {major:.1f} m is wider than --max-ellipse {max_ellipse:g} m", figures
     if "truth" in state:
-        err = np.array([state["east"] - state["truth"][0], state["north"] - state["truth"][1]])
+        # several transmitters on the frequency (co_channel): the estimate follows one of them, the nearest
+        k, _ = _nearest(state["east"], state["north"], state.get("truths") or [state["truth"]])
+        truth = (state.get("truths") or [state["truth"]])[k]
+        if k:
+            figures["co_channel_truth"] = k
+        err = np.array([state["east"] - truth[0], state["north"] - truth[1]])
         figures["error_m"] = float(np.hypot(*err))
         figures["nees"] = nees = crlb_nees(err, cov)
         if nees > CONVERGE_SCALE**2 * ELLIPSE_95:
@@ -569,7 +598,9 @@ class Run:
         args = self.args
         found = stations_of_bag(args)
         node_cmd, source_cmd = build_commands(args, node_parameters(args, found), found)
-        self.monitor = monitor = Monitor(args.record)
+        co = parse_params(args.vehicle_param, "--vehicle-param").get("co_channel")
+        flat = [float(v) for v in yaml.safe_load(co)] if co else []
+        self.monitor = monitor = Monitor(args.record, list(zip(flat[::2], flat[1::2], strict=False)))
         node = self.start("aoa_localizer", node_cmd)
         monitor.spin(1.5)  # let the node come up and the monitor discover it
         if not node.running():
@@ -697,7 +728,9 @@ def print_result(ok: bool, why: str, f: dict):
             f"95% ellipse semi-axes {f['ellipse95_m'][0]:.1f} m x {f['ellipse95_m'][1]:.1f} m"
         )
         if "error_m" in f:
-            print(f"error against the simulated truth: {f['error_m']:.2f} m")
+            which = (f" (co_channel transmitter {f['co_channel_truth']}, the nearest: the estimate follows one of "
+                     "the transmitters on its frequency)" if f.get("co_channel_truth") else "")
+            print(f"error against the simulated truth: {f['error_m']:.2f} m{which}")
         if "state" in f:
             print(f"state: {f['state']}")
     print(f"result: {why}")

@@ -158,7 +158,9 @@ def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
     for place in count.transmitters:
         assert antennas is not None  # given whenever there are transmitters
         size, reach = ellipse_and_reach(place.mean, place.cov, antennas[:, 0], antennas[:, 1])
-        sure = count.probability >= _COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
+        # more on the air than allowed: a place may hold another's readings too, so none is sure
+        sure = (count.probability >= _COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
+                and not count.more_than_allowed)
         out.append((place, EstimateState.TRACKING if sure else EstimateState.POORLY_DETERMINED))
     if count.count >= 2:
         places = ", ".join(f"{name(p.mean)} ({100 * p.share:.0f} %)" for p in count.transmitters)
@@ -174,5 +176,6 @@ def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
             warnings.append(f"{where} of the bearings, interleaved with this one's: a reflection, or another carrier "
                             "on the air at the same time (bearings alone cannot tell which)")
     if count.more_than_allowed:
-        warnings.append(f"more transmitters than max_emitters_per_channel ({max_k}) seem to be on this frequency")
+        warnings.append(f"more transmitters than max_emitters_per_channel ({max_k}) seem to be on this frequency: "
+                        "each place given may hold another's readings too (raise the limit to see them)")
     return out, warnings
