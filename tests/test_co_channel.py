@@ -143,6 +143,8 @@ def test_the_sample_co_channel_bag_replays_offline_to_two_transmitters(tmp_path,
     assert res.returncode == 0, res.stderr
     last = json.loads((tmp_path / "out.jsonl").read_text().splitlines()[-1])
     assert last["transmitter_count"] == 2 and len(last["transmitters"]) == 2
+    # the other transmitter's 42 % of the readings are its, not wild: the estimate is not called suspect for them
+    assert last["state"] == "tracking" and not any("look wild" in w for w in last["warnings"]), last["warnings"]
     assert "2 transmitters on this frequency" in res.stdout + res.stderr
     assert "the transmitter nearest the bag's truth" in res.stdout + res.stderr
 
@@ -226,3 +228,17 @@ def test_a_count_capped_by_the_limit_leaves_no_transmitter_sure():
         states, warnings = co_channel(count, antennas, 2)
         assert [s for _, s in states] == [EstimateState.POORLY_DETERMINED if capped else EstimateState.TRACKING] * 2
         assert any("more transmitters than max_emitters_per_channel (2)" in w for w in warnings) == capped
+
+
+def test_the_other_transmitters_share_is_what_the_track_does_not_follow():
+    from dataclasses import replace
+
+    from aoa_localizer.engine.inference.co_channel import Count, Place
+    from aoa_localizer.engine.track.report import others_share
+
+    places = [Place(PLACES[0].copy(), np.eye(2), 0.55), Place(PLACES[1].copy(), np.eye(2), 0.4)]
+    count = Count(2, 0.99, places, [], {2: 0.99}, False, np.zeros(0, int))
+    assert others_share(count, PLACES[0] + 20.0) == pytest.approx(0.4)
+    assert others_share(count, PLACES[1] - 20.0) == pytest.approx(0.55)
+    assert others_share(None, PLACES[0]) == 0.0
+    assert others_share(replace(count, count=1, transmitters=[]), PLACES[0]) == 0.0

@@ -34,7 +34,7 @@ from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
-from aoa_localizer.engine.track.report import co_channel
+from aoa_localizer.engine.track.report import co_channel, others_share
 from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading, Transmitter
 
@@ -571,8 +571,8 @@ class Localizer:
         lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
         from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         f = track.cloud
-        modes, state, warnings = track.assess(np.asarray(mean), np.asarray(cov))
         count = track.count_transmitters(final=end_of_data)
+        modes, state, warnings = track.assess(np.asarray(mean), np.asarray(cov), others_share(count, np.asarray(mean)))
         transmitters: list[Transmitter] = []
         if count is not None:
             # the antennas only rate the transmitters' ellipses: a single transmitter (most channels) skips them

@@ -175,10 +175,13 @@ class Held:
         shift, spread = marginalise(pts, mean, self.robust(), sd)
         return mean + shift, cov + spread
 
-    def assess(self, mean: np.ndarray, cov: np.ndarray) -> tuple[list, EstimateState, list[str]]:
-        """The estimate's modes (east, north, mass), its state and the warnings behind it (report.py)."""
+    def assess(self, mean: np.ndarray, cov: np.ndarray, others_share: float = 0.0
+               ) -> tuple[list, EstimateState, list[str]]:
+        """The estimate's modes (east, north, mass), its state and the warnings behind it (report.py), the
+        `others_share` of the readings other transmitters on the frequency explain not counted as wild."""
         modes = mode_masses(self.cloud, self.modes)
         history = self.model.history.data if self.filter is not None else None
-        state, warnings = assess(mean, cov, modes, self.supervisor.health, self.calibration, self.status, history)
+        state, warnings = assess(mean, cov, modes, self.supervisor.health, self.calibration, self.status, history,
+                                 others_share)
         return modes, state, warnings
 

@@ -107,11 +107,12 @@ def _inside(cluster: tuple[np.ndarray, np.ndarray, float], place: np.ndarray) ->
 
 
 def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor, c: Calibrator, status: Status,
-           history: np.ndarray | None) -> tuple[EstimateState, list[str]]:
+           history: np.ndarray | None, others_share: float = 0.0) -> tuple[EstimateState, list[str]]:
     """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings (the
-    supervisor's `health` in alarm, the calibration `c` finding many wild or offset bearings), `poorly_determined`
-    when the posterior is proper but wide or multi-modal, or only a provisional sample (no filter `history`: the
-    track's `status` says why), else `tracking`."""
+    supervisor's `health` in alarm, the calibration `c` finding many wild or offset bearings, beyond the
+    `others_share` of them that other transmitters on the frequency explain), `poorly_determined` when the posterior
+    is proper but wide or multi-modal, or only a provisional sample (no filter `history`: the track's `status` says
+    why), else `tracking`."""
     warnings = []
     if health.alarm_since is not None:
         warnings.append(f"the estimate no longer explains the newest bearings ({sum(health.flags)} of the "
@@ -119,7 +120,7 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
                         "bearing reference or offset set wrong (bearing_reference, mount_offset_deg, "
                         "magnetic_declination_deg)")
     wild = max(c.outlier_prob if c.grid is None else 0.0, c.noise.reading_outlier_prob if c.noise.fits else 0.0)
-    if wild > _SUSPECT_WILD_SHARE:
+    if wild - others_share > _SUSPECT_WILD_SHARE:
         warnings.append(f"{100 * wild:.0f} % of the bearings look wild: a bearing offset or reference set wrong "
                         "(bearing_reference, mount_offset_deg, magnetic_declination_deg), or heavy multipath")
     if c.course:
@@ -143,6 +144,15 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
 
 
 _COUNT_SURE = 0.9  # a count this probable: its transmitters may be `tracking`
+
+
+def others_share(count: Count | None, mean: np.ndarray) -> float:
+    """The share of a channel's readings that its other transmitters explain (the track follows the one nearest its
+    estimate `mean`); 0 with one transmitter."""
+    if count is None or count.count < 2:
+        return 0.0
+    nearest = min(count.transmitters, key=lambda p: float(np.hypot(*(p.mean - mean))))
+    return sum(p.share for p in count.transmitters) - nearest.share
 
 
 def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
