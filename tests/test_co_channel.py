@@ -147,6 +147,7 @@ def test_the_sample_co_channel_bag_replays_offline_to_two_transmitters(tmp_path,
     assert last["state"] == "tracking" and not any("look wild" in w for w in last["warnings"]), last["warnings"]
     assert "2 transmitters on this frequency" in res.stdout + res.stderr
     assert "the transmitter nearest the bag's truth" in res.stdout + res.stderr
+    assert "among them the other transmitters' on the frequency" in res.stdout + res.stderr  # the wild share's part
 
 
 @pytest.mark.slow

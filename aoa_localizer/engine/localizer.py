@@ -215,7 +215,10 @@ class Localizer:
         if est is not None and est.algorithm == "survey" and est.noise:
             lines.append(survey_sentence(est.noise))
         elif self._cfg.calibrate_noise:
-            lines.append(noise_sentence(self.noise_summary()))
+            line = noise_sentence(self.noise_summary())
+            if est is not None and est.transmitters:  # the channel's calibration reads the others' bearings as wild
+                line += " (among them the other transmitters' on the frequency: see the count)"
+            lines.append(line)
         pooled = self.receiver_noise()
         if pooled is not None:
             lines.append(f"the receiver over its channels: {pooled.sentence()}")
