@@ -13,8 +13,11 @@ Exit codes: 0 done; 1 the bag is damaged (offline: estimates made before the dam
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from aoa_localizer.common.bag_run import run_bag, summary
@@ -70,9 +73,11 @@ def run_offline(args) -> int:
     def write(est):
         nonlocal written
         write_header()
-        out.write(json.dumps(est.to_json_dict()) + "\n")
-        out.flush()
-        written += 1
+        line = json.dumps(est.to_json_dict()) + "\n"
+        with _ctrl_c_held():  # a line written is a line counted: the count said at Ctrl-C is what the file holds
+            out.write(line)
+            out.flush()
+            written += 1
 
     try:
         run = run_bag(args.bag, bag_topics(args), loc, write, stations=stations)
@@ -89,6 +94,23 @@ def run_offline(args) -> int:
         raise
     _settle(staged, keep=True)
     return _told(loc, run, written, args.output)
+
+
+@contextlib.contextmanager
+def _ctrl_c_held():
+    """A Ctrl-C (SIGINT) during the block raised as KeyboardInterrupt right after it (in the main thread, where
+    Python runs signal handlers; elsewhere the block runs as it is)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list = []
+    previous = signal.signal(signal.SIGINT, lambda *_: caught.append(True))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:
+            raise KeyboardInterrupt
 
 
 def _settle(staged: StagedFile | None, keep: bool) -> None:

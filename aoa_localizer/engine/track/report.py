@@ -112,9 +112,15 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
     supervisor's `health` in alarm, the calibration `c` finding many wild or offset bearings, beyond the
     `others_share` of them that other transmitters on the frequency explain), `poorly_determined` when the posterior
     is proper but wide or multi-modal, or only a provisional sample (no filter `history`: the track's `status` says
-    why), else `tracking`."""
-    warnings = []
-    if health.alarm_since is not None:
+    why), or in alarm while other transmitters on the frequency take turns with the one it follows, else
+    `tracking`."""
+    warnings, keyed = [], None
+    if health.alarm_since is not None and others_share > 0.0:
+        # the newest bearings are another transmitter's turn: the model fits, which one the track follows is open
+        keyed = (f"the estimate does not explain the newest bearings ({sum(health.flags)} of the last "
+                 f"{len(health.flags)} points disagree): another transmitter on this frequency has its turn (see "
+                 "the count), and the track may move to it")
+    elif health.alarm_since is not None:
         warnings.append(f"the estimate no longer explains the newest bearings ({sum(health.flags)} of the "
                         f"last {len(health.flags)} points disagree): multipath, an emitter that moved, or a "
                         "bearing reference or offset set wrong (bearing_reference, mount_offset_deg, "
@@ -131,6 +137,8 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
                         f"azimuth {c.offset_deg:+.1f} deg), learned and corrected: {c.offset_advice()}")
     if warnings:
         return EstimateState.SUSPECT, warnings
+    if keyed is not None:
+        return EstimateState.POORLY_DETERMINED, [keyed]
     if history is None:
         why = status.why or status.words()
         return EstimateState.POORLY_DETERMINED, [f"few or poorly crossing bearings: {why}"]
