@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any, NamedTuple
 
@@ -134,6 +134,12 @@ class Estimate:
     transmitter_count: int = 1
     count_probability: float = float("nan")
     transmitters: list = field(default_factory=list)
+
+    def at_transmitter(self, t: Transmitter) -> Estimate:
+        """This estimate moved to one of its channel's transmitters (its place and ellipse; no transmitters or
+        regions of its own): how the node and the exports show each."""
+        return replace(self, east=t.east, north=t.north, lat=t.lat, lon=t.lon, cov=t.cov, transmitters=[],
+                       regions=None)
 
     def to_json_dict(self) -> dict:
         """The JSON-lines record of docs/interface.md (offline replay output)."""

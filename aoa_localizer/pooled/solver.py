@@ -242,12 +242,6 @@ def _part_fix(readings: list[SurveyReading], receiver_class: str) -> SurveyTrans
     return None if fix is None else SurveyTransmitter(fix.lat, fix.lon, fix.cov, math.nan, fix.state)
 
 
-def _with_count(fix: EmitterFix, count: SurveyCount) -> EmitterFix:
-    """The fix with its id's transmitter count."""
-    state, warnings = count.applied(fix.state, fix.warnings)
-    return replace(fix, state=state, warnings=warnings, count=count)
-
-
 def _calibrations(geoms: dict[str, Geometry], biases: dict[str, Bias]) -> dict[str, ReceiverCalibration]:
     heard: dict[str, set] = defaultdict(set)
     stations: Counter = Counter()
@@ -260,6 +254,12 @@ def _calibrations(geoms: dict[str, Geometry], biases: dict[str, Bias]) -> dict[s
         bias, var = biases[r].overall if r in biases else (math.nan, math.nan)
         out[r] = ReceiverCalibration(r, math.degrees(bias), math.degrees(math.sqrt(var)), len(emitters), stations[r])
     return out
+
+
+def _with_count(fix: EmitterFix, count: SurveyCount) -> EmitterFix:
+    """The fix with its id's transmitter count."""
+    state, warnings = count.applied(fix.state, fix.warnings)
+    return replace(fix, state=state, warnings=warnings, count=count)
 
 
 def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown", max_k: int = 3) -> PooledResult:
@@ -279,7 +279,6 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
             result.refused[e] = g
         else:
             geoms[e] = g
-    counts = Counter(r.emitter for r in readings)
     heard: dict[str, list[SurveyReading]] = defaultdict(list)
     for r in readings:
         heard[r.emitter].append(r)
@@ -291,7 +290,7 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
         result.noise.append(summary)
         for e, g in group.items():
             region = _displaced(g, solved, noise)
-            fix = _fix(g, region, solved.shifts[e], solved.extra[e], summary["scale_deg"], counts[e])
+            fix = _fix(g, region, solved.shifts[e], solved.extra[e], summary["scale_deg"], len(heard[e]))
             counted = count_id(heard[e], g, region.point, math.radians(summary["scale_deg"]), max_k,
                                lambda part: _part_fix(part, receiver_class))
             result.fixes[e] = fix if counted is None else _with_count(fix, counted)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import datetime
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import replace
 
 import numpy as np
 
@@ -50,9 +49,7 @@ def shown(estimates: list[Estimate]) -> list[tuple[Estimate, str, str, dict]]:
         point_name, ellipse_name = names(est)
         out.append((est, point_name, ellipse_name, {}))
         for k, t in enumerate(est.transmitters, start=1):
-            view = replace(est, east=t.east, north=t.north, lat=t.lat, lon=t.lon, cov=t.cov, transmitters=[],
-                           regions=None)
-            out.append((view, f"{point_name}: transmitter {k} of {len(est.transmitters)}",
+            out.append((est.at_transmitter(t), f"{point_name}: transmitter {k} of {len(est.transmitters)}",
                         f"{ellipse_name}: transmitter {k} of {len(est.transmitters)}",
                         {"share": round(t.share, 4), "state": str(t.state),
                          "count_probability": round(est.count_probability, 4)}))

@@ -599,7 +599,7 @@ class Run:
         found = stations_of_bag(args)
         node_cmd, source_cmd = build_commands(args, node_parameters(args, found), found)
         co = parse_params(args.vehicle_param, "--vehicle-param").get("co_channel")
-        flat = [float(v) for v in yaml.safe_load(co)] if co else []
+        flat = [float(v) for v in vehicle_value(co)] if co else []
         self.monitor = monitor = Monitor(args.record, list(zip(flat[::2], flat[1::2], strict=False)))
         node = self.start("aoa_localizer", node_cmd)
         monitor.spin(1.5)  # let the node come up and the monitor discover it

@@ -6,7 +6,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
@@ -104,8 +104,7 @@ class NodeOutputs:
             if pub is None:
                 pub = self.transmitter_pubs[(est.channel, k)] = self.node.create_publisher(
                     self.types.PoseWithCovarianceStamped, f"{prefix}transmitter_{k}/pose", LATCHED)
-            place = replace(est, east=t.east, north=t.north, lat=t.lat, lon=t.lon, cov=t.cov, transmitters=[])
-            pub.publish(build.emitter_pose(self.types, place, self.map_frame))
+            pub.publish(build.emitter_pose(self.types, est.at_transmitter(t), self.map_frame))
 
     def posteriors(self, loc: Localizer, budget_s: float, period_s: float) -> PosteriorWork:
         """Each channel's posterior grid on its emitter/<channel>/posterior, and the primary channel's on

@@ -230,11 +230,11 @@ def check_outputs(source: Path, output: Path | None, report: Path | None):
 
 
 def record(ident: str, est: Estimate, rows: int) -> dict:
+    whole = est.to_json_dict()
     return {"id": ident, "lat": est.lat, "lon": est.lon, "east": est.east, "north": est.north,
             "cov": [[float(v) for v in r] for r in est.cov], "state": est.state, "warnings": list(est.warnings),
-            "bearings_used": est.bearings_used, "bearings_given": rows, "modes": est.to_json_dict()["modes"],
-            **{k: v for k, v in est.to_json_dict().items()
-               if k in ("transmitter_count", "count_probability", "transmitters")}}
+            "bearings_used": est.bearings_used, "bearings_given": rows,
+            **{k: whole[k] for k in ("modes", "transmitter_count", "count_probability", "transmitters")}}
 
 
 def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):

@@ -25,7 +25,8 @@ import numpy as np
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes, radio_reach
 
-MIN_READINGS = 30  # a channel's transmitters are counted from this many readings on
+MIN_READINGS = 30  # a channel's transmitters are counted from this many readings on ...
+COUNT_GROWTH = 2.0  # ... and again once they grew by this factor (a count costs 0.01-1 s)
 BIN_S = 2.0  # readings within one such bin of time are taken as one transmitter's (in turns)
 MIN_SHARE = 0.08  # a transmitter (or a ghost) explains at least this share of the readings
 _EM_ITERATIONS = 40
@@ -233,6 +234,7 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
     the shares, the scales and the sites' biases; then BIC (the biases, a prior's random effects, enter the
     log-likelihood with their prior's density, not as parameters)."""
     band = r.band
+    base = _turned(r, offset)
     k = len(places)
     x = np.array(places, float)
     share = np.full(k, 1.0 / k)
@@ -241,7 +243,7 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
     previous = -np.inf
     loglik = -np.inf
     for _ in range(_EM_ITERATIONS):
-        shifted = _turned(r, _shift(r, offset, bias))
+        shifted = _biased(base, bias)
         log_in, log_e = _emissions(shifted, x, eps, scale)  # (N, K) log of the inlier part, of the whole emission
         resp, loglik = _responsibilities(log_e, share, bins, in_turns)
         loglik += _bias_prior(r, bias)
@@ -252,12 +254,11 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
         for j in range(k):
             x[j] = _gauss_newton(shifted, x[j], inlier[:, j], scale)
         scale = _scale(shifted, x, inlier, band)
-        bias = _site_biases(_turned(r, offset), x, inlier, scale, len(bias))
+        bias = _site_biases(base, x, inlier, scale, len(bias))
         if abs(loglik - previous) <= _EM_TOL * abs(loglik):
             break
         previous = loglik
-    shift = _shift(r, offset, bias)
-    shifted = _turned(r, shift)
+    shifted = _biased(base, bias)
     log_in, log_e = _emissions(shifted, x, eps, scale)
     resp, loglik = _responsibilities(log_e, share, bins, in_turns)
     loglik += _bias_prior(r, bias)
@@ -265,12 +266,13 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
     out = [Place(x[j].copy(), _covariance(shifted, x[j], inlier[:, j], scale), float(resp[:, j].mean()))
            for j in range(k)]
     params = 2 * k + (k - 1) + 1 + len(np.unique(band))  # places, shares, the wild share, the scales
+    shift = offset + (bias[r.site] if r.site is not None else np.zeros(len(r)))
     return Fit(k, in_turns, out, scale, shift, loglik, -2.0 * loglik + params * math.log(len(r)), resp)
 
 
-def _shift(r: Readings, offset: float, bias: np.ndarray) -> np.ndarray:
-    """Each reading's shift: the receiver's offset and its site's bias."""
-    return offset + (bias[r.site] if r.site is not None else np.zeros(len(r)))
+def _biased(r: Readings, bias: np.ndarray) -> Readings:
+    """The readings with their sites' biases taken off (as they are without sites)."""
+    return _turned(r, bias[r.site]) if r.site is not None else r
 
 
 def _bias_prior(r: Readings, bias: np.ndarray) -> float:

@@ -19,11 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.geodesy import LocalFrame, unturn
+from aoa_localizer.engine.inference.co_channel import COUNT_GROWTH
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
 LIVE_GROWTH = 1.25  # a live survey fix is made again once the channel's bearings grew by this factor ...
-COUNT_GROWTH = 2.0  # a live fix counts the transmitters again once the bearings grew by this factor
 LIVE_PLACES = 3  # ... or a place joined, from this many places on (fewer: no crossing, the filter's estimate)
 
 

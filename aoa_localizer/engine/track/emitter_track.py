@@ -25,7 +25,14 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import CheckResult, refined
-from aoa_localizer.engine.inference.co_channel import MIN_READINGS, Count, Readings, count_transmitters, mode_starts
+from aoa_localizer.engine.inference.co_channel import (
+    COUNT_GROWTH,
+    MIN_READINGS,
+    Count,
+    Readings,
+    count_transmitters,
+    mode_starts,
+)
 from aoa_localizer.engine.inference.global_search import Mode, find_modes
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
@@ -44,7 +51,6 @@ from aoa_localizer.filters.base import ParticleFilter
 log = logging.getLogger("aoa_localizer")
 
 _CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
-_COUNT_GROWTH = 2.0  # counted from MIN_READINGS on, again when the readings heard doubled (a count costs 0.01-0.3 s)
 COUNT_MAX_READINGS = 1500  # more heard: every k-th point's readings (whole points: a bin's readings stay together)
 
 
@@ -388,19 +394,18 @@ class EmitterTrack(Held):
         `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
         cfg, c = self.cfg, self.calibration
         grown = self.heard_readings > self.counted_readings
-        due = grown and (final or self.heard_readings >= min(_COUNT_GROWTH * self.counted_readings,
+        due = grown and (final or self.heard_readings >= min(COUNT_GROWTH * self.counted_readings,
                                                               self.counted_readings + HEARD_READINGS))
         if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < MIN_READINGS or not due
                 or not self.estimating):
             return self.counted
         groups = list(self.heard)
-        stride = math.ceil(sum(len(g) for g in groups) / COUNT_MAX_READINGS)
+        stride = math.ceil(self.heard_held / COUNT_MAX_READINGS)
         readings = [r for g in groups[::-1][::stride][::-1] for r in g]  # the newest point always in
         # The readings as heard, with their own sigmas (the configured model): a receiver calibrated on two
         # transmitters' bearings reads them as one wide noise or an offset; the count fits its own of both
         rows = np.array([[r.stamp, r.east, r.north, r.theta, r.sigma, r.quality] for r in readings])
         heard = Readings(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], np.maximum(rows[:, 4], 1e-4), rows[:, 5])
-
         first = self.filter.estimate()[0] if self.filter is not None else self.modes[0].mean
         self.counted = count_transmitters(heard, first, mode_starts(heard), cfg.max_emitters_per_channel, c.offset)
         self.counted_readings = self.heard_readings
