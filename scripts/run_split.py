@@ -7,7 +7,7 @@ docs/benchmarks.md has the figures).
 
 Ours runs the default configuration (N = 100, `scheduling: reproducible`) through `feed`, `flush` and `finish`,
 as scripts/peer_speed.py does. The parts are timed by wrapping the engine's functions that make them (a search's
-or check's pieces wherever they ran; nested parts are counted once, in the outer). The columns `without ...` give the
+or check's turns wherever they ran; nested parts are counted once, in the outer). The columns `without ...` give the
 run's cost with those parts taken off, as a share of the EKF's whole run: what the rest of the design costs if the
 global work were free. Nothing here is a test.
 """
@@ -18,7 +18,7 @@ import functools
 import sys
 import time
 from collections import defaultdict
-from collections.abc import Callable, Generator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,7 @@ import peer_speed  # noqa: E402
 
 from aoa_localizer import Localizer, LocalizerConfig  # noqa: E402
 from aoa_localizer.engine.inference import checks  # noqa: E402
+from aoa_localizer.engine.scheduling import slices  # noqa: E402
 from aoa_localizer.engine.track import initiator, supervisor  # noqa: E402
 from aoa_localizer.filters.base import ParticleFilter  # noqa: E402
 from aoa_localizer.filters.resample_move import ResampleMove  # noqa: E402
@@ -46,23 +47,33 @@ def _timing(name: str, t0: float):
         SPENT[name] += time.perf_counter() - t0
 
 
-def _timed_steps(name: str, fn: Callable[..., Generator]) -> Callable[..., Generator]:
-    """A generator function (a job's pieces) whose pieces are timed wherever they run."""
+def _timed_job(name: str, fn: Callable) -> Callable:
+    """A job's function: timed here when it runs in the caller (inline, the end of data); in its own thread (made in
+    turns, slices.py) its turns are timed where they are given (_timed_turns), the thread only names the part."""
+    timed = _timed_call(name, fn)
+
     @functools.wraps(fn)
     def wrapped(*args, **kwargs):
+        turns = getattr(slices._meter, "turns", None)
+        if turns is None:
+            return timed(*args, **kwargs)
         COUNT[name] += 1
-        steps = fn(*args, **kwargs)
-        while True:
-            _open.append(name)
-            t0 = time.perf_counter()
-            try:
-                piece = next(steps)
-            except StopIteration as done:
-                return done.value
-            finally:
-                _timing(name, t0)
-                _open.pop()
-            yield piece
+        turns.part = name
+        return fn(*args, **kwargs)
+    return wrapped
+
+
+def _timed_turns(give: Callable) -> Callable:
+    """`_Turns.give`, each turn timed under the part its job named."""
+    @functools.wraps(give)
+    def wrapped(turns, call, whole):
+        t0 = time.perf_counter()
+        try:
+            return give(turns, call, whole)
+        finally:
+            name = getattr(turns, "part", "")
+            if name and not _open:
+                SPENT[name] += time.perf_counter() - t0
     return wrapped
 
 
@@ -82,10 +93,9 @@ def _timed_call(name: str, fn: Callable) -> Callable:
 
 def instrument():
     """Wrap the functions that make each part (the modules that call them hold their own names)."""
-    start = _timed_steps("start searches", checks.start_search)
-    checks.start_search = initiator.start_search = start
-    check = _timed_steps("global checks", checks.check)
-    checks.check = supervisor.check = check
+    checks.search_start = initiator.search_start = _timed_job("start searches", checks.search_start)
+    checks.run_check = supervisor.run_check = _timed_job("global checks", checks.run_check)
+    slices._Turns.give = _timed_turns(slices._Turns.give)
     ResampleMove.move = _timed_call("moves", ResampleMove.move)
     ParticleFilter.rejuvenate = _timed_call("moves", ParticleFilter.rejuvenate)
 

@@ -3,12 +3,11 @@ import numpy as np
 
 from aoa_localizer.engine.inference.global_search import Points, Robust
 from aoa_localizer.engine.ingest import clock_check
-from aoa_localizer.engine.scheduling.slices import run_whole
 
 
 def best_shift(*args):
     """clock_check.best_shift, every piece made."""
-    return run_whole(clock_check.best_shift(*args))
+    return clock_check.best_shift(*args)
 
 
 def _drive(late_s: float, speed: float = 10.0):

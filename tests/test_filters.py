@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.inference import emitter_model
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.likelihood import (
     BearingLikelihood,
@@ -317,12 +316,18 @@ def test_realtime_sweeps_are_owed_to_the_scheduler_and_made_between_or_at_the_ne
     assert scheduler.debt(_filter(n=200)).sweeps == 0  # a new filter owes nothing
 
 
+def _unmetered_looks(monkeypatch):
+    """The model's looks (LOOKS) charge nothing: only what a test charges is metered."""
+    real = slices.charge
+    monkeypatch.setattr(slices, "charge", lambda cost, elements: None if cost is slices.LOOKS else real(cost, elements))
+
+
 def test_reproducible_sweeps_fill_the_calls_budget_and_the_rest_go_to_the_next_points(monkeypatch):
     """Under `reproducible` a call makes the owed sweeps while its metered cost and one more sweep's stay under
     SWEEP_BUDGET_US, at least one a call unless a job's pieces came first or the call spent half the budget; the rest
     at the points that follow. A resampling before the debt is paid owes its own sweeps instead. move_one() (idle
     time) makes none: a reproducible run follows its points alone. pay_all() makes the rest."""
-    monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)  # only the test's cost is metered
+    _unmetered_looks(monkeypatch)  # only the test's cost is metered
     sweep_us = 1500.0  # 5000 us holds three (4500), not four
     scheduler, f, made = _counting_filter(False, sweep_us, n=SWEEP_PART)  # whole sweeps
     assert _sweeps_per_call(scheduler, f, made, 3) == [3, 2, 0, 0]
@@ -359,7 +364,7 @@ def test_reproducible_sweeps_of_a_large_cloud_are_made_a_part_at_a_time(monkeypa
     """Under `reproducible` a cloud of more than SWEEP_PART particles is swept SWEEP_PART particles at a time (the
     budget counts the parts): a sweep's parts are a permutation of the cloud, and a part leaves every other
     particle as it was. pay_all() makes the rest as whole sweeps."""
-    monkeypatch.setattr(emitter_model, "charge", lambda cost, elements: None)
+    _unmetered_looks(monkeypatch)
     scheduler, f, made = _counting_filter(False, 1500.0, n=250)
     parts = []
     real_move = f.move

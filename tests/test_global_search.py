@@ -9,7 +9,6 @@ from aoa_localizer.engine.inference import global_search, start_grid
 from aoa_localizer.engine.inference.global_search import Points, Robust, find_modes, log_posterior, refine
 from aoa_localizer.engine.inference.receiver import NoiseGrid
 from aoa_localizer.engine.inference.start_grid import StartGrid
-from aoa_localizer.engine.scheduling.slices import run_whole
 
 
 def _points(rng: np.random.Generator) -> Points:
@@ -58,11 +57,6 @@ def test_refine_skips_the_steps_of_starts_that_stopped_and_ends_where_every_step
     assert np.hypot(*(got[0][4] - [150.0, 900.0])) < 50.0  # the start next to the source ends at it
 
 
-def score_of(grid: StartGrid, pts: Points, rob: Robust) -> np.ndarray:
-    """StartGrid.score, every piece made."""
-    return run_whole(grid.score(pts, rob))
-
-
 def counting(monkeypatch) -> list[int]:
     """How many points each of the start grid's sums is made over, in the order made."""
     scored: list[int] = []
@@ -70,7 +64,7 @@ def counting(monkeypatch) -> list[int]:
 
     def grid_sums(cells, radius, pts, rob):
         scored.append(len(pts))
-        return (yield from real(cells, radius, pts, rob))
+        return real(cells, radius, pts, rob)
 
     monkeypatch.setattr(start_grid, "grid_sums", grid_sums)
     return scored
@@ -87,20 +81,20 @@ def test_a_start_grid_adds_new_points_to_its_sums_and_scores_as_a_fresh_grid_doe
     scored = counting(monkeypatch)
     for k in (10, 11, 20, 30):
         held = pts.take(slice(0, k))
-        score = score_of(grid, held, rob)
-        fresh = score_of(replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0), held, rob)
+        score = grid.score(held, rob)
+        fresh = replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0).score(held, rob)
         np.testing.assert_allclose(score, fresh, rtol=0.0, atol=1e-9)
         coarse = global_search.coarse_robust(rob)  # all the points in one piece, as find_modes scored before pieces
         whole = log_posterior(grid.cells, held, coarse, global_search.cell_widening(grid.cells, grid.radius, held))
         np.testing.assert_allclose(score, whole, rtol=0.0, atol=1e-9)
     assert scored[::2] == [10, 1, 9, 10]  # each fresh score took all k points
     remade = replace(pts, sigma=2.0 * pts.sigma)
-    score_of(grid, remade, rob)
-    score_of(grid, pts, replace(rob, gps_sigma_m=10.0))
+    grid.score(remade, rob)
+    grid.score(pts, replace(rob, gps_sigma_m=10.0))
     assert scored[-2:] == [30, 30]
     assert grid.covers(pts.take(slice(0, 13))) and not grid.covers(pts)  # laid for 10 points: twice their reach
     laid = StartGrid(*global_search.polar_grid(pts))
-    assert [m.mean.tolist() for m in run_whole(laid.modes(pts, rob))] == \
+    assert [m.mean.tolist() for m in laid.modes(pts, rob)] == \
         [m.mean.tolist() for m in find_modes(pts, rob, by_density=True)]
 
 
@@ -112,14 +106,14 @@ def test_a_start_grid_takes_off_the_points_a_window_dropped(monkeypatch):
     rob = Robust(0.05, 3.0, grid=NoiseGrid.weak(2.0))
     grid = StartGrid()
     assert not grid.covers(pts)
-    run_whole(grid.modes(pts.take(slice(0, 20)), rob))
+    grid.modes(pts.take(slice(0, 20)), rob)
     assert grid.covers(pts.take(slice(0, 20)))
     scored = counting(monkeypatch)
     window = pts.take(slice(5, 24))  # 5 dropped, 4 new
-    score = score_of(grid, window, rob)
+    score = grid.score(window, rob)
     assert scored == [5, 4]
-    fresh = score_of(replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0), window, rob)
+    fresh = StartGrid.score(replace(grid, rows=np.zeros((0, 5)), key=(), sums=0.0), window, rob)
     np.testing.assert_allclose(score, fresh, rtol=0.0, atol=1e-9)
     scored.clear()
-    score_of(grid, pts.take(slice(16, 26)), rob)  # 11 of 19 dropped: afresh
+    grid.score(pts.take(slice(16, 26)), rob)  # 11 of 19 dropped: afresh
     assert scored == [10]

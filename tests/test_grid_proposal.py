@@ -8,7 +8,6 @@ from aoa_localizer.engine.inference.global_search import Points, Robust, log_pos
 from aoa_localizer.engine.inference.grid_proposal import Blend, GridProposal
 from aoa_localizer.engine.inference.safety import ModeProposal, weighted_sample
 from aoa_localizer.engine.inference.start_grid import StartGrid
-from aoa_localizer.engine.scheduling.slices import run_whole
 
 
 def _small_grid() -> GridProposal:
@@ -90,7 +89,7 @@ def _share_beyond(pts, rob, radius: float) -> float:
 def test_on_a_ray_the_grid_keeps_more_draws_and_the_sample_reaches_the_far_end():
     pts, rob = _parallel_bearings()
     grid = StartGrid()
-    modes = run_whole(grid.modes(pts, rob))
+    modes = grid.modes(pts, rob)
     assert modes
     mode_q = ModeProposal(modes, 100.0)
     grid_q = grid.proposal()

@@ -166,3 +166,21 @@ def test_no_file_of_the_package_imports_one_that_imports_it_back():
         tuple(graphlib.TopologicalSorter(graph).static_order())
     except graphlib.CycleError as exc:
         pytest.fail(f"an import circle: {' -> '.join(exc.args[1])}")
+
+
+def test_the_maths_has_no_turns_and_no_meter_inside_it():
+    """Architecture III (issue 52): the searches and checks were generators whose `yield`s marked the pieces a
+    call could make, and the kernels called the cost meter in their bodies. Now a job is a plain function; only the
+    scheduling room cuts it into turns, and a kernel declares its cost on its definition (`@metered`)."""
+    engine = Path(aoa_localizer.__file__).parent / "engine"
+    found = []
+    for path in sorted(engine.rglob("*.py")):
+        if path.parent.name == "scheduling" or path.name == "localizer.py":  # Localizer.run yields its estimates
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Yield | ast.YieldFrom):
+                found.append(f"{path.relative_to(engine)}:{node.lineno} yield")
+            elif isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) == "charge":
+                found.append(f"{path.relative_to(engine)}:{node.lineno} charge()")
+    assert not found, found
+    assert (engine / "inference" / "global_search.py").read_text().count("@metered(") == 1  # the test sees them

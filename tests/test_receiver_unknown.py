@@ -16,7 +16,6 @@ from aoa_localizer.engine.inference.checks import refined
 from aoa_localizer.engine.inference.global_search import Points, Robust, linearised, log_posterior
 from aoa_localizer.engine.inference.offset import joint_optimum, shifted
 from aoa_localizer.engine.inference.receiver import NoiseGrid, em_weights, log_densities, log_sum
-from aoa_localizer.engine.scheduling.slices import run_whole
 from aoa_localizer.engine.site_bearings import least_squares_fix
 from aoa_localizer.simulation.evaluation import run
 from aoa_localizer.simulation.scenarios import robustness_cells, simulate
@@ -226,7 +225,7 @@ def test_the_joint_optimum_finds_a_constant_offset_on_a_drive_with_a_turn():
     theta = np.arctan2(truth[1] - north, truth[0] - east) + math.radians(20) + math.radians(1) * rng.standard_normal(40)
     pts = Points(east, north, theta, np.full(40, math.radians(1.0)))
     rob = Robust(0.05)
-    b, x, lp = run_whole(joint_optimum(pts, np.array([400.0, 400.0]), rob))
+    b, x, lp = joint_optimum(pts, np.array([400.0, 400.0]), rob)
     assert math.degrees(b) == pytest.approx(20.0, abs=1.0)
     assert np.hypot(*(x - truth)) < 15.0
     assert lp > float(log_posterior(refined(x, pts, rob), pts, rob)) + 100
@@ -272,7 +271,7 @@ def test_the_joint_optimum_of_every_start_at_once_is_the_best_of_one_start_at_a_
     rob = Robust(0.1, 5.0)
     x0 = truth + rng.normal(0, 200, 2)
     starts = np.arange(-90.0, 91.0, 15.0) if case < 3 else np.arange(-180.0, 180.0, 15.0)
-    b, x, lp = run_whole(joint_optimum(pts, x0, rob, starts))
+    b, x, lp = joint_optimum(pts, x0, rob, starts)
     ref = max((one_start(pts, x0.copy(), math.radians(s), rob) for s in starts), key=lambda r: r[2])
     assert lp == pytest.approx(ref[2], rel=1e-9, abs=1e-6)
     assert math.remainder(b - ref[0], 2 * math.pi) == pytest.approx(0.0, abs=1e-6)

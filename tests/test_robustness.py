@@ -13,7 +13,6 @@ from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.safety import HealthMonitor, ModeProposal
 from aoa_localizer.engine.ingest.preprocess import reading_sigma
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scheduling.slices import run_whole
 from aoa_localizer.engine.track.report import merge_overlapping
 from aoa_localizer.filters.moves import independence_from
 from aoa_localizer.simulation.evaluation import run
@@ -330,9 +329,9 @@ def test_em_that_merges_its_runs_and_stops_when_converged_finds_what_every_run_t
     responsibilities = noise_module._responsibilities
     monkeypatch.setattr(noise_module, "_responsibilities",
                         lambda *a: work.append(a[3].shape[0]) or responsibilities(*a))
-    fast = run_whole(noise_module._em_in_pieces(resid, base, np.zeros(q.size), band, starts))
+    fast = noise_module._em(resid, base, np.zeros(q.size), band, starts)
     fast_work, work[:] = sum(work), []
-    plain = run_whole(noise_module._em_in_pieces(resid, base, np.zeros(q.size), band, starts, tol=0.0))
+    plain = noise_module._em(resid, base, np.zeros(q.size), band, starts, tol=0.0)
     assert all(n == starts.size for n in work)  # every run, to the end (or to a fixed point to the last bit)
     assert fast_work < sum(work) / 2
     assert fast[0] == pytest.approx(plain[0], rel=1e-6)

@@ -295,8 +295,8 @@ class LocalizerConfig(GroupAccess):
         "`realtime`: the global checks' and start searches' noise fits and searches run in a worker process (their "
         "result applied at the emitter's next point) and a resampling's move sweeps are owed, made between "
         "messages (the node's idle time) or one per following point, so no step blocks for long; `reproducible`: "
-        "in the calls, cut into pieces made a few per following point (as many as a cost model of the work, never "
-        "the clock, lets under a few ms), so a seed repeats a run exactly; `auto`: realtime in the node, "
+        "in the calls, made in turns, one per following point (as long as a cost model of the work, never the "
+        "clock, lets under a few ms), so a seed repeats a run exactly; `auto`: realtime in the node, "
         "reproducible offline and from Python",
         read_only=True,
     )

@@ -3,8 +3,9 @@ points, which can run beside the filter (in a worker process) while new points k
 
 The check's expensive part (EM noise fits at a few candidate places, the points rebuilt with the fitted noise,
 the search for every mode, the stamp-shift test) reads only the snapshot: readings and points are immutable, the
-noise model and the prior are copies. Its result is applied by the track, inline right away (`scheduling:
-reproducible`, so a seed repeats a run) or at the track's next point (`realtime`), where the cheap part
+noise model and the prior are copies. Its result is applied by the track, in the call that ends its last turn
+(`scheduling: reproducible`: made in turns within the calls, so a seed repeats a run; slices.py) or at the track's
+next point (`realtime`), where the cheap part
 runs on the current cloud and points: the re-weighting by the new noise, the emitter-moved test, the re-start test.
 A start search's result starts the filter from the modes it found over the points held then.
 
@@ -33,8 +34,8 @@ from aoa_localizer.engine.inference.global_search import (
     Mode,
     Points,
     Robust,
+    find_modes,
     log_posterior,
-    modes_in_pieces,
     point_log_densities,
     refine,
     residuals,
@@ -48,7 +49,6 @@ from aoa_localizer.engine.ingest.point_batch import Built, PointBatch, points_of
 from aoa_localizer.engine.ingest.preprocess import Columns, Group, columns, group_size
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from aoa_localizer.engine.scheduling.parent_death import die_with_parent
-from aoa_localizer.engine.scheduling.slices import Steps, run_whole
 from aoa_localizer.engine.track.provisional import DRAWS, provisional_sample
 from aoa_localizer.engine.types import Reading
 
@@ -61,7 +61,7 @@ def refined(x: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
 
 
 def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: list[np.ndarray], by_density: bool,
-              offset: float = 0.0, try_course: bool = False) -> Steps[Fit | None]:
+              offset: float = 0.0, try_course: bool = False) -> Fit | None:
     """Position and noise jointly: at each candidate place, and at the best mode under the configured noise, EM
     fits the noise and Gauss-Newton refines the place; the pair whose readings are likeliest wins (a wrong place
     explained by a wide noise loses to the right place with the right noise), unless its core is hollow (a place
@@ -69,20 +69,18 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
     reference's prior log odds; and, with `try_course`, for a north reference on a moving vehicle, the bearings turned
     by its course (course.py) with an offset of their own, adopted when they gain as much again over the best of
-    north and explain more than an emitter that moved. None when the readings are too few for a fit. In pieces
-    (slices.py): each EM fit, each refinement, the search under the configured noise, each offset's optimum."""
+    north and explain more than an emitter that moved. None when the readings are too few for a fit."""
     cfg, c = batch.cfg, batch.cols
     if c.theta.size < 2:
         return None
     rob = replace(rob, grid=None)  # each trial noise is taken as it is
     joint = _joint(batch, noise, rob, offset)
     configured = batch.points(None, offset)
-    yield
     eps = cfg.outlier_prob if cfg.likelihood == "mixture" else 0.0
-    narrow = yield from modes_in_pieces(configured, Robust(eps, cfg.gps_sigma_m), by_density)
+    narrow = find_modes(configured, Robust(eps, cfg.gps_sigma_m), by_density)
     best = None
     for x in list(candidates) + [m.mean for m in narrow[:1]]:
-        fit = yield from joint(x, offset)
+        fit = joint(x, offset)
         if fit is None:
             return None
         # a fit whose core is hollow explains the readings by a noise they do not have: any other wins over it
@@ -94,24 +92,23 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     out = Fit(trial, x, offset, batch)
     if not cfg.learn_offset:
         return out
-    found = yield from _offset_fit(batch.points(trial, offset), x, rob, offset, joint)
+    found = _offset_fit(batch.points(trial, offset), x, rob, offset, joint)
     # a first offset must beat the bearing reference's prior odds; one already learned is refined by any gain
     needed = 0.0 if offset else PRIOR_LOG_ODDS[cfg.bearing_reference]
     if found is not None and found[0] > ll + needed:
         ll, out = found[0], Fit(found[1], found[2], found[3], batch)
     if try_course and not batch.course and cfg.bearing_reference != "vehicle" and moved(c.v_east, c.v_north):
         turned = PointBatch(batch.groups, cfg, course=True)
-        yield
-        on_course = yield from _offset_fit(turned.points(out.noise, 0.0), out.at, rob, 0.0,
-                                           _joint(turned, noise, rob, 0.0), ALL_OFFSETS_DEG)
+        on_course = _offset_fit(turned.points(out.noise, 0.0), out.at, rob, 0.0, _joint(turned, noise, rob, 0.0),
+                                ALL_OFFSETS_DEG)
         if on_course is not None and on_course[0] > ll + PRIOR_LOG_ODDS[cfg.bearing_reference]:
             course_fit = Fit(on_course[1], on_course[2], on_course[3], turned)
-            if not (yield from _moved_explains_more(out, course_fit, rob)):
+            if not _moved_explains_more(out, course_fit, rob):
                 out = course_fit
     return out
 
 
-def _moved_explains_more(north: Fit, course: Fit, rob: Robust) -> Steps[bool]:
+def _moved_explains_more(north: Fit, course: Fit, rob: Robust) -> bool:
     """Whether an emitter that moved explains the points read from north at least as well as the bearings turned
     by the course do, by their robust log posteriors, the move's extra coordinates charged log K (BIC): both bend
     the bearings at one moment, and a single turn cannot tell them apart by itself. The move is placed where the
@@ -125,12 +122,11 @@ def _moved_explains_more(north: Fit, course: Fit, rob: Robust) -> Steps[bool]:
     pts = north.batch.points(north.noise, north.offset)
     places = []
     for part in (pts.take(np.arange(cut)), pts.take(np.arange(cut, k))):
-        modes = yield from modes_in_pieces(part, rob, True)
+        modes = find_modes(part, rob, True)
         places.append(modes[0].mean if modes else refined(north.at, part, rob))
     before, after = (np.cumsum(point_log_densities(x, pts, rob)) for x in places)
     # the old place up to the move, the new one from it on; at least two points either side
     cut = int(np.argmax(before[1:-2] + after[-1] - after[1:-2])) + 2
-    yield
     split = 0.0
     for x, part in zip(places, (pts.take(np.arange(cut)), pts.take(np.arange(cut, k))), strict=True):
         split += float(log_posterior(refined(x, part, rob), part, rob))
@@ -150,7 +146,7 @@ class Fit:
     batch: PointBatch
 
 
-JointFit = Callable[[np.ndarray, float], Steps[tuple[float, NoiseModel, np.ndarray] | None]]
+JointFit = Callable[[np.ndarray, float], tuple[float, NoiseModel, np.ndarray] | None]
 
 
 def _joint(batch: PointBatch, noise: NoiseModel, rob: Robust, offset: float) -> JointFit:
@@ -159,30 +155,28 @@ def _joint(batch: PointBatch, noise: NoiseModel, rob: Robust, offset: float) -> 
     quality, base, heading_var = c.quality, c.sigma, c.heading_sigma**2
     at_readings = shifted(Points(c.east, c.north, c.theta, base), offset)
 
-    def joint(x: np.ndarray, b: float) -> Steps[tuple[float, NoiseModel, np.ndarray] | None]:
+    def joint(x: np.ndarray, b: float) -> tuple[float, NoiseModel, np.ndarray] | None:
         """Noise at x, then x under that noise, twice; the readings' log likelihood, the noise, the place."""
         trial, ll, readings = noise.copy(), float("nan"), shifted(at_readings, b - offset)
         for _ in range(2):
-            ll = yield from trial.fit_in_pieces(residuals(x, readings), quality, base, heading_var)
-            yield
+            ll = trial.fit(residuals(x, readings), quality, base, heading_var)
             if not np.isfinite(ll):
                 return None
             x = refined(x, batch.points(trial, b), rob)
-            yield
         return ll, trial, x
 
     return joint
 
 
 def _offset_fit(pts: Points, x: np.ndarray, rob: Robust, offset: float, joint: JointFit,
-                starts_deg: np.ndarray | None = None) -> Steps[tuple[float, NoiseModel, np.ndarray, float] | None]:
+                starts_deg: np.ndarray | None = None) -> tuple[float, NoiseModel, np.ndarray, float] | None:
     """The joint (place, offset) optimum from x (offset.py) with the noise fitted again there: (log likelihood,
     noise, place, offset); None when the optimum is the current offset, or its fit's core is hollow."""
-    b, x_b, _ = yield from joint_optimum(pts, x, rob, starts_deg)
+    b, x_b, _ = joint_optimum(pts, x, rob, starts_deg)
     if not b:
         return None
     total = float(wrap_pi(offset + b))
-    fit = yield from joint(x_b, total)
+    fit = joint(x_b, total)
     return None if fit is None or fit[1].hollow else (fit[0], fit[1], fit[2], total)
 
 
@@ -264,17 +258,15 @@ class _Calibrated:
         self.built: list[Built] = []
         self.offset = snap.offset
 
-    def fit(self, candidates: list[np.ndarray], by_density: bool, try_course: bool = False) -> Steps[None]:
+    def fit(self, candidates: list[np.ndarray], by_density: bool, try_course: bool = False) -> None:
         snap = self.snap
-        fit = yield from fit_noise(self.before, snap.noise, snap.rob, candidates, by_density, snap.offset, try_course)
+        fit = fit_noise(self.before, snap.noise, snap.rob, candidates, by_density, snap.offset, try_course)
         if fit is not None:
             self.noise, self.at, self.offset, self.batch = fit.noise, fit.at, fit.offset, fit.batch
             self._rebuild()
-            yield
-            if self.offset != snap.offset and (yield from self._stamp_shift_explains_more()):
+            if self.offset != snap.offset and self._stamp_shift_explains_more():
                 self.offset, self.batch = snap.offset, self.before
                 self._rebuild()
-                yield
 
     def _rebuild(self):
         """The points and their outlier share under the fitted noise, offset and reading of the bearings."""
@@ -282,7 +274,7 @@ class _Calibrated:
         self.pts = points_of([p for p, _ in self.built])
         self.outlier = point_outlier_prob(residuals(self.at, self.pts), self.pts.sigma, self.snap.outlier_prob)
 
-    def _stamp_shift_explains_more(self) -> Steps[bool]:
+    def _stamp_shift_explains_more(self) -> bool:
         """Whether a DF stamp shift (clock_check.py) explains the points at the previous offset at least as well as
         the newly learned offset does: on a moving vehicle a late clock also bends every bearing, by an angle that
         follows the geometry, and an offset must not take the blame for it."""
@@ -290,7 +282,7 @@ class _Calibrated:
         assert at is not None  # called after a fit
         rob = snap.robust(self.outlier, True)
         before = self.before.points(self.noise, snap.offset)
-        hint = yield from best_shift(before, self.before.velocity(), at, rob)
+        hint = best_shift(before, self.before.velocity(), at, rob)
         if hint is None:
             return False
         shifted_best = float(log_posterior(refined(at, before, rob), before, rob)) + hint.gain
@@ -301,36 +293,28 @@ class _Calibrated:
         return CheckResult(self.noise, self.at, self.built, modes, hint, self.offset, self.batch.course, why,
                            len(self.snap.rows), determined, self.snap.start_grid)
 
-    def provisional(self, modes: list[Mode], why: str) -> Steps[CheckResult]:
+    def provisional(self, modes: list[Mode], why: str) -> CheckResult:
         """A start search's result whose best mode is not determined: its modes, why, and a weighted sample of the
         posterior it searched (the radio-range prior's, under the fitted noise when it made a fit)."""
         snap = self.snap
         rob = snap.rob if self.noise is None else snap.robust(self.outlier, True)
         rng = np.random.default_rng(snap.sample_seed)
-        sample = yield from provisional_sample(modes, self.pts, rob, snap.start_grid,
-                                               max(snap.cfg.num_particles, DRAWS), rng)
+        sample = provisional_sample(modes, self.pts, rob, snap.start_grid, max(snap.cfg.num_particles, DRAWS), rng)
         return replace(self.result(modes, why=why, determined=False), sample=sample)
 
 
 def run_check(snap: Snapshot) -> CheckResult:
-    """The expensive part of a global check over the snapshot, whole (in the worker, at the end of data)."""
-    return run_whole(check(snap))
-
-
-def check(snap: Snapshot) -> Steps[CheckResult]:
-    """The expensive part of a global check over the snapshot (nothing outside it is read or changed), in pieces."""
+    """The expensive part of a global check over the snapshot (nothing outside it is read or changed)."""
     cal = _Calibrated(snap)
-    yield
     if snap.cfg.calibrate_noise and snap.best_particle is not None:
         start = refined(snap.best_particle, cal.pts, snap.rob)
-        yield
         # the course needs a track's worth of points and turns: a global check tries it, a start search does not
-        yield from cal.fit([start] + snap.mode_means, False, try_course=True)
+        cal.fit([start] + snap.mode_means, False, try_course=True)
     pts, rob = cal.pts, snap.robust(cal.outlier, cal.noise is not None)
-    modes = yield from modes_in_pieces(pts, rob, False)
+    modes = find_modes(pts, rob, False)
     hint = None
     if modes:
-        hint = yield from best_shift(pts, cal.before.velocity(), modes[0].mean, rob)
+        hint = best_shift(pts, cal.before.velocity(), modes[0].mean, rob)
     return cal.result(modes, hint)
 
 
@@ -341,44 +325,36 @@ def ellipse_and_reach(mean: np.ndarray, cov: np.ndarray, east: np.ndarray, north
     return math.sqrt(ELLIPSE_95 * max(float(np.linalg.eigvalsh(cov)[-1]), 0.0)), reach
 
 
-def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float, final: bool = False) -> CheckResult:
-    """A start search over the snapshot, whole (in the worker, at the end of data): start_search."""
-    return run_whole(start_search(snap, min_inliers, max_ellipse_range_share, final))
-
-
-def start_search(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float,
-                 final: bool = False) -> Steps[CheckResult]:
+def search_start(snap: Snapshot, min_inliers: int, max_ellipse_range_share: float,
+                 final: bool = False) -> CheckResult:
     """Modes of the robust posterior over the points waiting for a start (highest density first: under a flat
     prior a far, poorly determined mode gains Laplace mass from its size), after a noise fit when the best is
     determined. No modes, and why, when the posterior is not proper yet (no two bearings cross steeply enough in
     front of their antennas); the modes with `determined` False, and why, when it is proper but the best is not
     determined well enough to start the filter from (too few points agree, or its ellipse is wide for its range).
-    `final`: the end of data, where nearly parallel bearings still give their (radio-range bounded) posterior. In
-    pieces (slices.py)."""
+    `final`: the end of data, where nearly parallel bearings still give their (radio-range bounded) posterior."""
     cfg, cal = snap.cfg, _Calibrated(snap)
-    yield
     if len(cal.pts) < 2:
         return cal.result([], why="no crossing of bearings in front of the antennas")
     # The grid of the search before, with its sums, while the points stay within it (start_grid.py)
     snap.start_grid = snap.start_grid or StartGrid()
-    modes = yield from snap.start_grid.modes(cal.pts, snap.rob)
+    modes = snap.start_grid.modes(cal.pts, snap.rob)
     if modes and modes[0].crossing_deg >= cfg.init_min_crossing_deg and cfg.calibrate_noise:
-        yield from cal.fit([m.mean for m in modes[:2]], True)
+        cal.fit([m.mean for m in modes[:2]], True)
         if cal.noise is not None:
-            modes = yield from modes_in_pieces(cal.pts, snap.robust(cal.outlier, True), True)
+            modes = find_modes(cal.pts, snap.robust(cal.outlier, True), True)
     if not modes:
         return cal.result([], why="no crossing of bearings in front of the antennas")
     best = modes[0]
     if best.crossing_deg < cfg.init_min_crossing_deg:
         why = f"bearings nearly parallel: best crossing {best.crossing_deg:.1f} deg < {cfg.init_min_crossing_deg:g} deg"
-        return (yield from cal.provisional(modes, why)) if final else cal.result([], why=why, determined=False)
+        return cal.provisional(modes, why) if final else cal.result([], why=why, determined=False)
     if best.inliers < min_inliers:
-        return (yield from cal.provisional(modes, f"the best place explains only {best.inliers} points (needs "
-                                                  f"{min_inliers})"))
+        return cal.provisional(modes, f"the best place explains only {best.inliers} points (needs {min_inliers})")
     size, reach = ellipse_and_reach(best.mean, best.cov, cal.pts.east, cal.pts.north)
     if size > max_ellipse_range_share * reach:
-        return (yield from cal.provisional(modes, f"position not determined yet: 95 % ellipse {size:.0f} m at "
-                                                  f"{reach:.0f} m from the track"))
+        return cal.provisional(modes, f"position not determined yet: 95 % ellipse {size:.0f} m at {reach:.0f} m "
+                                      "from the track")
     return cal.result(modes)
 
 

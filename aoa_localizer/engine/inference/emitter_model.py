@@ -18,7 +18,7 @@ from aoa_localizer.engine.inference.global_search import (
 )
 from aoa_localizer.engine.inference.likelihood import BearingLikelihood
 from aoa_localizer.engine.inference.receiver import NoiseGrid, log_sum
-from aoa_localizer.engine.scheduling.slices import LOOKS, charge
+from aoa_localizer.engine.scheduling.slices import LOOKS, metered
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.models.base import StateSpaceModel
 
@@ -133,10 +133,10 @@ class EmitterModel(StateSpaceModel):
             return None
         return hypotheses_log_joint(np.asarray(x, float), Points.of(self.history.data), self._latent())
 
+    @metered(LOOKS, lambda self, x, h: 0)
     def log_posterior_given(self, x: np.ndarray, h: np.ndarray) -> np.ndarray:
         """log p(x, h | kept points) at each row of x (M, 2) with its own hypothesis h (M,): hypotheses_log_joint's
         column, made at the cost of one hypothesis (its kernels metered, and the move's own work as a look's)."""
-        charge(LOOKS, 0)
         return log_posterior_given(np.asarray(x, float), Points.of(self.history.data), self._latent(), h)
 
     def usable(self, p: ObservationPoint) -> bool:
@@ -155,6 +155,10 @@ class EmitterModel(StateSpaceModel):
         if self.reach is not None:
             lp = lp + reach_log_prior(x, self.reach)
         if len(h):
-            lp = lp + self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3], h[:, 4]).sum(axis=-1)
-            charge(LOOKS, x.size // 2 * len(h))
+            lp = lp + self._log_likelihood(x, h)
         return lp
+
+    @metered(LOOKS, lambda self, x, h: np.size(x) // 2 * len(h))
+    def _log_likelihood(self, x: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """The kept points' log likelihood at each place of x (..., 2), the noise taken as it is."""
+        return self.lik.log(x[..., None, :], h[:, 0], h[:, 1], h[:, 2], h[:, 3], h[:, 4]).sum(axis=-1)

@@ -17,7 +17,7 @@ import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.inference.receiver import NoiseGrid, em_weights, given_log_densities, log_densities, log_sum
-from aoa_localizer.engine.scheduling.slices import PIECE_EVALUATIONS, RESIDUALS, Steps, charge, run_whole
+from aoa_localizer.engine.scheduling.slices import PIECE_EVALUATIONS, RESIDUALS, metered
 
 _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 # Grid: azimuth cells, log-range cells, and the range span relative to the track's extent.
@@ -114,6 +114,7 @@ class Mode:
     crossing_deg: float
 
 
+@metered(RESIDUALS, lambda x, pts: math.prod(np.shape(x)[:-1]) * np.size(pts.east))
 def _residuals(x: np.ndarray, pts: Points):
     """Residuals theta - bearing(x) in (-pi, pi] (the angle from the antenna->x direction to the measured one,
     no wrapping needed), offsets dx, dy and squared ranges, for x of shape (..., 2) against the K points."""
@@ -121,7 +122,6 @@ def _residuals(x: np.ndarray, pts: Points):
     dy = x[..., None, 1] - pts.north
     c, s = pts.cos, pts.sin
     resid = np.arctan2(dx * s - dy * c, dx * c + dy * s)
-    charge(RESIDUALS, resid.size)
     return resid, dx, dy, np.maximum(dx * dx + dy * dy, 1e-6)
 
 
@@ -304,12 +304,6 @@ def refine(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust
     Returns means (M, 2), covariances (M, 2, 2) (the Laplace approximation, inverse of the EM-weighted
     information plus the prior's precision) and EM inlier weights (M, K).
     """
-    return run_whole(refine_in_pieces(starts, widen, pts, rob))
-
-
-def refine_in_pieces(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Robust
-                     ) -> Steps[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """refine, a piece per annealing level (slices.py)."""
     x = np.array(starts, float)
     widen = np.asarray(widen, float)
     prec = rob.prior_prec if rob.prior_prec is not None else np.zeros((2, 2))
@@ -325,7 +319,6 @@ def refine_in_pieces(starts: np.ndarray, widen: np.ndarray, pts: Points, rob: Ro
             moving = moving[still]
             if not moving.size:
                 break
-        yield
     _, grad, w, gamma = linearised(x, pts, rob)
     info = np.einsum("mk,mki,mkj->mij", w, grad, grad) + prec + 1e-12 * np.eye(2)
     return x, inverse_2x2(info), gamma
@@ -388,11 +381,6 @@ def find_modes(pts: Points, rob: Robust, by_density: bool = False) -> list[Mode]
     `by_density`: highest posterior density first. Under a flat prior (before the start) a far, poorly
     determined mode gains Laplace mass from its sheer size (the bearing-only posterior is improper along the
     rays), so the start ranks by density; once the prior is proper, mass is the right order."""
-    return run_whole(modes_in_pieces(pts, rob, by_density))
-
-
-def modes_in_pieces(pts: Points, rob: Robust, by_density: bool) -> Steps[list[Mode]]:
-    """find_modes in pieces (slices.py): the grid's score's, then the refinement's."""
     if len(pts) < 2:
         return []
     coarse = pts
@@ -400,20 +388,19 @@ def modes_in_pieces(pts: Points, rob: Robust, by_density: bool) -> Steps[list[Mo
         coarse = pts.take(np.linspace(0, len(pts) - 1, _MAX_GRID_POINTS).round().astype(int))
     _, _, cells, radius = polar_grid(coarse)
     scored = coarse_robust(rob)
-    sums = yield from grid_sums(cells, radius, coarse, scored)
-    return (yield from modes_from_grid(cells, radius, from_sums(sums, cells, scored), pts, rob, by_density))
+    sums = grid_sums(cells, radius, coarse, scored)
+    return modes_from_grid(cells, radius, from_sums(sums, cells, scored), pts, rob, by_density)
 
 
-def grid_sums(cells: np.ndarray, radius: np.ndarray, pts: Points, rob: Robust) -> Steps[np.ndarray]:
+def grid_sums(cells: np.ndarray, radius: np.ndarray, pts: Points, rob: Robust) -> np.ndarray:
     """summed_log_densities at a polar grid's cells (A, R, 2) of radius (R,) over `pts`, each bearing widened by the
-    cell's size: a piece per PIECE_EVALUATIONS densities (sums over sets of points add)."""
+    cell's size: PIECE_EVALUATIONS densities at a time (sums over sets of points add)."""
     per_point = cells.shape[0] * cells.shape[1] * (1 if rob.grid is None else rob.grid.scale.size)
     step = max(1, PIECE_EVALUATIONS // per_point)
     sums: np.ndarray | float = 0.0
     for lo in range(0, len(pts), step):
         part = pts.take(slice(lo, lo + step))
         sums = sums + summed_log_densities(cells, part, rob, cell_widening(cells, radius, part))
-        yield
     return np.asarray(sums)
 
 
@@ -423,14 +410,14 @@ def coarse_robust(rob: Robust) -> Robust:
 
 
 def modes_from_grid(cells: np.ndarray, radius: np.ndarray, score: np.ndarray, pts: Points, rob: Robust,
-                    by_density: bool) -> Steps[list[Mode]]:
+                    by_density: bool) -> list[Mode]:
     """find_modes from a polar grid's cells (A, R, 2), radius (R,) and coarse score (A, R): its best local maxima
-    refined over `pts`, distinct, ordered as find_modes orders them. In pieces: the refinement's (slices.py)."""
+    refined over `pts`, distinct, ordered as find_modes orders them."""
     top = _local_maxima(score)[:_MAX_STARTS]
     if top.size == 0:
         return []
     a_idx, r_idx = np.unravel_index(top, score.shape)
-    means, covs, gamma = yield from refine_in_pieces(cells[a_idx, r_idx], radius[r_idx], pts, rob)
+    means, covs, gamma = refine(cells[a_idx, r_idx], radius[r_idx], pts, rob)
     lp = log_posterior(means, pts, rob)
     modes: list[Mode] = []
     for m in np.argsort(-lp):

@@ -13,11 +13,12 @@ while the config says constant, and one that reports no quality at all. EM start
 from __future__ import annotations
 
 import bisect
+import math
 
 import numpy as np
 
 from aoa_localizer.engine.geodesy import TWO_PI
-from aoa_localizer.engine.scheduling.slices import EM_STEP, Steps, charge, run_whole
+from aoa_localizer.engine.scheduling.slices import EM_STEP, metered
 
 BAND_EDGES = np.arange(40.0, 101.0, 10.0)  # quality bands; below 40 joins the first, NaN has its own
 N_BANDS = BAND_EDGES.size - 1
@@ -95,11 +96,6 @@ class NoiseModel:
         residual has besides the receiver's (the heading a relative bearing was turned by), so it is not
         blamed on the receiver. Returns the log likelihood of the readings under the fitted model (NaN, nothing
         changed, with too few readings)."""
-        return run_whole(self.fit_in_pieces(resid, quality, base_sigma, known_var))
-
-    def fit_in_pieces(self, resid: np.ndarray, quality: np.ndarray, base_sigma: np.ndarray,
-                      known_var: np.ndarray | None = None) -> Steps[float]:
-        """fit, a piece per EM iteration (slices.py)."""
         resid, base_sigma = np.asarray(resid, float), np.asarray(base_sigma, float)
         known = np.zeros(resid.size) if known_var is None else np.asarray(known_var, float)
         ok = np.isfinite(resid) & np.isfinite(base_sigma) & (base_sigma > 0) & np.isfinite(known)
@@ -107,11 +103,11 @@ class NoiseModel:
             return float("nan")
         resid, base_sigma, band = resid[ok], base_sigma[ok], band_of(np.asarray(quality, float)[ok])
         starts = self._starts(resid / base_sigma)
-        best = (1.0, (yield from _em_in_pieces(resid, base_sigma, known[ok], band, starts)))
+        best = (1.0, _em(resid, base_sigma, known[ok], band, starts))
         if _floored(*best[1][1:4:2]):
             # the statement left most readings no receiver noise of their own: how much of it do they bear out?
             for scale in HEADING_SCALES[1:]:
-                fit = yield from _em_in_pieces(resid, base_sigma, scale * known[ok], band, starts)
+                fit = _em(resid, base_sigma, scale * known[ok], band, starts)
                 if fit[0] > best[1][0] + (_HEADING_EVIDENCE if best[0] == 1.0 else 0.0):
                     best = (scale, fit)
         self.heading_scale, (ll, k2, eps, w, self.hollow) = best
@@ -155,15 +151,14 @@ def _floored(k2: np.ndarray, weights: np.ndarray) -> bool:
     return float(weights[low].sum()) > 0.5 * float(weights.sum())
 
 
-def _em_in_pieces(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,
-                  tol: float = _EM_TOL) -> Steps[tuple[float, np.ndarray, float, np.ndarray, bool]]:
+def _em(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarray, band: np.ndarray, k0: np.ndarray,
+        tol: float = _EM_TOL) -> tuple[float, np.ndarray, float, np.ndarray, bool]:
     """EM from each starting scale in k0 (S,), all at once. Returns the best run's (log likelihood, k^2 per band,
     outlier rate, inlier weight per band, whether its core is hollow); a run with a hollow core is the best only
     when every run's is. A residual's variance is k^2 base_sigma^2 + known_var; the M-step takes the known part
     off each squared residual (a moment step: unbiased, and exact EM when it is 0). Runs that reach one another
     (within _EM_MERGE) go on as one, and EM stops once no parameter moves by more than `tol` (0: every iteration,
-    every run): the starts mostly meet within a few iterations, and the rest would repeat the same run. A piece per
-    iteration (slices.py)."""
+    every run): the starts mostly meet within a few iterations, and the rest would repeat the same run."""
     z2_all, z2_known = (resid / base_sigma) ** 2, known_var / base_sigma**2
     z2 = z2_all - z2_known
     onehot = np.zeros((resid.size, N_BANDS + 1))
@@ -183,7 +178,6 @@ def _em_in_pieces(resid: np.ndarray, base_sigma: np.ndarray, known_var: np.ndarr
             break
         if tol > 0.0:
             k2, eps = _distinct_runs(k2, eps)
-        yield
     gamma, dens = _responsibilities(resid, base_sigma, known_var, k2[:, band], eps)
     ll = np.log(dens).sum(axis=1)
     hollow = _hollow(gamma, z2_all / (k2[:, band] + z2_known))
@@ -207,11 +201,12 @@ def _hollow(gamma: np.ndarray, z2: np.ndarray) -> np.ndarray:
     return (weight >= _HOLLOW_MIN_WEIGHT) & (core < _HOLLOW_SHARE * weight)
 
 
+@metered(EM_STEP, lambda resid, base_sigma, known_var, k2_per_reading, eps: math.prod(np.broadcast_shapes(
+    np.shape(resid), np.shape(base_sigma), np.shape(known_var), np.shape(k2_per_reading), np.shape(eps))))
 def _responsibilities(resid, base_sigma, known_var, k2_per_reading, eps):
     """Inlier weights and mixture densities of the readings (S, n) under each run's scales and outlier rate."""
     var = k2_per_reading * base_sigma**2 + known_var
     g = (1 - eps) * np.exp(-0.5 * resid**2 / var) / np.sqrt(TWO_PI * var)
-    charge(EM_STEP, g.size)
     dens = g + eps / TWO_PI
     return g / dens, dens
 

@@ -17,7 +17,7 @@ import numpy as np
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.inference.global_search import Points, Robust, linearised, log_posterior
-from aoa_localizer.engine.scheduling.slices import RESIDUALS, Steps, charge
+from aoa_localizer.engine.scheduling.slices import RESIDUALS, metered
 
 _STARTS_DEG = np.arange(-90.0, 91.0, 15.0)  # offsets the joint search starts from, around the current one
 ALL_OFFSETS_DEG = np.arange(-180.0, 180.0, 15.0)  # the starts where any offset is as likely (an array's mount)
@@ -70,19 +70,20 @@ def marginalise(pts: Points, x: np.ndarray, rob: Robust, sd: float) -> tuple[np.
     return -g * mean, np.outer(g, g) / info
 
 
+# the bearings wrapped, their cosines and sines: a residual's work per element
+@metered(RESIDUALS, lambda pts, offset: math.prod(np.broadcast_shapes(np.shape(pts.theta), np.shape(offset))))
 def shifted(pts: Points, offset: float | np.ndarray) -> Points:
     """The points with `offset` (rad) taken off every bearing; offsets (M, 1) give each of M rows its own."""
     theta = wrap_pi(pts.theta - offset)
-    charge(RESIDUALS, theta.size)  # the bearings wrapped, their cosines and sines: a residual's work per element
     return Points(pts.east, pts.north, theta, pts.sigma, pts.gps)
 
 
 def joint_optimum(pts: Points, x0: np.ndarray, rob: Robust,
-                  starts_deg: np.ndarray | None = None) -> Steps[tuple[float, np.ndarray, float]]:
+                  starts_deg: np.ndarray | None = None) -> tuple[float, np.ndarray, float]:
     """The best (offset, place, log posterior) of the points with an unknown constant offset: damped Gauss-Newton in
     (east, north, offset) with the mixture's EM weights, from starts every 15 deg (the offset's likelihood has a
     mode per way of lining the bearings up): within 90 deg of the current one unless `starts_deg` says. Every start
-    at once, each on its own path (a test holds them to one start at a time); a piece per iteration (slices.py)."""
+    at once, each on its own path (a test holds them to one start at a time)."""
     b = np.radians(_STARTS_DEG if starts_deg is None else starts_deg).astype(float)
     x = np.repeat(np.asarray(x0, float)[None, :], b.size, axis=0)
     lp = log_posterior(x, shifted(pts, b[:, None]), rob)
@@ -92,7 +93,6 @@ def joint_optimum(pts: Points, x0: np.ndarray, rob: Robust,
             break
         moved, done = _step(pts, rob, x, b, lp, active)
         active = active[moved & ~done]
-        yield
     best = (0.0, np.asarray(x0, float), -math.inf)
     for i in range(b.size):  # the first of equals, in the starts' order
         if np.isfinite(lp[i]) and lp[i] > best[2] + 1e-9:

@@ -18,7 +18,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.ingest.preprocess import reading_sigma
-from aoa_localizer.engine.scheduling.slices import DENSITIES, charge
+from aoa_localizer.engine.scheduling.slices import DENSITIES, metered
 
 SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers
 _N_SCALES = 8  # a factor 1.9 apart: the marginal over the sigma is smooth, and each hypothesis costs a pass
@@ -91,12 +91,13 @@ def log_densities(resid, var, extra_var, grid: NoiseGrid) -> np.ndarray:
     return np.moveaxis(np.log(mix, out=mix).sum(axis=-1), 0, -1)
 
 
+@metered(DENSITIES, lambda resid, var, extra_var, grid, h: math.prod(np.broadcast_shapes((np.size(h), 1), np.shape(var),
+                                                                          np.shape(extra_var))))
 def given_log_densities(resid, var, extra_var, grid: NoiseGrid, h: np.ndarray) -> np.ndarray:
     """log_densities' column h[i] for each row i of resid (M, K): the points' log densities given one hypothesis per
     row, each made by the same operations (so the same numbers), at the cost of one hypothesis instead of all."""
     resid2 = np.square(resid)
     v = np.square(grid.scale[h])[:, None] * var + extra_var
-    charge(DENSITIES, v.size)
     mix = np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v)
     mix *= (1.0 - grid.outlier[h])[:, None]
     mix += (grid.outlier[h] / TWO_PI)[:, None]
@@ -131,12 +132,14 @@ def _terms(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarr
     return inl + outlier / TWO_PI, inl, v[which]
 
 
+# what the callers make: a mixture per hypothesis
+@metered(DENSITIES, lambda resid, var, extra_var, grid: grid.scale.size * math.prod(
+    np.broadcast_shapes(np.shape(resid), np.shape(var), np.shape(extra_var))))
 def _gauss(resid, var, extra_var, grid: NoiseGrid) -> tuple[np.ndarray, np.ndarray]:
     """Each point's Gaussian density and variance under each distinct scale of the grid: (scales, ..., K) each."""
     resid2 = np.square(resid)
     shape = np.broadcast_shapes(np.shape(resid2), np.shape(var), np.shape(extra_var))
     v = np.square(grid.distinct[0]).reshape((-1,) + (1,) * len(shape)) * var + extra_var
-    charge(DENSITIES, grid.scale.size * math.prod(shape))  # what the callers make: a mixture per hypothesis
     return np.exp(-0.5 * resid2 / v) / np.sqrt(TWO_PI * v), v
 
 

@@ -26,7 +26,6 @@ from aoa_localizer.engine.inference.global_search import (
     polar_grid,
 )
 from aoa_localizer.engine.inference.grid_proposal import GridProposal
-from aoa_localizer.engine.scheduling.slices import Steps
 
 _REGRID = 2.0  # points this many times farther from the grid's centre than when it was laid: a new grid
 
@@ -51,19 +50,17 @@ class StartGrid:
         one)."""
         return self.cells.size > 0 and extent_from(self.centre, pts) <= _REGRID * self.extent
 
-    def modes(self, pts: Points, rob: Robust) -> Steps[list[Mode]]:
+    def modes(self, pts: Points, rob: Robust) -> list[Mode]:
         """find_modes(pts, rob, by_density=True) on this grid, its score made from the kept sums plus the points that
-        came since; the grid laid (again) around the points first when they are not within it. In pieces (slices.py):
-        the score, then the refinement's."""
+        came since; the grid laid (again) around the points first when they are not within it."""
         if not self.covers(pts):
             self.centre, self.extent, self.cells, self.radius = polar_grid(pts)
             self.rows, self.key, self.sums = np.zeros((0, 5)), (), 0.0
-        score = yield from self.score(pts, rob)
-        return (yield from modes_from_grid(self.cells, self.radius, score, pts, rob, by_density=True))
+        score = self.score(pts, rob)
+        return modes_from_grid(self.cells, self.radius, score, pts, rob, by_density=True)
 
-    def score(self, pts: Points, rob: Robust) -> Steps[np.ndarray]:
-        """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size; in pieces
-        (grid_sums')."""
+    def score(self, pts: Points, rob: Robust) -> np.ndarray:
+        """The coarse log posterior (A, R) over `pts` at the cells, each bearing widened by the cell's size."""
         coarse = coarse_robust(rob)
         rows = pts.rows()
         key = _key(coarse)
@@ -73,9 +70,9 @@ class StartGrid:
         if dropped is not None:
             sums, done = self.sums, len(self.rows) - dropped
             if dropped:
-                sums = sums - (yield from grid_sums(self.cells, self.radius, Points.of(self.rows[:dropped]), coarse))
+                sums = sums - grid_sums(self.cells, self.radius, Points.of(self.rows[:dropped]), coarse)
         if done < len(rows):
-            sums = sums + (yield from grid_sums(self.cells, self.radius, pts.take(slice(done, None)), coarse))
+            sums = sums + grid_sums(self.cells, self.radius, pts.take(slice(done, None)), coarse)
         self.rows, self.key, self.sums = rows, key, sums  # together: a search that failed leaves the last ones
         self.last_score = from_sums(np.asarray(sums), self.cells, coarse)
         return self.last_score

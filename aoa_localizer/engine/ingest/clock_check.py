@@ -9,7 +9,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.inference.global_search import Points, Robust, log_posterior, refine
-from aoa_localizer.engine.scheduling.slices import Steps
 
 # The shifts tried, s: whole seconds over +-3 s, then halves and quarters around the best (a log likelihood that
 # moves smoothly with the shift: 11 fits where the quarter-second grid takes 25). 0 is the reference.
@@ -26,10 +25,10 @@ class ClockHint:
     gain: float
 
 
-def best_shift(pts: Points, velocity: np.ndarray, x0: np.ndarray, rob: Robust) -> Steps[ClockHint | None]:
+def best_shift(pts: Points, velocity: np.ndarray, x0: np.ndarray, rob: Robust) -> ClockHint | None:
     """The shift (to a quarter second, COARSE_S then FINE_S) that fits best when it beats no shift by MIN_GAIN, else
     None. `velocity` (K, 2) is the vehicle's east/north velocity at each point, `x0` the emitter estimate the fits
-    start from. In pieces (slices.py): a fit each."""
+    start from."""
     if len(pts) < 3 or float(np.median(np.hypot(velocity[:, 0], velocity[:, 1]))) < MIN_SPEED_MPS:
         return None
     scores: dict[float, float] = {}
@@ -44,12 +43,10 @@ def best_shift(pts: Points, velocity: np.ndarray, x0: np.ndarray, rob: Robust) -
 
     for shift in COARSE_S.tolist():
         score(shift)
-        yield
     best = max(COARSE_S.tolist(), key=score)
     for step in FINE_S:
         for shift in (best - step, best + step):
             score(shift)
-            yield
         best = max((best - step, best, best + step), key=score)
     gain = scores[best] - scores[0.0]
     if best == 0.0 or not gain >= MIN_GAIN:

@@ -22,7 +22,7 @@ from aoa_localizer.engine.ingest.preprocess import (
     group_size,
     make_point,
 )
-from aoa_localizer.engine.scheduling.slices import BATCH_MADE, POINTS_MADE, charge
+from aoa_localizer.engine.scheduling.slices import BATCH_MADE, POINTS_MADE, metered
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
 Built = tuple[ObservationPoint, np.ndarray]  # a point and the mask of the readings it kept
@@ -60,6 +60,8 @@ class PointBatch:
     """The readings of many observation points as flat arrays, with what does not depend on the noise (each
     reading's distance from its point's circular median) worked out once."""
 
+    # turning the readings is a pass of its own
+    @metered(BATCH_MADE, lambda self, *_args, **_kw: (1 + self.course) * (self.of.size + 4 * self.sizes.size))
     def __init__(self, groups: Sequence[list[Reading]], cfg: LocalizerConfig, course: bool = False):
         """`course`: each bearing turned by the vehicle's course (course.py), for bearings from its forward axis."""
         self.cfg, self.course = cfg, course
@@ -73,7 +75,6 @@ class PointBatch:
         self.cols = Columns(*(np.array([v for c in cols for v in getattr(c, name).tolist()], float)
                               for name in Columns._fields))
         self.off_median = self._off_median(cols)
-        charge(BATCH_MADE, (1 + course) * (self.of.size + 4 * self.sizes.size))  # turning them is a pass of its own
 
     def _off_median(self, cols: list[Columns]) -> np.ndarray:
         """Each reading's angular distance from its point's circular median; 0 where the gate does not apply
@@ -92,11 +93,11 @@ class PointBatch:
             off[idx] = np.abs(wrap_pi(theta - median[:, None]))
         return off
 
+    @metered(POINTS_MADE, lambda self, noise, offset: self.cols.theta.size)
     def _made(self, noise: NoiseModel | None, offset: float):
         """The points' fields under `noise` (None: the configured sigmas) with `offset` (rad) taken off, and the
         mask of the readings kept."""
         cfg, c, of, k = self.cfg, self.cols, self.of, self.sizes.size
-        charge(POINTS_MADE, c.theta.size)
         own = c.sigma
         sigma = own if noise is None else own * noise.scale(c.quality)
         # the gate is never stricter than the configured sigma (make_point_arrays says why)

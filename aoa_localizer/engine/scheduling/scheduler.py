@@ -1,7 +1,7 @@
 """Where a Localizer's deferred work runs and what it owes, in one place.
 
-A track defers two kinds of work. Its jobs (start searches and global checks) run a few pieces per point
-(`reproducible`: a seed repeats a run; slices.py), their result applied in the call that made the last piece, or in
+A track defers two kinds of work. Its jobs (start searches and global checks) run in turns, one per point
+(`reproducible`: a seed repeats a run; slices.py), their result applied in the call that made the last turn, or in
 the check worker's process (`realtime`: the node's), their result applied at the track's next point or by
 `idle()`. A resampling's Metropolis-Hastings sweeps are owed instead of made in its step: the scheduler keeps the
 debt of each filter. Under `reproducible` a call makes them while its metered cost stays under SWEEP_BUDGET_US
@@ -27,7 +27,6 @@ from aoa_localizer.engine.scheduling.slices import (
     SWEEP_BUDGET_US,
     Call,
     SlicedJob,
-    Steps,
     current_call,
     metered_since,
     spent_ns,
@@ -78,16 +77,15 @@ class Scheduler:
         """The worker's failed jobs in a row (0 inline)."""
         return self.worker.failures if self.worker is not None else 0
 
-    def start(self, whole: Callable[[], CheckResult], steps: Steps[CheckResult], budget_us: float
-              ) -> Future | SlicedJob:
-        """A job: `whole` handed to the worker (its future); inline, or when the worker cannot take it, its `steps`
-        made a few pieces per point, up to `budget_us` a call (slices.py), the first call's pieces now."""
-        future = None if self.worker is None else self.worker.submit(whole)
+    def start(self, job: Callable[[], CheckResult], budget_us: float) -> Future | SlicedJob:
+        """A job, a plain function: handed to the worker (its future); inline, or when the worker cannot take it,
+        made in turns within the calls, up to `budget_us` a call (slices.py), the first turn now."""
+        future = None if self.worker is None else self.worker.submit(job)
         if future is not None:
             return future
-        job = SlicedJob(steps, budget_us)
-        job.advance()
-        return job
+        sliced = SlicedJob(job, budget_us)
+        sliced.advance()
+        return sliced
 
     # -- the moves owed ------------------------------------------------------------------------------
     def defer_moves(self, f: ParticleFilter) -> None:
@@ -112,7 +110,7 @@ class Scheduler:
         of the new one's, and without a resampling SWEEPS_PER_POINT of them. `reproducible`: as many as the call's
         budget holds, at least one a call; a resampling's own sweeps replace what is left of the one before (a
         bounded call: each resampling still gets at least one at once, unless the call already made one or a job's
-        pieces or spent half its budget, and the rest while no other comes)."""
+        turn or spent half its budget, and the rest while no other comes)."""
         if not isinstance(f, ResampleMove) or not f.deferred:
             return
         debt = self.debt(f)
@@ -132,8 +130,8 @@ class Scheduler:
     @staticmethod
     def _sweep_within_budget(f: ResampleMove, debt: Debt, call: Call) -> None:
         """The owed sweeps one at a time while the call's metered cost with one more sweep's stays under
-        SWEEP_BUDGET_US; at least one when the call made no sweep and no job's pieces yet and spent under half the
-        budget (a second point of one input, or a point after a job's pieces or a check's result applied, owes them
+        SWEEP_BUDGET_US; at least one when the call made no sweep and gave no job a turn yet and spent under half the
+        budget (a second point of one input, or a point after a job's turn or a check's result applied, owes them
         when the call is spent); a cloud of more than SWEEP_PART particles a part of a sweep at a time."""
         first = not (call.swept or call.pieces) and call.cost() < 0.5 * SWEEP_BUDGET_US
         while debt.sweeps and (first or call.cost() + debt.sweep_us < SWEEP_BUDGET_US):

@@ -1,18 +1,23 @@
-"""Work cut into pieces: a generator that yields after each piece and returns its result, run whole (in the check
-worker, at the end of data) or a few pieces per point (`scheduling: reproducible`), so no single call carries a
-whole global check and a seed still repeats a run. After the filter's step, a call makes pieces until the metered
-cost of the step and the pieces reaches the job's budget: the kernels charge what they cost by a model of their
-size (`charge`), so how far a job has got depends on the points alone, never on the clock."""
+"""Work cut into turns. A job is a plain function of its inputs, run whole (in the check worker, at the end of data)
+or, under `scheduling: reproducible`, in a thread of its own that takes turns with its caller: a turn per point, so
+no single call carries a whole global check and a seed still repeats a run. Only one of the two runs at a time.
+
+The kernels declare what they cost by a model of their size (`metered`); the scheduler's meter counts it, and a
+job's thread gives its turn back after a kernel once the call's metered cost, the filter's step included, with one
+more stretch like the last would reach the job's budget. How far a job has got depends on the points alone, never
+on the clock; the maths knows nothing of turns or budgets."""
 from __future__ import annotations
 
+import functools
 import threading
-from collections.abc import Generator, Iterator
+import weakref
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Generic, ParamSpec, TypeVar
 
 T = TypeVar("T")
-Steps = Generator[None, None, T]  # yields after each piece of work, returns the result
+P = ParamSpec("P")
 
 
 @dataclass(frozen=True)
@@ -30,31 +35,69 @@ EM_STEP = Cost(71.0, 0.017)  # noise: an EM iteration's responsibilities over ru
 LOOKS = Cost(185.0, 0.021)  # emitter_model: the posterior at a move's looks, the move's own work included
 POINTS_MADE = Cost(135.0, 0.13)  # point_batch: every point remade from its readings
 BATCH_MADE = Cost(117.0, 0.95)  # point_batch: a batch's readings gathered (elements: readings + 4 per point), per pass
-PIECE_US = 71.0  # what a piece costs besides the metered kernels
-# A call's pieces: the piece that reaches its budget is the call's last, and may overrun it by its own cost. A
+# What a job's stretch costs besides its kernel's model: the Python around it (a Gauss-Newton step's solve, an EM
+# step's sums). Chosen so a turn's time per metered microsecond is about what the generator pieces' was (the models
+# alone under-count a turn by 40 %; 80 us over-counts it by 30 %)
+STRETCH_US = 35.0
+# A call's turns: the stretch that reaches its budget is the turn's last, and may overrun it by its own cost. A
 # global check shares its call with the filter's step and the sweeps it makes; a start search comes before there
 # is a filter, so it may take more (its result waits for the next point once it spent half: SlicedJob.advance).
 CHECK_BUDGET_US = 4000.0
 START_BUDGET_US = 6000.0
 # A resampling's sweeps made in a call, the step included: the rest are owed to the following points (scheduler.py)
 SWEEP_BUDGET_US = 5000.0
-PIECE_EVALUATIONS = 30_000  # bearing densities a grid's score makes per piece (a millisecond or two)
+PIECE_EVALUATIONS = 30_000  # bearing densities a grid's score makes at once (its memory: a few megabytes)
 
-_meter = threading.local()  # a thread's own, so Localizers in other threads never move a job's pieces
-# The meter counts whole nanoseconds, in an int: a call's cost is a difference of the thread's totals, and in floats
-# that difference carried the totals' rounding (2000 + 1500 + 1500 came to 4999.99999999999 after 130,000 us of
-# earlier work), so where a budget's edge fell depended on what the thread had metered before
+_meter = threading.local()  # a thread's own counter, open call and (in a job's thread) turns
+# The meter counts whole nanoseconds, in an int: a call's cost is a difference of totals, and in floats that
+# difference carried the totals' rounding (2000 + 1500 + 1500 came to 4999.99999999999 after 130,000 us of earlier
+# work), so where a budget's edge fell depended on what the thread had metered before
 _NS_PER_US = 1000
 
 
+class _Counter:
+    """The metered nanoseconds of one thread."""
+
+    def __init__(self) -> None:
+        self.ns = 0
+
+
+def _counter() -> _Counter:
+    counter = getattr(_meter, "counter", None)
+    if counter is None:
+        counter = _meter.counter = _Counter()
+    return counter
+
+
 def charge(cost: Cost, elements: int) -> None:
-    """Count what a kernel call over `elements` elements cost."""
-    _meter.spent_ns = getattr(_meter, "spent_ns", 0) + round(_NS_PER_US * (cost.per_call + cost.per_element * elements))
+    """Count what a kernel call over `elements` elements cost: in this thread's total and, in a job's thread, in the
+    call it has its turn in."""
+    ns = round(_NS_PER_US * (cost.per_call + cost.per_element * elements))
+    _counter().ns += ns
+    turns: _Turns | None = getattr(_meter, "turns", None)
+    if turns is not None and turns.call is not None:
+        turns.call.jobs_ns += ns
+
+
+def metered(cost: Cost, elements: Callable[..., int]) -> Callable[[Callable[P, T]], Callable[P, T]]:
+    """A kernel's declared cost: `elements` of the call's arguments (read after it) priced by `cost`. Inside a
+    job's turn the kernel's end is where the job may give the turn back."""
+    def declare(kernel: Callable[P, T]) -> Callable[P, T]:
+        @functools.wraps(kernel)
+        def counted(*args: P.args, **kwargs: P.kwargs) -> T:
+            out = kernel(*args, **kwargs)
+            charge(cost, elements(*args, **kwargs))
+            turns: _Turns | None = getattr(_meter, "turns", None)
+            if turns is not None:
+                turns.kernel_done()
+            return out
+        return counted
+    return declare
 
 
 def spent_ns() -> int:
     """The metered cost so far in this thread (nanoseconds, by the models): take differences of these."""
-    return getattr(_meter, "spent_ns", 0)
+    return _counter().ns
 
 
 def metered_since(start_ns: int) -> float:
@@ -63,15 +106,18 @@ def metered_since(start_ns: int) -> float:
 
 
 class Call:
-    """What the pieces made in one call have cost so far."""
+    """What one call has cost so far: the thread's own metered work since it began, and its jobs' turns."""
 
     def __init__(self) -> None:
-        self.start_ns, self.pieces = spent_ns(), 0
+        self._counter = _counter()
+        self._start = self._counter.ns
+        self.jobs_ns = 0  # metered in the jobs' threads during their turns in this call
+        self.pieces = 0  # kernels the jobs made in the call
         self.swept = False  # a resampling's sweep (or part of one) was made in the call
 
     def cost(self) -> float:
-        """The call's metered cost so far (microseconds, by the models), its pieces' own cost included."""
-        return metered_since(self.start_ns) + PIECE_US * self.pieces
+        """The call's metered cost so far (microseconds, by the models), its jobs' turns included."""
+        return (self._counter.ns - self._start + self.jobs_ns) / _NS_PER_US
 
 
 def current_call() -> Call:
@@ -91,60 +137,119 @@ def one_call(call: Call | None = None) -> Iterator[None]:
         _meter.call = outer
 
 
-def run_whole(steps: Steps[T]) -> T:
-    """Every piece of `steps`, then its result."""
-    while True:
+class _Cancelled(BaseException):
+    """Raised in a dropped job's thread at its next kernel, so the thread ends."""
+
+
+class _Turns:
+    """A job's thread and its turns: the caller hands a turn over and waits until it comes back."""
+
+    def __init__(self, job: Callable[[], object], budget_us: float):
+        self.job, self.budget_us = job, budget_us
+        self.cond = threading.Condition()
+        self.job_runs = False  # the job's thread has the turn (the caller waits)
+        self.call: Call | None = None  # the call the turn is part of
+        self.whole = False  # the turn lasts to the job's end
+        self.cancelled = False
+        self.done = False
+        self.value: object = None
+        self.error: BaseException | None = None
+        self.mark = 0.0  # the call's cost at the last kernel's end
+        self.last = 0.0  # the last stretch's metered cost: what the next may cost
+        self.thread: threading.Thread | None = None
+
+    def run(self) -> None:
+        """The job's thread: the job, then the turn back for good."""
+        _meter.turns = self
         try:
-            next(steps)
-        except StopIteration as stop:
-            return stop.value
+            self.value = self.job()
+        except _Cancelled:
+            pass
+        except Exception as exc:  # noqa: BLE001 - kept for result(), as a worker's Future keeps it
+            self.error = exc
+        with self.cond:
+            self.done, self.job_runs, self.call = True, False, None
+            self.cond.notify_all()
+
+    def kernel_done(self) -> None:
+        """In the job's thread: after a kernel, the turn goes back when one more stretch like the last would reach
+        the budget."""
+        call = self.call
+        if call is None:
+            return
+        call.jobs_ns += round(_NS_PER_US * STRETCH_US)
+        now = call.cost()
+        self.last, self.mark = now - self.mark, now
+        call.pieces += 1
+        if not self.whole and now + self.last >= self.budget_us:
+            with self.cond:
+                self.job_runs = False
+                self.cond.notify_all()
+                while not (self.job_runs or self.cancelled):
+                    self.cond.wait()
+            if self.cancelled:
+                raise _Cancelled
+
+    def give(self, call: Call, whole: bool) -> None:
+        """In the caller: a turn for the job, back when it ends (a turn left running by an exception in the caller,
+        a Ctrl-C, ends first)."""
+        with self.cond:
+            while self.job_runs:
+                self.cond.wait()
+            if self.done:
+                return
+            self.call, self.whole, self.mark = call, whole, call.cost()
+            self.job_runs = True
+            if self.thread is None:
+                self.thread = threading.Thread(target=self.run, name="aoa-job", daemon=True)
+                self.thread.start()
+            else:
+                self.cond.notify_all()
+            while self.job_runs:
+                self.cond.wait()
+            self.call = None
+
+    def cancel(self) -> None:
+        """The job was dropped: a thread waiting for its turn ends (at once, with nothing of the job made)."""
+        with self.cond:
+            self.cancelled = True
+            self.cond.notify_all()
 
 
 class SlicedJob(Generic[T]):
-    """A job run a few pieces at a time by `advance` (what a Future's `done` and `result` are to the track: `result`
-    makes the pieces left). An exception a piece raises is kept and raised by `result`, as a Future's is."""
+    """A job run a turn per call by `advance` (what a Future's `done` and `result` are to the track: `result`
+    makes the rest). An exception the job raises is kept and raised by `result`, as a Future's is."""
 
-    def __init__(self, steps: Steps[T], budget_us: float):
-        """`budget_us`: the metered cost a call's pieces may reach."""
-        self._steps, self.budget_us = steps, budget_us
-        self._done = False
+    def __init__(self, job: Callable[[], T], budget_us: float):
+        """`budget_us`: the metered cost a call, the filter's step included, may reach."""
+        self._turns = _Turns(job, budget_us)
+        self.budget_us = budget_us
         self._held = False  # finished in a call that had spent half its budget: done() at the next point
-        self._value: T | None = None
-        self._error: BaseException | None = None
+        weakref.finalize(self, self._turns.cancel)  # a job dropped unfinished takes its thread with it
 
     def advance(self) -> None:
-        """Pieces while the call's cost, the filter's step included, with the last piece's once more stays under the
-        budget; at least one per call, so a job goes on however dear the steps are (none once done)."""
-        call, last, was_done = current_call(), 0.0, self._done
-        while not self._done and not (call.pieces and call.cost() + last >= self.budget_us):
-            before = call.cost()
-            self._next()
-            call.pieces += 1
-            last = call.cost() - before
-        # Applying a result costs about as much as a piece or two (a start's sample and sweeps, a check's points
+        """A turn, unless the call's jobs already made a kernel and spent its budget (at least one kernel a call,
+        so a job goes on however dear the steps are; none once done)."""
+        turns, call = self._turns, current_call()
+        if turns.done or (call.pieces and call.cost() >= self.budget_us):
+            return
+        turns.give(call, whole=False)
+        # Applying a result costs about as much as a stretch or two (a start's sample and sweeps, a check's points
         # rebuilt and cloud re-weighted): after half the budget, it waits for the next point, as a worker's does.
-        if self._done and not was_done:
+        if turns.done:
             self._held = call.cost() >= 0.5 * self.budget_us
 
     def release(self) -> None:
         """A new point came: a result held back from the call that finished it is ready."""
         self._held = False
 
-    def _next(self) -> None:
-        try:
-            next(self._steps)
-        except StopIteration as stop:
-            self._done, self._value = True, stop.value
-        except Exception as exc:  # noqa: BLE001 - kept for result(), as a worker's Future keeps it
-            self._done, self._error = True, exc
-
     def done(self) -> bool:
-        return self._done and not self._held
+        return self._turns.done and not self._held
 
     def result(self) -> T:
-        """The job's result, its pieces left made first; the exception a piece raised, if one did."""
-        while not self._done:
-            self._next()
-        if self._error is not None:
-            raise self._error
-        return self._value  # type: ignore[return-value]  # set with _done when no piece raised
+        """The job's result, the rest of it made first; the exception it raised, if it did."""
+        turns = self._turns
+        turns.give(current_call(), whole=True)
+        if turns.error is not None:
+            raise turns.error
+        return turns.value  # type: ignore[return-value]  # set when the job returned

@@ -21,7 +21,6 @@ from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.ingest.course import group_courses, turned
 from aoa_localizer.engine.ingest.point_batch import Built, PointBatch, offset_point, points_of, sigmas
 from aoa_localizer.engine.ingest.preprocess import columns, make_point
-from aoa_localizer.engine.scheduling.slices import run_whole
 from aoa_localizer.engine.track.state import WindowEntry
 from aoa_localizer.engine.types import ObservationPoint, Reading
 
@@ -108,7 +107,7 @@ class Calibrator:
         """Fit position and noise jointly (checks.fit_noise) from the candidate places, then adopt the fit: the
         `window`'s points rebuilt with it; None when no fit was made."""
         batch = PointBatch([e.readings for e in window], self.cfg)
-        fit = run_whole(fit_noise(batch, self.noise, robust, candidates, by_density))
+        fit = fit_noise(batch, self.noise, robust, candidates, by_density)
         if fit is None:
             return None
         return self.apply(fit.noise, fit.at, {}, fit.offset, fit.batch.course, window)

@@ -69,7 +69,7 @@ class EmitterTrack(Held):
     # -- the flow -----------------------------------------------------------------------------------
     def add(self, readings: list[Reading]) -> bool:
         """One closed group of readings; True when the filter took it (or started) and has a new estimate. Its
-        job's pieces come after the filter's step, within what the step left of the call's budget (the Localizer
+        job's turn comes after the filter's step, within what the step left of the call's budget (the Localizer
         opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
@@ -225,10 +225,10 @@ class EmitterTrack(Held):
         if not final and not ini.search_due(len(self.window), self.job is not None):
             return False
         snap = self.snapshot()
-        whole, steps = ini.search_job(snap, final)
+        job = ini.search_job(snap, final)
         if inline:
-            return self._apply_start(whole(), snap.groups)
-        self.job = PendingJob(self.scheduler.start(whole, steps, START_BUDGET_US), None, snap.groups)
+            return self._apply_start(job(), snap.groups)
+        self.job = PendingJob(self.scheduler.start(job, START_BUDGET_US), None, snap.groups)
         return self.apply_job()  # a sliced search small enough to finish in its first call starts the filter now
 
     def _apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
@@ -313,14 +313,14 @@ class EmitterTrack(Held):
 
     def _global_check(self, inline: bool = False):
         """Noise calibration, emitter-moved test, global search, MH move or re-start: whole here (`inline`), or its
-        expensive part handed to the worker or made a few pieces per point (applied by apply_job() once finished:
+        expensive part handed to the worker or made in turns, one per point (applied by apply_job() once finished:
         here when it finished in its first call)."""
         snap = self.snapshot()
-        whole, steps = self.supervisor.check_job(snap, self.points_seen)
+        job = self.supervisor.check_job(snap, self.points_seen)
         if inline:
-            self._apply_check(whole(), snap.groups)
+            self._apply_check(job(), snap.groups)
             return
-        self.job = PendingJob(self.scheduler.start(whole, steps, CHECK_BUDGET_US), self.running, snap.groups)
+        self.job = PendingJob(self.scheduler.start(job, CHECK_BUDGET_US), self.running, snap.groups)
         self.apply_job()
 
     def _apply_check(self, res: CheckResult, groups: list[list[Reading]]):

@@ -14,7 +14,7 @@ from typing import cast
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, search_start, start_search
+from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, search_start
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode
 from aoa_localizer.engine.inference.receiver import NoiseGrid
@@ -23,7 +23,6 @@ from aoa_localizer.engine.inference.start_grid import StartGrid
 from aoa_localizer.engine.inference.triangulation import initial_particles
 from aoa_localizer.engine.ingest.point_batch import points_of
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
-from aoa_localizer.engine.scheduling.slices import Steps
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters import make_filter
 from aoa_localizer.filters.base import ParticleFilter
@@ -86,12 +85,10 @@ class Initiator:
         """The next start search is due at once, whatever the points held (the end of data)."""
         self.next_start_try = 0
 
-    def search_job(self, snap: Snapshot, final: bool) -> tuple[partial[CheckResult], Steps[CheckResult]]:
-        """A start search of `snap` (`final`: the end of data, with whatever points there are): made whole (the
-        worker's, or inline), and as pieces."""
+    def search_job(self, snap: Snapshot, final: bool) -> partial[CheckResult]:
+        """A start search of `snap` (`final`: the end of data, with whatever points there are), for the scheduler."""
         snap.start_grid, snap.sample_seed = self.start_grid, int(self.sample_seeds.integers(2**63))
-        return (partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final),
-                start_search(snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final))
+        return partial(search_start, snap, MIN_INLIERS, MAX_ELLIPSE_RANGE_SHARE, final)
 
     def outcome(self, res: CheckResult, held: int) -> Outcome:
         """What `res` means with `held` points held now. Points may come far faster than the worker searched (a bag

@@ -94,7 +94,7 @@ class WindowEntry:
 
 @dataclass
 class PendingJob:
-    """A job running in the check worker, or made a few pieces per point: a start search (`filter` None) or a global
+    """A job running in the check worker, or made in turns, one per point: a start search (`filter` None) or a global
     check for `filter`, with the reading groups of its snapshot (the originals: the worker's copies come back as
     points in their order)."""
 
@@ -103,7 +103,7 @@ class PendingJob:
     groups: list[list[Reading]]
 
     def advance(self) -> None:
-        """A point came: a sliced job makes its pieces for it (a worker's goes on by itself)."""
+        """A point came: a sliced job takes its turn (a worker's goes on by itself)."""
         if isinstance(self.future, SlicedJob):
             self.future.advance()
 
@@ -114,7 +114,7 @@ class PendingJob:
 
     @property
     def in_calls(self) -> bool:
-        """Made a few pieces per point (not in the worker)."""
+        """Made in turns within the calls (not in the worker)."""
         return isinstance(self.future, SlicedJob)
 
     @property

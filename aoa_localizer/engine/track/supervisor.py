@@ -15,12 +15,11 @@ from typing import cast
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, check, run_check
+from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, run_check
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Points, Robust, find_modes, inlier_share, log_posterior
 from aoa_localizer.engine.inference.safety import HealthMonitor
 from aoa_localizer.engine.ingest.clock_check import ClockHint
-from aoa_localizer.engine.scheduling.slices import Steps
 from aoa_localizer.engine.track.initiator import MIN_INLIERS
 from aoa_localizer.engine.track.state import PendingJob
 from aoa_localizer.filters.base import ParticleFilter
@@ -90,7 +89,7 @@ class Supervisor:
         """The newest point's health (`f` has just taken it; `logw_before`: its log weights before) with `held`
         points kept of `seen`, against the calibrated `outlier_prob`; whether a scheduled or alarm-driven global
         check is due (not while `job` runs: due again once it is applied), else the moves while in alarm (one while
-        a check is made in the calls: two left it a piece a point, and an emitter that moved was noticed late)."""
+        a check is made in the calls: two left it one kernel a point, and an emitter that moved was noticed late)."""
         cfg = self.cfg
         if not cfg.global_safety:
             if cfg.calibrate_noise and held >= self.next_search:
@@ -118,10 +117,10 @@ class Supervisor:
     def _schedule(self, held: int):
         self.next_search = min(int(math.ceil(held * _SEARCH_GROWTH)), held + _SEARCH_EVERY_MAX)
 
-    def check_job(self, snap: Snapshot, seen: int) -> tuple[partial[CheckResult], Steps[CheckResult]]:
-        """A global check of `snap` at point `seen`: made whole (the worker's, or inline), and as pieces."""
+    def check_job(self, snap: Snapshot, seen: int) -> partial[CheckResult]:
+        """A global check of `snap` at point `seen`, for the scheduler."""
         self.last_search_point = seen
-        return partial(run_check, snap), check(snap)
+        return partial(run_check, snap)
 
     def verdict(self, res: CheckResult, f: ParticleFilter, pts: Points, robust: Robust, realtime: bool
                 ) -> CheckVerdict:
