@@ -41,8 +41,9 @@ def test_driving_straight_at_a_far_emitter_ends_with_a_long_honest_ellipse_on_it
 def test_a_near_track_mode_of_wild_bearings_leaves_its_ray_open(seed):
     """20 % wild bearings (the robustness cell; the seeds of 1-12 whose start search comes out provisional): after
     6-11 points the best mode lies by the track and the emitter 1.1-1.4 km out along the ray. The provisional
-    sample is of the start search's posterior (radio-range prior only, its scale at least 1 km): a Gaussian prior of ten times the mode's range at the mode put the truth at NEES 42
-    (seed 1), and a 100 m scale at NEES 20 and 57 (seeds 2 and 8)."""
+    sample is of the start search's posterior (radio-range prior only, its scale at least 1 km): a Gaussian prior
+    of ten times the mode's range at the mode put the truth at NEES 42 (seed 1), and a 100 m scale at NEES 20 and
+    57 (seeds 2 and 8)."""
     data = simulate(robustness_cells()["wild20"], seed)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=seed)))
     for event in data.inputs():
