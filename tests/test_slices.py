@@ -3,6 +3,7 @@ dropped unfinished, a check made in turns against the whole one, and a reproduci
 clock can change."""
 import gc
 import logging
+import threading
 
 import numpy as np
 import pytest
@@ -162,6 +163,26 @@ def test_a_job_dropped_unfinished_takes_its_thread_with_it():
     gc.collect()
     thread.join(timeout=30.0)
     assert not thread.is_alive() and made == [0]
+
+
+@pytest.mark.usefixtures("stretch_us")
+def test_a_job_whose_thread_is_gone_fails_rather_than_waiting_forever():
+    """A fork's child has none of its parent's threads: a job begun in the parent fails there (the track counts it
+    and goes on) instead of handing its turn to a thread that no longer exists."""
+    made: list[int] = []
+    job = SlicedJob(counted(made, 100, cost_us=6000.0), 5000.0)
+    job.advance()
+    parked, gone = job._turns.thread, threading.Thread(target=lambda: None)
+    gone.start()
+    gone.join()
+    job._turns.thread = gone  # what a forked child sees: a thread object whose thread does not run there
+    job.advance()
+    assert job.done() and made == [0]
+    with pytest.raises(RuntimeError, match="thread is gone"):
+        job.result()
+    job._turns.cancel()  # the parent's own thread, still parked, ends
+    parked.join(timeout=30.0)
+    assert not parked.is_alive()
 
 
 @pytest.mark.slow

@@ -510,7 +510,7 @@ class Localizer:
     def wait_for_worker(self) -> None:
         """Wait until the check worker has finished the live channels' jobs (`scheduling: realtime`; nothing
         otherwise); their results are applied at each channel's next point, or by idle() or catch_up()."""
-        self._scheduler.wait(c.track.job.future for c in self.channels.live.values() if c.track.job is not None)
+        self._scheduler.wait(c.track for c in self.channels.live.values())
 
     def close(self):
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""

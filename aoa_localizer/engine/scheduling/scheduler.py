@@ -31,6 +31,7 @@ from aoa_localizer.engine.scheduling.slices import (
     metered_since,
     spent_ns,
 )
+from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove
 
@@ -57,6 +58,26 @@ class Debt:
         return int(self.modes) + self.sweeps
 
 
+@dataclass
+class PendingJob:
+    """A track's job, running in the check worker or made in turns, one per point: a start search (`filter` None) or
+    a global check for `filter`, with the reading groups of its snapshot (the originals: the worker's copies come
+    back as points in their order)."""
+
+    future: Future | SlicedJob
+    filter: ParticleFilter | None
+    groups: list[list[Reading]]
+
+    @property
+    def in_calls(self) -> bool:
+        """Made in turns within the calls (not in the worker)."""
+        return isinstance(self.future, SlicedJob)
+
+    @property
+    def is_start(self) -> bool:
+        return self.filter is None
+
+
 class Scheduler:
     """Runs the tracks' jobs inline or in the worker (`realtime`), and makes the moves they owe when asked."""
 
@@ -66,6 +87,8 @@ class Scheduler:
         self.reject = reject
         # Keyed by the filter that owes: a filter replaced (re-start, divergence) takes its debt with it.
         self._debts: WeakKeyDictionary[ParticleFilter, Debt] = WeakKeyDictionary()
+        # Keyed by the track that waits for it: a track dropped takes its job with it (a sliced one ends its thread).
+        self._jobs: WeakKeyDictionary[object, PendingJob] = WeakKeyDictionary()
 
     @property
     def realtime(self) -> bool:
@@ -77,15 +100,41 @@ class Scheduler:
         """The worker's failed jobs in a row (0 inline)."""
         return self.worker.failures if self.worker is not None else 0
 
-    def start(self, job: Callable[[], CheckResult], budget_us: float) -> Future | SlicedJob:
-        """A job, a plain function: handed to the worker (its future); inline, or when the worker cannot take it,
-        made in turns within the calls, up to `budget_us` a call (slices.py), the first turn now."""
+    def start(self, owner: object, job: Callable[[], CheckResult], budget_us: float, f: ParticleFilter | None,
+              groups: list[list[Reading]]) -> None:
+        """`owner`'s job, a plain function (a start search for `f` None, else a check for `f`, over the snapshot of
+        `groups`): handed to the worker; inline, or when the worker cannot take it, made in turns within the calls, up
+        to `budget_us` a call (slices.py), the first turn now."""
         future = None if self.worker is None else self.worker.submit(job)
-        if future is not None:
-            return future
-        sliced = SlicedJob(job, budget_us)
-        sliced.advance()
-        return sliced
+        if future is None:
+            sliced = SlicedJob(job, budget_us)
+            sliced.advance()
+        self._jobs[owner] = PendingJob(future if future is not None else sliced, f, groups)
+
+    def job(self, owner: object) -> PendingJob | None:
+        """The job running for `owner`, if one is."""
+        return self._jobs.get(owner)
+
+    def point_came(self, owner: object) -> None:
+        """A point came to `owner`: a result held back from the call that finished it is ready (slices.py)."""
+        job = self._jobs.get(owner)
+        if job is not None and isinstance(job.future, SlicedJob):
+            job.future.release()
+
+    def take_turn(self, owner: object) -> None:
+        """After `owner`'s step: its job made in the calls takes its turn (a worker's goes on by itself)."""
+        job = self._jobs.get(owner)
+        if job is not None and isinstance(job.future, SlicedJob):
+            job.future.advance()
+
+    def finished(self, owner: object, wait: bool = False) -> PendingJob | None:
+        """`owner`'s job once it is done (`wait`: waited for, or made to its end), handed back and no longer held;
+        None while it runs, or when there is none."""
+        job = self._jobs.get(owner)
+        if job is None or not (wait or job.future.done()):
+            return None
+        del self._jobs[owner]
+        return job
 
     # -- the moves owed ------------------------------------------------------------------------------
     def defer_moves(self, f: ParticleFilter) -> None:
@@ -195,11 +244,11 @@ class Scheduler:
             self.reject(Reason.INTERNAL_ERROR)
             return False
 
-    @staticmethod
-    def wait(jobs: Iterable[Future | SlicedJob]) -> None:
-        """Wait until the worker has finished `jobs` (their results are applied at each track's next point, as
-        live); a job made in the calls has nothing to wait for."""
-        wait([job for job in jobs if isinstance(job, Future)])
+    def wait(self, owners: Iterable[object]) -> None:
+        """Wait until the worker has finished the jobs of `owners` (their results are applied at each track's next
+        point, as live); a job made in the calls has nothing to wait for."""
+        jobs = (self._jobs.get(owner) for owner in owners)
+        wait([job.future for job in jobs if job is not None and isinstance(job.future, Future)])
 
     def close(self) -> None:
         """Stop the worker (a job running finishes; its result is dropped)."""

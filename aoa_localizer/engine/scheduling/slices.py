@@ -36,9 +36,9 @@ LOOKS = Cost(185.0, 0.021)  # emitter_model: the posterior at a move's looks, th
 POINTS_MADE = Cost(135.0, 0.13)  # point_batch: every point remade from its readings
 BATCH_MADE = Cost(117.0, 0.95)  # point_batch: a batch's readings gathered (elements: readings + 4 per point), per pass
 # What a job's stretch costs besides its kernel's model: the Python around it (a Gauss-Newton step's solve, an EM
-# step's sums). Chosen so a turn's time per metered microsecond is about what the generator pieces' was (the models
-# alone under-count a turn by 40 %; 80 us over-counts it by 30 %)
-STRETCH_US = 35.0
+# step's sums). Chosen so a turn's time per metered microsecond, and when a start comes, are about what the
+# generator pieces' were (docs/benchmarks.md, "Jobs in turns")
+STRETCH_US = 20.0
 # A call's turns: the stretch that reaches its budget is the turn's last, and may overrun it by its own cost. A
 # global check shares its call with the filter's step and the sweeps it makes; a start search comes before there
 # is a filter, so it may take more (its result waits for the next point once it spent half: SlicedJob.advance).
@@ -197,6 +197,9 @@ class _Turns:
             while self.job_runs:
                 self.cond.wait()
             if self.done:
+                return
+            if self.thread is not None and not self.thread.is_alive():  # a fork's child has none of its threads
+                self.done, self.error = True, RuntimeError("the job's thread is gone (the process was forked)")
                 return
             self.call, self.whole, self.mark = call, whole, call.cost()
             self.job_runs = True

@@ -43,7 +43,7 @@ from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET
 from aoa_localizer.engine.track.calibrator import Recalibration
 from aoa_localizer.engine.track.held import HEARD_READINGS, Held
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
-from aoa_localizer.engine.track.state import PendingJob, Phase, Status, WindowEntry
+from aoa_localizer.engine.track.state import Phase, Status, WindowEntry
 from aoa_localizer.engine.track.supervisor import CheckVerdict, Moved, Supervisor, Watch
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
@@ -73,8 +73,7 @@ class EmitterTrack(Held):
         opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
-        if self.job is not None:
-            self.job.release()
+        self.scheduler.point_came(self)
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         self.heard.append(readings)
         self.heard_readings += len(readings)
@@ -93,10 +92,9 @@ class EmitterTrack(Held):
             took = self._try_start() or (applied and self.estimating)
         else:
             took = self._update(entry, owed_before)
-        if self.job is not None:
-            self.job.advance()
-            if self.apply_job():  # one that finished now is applied now, as at a point
-                took = self.estimating
+        self.scheduler.take_turn(self)
+        if self.apply_job():  # one that finished now is applied now, as at a point
+            took = self.estimating
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took
 
@@ -173,10 +171,9 @@ class EmitterTrack(Held):
     def apply_job(self, wait: bool = False) -> bool:
         """Apply the worker's result once it is ready (`wait`: wait for it); True when one was applied. A result for
         a filter that has since been replaced (re-start, divergence) is dropped."""
-        job = self.job
-        if job is None or not (wait or job.future.done()):
+        job = self.scheduler.finished(self, wait)
+        if job is None:
             return False
-        self.job = None
         try:
             result = job.future.result()
         except Exception:  # the worker's boundary: a failed check never stops the track
@@ -228,7 +225,7 @@ class EmitterTrack(Held):
         job = ini.search_job(snap, final)
         if inline:
             return self._apply_start(job(), snap.groups)
-        self.job = PendingJob(self.scheduler.start(job, START_BUDGET_US), None, snap.groups)
+        self.scheduler.start(self, job, START_BUDGET_US, None, snap.groups)
         return self.apply_job()  # a sliced search small enough to finish in its first call starts the filter now
 
     def _apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
@@ -320,7 +317,7 @@ class EmitterTrack(Held):
         if inline:
             self._apply_check(job(), snap.groups)
             return
-        self.job = PendingJob(self.scheduler.start(job, CHECK_BUDGET_US), self.running, snap.groups)
+        self.scheduler.start(self, job, CHECK_BUDGET_US, self.running, snap.groups)
         self.apply_job()
 
     def _apply_check(self, res: CheckResult, groups: list[list[Reading]]):

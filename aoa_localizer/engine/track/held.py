@@ -17,10 +17,10 @@ from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, r
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.ingest.point_batch import points_of, rows_of
-from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.track.calibrator import Calibrator
 from aoa_localizer.engine.track.report import assess, cloud_estimate, mode_masses, spatial_median, wide_for_range
-from aoa_localizer.engine.track.state import PendingJob, Phase, Status, TrackState, TrackStatus, WindowEntry
+from aoa_localizer.engine.track.state import Phase, Status, TrackState, TrackStatus, WindowEntry
 from aoa_localizer.engine.track.supervisor import Supervisor
 from aoa_localizer.engine.types import EstimateState, Reading
 from aoa_localizer.filters.base import ParticleFilter
@@ -37,7 +37,6 @@ class Held:
     def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, scheduler: Scheduler):
         self.cfg, self.rng, self.scheduler = cfg, rng, scheduler
         self.calibration = Calibrator(cfg)
-        self.job: PendingJob | None = None  # a start search or global check running in the worker
         # The points waiting for a start, then the filter's history
         self.window: deque[WindowEntry] = deque()
         self.filter: ParticleFilter | None = None
@@ -62,6 +61,11 @@ class Held:
         self.heard_readings = 0  # readings heard since the start
         self.counted: Count | None = None
         self.counted_readings = 0
+
+    @property
+    def job(self) -> PendingJob | None:
+        """The start search or global check running for this track: the scheduler holds it."""
+        return self.scheduler.job(self)
 
     @property
     def state(self) -> TrackState:

@@ -1,14 +1,10 @@
-"""What an emitter track holds between its parts: the state it is in, its points and the job it has handed to the
-check worker."""
+"""What an emitter track holds between its parts: the state it is in and its points."""
 from __future__ import annotations
 
-from concurrent.futures import Future
 from dataclasses import dataclass
 from enum import Enum, StrEnum
 
-from aoa_localizer.engine.scheduling.slices import SlicedJob
 from aoa_localizer.engine.types import ObservationPoint, Reading
-from aoa_localizer.filters.base import ParticleFilter
 
 
 class TrackState(Enum):
@@ -90,33 +86,3 @@ class WindowEntry:
     def used(self) -> int:
         """The readings the point used."""
         return len(self.readings) - self.gated
-
-
-@dataclass
-class PendingJob:
-    """A job running in the check worker, or made in turns, one per point: a start search (`filter` None) or a global
-    check for `filter`, with the reading groups of its snapshot (the originals: the worker's copies come back as
-    points in their order)."""
-
-    future: Future | SlicedJob
-    filter: ParticleFilter | None
-    groups: list[list[Reading]]
-
-    def advance(self) -> None:
-        """A point came: a sliced job takes its turn (a worker's goes on by itself)."""
-        if isinstance(self.future, SlicedJob):
-            self.future.advance()
-
-    def release(self) -> None:
-        """A point came: a sliced job's result held back from the call that finished it is ready (slices.py)."""
-        if isinstance(self.future, SlicedJob):
-            self.future.release()
-
-    @property
-    def in_calls(self) -> bool:
-        """Made in turns within the calls (not in the worker)."""
-        return isinstance(self.future, SlicedJob)
-
-    @property
-    def is_start(self) -> bool:
-        return self.filter is None
