@@ -393,7 +393,7 @@ class CheckWorker:
         self._breaks = self._breaks + 1 if isinstance(exc, BrokenProcessPool) else 0
         self.failures += exc is not None
 
-    def submit(self, job: Callable[[], CheckResult]) -> Future | None:
+    def submit(self, job: Callable[[], object]) -> Future | None:
         with self._lock:
             if self.unusable:
                 return None

@@ -24,6 +24,7 @@ import numpy as np
 
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes, radio_reach
+from aoa_localizer.engine.scheduling.slices import COUNT_EM, metered
 
 MIN_READINGS = 30  # a channel's transmitters are counted from this many readings on ...
 COUNT_GROWTH = 2.0  # ... and again once they grew by this factor (a count costs 0.01-1 s)
@@ -163,6 +164,12 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     beyond = min(fits, key=lambda f: f.bic)
     return Count(count, by_count[count], transmitters, ghosts, by_count, beyond.k > max_k and beyond.in_turns,
                  assigned)
+
+
+def count_job(r: Readings, first: np.ndarray, max_k: int, offset: float) -> Count | None:
+    """count_transmitters from the readings' own modes: a plain function of its inputs, as the scheduler runs it (in
+    the check worker, or in turns within the calls)."""
+    return count_transmitters(r, first, mode_starts(r), max_k, offset)
 
 
 def mode_starts(r: Readings) -> Callable[[float], list[np.ndarray]]:
@@ -311,6 +318,7 @@ def _scale(r: Readings, x: np.ndarray, inlier: np.ndarray, band: np.ndarray) -> 
     return np.clip(scales, *_SCALE_RANGE)[band]
 
 
+@metered(COUNT_EM, lambda r, x, eps, scale: len(r) * len(x))
 def _emissions(r: Readings, x: np.ndarray, eps: float, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """log((1 - eps) N(residual; scale sigma)) and log of it plus the wild share's eps / 2 pi, (N, K)."""
     bearing = np.arctan2(x[None, :, 1] - r.north[:, None], x[None, :, 0] - r.east[:, None])

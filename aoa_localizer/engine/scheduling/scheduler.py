@@ -20,7 +20,7 @@ from weakref import WeakKeyDictionary
 
 import numpy as np
 
-from aoa_localizer.engine.inference.checks import CheckResult, CheckWorker
+from aoa_localizer.engine.inference.checks import CheckWorker
 from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.slices import (
@@ -100,11 +100,11 @@ class Scheduler:
         """The worker's failed jobs in a row (0 inline)."""
         return self.worker.failures if self.worker is not None else 0
 
-    def start(self, owner: object, job: Callable[[], CheckResult], budget_us: float, f: ParticleFilter | None,
+    def start(self, owner: object, job: Callable[[], object], budget_us: float, f: ParticleFilter | None,
               groups: list[list[Reading]]) -> None:
-        """`owner`'s job, a plain function (a start search for `f` None, else a check for `f`, over the snapshot of
-        `groups`): handed to the worker; inline, or when the worker cannot take it, made in turns within the calls, up
-        to `budget_us` a call (slices.py), the first turn now."""
+        """`owner`'s job, a plain function (a track's start search for `f` None, else a check for `f`, over the
+        snapshot of `groups`; or its transmitter count): handed to the worker; inline, or when the worker cannot take
+        it, made in turns within the calls, up to `budget_us` a call (slices.py), the first turn now."""
         future = None if self.worker is None else self.worker.submit(job)
         if future is None:
             sliced = SlicedJob(job, budget_us)

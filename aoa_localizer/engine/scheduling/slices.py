@@ -35,6 +35,9 @@ EM_STEP = Cost(71.0, 0.017)  # noise: an EM iteration's responsibilities over ru
 LOOKS = Cost(185.0, 0.021)  # emitter_model: the posterior at a move's looks, the move's own work included
 POINTS_MADE = Cost(135.0, 0.13)  # point_batch: every point remade from its readings
 BATCH_MADE = Cost(117.0, 0.95)  # point_batch: a batch's readings gathered (elements: readings + 4 per point), per pass
+# co_channel: one EM iteration of a count's fit, its places' Gauss-Newton steps, scales and biases included (elements:
+# readings x places; least squares over fits of 60-1500 readings and 1-3 places, median model / real 0.93)
+COUNT_EM = Cost(238.0, 0.20)
 # What a job's stretch costs besides its kernel's model: the Python around it (a Gauss-Newton step's solve, an EM
 # step's sums). Chosen so a turn's time per metered microsecond, and when a start comes, are about what the
 # generator pieces' were (docs/benchmarks.md, "Jobs in turns")

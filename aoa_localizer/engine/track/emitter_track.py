@@ -20,6 +20,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
+from functools import partial
 
 import numpy as np
 
@@ -30,15 +31,14 @@ from aoa_localizer.engine.inference.co_channel import (
     MIN_READINGS,
     Count,
     Readings,
-    count_transmitters,
-    mode_starts,
+    count_job,
 )
 from aoa_localizer.engine.inference.global_search import Mode, find_modes
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.ingest.point_batch import Built
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
 from aoa_localizer.engine.track.calibrator import Recalibration
 from aoa_localizer.engine.track.held import HEARD_READINGS, Held
@@ -74,6 +74,7 @@ class EmitterTrack(Held):
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
         self.scheduler.point_came(self)
+        self.scheduler.point_came(self.counting)
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         self.heard.append(readings)
         self.heard_readings += len(readings)
@@ -95,6 +96,8 @@ class EmitterTrack(Held):
         self.scheduler.take_turn(self)
         if self.apply_job():  # one that finished now is applied now, as at a point
             took = self.estimating
+        self.scheduler.take_turn(self.counting)
+        self._count()
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took
 
@@ -385,17 +388,27 @@ class EmitterTrack(Held):
             f.rejuvenate(_CALIBRATION_SWEEPS, self.proposal)
 
     def count_transmitters(self, final: bool = False) -> Count | None:
-        """How many transmitters the channel's bearings come from (co_channel.py), counted again when the readings
-        heard doubled since the last count or grew by HEARD_READINGS (so a long run's newest are counted), and at
-        the end of data (`final`) whenever they grew; None before MIN_READINGS, with
-        `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
+        """How many transmitters the channel's bearings come from (co_channel.py): the newest count made. At the end
+        of data (`final`) the count under way is waited for, and made again whenever the readings grew."""
+        if final:
+            self._count(final=True)
+        return self.counted
+
+    def _count(self, final: bool = False):
+        """A count that finished is adopted; a new one is started when the readings heard doubled since the last
+        began or grew by HEARD_READINGS (so a long run's newest are counted), or at the end of data whenever they
+        grew: a job of the scheduler's (the check worker's, or made in turns), made here at the end of data. None
+        before MIN_READINGS, with `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
+        done = self.scheduler.finished(self.counting, wait=final)
+        if done is not None:
+            self._adopt_count(done)
         cfg, c = self.cfg, self.calibration
         grown = self.heard_readings > self.counted_readings
         due = grown and (final or self.heard_readings >= min(COUNT_GROWTH * self.counted_readings,
                                                               self.counted_readings + HEARD_READINGS))
         if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < MIN_READINGS or not due
-                or not self.estimating):
-            return self.counted
+                or not self.estimating or self.scheduler.job(self.counting) is not None):
+            return
         groups = list(self.heard)
         stride = math.ceil(self.heard_held / COUNT_MAX_READINGS)
         readings = [r for g in groups[::-1][::stride][::-1] for r in g]  # the newest point always in
@@ -404,9 +417,22 @@ class EmitterTrack(Held):
         rows = np.array([[r.stamp, r.east, r.north, r.theta, r.sigma, r.quality] for r in readings])
         heard = Readings(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], np.maximum(rows[:, 4], 1e-4), rows[:, 5])
         first = self.filter.estimate()[0] if self.filter is not None else self.modes[0].mean
-        self.counted = count_transmitters(heard, first, mode_starts(heard), cfg.max_emitters_per_channel, c.offset)
+        job = partial(count_job, heard, np.asarray(first, float), cfg.max_emitters_per_channel, c.offset)
         self.counted_readings = self.heard_readings
-        return self.counted
+        if final:
+            self.counted = job()
+            return
+        self.scheduler.start(self.counting, job, CHECK_BUDGET_US, None, [])
+        done = self.scheduler.finished(self.counting)  # a count small enough to finish in its first turn
+        if done is not None:
+            self._adopt_count(done)
+
+    def _adopt_count(self, done: PendingJob):
+        try:
+            self.counted = done.future.result()
+        except Exception:  # the worker's boundary: a failed count never stops the track
+            log.exception("a transmitter count failed; the last one is kept")
+            self.reject(Reason.INTERNAL_ERROR, 1)
 
     def batch_estimate(self) -> Mode | None:
         """Robust batch maximum likelihood over every point held (no filter): global search, joint noise

@@ -29,6 +29,11 @@ _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it t
 HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter count looks at: about 1 MB a channel
 
 
+class Counting:
+    """Where a track's transmitter count waits among the scheduler's jobs (a track's own place holds its search or
+    check)."""
+
+
 class Held:
     """One emitter track's state, and the values read off it."""
 
@@ -60,7 +65,8 @@ class Held:
         self.heard_held = 0  # readings in `heard`
         self.heard_readings = 0  # readings heard since the start
         self.counted: Count | None = None
-        self.counted_readings = 0
+        self.counted_readings = 0  # readings heard when the count under way (or the last) began
+        self.counting = Counting()
 
     @property
     def job(self) -> PendingJob | None:
