@@ -29,11 +29,11 @@ from aoa_localizer.engine.ingest.station import Station
 from aoa_localizer.engine.outputs import survey_solver
 from aoa_localizer.engine.outputs.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid, posterior_grid
-from aoa_localizer.engine.outputs.survey_log import SurveyFix, counted, survey_sentence
+from aoa_localizer.engine.outputs.survey_log import SurveyFix, counted, live_fix, survey_sentence
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
-from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.track.report import co_channel, others_share
 from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading, Transmitter
@@ -430,39 +430,47 @@ class Localizer:
     def _live_survey(self, channel: Channel) -> Estimate | None:
         """A survey-like channel's estimate while the data come (every bearing from a fixed site or a standing
         antenna, from three places on): the survey model's fix of its bearings alone, made again as they grow
-        (SurveyLog.due) and otherwise the last one, restamped; None (the filter's estimate) for any other channel
-        or while the model has no fix for it. The end of data pools every survey-like channel (finish)."""
-        log = self._intake.survey_log
-        if log.due(channel.id):
-            log.mark_solved(channel.id)
-            solve = survey_solver.solver()
-            fix = self._live_fix(solve, channel.id) if solve is not None else None
-            made = self._publish_survey(channel, fix, end_of_data=False) if fix is not None else None
-            if made is None:
-                log.live.pop(channel.id, None)
+        (SurveyLog.due) as a job of the scheduler's (the check worker's, or made in turns at the points that follow:
+        a fix that counts transmitters takes up to seconds) and published once it is done; until then the last one,
+        restamped; None (the filter's estimate) for any other channel or while the model has no fix for it. The end
+        of data pools every survey-like channel (finish)."""
+        survey, place = self._intake.survey_log, channel.track.surveying
+        done = self._scheduler.finished(place)
+        if done is not None:
+            return self._adopt_live_fix(channel, done)
+        solve = survey_solver.solver()
+        if solve is not None and survey.due(channel.id) and self._scheduler.job(place) is None:
+            survey.mark_solved(channel.id)
+            records = survey.survey_records(self.datum_frame(), only=channel.id)
+            if survey.count_due(channel.id):
+                max_k, last = self._cfg.max_emitters_per_channel, None
+                survey.counted[channel.id] = (len(records), survey.counted.get(channel.id, (0, None))[1])
             else:
-                log.live[channel.id] = made
-            return made
-        last = log.live.get(channel.id)
-        if last is None:
+                max_k, last = 1, survey.counted[channel.id][1]
+            job = functools.partial(live_fix, solve, records, channel.id, self._cfg.receiver_class, max_k, last)
+            self._scheduler.start(place, job, slices.CHECK_BUDGET_US, None, [], first_turn=False)
+        last_made = survey.live.get(channel.id)
+        if last_made is None:
             return None
-        return self._announce(channel, replace(last, stamp=channel.track.last_stamp))
+        return self._announce(channel, replace(last_made, stamp=channel.track.last_stamp))
 
-    def _live_fix(self, solve: survey_solver.SurveySolver, channel: str) -> SurveyFix | None:
-        """The survey model's fix of one channel's bearings, its transmitters counted again when due
-        (SurveyLog.count_due) and otherwise the last count's."""
-        log = self._intake.survey_log
-        records = log.survey_records(self.datum_frame(), only=channel)
-        if log.count_due(channel):
-            fix = solve(records, self._cfg.receiver_class, self._cfg.max_emitters_per_channel).get(channel)
-            log.counted[channel] = (len(records), fix.count if fix is not None else None)
-            return fix
-        fix = solve(records, self._cfg.receiver_class, 1).get(channel)
-        last = log.counted[channel][1]
-        if fix is None or last is None:
-            return fix
-        state, warnings = last.applied(fix.state, fix.warnings)
-        return replace(fix, state=state, warnings=warnings, count=last)
+    def _adopt_live_fix(self, channel: Channel, done: PendingJob) -> Estimate | None:
+        """A live survey fix the scheduler finished, published (and its count kept when it made one)."""
+        survey = self._intake.survey_log
+        try:
+            fix = done.future.result()
+        except Exception:  # the worker's boundary: a failed fix never stops the channel
+            log.exception("a live survey fix failed; the last one is kept")
+            self._rejections(Reason.INTERNAL_ERROR)
+            fix = None
+        if fix is not None and fix.count is not None and channel.id in survey.counted:
+            survey.counted[channel.id] = (survey.counted[channel.id][0], fix.count)
+        made = self._publish_survey(channel, fix, end_of_data=False) if fix is not None else None
+        if made is None:
+            survey.live.pop(channel.id, None)
+        else:
+            survey.live[channel.id] = made
+        return made
 
     def _publish_survey(self, channel: Channel, fix: SurveyFix, end_of_data: bool = True) -> Estimate | None:
         """A survey-like channel's estimate from the survey model, in the map frame."""

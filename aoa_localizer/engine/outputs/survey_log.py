@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -89,6 +90,17 @@ class SurveyFix:
     noise: dict  # the pooled calibration of the fix's group: station error, wild share, receivers' biases
     regions: dict  # level -> rings of (lat, lon): the highest-density regions
     count: SurveyCount | None = None  # how many transmitters its bearings come from (None: not counted)
+
+
+def live_fix(solve: Callable[[list[SurveyRecord], str, int], dict[str, SurveyFix]], records: list[SurveyRecord],
+             channel: str, receiver_class: str, max_k: int, last: SurveyCount | None) -> SurveyFix | None:
+    """A survey-like channel's live fix by the survey model: its transmitters counted up to `max_k` (1: not
+    counted again, `last` count applied). A plain function of its inputs, as the scheduler runs it."""
+    fix = solve(records, receiver_class, max_k).get(channel)
+    if max_k > 1 or fix is None or last is None:
+        return fix
+    state, warnings = last.applied(fix.state, fix.warnings)
+    return replace(fix, state=state, warnings=warnings, count=last)
 
 
 def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:

@@ -101,14 +101,16 @@ class Scheduler:
         return self.worker.failures if self.worker is not None else 0
 
     def start(self, owner: object, job: Callable[[], object], budget_us: float, f: ParticleFilter | None,
-              groups: list[list[Reading]]) -> None:
+              groups: list[list[Reading]], first_turn: bool = True) -> None:
         """`owner`'s job, a plain function (a track's start search for `f` None, else a check for `f`, over the
-        snapshot of `groups`; or its transmitter count): handed to the worker; inline, or when the worker cannot take
-        it, made in turns within the calls, up to `budget_us` a call (slices.py), the first turn now."""
+        snapshot of `groups`; its transmitter count; its channel's live survey fix): handed to the worker; inline, or
+        when the worker cannot take it, made in turns within the calls, up to `budget_us` a call (slices.py), the
+        first turn now (`first_turn`; else at the owner's next point: a job begun outside its point's call)."""
         future = None if self.worker is None else self.worker.submit(job)
         if future is None:
             sliced = SlicedJob(job, budget_us)
-            sliced.advance()
+            if first_turn:
+                sliced.advance()
         self._jobs[owner] = PendingJob(future if future is not None else sliced, f, groups)
 
     def job(self, owner: object) -> PendingJob | None:

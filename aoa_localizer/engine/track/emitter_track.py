@@ -73,8 +73,8 @@ class EmitterTrack(Held):
         opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
-        self.scheduler.point_came(self)
-        self.scheduler.point_came(self.counting)
+        for place in (self, self.counting, self.surveying):
+            self.scheduler.point_came(place)
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         self.heard.append(readings)
         self.heard_readings += len(readings)
@@ -98,6 +98,7 @@ class EmitterTrack(Held):
             took = self.estimating
         self.scheduler.take_turn(self.counting)
         self._count()
+        self.scheduler.take_turn(self.surveying)  # the channel's live survey fix (the Localizer's)
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took
 

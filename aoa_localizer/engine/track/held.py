@@ -29,9 +29,9 @@ _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it t
 HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter count looks at: about 1 MB a channel
 
 
-class Counting:
-    """Where a track's transmitter count waits among the scheduler's jobs (a track's own place holds its search or
-    check)."""
+class JobPlace:
+    """Where one kind of a track's jobs waits among the scheduler's (the track's own place holds its search or
+    check; these its transmitter count and its channel's live survey fix)."""
 
 
 class Held:
@@ -66,7 +66,8 @@ class Held:
         self.heard_readings = 0  # readings heard since the start
         self.counted: Count | None = None
         self.counted_readings = 0  # readings heard when the count under way (or the last) began
-        self.counting = Counting()
+        self.counting = JobPlace()
+        self.surveying = JobPlace()
 
     @property
     def job(self) -> PendingJob | None:
