@@ -553,7 +553,7 @@ class Localizer:
     def _add_points(self, closed: Closed) -> Estimate | None:
         """The channels' tracks take the closed points in order, the points of one track within one call's budget
         for its jobs (slices.py; each track its own, so a channel's run never depends on another's); returns the
-        newest estimate they made."""
+        newest estimate they made (a survey-like channel's survey fix also while its filter has not started)."""
         estimate = None
         calls: dict[int, slices.Call] = {}
         for channel, readings in closed:
@@ -564,6 +564,8 @@ class Localizer:
                 self._intake.observer.on_point(readings, track.last_kept)
             if took:
                 estimate = self._publish(channel) or estimate
+            elif self._cfg.end_of_data_model == "survey":  # a survey-like channel's fix needs no started filter
+                estimate = self._live_survey(channel) or estimate
         return estimate
 
     def _publish(self, channel: Channel, end_of_data: bool = False) -> Estimate | None:
