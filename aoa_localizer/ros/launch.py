@@ -229,7 +229,7 @@ class Monitor:
 
         from msgs_adapters.build import rclpy_types
 
-        rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        rclpy.init(args=[], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
         self.rclpy = rclpy
         self.node = rclpy.create_node("aoa_launch")
         T = rclpy_types()
@@ -560,7 +560,7 @@ def foreign_publishers(domain: int, wait_s: float = 1.5) -> str:
     from rclpy.context import Context
 
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(args=[], context=ctx, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     try:
         node = rclpy.create_node("aoa_launch_probe", context=ctx)
         found: list[str] = []
