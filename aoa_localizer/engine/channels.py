@@ -13,7 +13,7 @@ from aoa_localizer.engine.inference.global_search import Mode
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise, pooled_noise
 from aoa_localizer.engine.ingest.preprocess import PointBuilder
 from aoa_localizer.engine.rejections import Reason
-from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.scheduling.scheduler import JobPlace, Scheduler
 from aoa_localizer.engine.track.emitter_track import EmitterTrack
 from aoa_localizer.engine.types import Estimate, EstimateState
 
@@ -42,6 +42,7 @@ class Channel:
         """`first_point`: the share of the observation-point limits its builders give their first point."""
         self.id, self.frequency_hz, self.cfg, self.first_point = cid, frequency_hz, cfg, first_point
         self.track = EmitterTrack(cfg, rng, reject, scheduler)
+        self.surveying = JobPlace()  # its live survey fix among the scheduler's jobs (the Localizer's)
         self.builders: dict[str, PointBuilder] = {}
         self.estimate: Estimate | None = None
         self.last_heard = -math.inf  # the newest DF stamp admitted on this channel (GPS clock)

@@ -434,7 +434,7 @@ class Localizer:
         a fix that counts transmitters takes up to seconds) and published once it is done; until then the last one,
         restamped; None (the filter's estimate) for any other channel or while the model has no fix for it. The end
         of data pools every survey-like channel (finish)."""
-        survey, place = self._intake.survey_log, channel.track.surveying
+        survey, place = self._intake.survey_log, channel.surveying
         done = self._scheduler.finished(place)
         if done is not None:
             return self._adopt_live_fix(channel, done)
@@ -457,12 +457,7 @@ class Localizer:
     def _adopt_live_fix(self, channel: Channel, done: PendingJob) -> Estimate | None:
         """A live survey fix the scheduler finished, published (and its count kept when it made one)."""
         survey = self._intake.survey_log
-        try:
-            fix = done.future.result()
-        except Exception:  # the worker's boundary: a failed fix never stops the channel
-            log.exception("a live survey fix failed; the last one is kept")
-            self._rejections(Reason.INTERNAL_ERROR)
-            fix = None
+        fix = self._scheduler.value(done, "a live survey fix")[1]
         if fix is not None and fix.count is not None and channel.id in survey.counted:
             survey.counted[channel.id] = (survey.counted[channel.id][0], fix.count)
         made = self._publish_survey(channel, fix, end_of_data=False) if fix is not None else None
@@ -559,7 +554,9 @@ class Localizer:
         for channel, readings in closed:
             track = channel.track
             with slices.one_call(calls.setdefault(id(track), slices.Call())):
+                self._scheduler.point_came(channel.surveying)
                 took = track.add(readings)
+                self._scheduler.take_turn(channel.surveying)  # its live survey fix's turn, after the track's
             if self._intake.observer is not None:
                 self._intake.observer.on_point(readings, track.last_kept)
             if took:

@@ -16,6 +16,7 @@ import logging
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future, wait
 from dataclasses import dataclass
+from typing import Any
 from weakref import WeakKeyDictionary
 
 import numpy as np
@@ -76,6 +77,11 @@ class PendingJob:
     @property
     def is_start(self) -> bool:
         return self.filter is None
+
+
+class JobPlace:
+    """A key for one kind of job among the scheduler's (a track's own place holds its search or check; these its
+    transmitter count, and its channel's live survey fix)."""
 
 
 class Scheduler:
@@ -245,6 +251,17 @@ class Scheduler:
             log.exception("a move sweep between points failed; skipped")
             self.reject(Reason.INTERNAL_ERROR)
             return False
+
+    def value(self, job: PendingJob, what: str) -> tuple[bool, Any]:
+        """A finished job's value, with True; (False, None) when it raised: counted as an internal error and logged
+        (with its traceback, unless the worker failed in a row before), the owner going on as it was."""
+        try:
+            return True, job.future.result()
+        except Exception:  # the worker's boundary: a failed job never stops its owner
+            if self.failures <= 1:
+                log.exception("%s failed; skipped (further failures are counted)", what)
+            self.reject(Reason.INTERNAL_ERROR)
+            return False, None
 
     def wait(self, owners: Iterable[object]) -> None:
         """Wait until the worker has finished the jobs of `owners` (their results are applied at each track's next

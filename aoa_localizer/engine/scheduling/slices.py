@@ -75,14 +75,15 @@ def _counter() -> _Counter:
     return counter
 
 
-def charge(cost: Cost, elements: int) -> None:
+def charge(cost: Cost, elements: int) -> _Turns | None:
     """Count what a kernel call over `elements` elements cost: in this thread's total and, in a job's thread, in the
-    call it has its turn in."""
+    call it has its turn in; that thread's turns (None outside a job)."""
     ns = round(_NS_PER_US * (cost.per_call + cost.per_element * elements))
     _counter().ns += ns
     turns: _Turns | None = getattr(_meter, "turns", None)
     if turns is not None and turns.call is not None:
         turns.call.jobs_ns += ns
+    return turns
 
 
 def metered(cost: Cost, elements: Callable[..., int]) -> Callable[[Callable[P, T]], Callable[P, T]]:
@@ -92,8 +93,7 @@ def metered(cost: Cost, elements: Callable[..., int]) -> Callable[[Callable[P, T
         @functools.wraps(kernel)
         def counted(*args: P.args, **kwargs: P.kwargs) -> T:
             out = kernel(*args, **kwargs)
-            charge(cost, elements(*args, **kwargs))
-            turns: _Turns | None = getattr(_meter, "turns", None)
+            turns = charge(cost, elements(*args, **kwargs))
             if turns is not None:
                 turns.kernel_done()
             return out

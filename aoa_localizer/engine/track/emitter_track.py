@@ -73,7 +73,7 @@ class EmitterTrack(Held):
         opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
-        for place in (self, self.counting, self.surveying):
+        for place in (self, self.counting):
             self.scheduler.point_came(place)
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         self.heard.append(readings)
@@ -98,7 +98,6 @@ class EmitterTrack(Held):
             took = self.estimating
         self.scheduler.take_turn(self.counting)
         self._count()
-        self.scheduler.take_turn(self.surveying)  # the channel's live survey fix (the Localizer's)
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took
 
@@ -178,14 +177,8 @@ class EmitterTrack(Held):
         job = self.scheduler.finished(self, wait)
         if job is None:
             return False
-        try:
-            result = job.future.result()
-        except Exception:  # the worker's boundary: a failed check never stops the track
-            if self.scheduler.failures <= 1:
-                log.exception("global check failed in the worker; skipped (further failures are counted)")
-            self.reject(Reason.INTERNAL_ERROR, 1)
-            return False
-        if self.filter is not job.filter:
+        ok, result = self.scheduler.value(job, "a start search" if job.is_start else "a global check")
+        if not ok or self.filter is not job.filter:
             return False
         try:
             if job.is_start:
@@ -400,9 +393,7 @@ class EmitterTrack(Held):
         began or grew by HEARD_READINGS (so a long run's newest are counted), or at the end of data whenever they
         grew: a job of the scheduler's (the check worker's, or made in turns), made here at the end of data. None
         before MIN_READINGS, with `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
-        done = self.scheduler.finished(self.counting, wait=final)
-        if done is not None:
-            self._adopt_count(done)
+        self._adopt_count(self.scheduler.finished(self.counting, wait=final))
         cfg, c = self.cfg, self.calibration
         grown = self.heard_readings > self.counted_readings
         due = grown and (final or self.heard_readings >= min(COUNT_GROWTH * self.counted_readings,
@@ -424,16 +415,14 @@ class EmitterTrack(Held):
             self.counted = job()
             return
         self.scheduler.start(self.counting, job, CHECK_BUDGET_US, None, [])
-        done = self.scheduler.finished(self.counting)  # a count small enough to finish in its first turn
-        if done is not None:
-            self._adopt_count(done)
+        self._adopt_count(self.scheduler.finished(self.counting))  # a count small enough to finish in its first turn
 
-    def _adopt_count(self, done: PendingJob):
-        try:
-            self.counted = done.future.result()
-        except Exception:  # the worker's boundary: a failed count never stops the track
-            log.exception("a transmitter count failed; the last one is kept")
-            self.reject(Reason.INTERNAL_ERROR, 1)
+    def _adopt_count(self, done: PendingJob | None):
+        """A finished count adopted (a failed one leaves the last)."""
+        if done is not None:
+            ok, count = self.scheduler.value(done, "a transmitter count")
+            if ok:
+                self.counted = count
 
     def batch_estimate(self) -> Mode | None:
         """Robust batch maximum likelihood over every point held (no filter): global search, joint noise

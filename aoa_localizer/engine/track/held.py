@@ -17,7 +17,7 @@ from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, r
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.ingest.point_batch import points_of, rows_of
-from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
+from aoa_localizer.engine.scheduling.scheduler import JobPlace, PendingJob, Scheduler
 from aoa_localizer.engine.track.calibrator import Calibrator
 from aoa_localizer.engine.track.report import assess, cloud_estimate, mode_masses, spatial_median, wide_for_range
 from aoa_localizer.engine.track.state import Phase, Status, TrackState, TrackStatus, WindowEntry
@@ -27,11 +27,6 @@ from aoa_localizer.filters.base import ParticleFilter
 
 _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
 HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter count looks at: about 1 MB a channel
-
-
-class JobPlace:
-    """Where one kind of a track's jobs waits among the scheduler's (the track's own place holds its search or
-    check; these its transmitter count and its channel's live survey fix)."""
 
 
 class Held:
@@ -67,7 +62,6 @@ class Held:
         self.counted: Count | None = None
         self.counted_readings = 0  # readings heard when the count under way (or the last) began
         self.counting = JobPlace()
-        self.surveying = JobPlace()
 
     @property
     def job(self) -> PendingJob | None:
