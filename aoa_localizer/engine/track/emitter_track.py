@@ -391,7 +391,7 @@ class EmitterTrack(Held):
     def _count(self, final: bool = False):
         """A count that finished is adopted; a new one is started when the readings heard doubled since the last
         began or grew by HEARD_READINGS (so a long run's newest are counted), or at the end of data whenever they
-        grew: a job of the scheduler's (the check worker's, or made in turns), made here at the end of data. None
+        grew: a job of the scheduler's (the check worker's, or made in turns), made here at the end of data. No count
         before MIN_READINGS, with `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
         self._adopt_count(self.scheduler.finished(self.counting, wait=final))
         cfg, c = self.cfg, self.calibration
