@@ -20,12 +20,14 @@ class FixRecord(NamedTuple):
 
 
 class DfRecord(NamedTuple):
-    """A DF record (Vector3Stamped encoding of docs/interface.md) as Localizer.add_bearing takes it."""
+    """A DF record as Localizer.add_bearing takes it (either encoding of docs/interface.md). `sigma_deg`: the
+    reading's own sigma, when its encoding gives one (`pose`); NaN: the one its quality gives."""
 
     stamp: float
     azimuth_deg: float
     quality: float
     frequency_hz: float
+    sigma_deg: float = math.nan
 
 
 def stamp_seconds(header) -> float:
@@ -108,6 +110,23 @@ def heading_from_imu(msg) -> HeadingRecord:
 def bearing_from_pose(msg) -> PoseBearing:
     """geometry_msgs/PoseWithCovarianceStamped bearing -> PoseBearing (variance from covariance[35])."""
     return PoseBearing(stamp_seconds(msg.header), yaw_of(msg.pose.pose.orientation), _float(msg.pose.covariance[35]))
+
+
+def df_from_pose(msg) -> DfRecord:
+    """A `pose` bearing (bearing_from_pose) as a DF record: its yaw as an azimuth (deg clockwise from north), its
+    variance as the reading's sigma (NaN when not positive: the configured one), no quality, no frequency. The
+    same arithmetic as Localizer.add_bearing_enu, so a live pose and a replayed one give one answer."""
+    p = bearing_from_pose(msg)
+    azimuth = 90.0 - math.degrees(p.yaw_rad) if math.isfinite(p.yaw_rad) else p.yaw_rad
+    var = p.variance_rad2
+    sigma = math.degrees(math.sqrt(var)) if var > 0 and math.isfinite(var) else math.nan
+    return DfRecord(p.stamp, azimuth, math.nan, math.nan, sigma)
+
+
+def df_record(msg, encoding: str) -> DfRecord:
+    """A bearing message in `bearing_encoding` (`df_record`: Vector3Stamped; `pose`: PoseWithCovarianceStamped) as
+    one DfRecord, so the node hands either to the engine by one call."""
+    return df_from_vector3stamped(msg) if encoding == "df_record" else df_from_pose(msg)
 
 
 def estimate_from_pose(msg) -> tuple[float, float, float, list[list[float]]]:

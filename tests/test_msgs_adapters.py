@@ -12,6 +12,7 @@ from msgs_adapters.bag import typestore
 from msgs_adapters.fields import (
     bearing_from_pose,
     df_from_vector3stamped,
+    df_record,
     diagnostics_values,
     estimate_from_pose,
     fix_from_navsatfix,
@@ -44,7 +45,7 @@ def test_navsatfix_and_df_record_read_the_same_from_either_class(T):
     df = build.df_record(T, 10.75, 359.5, 88.0, 433.92e6)
     assert fix_from_navsatfix(fix)[:5] == (10.5, 39.1, 117.2, 5.0, -1)
     assert math.isnan(fix_from_navsatfix(fix).sigma_m)  # covariance type unknown
-    assert df_from_vector3stamped(df) == (10.75, 359.5, 88.0, 433.92e6)
+    assert df_from_vector3stamped(df)[:4] == (10.75, 359.5, 88.0, 433.92e6)
     known = build.navsatfix(T, 10.5, 39.1, 117.2, 5.0, covariance=np.diag([9.0, 16.0, 25.0]), covariance_type=2)
     assert fix_from_navsatfix(known).sigma_m == pytest.approx(math.sqrt(12.5))
 
@@ -64,6 +65,18 @@ def test_pose_encoding_bearing_round_trip(yaw):
     for m in flavours(msg, "geometry_msgs/msg/PoseWithCovarianceStamped"):
         r = bearing_from_pose(m)
         assert r.stamp == 3.0 and r.yaw_rad == pytest.approx(yaw) and r.variance_rad2 == pytest.approx(0.0004)
+
+
+@pytest.mark.parametrize("yaw", [0.3, -2.9, math.pi / 2])
+def test_a_pose_bearing_is_read_as_a_df_record_with_its_own_sigma(yaw):
+    """The node hands either encoding to the engine by one call: the pose's yaw as an azimuth from north, its
+    variance as the reading's sigma (a variance of 0: not known), no quality or frequency."""
+    r = df_record(build.pose_bearing(RCLPY, 3.0, yaw, 0.0004), "pose")
+    assert r.stamp == 3.0 and r.azimuth_deg == pytest.approx(90.0 - math.degrees(yaw))
+    assert r.sigma_deg == pytest.approx(math.degrees(0.02)) and math.isnan(r.quality) and math.isnan(r.frequency_hz)
+    assert math.isnan(df_record(build.pose_bearing(RCLPY, 3.0, yaw, 0.0), "pose").sigma_deg)
+    df = build.df_record(RCLPY, 10.75, 359.5, 88.0, 433.92e6)
+    assert df_record(df, "df_record") == df_from_vector3stamped(df)
 
 
 def test_emitter_pose_carries_the_estimate_and_its_covariance(estimate):

@@ -517,17 +517,17 @@ def test_fixed_stations_live_estimates_are_the_survey_models_and_hold_their_bias
     the end of data's is the same fix. The live fixes are the scheduler's jobs, made in turns (made in the
     publishing call, one took up to a second)."""
     from aoa_localizer import Localizer, LocalizerConfig
-    from aoa_localizer.engine import localizer as localizer_module
+    from aoa_localizer.engine.outputs import estimates as estimates_module
     from aoa_localizer.engine.scheduling import slices
 
     in_turns: list[bool] = []
-    real_fix = localizer_module.live_fix
+    real_fix = estimates_module.live_fix
 
     def live_fix(*args):
         in_turns.append(getattr(slices._meter, "turns", None) is not None)
         return real_fix(*args)
 
-    monkeypatch.setattr(localizer_module, "live_fix", live_fix)
+    monkeypatch.setattr(estimates_module, "live_fix", live_fix)
     rng = np.random.default_rng(3)
     stations = np.array([[-500.0, 0.0], [400.0, -300.0], [0.0, 500.0], [350.0, 350.0]])
     truth = np.array([60.0, -40.0])

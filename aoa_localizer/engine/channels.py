@@ -3,6 +3,7 @@ of the channel's), each channel has its own emitter track, point builders (one p
 Records without a frequency (0 or NaN) share the default channel, so single-emitter use is unchanged."""
 from __future__ import annotations
 
+import logging
 import math
 import zlib
 
@@ -15,7 +16,11 @@ from aoa_localizer.engine.ingest.preprocess import PointBuilder
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import JobPlace, Scheduler
 from aoa_localizer.engine.track.emitter_track import EmitterTrack
-from aoa_localizer.engine.types import Estimate, EstimateState
+from aoa_localizer.engine.types import Estimate, EstimateState, Reading
+
+log = logging.getLogger("aoa_localizer")
+
+Closed = list[tuple["Channel", list[Reading]]]  # closed observation points, each with its channel
 
 DEFAULT = "default"  # the channel of records without a frequency
 # Carrier frequencies a DF receiver can report: above 0 and at most 1 THz (receivers stop near 50 GHz), so a
@@ -92,6 +97,7 @@ class Channels:
         self.retired: dict[str, Channel] = {}
         self._heard: dict[float, Channel] = {}  # frequency -> its channel, for frequencies heard before
         self._opened = 0  # frequency channels opened so far
+        self._retire_check = -math.inf  # DF stamp of the last look for silent channels
         self.default = self._open(DEFAULT, math.nan)
 
     def _open(self, cid: str, frequency_hz: float) -> Channel:
@@ -155,26 +161,31 @@ class Channels:
             for f in [f for f, c in self._heard.items() if c is channel]:
                 del self._heard[f]
 
-    def retire_silent(self, now: float) -> list[Channel]:
-        """Retire the frequency channels silent for `channel_timeout_s` of DF time before `now` (0: never);
-        returns them (their open points still to be used by the caller). A channel never heard is closed, not
-        retired: it has nothing to keep."""
+    def retire_silent(self, now: float, every_time: bool = False) -> Closed:
+        """Once per second of DF time (`every_time`: now), retire the frequency channels silent for
+        `channel_timeout_s` before `now` (0: never); returns their open points, closed. A channel never heard is
+        closed, not retired: it has nothing to keep."""
         timeout = self.cfg.channel_timeout_s
-        if timeout <= 0:
+        if timeout <= 0 or (now - self._retire_check < 1.0 and not every_time):
             return []
+        self._retire_check = now
         for c in [c for c in self.live.values() if c.last_heard == -math.inf]:
             self.discard_unheard(c)
         gone = [c for c in self.live.values() if c.id != DEFAULT and now - c.last_heard > timeout]
         if gone:
             self._heard.clear()
+        closed: Closed = []
         for c in gone:
             c.retired = True
             del self.live[c.id]
             self.retired.pop(c.id, None)
             self.retired[c.id] = c
+            closed += [(c, group) for group in (b.flush() for b in c.builders.values()) if group]
+            log.info("channel %s (%.0f Hz) silent for %.0f s: retired, its last estimate kept", c.id, c.frequency_hz,
+                     now - c.last_heard)
         while len(self.retired) > self.cfg.max_channels:  # the oldest retired go: memory bounded over any stream
             del self.retired[next(iter(self.retired))]
-        return gone
+        return closed
 
     def primary(self) -> Channel | None:
         """The channel a single-emitter consumer reads (the node's `emitter/pose`): the default channel while it has

@@ -51,11 +51,9 @@ def locate_bearings(bearings: list[SiteBearing], cfg: LocalizerConfig) -> tuple[
     loc = Localizer(cfg)
     for b in sorted(bearings, key=lambda b: b.stamp):
         loc.set_station_position(b.site, b.lat, b.lon)
-        if math.isnan(b.sigma_deg):
-            loc.add_bearing(b.stamp, b.azimuth_deg, b.quality, station=b.site)
-        else:
-            loc.add_bearing_enu(b.stamp, math.radians(90.0 - b.azimuth_deg), math.radians(b.sigma_deg) ** 2,
-                                station=b.site)
+        # a bearing with its own sigma is taken at it alone, its quality unused
+        quality = b.quality if math.isnan(b.sigma_deg) else math.nan
+        loc.add_bearing(b.stamp, b.azimuth_deg, quality, station=b.site, sigma_deg=b.sigma_deg)
     loc.flush()
     est = loc.finish() or loc.estimate
     loc.close()

@@ -37,6 +37,7 @@ class BearingInput(NamedTuple):
     azimuth_deg: float
     quality: float = math.nan
     frequency_hz: float = math.nan
+    sigma_deg: float = math.nan
 
 
 @dataclass(frozen=True)

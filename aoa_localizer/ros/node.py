@@ -42,8 +42,7 @@ from aoa_localizer.ros.ros_main import run_node, spin
 from aoa_localizer.ros.vehicle_path import VehiclePath
 from msgs_adapters import build
 from msgs_adapters.fields import (
-    bearing_from_pose,
-    df_from_vector3stamped,
+    df_record,
     fix_from_navsatfix,
     heading_from_imu,
 )
@@ -398,14 +397,10 @@ class LocalizerNode(Node):
         mon.counts["bearings_received"] += 1
         mon.health.reading(self._now())
         try:
-            if self.cfg.bearing_encoding == "df_record":
-                r = df_from_vector3stamped(msg)
-                mon.df_stamp(station, r.stamp, r.frequency_hz)
-                self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz)
-            else:
-                p = bearing_from_pose(msg)
-                mon.df_stamp(station, p.stamp)
-                self.loc.add_bearing_enu(p.stamp, p.yaw_rad, p.variance_rad2, station=station)
+            r = df_record(msg, self.cfg.bearing_encoding)
+            mon.df_stamp(station, r.stamp, r.frequency_hz)
+            self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz,
+                                 sigma_deg=r.sigma_deg)
         except (AttributeError, TypeError, ValueError):
             mon.counts["adapter_errors"] += 1
             return

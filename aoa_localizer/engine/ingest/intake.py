@@ -9,30 +9,25 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
-from collections.abc import Callable
 
-from aoa_localizer.engine.channels import Channel, Channels
+from aoa_localizer.engine.channels import Channels, Closed
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.geodesy import LocalFrame, Skew, turn
-from aoa_localizer.engine.ingest.gps_track import STILL_MPS, GpsTrack, Where
+from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.ingest.gps_track import GpsTrack
 from aoa_localizer.engine.ingest.heading import ImuHeading, TrackHeading
 from aoa_localizer.engine.ingest.input_guard import StreamClock, Verdict, beyond_map, confirms, implausible_fix
-from aoa_localizer.engine.ingest.preprocess import reading_sigma
-from aoa_localizer.engine.ingest.station import Pending, Station
+from aoa_localizer.engine.ingest.pairing import Pairing
+from aoa_localizer.engine.ingest.station import Station
 from aoa_localizer.engine.outputs.survey_log import SurveyLog
 from aoa_localizer.engine.rejections import Reason, Rejections
-from aoa_localizer.engine.types import Reading
 
 log = logging.getLogger("aoa_localizer")
 
-_MAX_PENDING = 100_000  # bearings waiting for a fix, at most (the age limit normally binds long before)
 _CLOCK_REASONS = {  # (the fix's, the bearing's) reason for each refusing verdict of a stream clock
     Verdict.REPEATED: (Reason.FIX_REPEATED, Reason.BEARING_REPEATED),
     Verdict.OUT_OF_ORDER: (Reason.FIX_OUT_OF_ORDER, Reason.BEARING_OUT_OF_ORDER),
     Verdict.AHEAD: (Reason.FIX_STAMP_JUMP, Reason.BEARING_STAMP_JUMP),
 }
-
-Closed = list[tuple[Channel, list[Reading]]]  # the observation points an input closed, with their channels
 
 
 def as_float(value) -> float:
@@ -52,12 +47,9 @@ class Intake:
         self.cfg, self.channels, self.reject, self.frame, self.observer = cfg, channels, reject, frame, observer
         self.stations: dict[str, Station] = {}
         self.input_events: Counter = Counter()  # fix_clock_jump, df_clock_jump, fix_pause
-        self.unknown_quality = 0  # readings used with NaN quality (no correction, default sigma)
         self.other_band = 0  # DF records outside frequency_band_hz, left to the node of their band
         self.waiting_line = "waiting for a GPS fix"
-        self.survey_log = SurveyLog()
-        # called with a record's stamp when every channel is taken: retires the silent ones, says whether any went
-        self.make_room: Callable[[float], bool] | None = None
+        self.pairing = Pairing(cfg, channels, reject)
 
     def reset(self, channels: Channels):
         """Drop the stations (their tracks, clocks and held bearings) for new `channels`; the datum and the counters
@@ -65,7 +57,17 @@ class Intake:
         self.channels = channels
         self.stations = {}
         self.waiting_line = "waiting for a GPS fix"
-        self.survey_log = SurveyLog()
+        self.pairing.reset(channels)
+
+    @property
+    def survey_log(self) -> SurveyLog:
+        """The survey-like bearings placed so far (survey_log.py)."""
+        return self.pairing.survey_log
+
+    @property
+    def unknown_quality(self) -> int:
+        """Readings used with NaN quality (no correction, the default sigma)."""
+        return self.pairing.unknown_quality
 
     @property
     def waiting_for_gps(self) -> bool:
@@ -151,7 +153,7 @@ class Intake:
         if st.fixed:  # a site's fix is its position: trusted like a configured one, no confirmation
             self.place(station, lat, lon, alt, sigma_m)
             self.reject.used()
-            return self.release(st)
+            return self.pairing.pair_held(st)
         if self.frame is None:
             candidate = st.datum_candidate
             # a sparse stream's next fix (a surveyor's, minutes after the last) confirms across its pause
@@ -179,62 +181,53 @@ class Intake:
         elif not heading.add(stamp, yaw, math.sqrt(variance) if 0 < variance < math.inf else 0.0):
             self.reject(Reason.HEADING_OUT_OF_ORDER)
 
-    def _channel(self, frequency: float, stamp: float, station: str) -> Channel | Reason:
-        """The record's channel; with every channel taken, the silent ones are retired as of its stamp first, when
-        that lies on its station's timeline (a stamp from nowhere must not retire them)."""
-        channel = self.channels.for_frequency(frequency)
-        if channel is Reason.CHANNEL_LIMIT and self.make_room is not None:
-            st = self.station(station)
-            if not st.ahead_of_timeline(stamp) and not st.fix_clock.future(stamp) and self.make_room(stamp):
-                channel = self.channels.for_frequency(frequency)
-        return channel
-
-    def admit_bearing(self, stamp, azimuth_deg, quality, sigma, station: str,
-                      frequency_hz) -> tuple[Station, float] | None:
-        """Check a DF record and hold it at its station until a fix places it (release): its station and its stamp on
-        the GPS clock, or None when refused."""
+    def take_bearing(self, stamp, azimuth_deg, quality, sigma, station: str, frequency_hz) -> Closed:
+        """A DF record, checked, found its channel and handed to its station, which holds it until a fix places it;
+        returns the observation points it closed: the points of channels retired as silent by its stamp, then
+        those its station's held bearings close now that they can be placed (Pairing). A refused record is
+        counted under its reason and closes only what retiring made room for."""
         stamp, azimuth, quality, frequency = map(as_float, (stamp, azimuth_deg, quality, frequency_hz))
         if not self.cfg.in_band(frequency):  # another node's (frequency_band_hz): not ours, not an error
             self.other_band += 1
-            return None
+            return []
         stamp += self.cfg.df_time_offset_s  # on the GPS clock
-        if not math.isfinite(stamp):
-            self.reject(Reason.BAD_STAMP)
-            return None
-        if not math.isfinite(azimuth):
-            self.reject(Reason.BAD_AZIMUTH)
-            return None
-        if not math.isnan(quality) and not 0 <= quality <= 100:
-            self.reject(Reason.BAD_QUALITY)
-            return None
-        if quality < self.cfg.quality_min:  # False for NaN: unknown quality passes, counted below
-            self.reject(Reason.LOW_QUALITY)
-            return None
-        channel = self._channel(frequency, stamp, station)
+        why = (Reason.BAD_STAMP if not math.isfinite(stamp) else Reason.BAD_AZIMUTH if not math.isfinite(azimuth)
+               else Reason.BAD_QUALITY if not math.isnan(quality) and not 0 <= quality <= 100
+               else Reason.LOW_QUALITY if quality < self.cfg.quality_min  # False for NaN: unknown quality passes
+               else None)
+        if why is not None:
+            self.reject(why)
+            return []
+        room: Closed = []
+        channel = self.channels.for_frequency(frequency)
+        # with every channel taken, the silent ones are retired as of the record's stamp first, when that lies on
+        # its station's timeline (a stamp from nowhere must not retire them)
+        if channel is Reason.CHANNEL_LIMIT and not (self.station(station).ahead_of_timeline(stamp)
+                                                    or self.station(station).fix_clock.future(stamp)):
+            before = len(self.channels.live)
+            room = self.channels.retire_silent(stamp, every_time=True)
+            if len(self.channels.live) < before:
+                channel = self.channels.for_frequency(frequency)
         if isinstance(channel, Reason):
             self.reject(channel)
-            return None
+            return room
         st = self.station(station)
-        # a record refused here never opened its channel: one left open would hold a place among max_channels
-        # that no bearing ever fills (a scanning receiver before its first fix filled them all)
-        if channel.id not in st.df_clocks and st.ahead_of_timeline(stamp):
-            self.reject(Reason.BEARING_STAMP_JUMP)
+        verdict, refused, dropped = st.hold(channel.id, stamp, azimuth % 360.0, quality, sigma)
+        if verdict in _CLOCK_REASONS:
+            refused = _CLOCK_REASONS[verdict][1]
+        elif verdict is Verdict.CLOCK_JUMP:
+            self.input_events["df_clock_jump"] += 1
+            log.warning("df_clock_jump: the clock jumped to %.3f; going on on the new timeline", stamp)
+            self.reject(Reason.CLOCK_JUMP, dropped)
+        if refused is not None:
+            # a record refused here never opened its channel: one left open would hold a place among max_channels
+            # that no bearing ever fills (a scanning receiver before its first fix filled them all)
+            self.reject(refused)
             self.channels.discard_unheard(channel)
-            return None
-        verdict = self._admit(st.df_clock(channel.id), "bearing", "df_clock_jump", stamp)
-        if verdict is None:
-            self.channels.discard_unheard(channel)
-            return None
-        if verdict is Verdict.CLOCK_JUMP:  # waiting on the old timeline: no fix will place them in order any more
-            self.reject(Reason.CLOCK_JUMP, st.pending.drop_channel(channel.id))
-        if stamp < st.first_stamp:
-            self.reject(Reason.BEFORE_FIRST_FIX)
-            self.channels.discard_unheard(channel)
-            return None
+            return room
         self.reject.used()
         channel.last_heard = stamp  # on its clock's timeline (a step back is followed)
-        st.pending.push(Pending(stamp, azimuth % 360.0, quality, sigma, channel.id))
-        return st, stamp
+        return room + self.channels.retire_silent(stamp) + self.pairing.pair_held(st)
 
     def flush(self) -> Closed:
         """End of data: bearings waiting only for the later fixes of their course are paired with the fixes there
@@ -245,7 +238,7 @@ class Intake:
                 held, st.held_fix = st.held_fix, None
                 st.fix_clock.resume(held[0])
                 closed += self._use_fix(st, *held)
-            closed += self.release(st, final=True)  # those only waiting for their course's later fixes
+            closed += self.pairing.pair_held(st, final=True)  # those only waiting for their course's later fixes
             self.reject(Reason.NO_FIX_AFTER, len(st.pending))
             st.pending.clear()
         return closed + [(channel, group) for channel in list(self.channels.live.values())
@@ -283,7 +276,7 @@ class Intake:
             st.heading.note_fix(gps)
         if self.observer is not None:
             self.observer.on_fix(stamp, float(east), float(north), st.name)
-        closed = self.release(st)
+        closed = self.pairing.pair_held(st)
         # A fix well after an open point's first reading closes it: a vehicle that stopped taking
         # readings still gets its estimate, without waiting for the next reading.
         if not st.pending:
@@ -294,79 +287,3 @@ class Intake:
                 if stamp - builder.readings[0].stamp > self.cfg.obs_max_duration_s:
                     closed.append((channel, builder.flush() or []))
         return closed
-
-    def release(self, st: Station, final: bool = False) -> Closed:
-        """Pair a station's held bearings with its track in stamp order; stop at the first one still waiting for
-        a fix (every later one waits too). A bearing turned by the course over ground also waits for the fixes of
-        `heading_window_s` after it (its course is fitted centred on it: a trailing one lags a turn), except at the
-        end of data (`final`)."""
-        closed: Closed = []
-        gps = st.gps
-        lead = self.cfg.heading_window_s if st.course_source() else 0.0
-        while st.pending:
-            p = st.pending.head()
-            # Waiting is bounded whatever the GPS does: 2 x gps_max_gap_s (and the course's lead) behind its
-            # channel's DF stream, no fix will come (each channel's own stream: a record stamped ahead on another one
-            # costs only itself)
-            if (st.newest_df(p.channel) - p.stamp > 2 * self.cfg.gps_max_gap_s + lead
-                    or len(st.pending) > _MAX_PENDING):
-                st.pending.pop()
-                self.reject(Reason.GPS_GAP if len(gps) else Reason.BEFORE_FIRST_FIX)
-                continue
-            if not len(gps):
-                break  # the datum waits for its confirming fix
-            where, at = gps.locate(p.stamp)
-            if where is Where.WAIT or (lead and not final and where is Where.OK and gps.t[-1] < p.stamp + lead):
-                break
-            if where is Where.GAP and st.held_fix is not None and p.stamp > gps.t[-1]:
-                break  # a held fix may be the start of the stream's next stretch: the next fix says
-            st.pending.pop()
-            if where is not Where.OK or at is None:
-                self.reject(where.value)
-                continue
-            channel = self.channels.live.get(p.channel)
-            if channel is None:
-                self.reject(Reason.CHANNEL_RETIRED)
-                continue
-            east, north, north_angle, gps_sigma, v_east, v_north = at
-            turned = self._theta(st, p.stamp, p.azimuth, north_angle, LocalFrame.skew(east, north))
-            if turned is None:
-                self.reject(Reason.HEADING_UNKNOWN)
-                continue
-            theta, heading_sigma = turned
-            if math.isnan(p.quality):
-                self.unknown_quality += 1
-            sigma = reading_sigma(p.quality, self.cfg) if math.isnan(p.sigma) else p.sigma
-            reading = Reading(p.stamp, theta, p.quality, sigma, east, north, float(gps_sigma), float(v_east),
-                              float(v_north), heading_sigma)
-            if channel.id not in self.survey_log.not_survey:  # a drive's channel costs a set look-up a reading
-                # a survey's: from a fixed site, or from an antenna standing still (a surveyor's stop)
-                still = math.hypot(v_east, v_north) < STILL_MPS
-                self.survey_log.add(channel.id, st.fixed or still,
-                                    (st.name, p.stamp, east, north, theta, north_angle,
-                                     math.degrees(p.sigma) if math.isfinite(p.sigma) else math.nan))
-            closed += [(channel, group) for group in channel.builder(st.name).add(reading)]
-        return closed
-
-    def _theta(self, st: Station, stamp: float, azimuth: float, north_angle: float,
-               skew: Skew) -> tuple[float, float] | None:
-        """The reading's map angle (rad) from its azimuth as `bearing_reference` defines it, and the sigma of the
-        heading it was turned by (rad); None when a vehicle-relative azimuth has no heading at its stamp. The
-        azimuth turns from north (or the heading) on the ground, and the plane's skew far from the datum says
-        what that turn is on the map (geodesy.turn)."""
-        cfg = self.cfg
-        if cfg.bearing_reference == "true_north":
-            return turn(north_angle, -math.radians(azimuth), skew), 0.0
-        if cfg.bearing_reference == "magnetic_north":
-            return turn(north_angle, -math.radians(azimuth + cfg.magnetic_declination_deg), skew), 0.0
-        course = st.course_source()
-        if isinstance(st.heading, ImuHeading):
-            at = st.heading.at(st.gps, stamp, north_angle, skew)
-        elif course is not None:
-            at = course[0].at(course[1], stamp, north_angle, skew)
-        else:
-            return None  # the forward axis, ENU in the map plane
-        if at is None:
-            return None
-        heading, sigma = at
-        return turn(heading, -math.radians(azimuth + cfg.mount_offset_deg), skew), sigma

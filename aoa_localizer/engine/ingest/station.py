@@ -5,11 +5,13 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
+from typing import NamedTuple
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.ingest.gps_track import GpsTrack, Where
 from aoa_localizer.engine.ingest.heading import ImuHeading, TrackHeading
-from aoa_localizer.engine.ingest.input_guard import StreamClock
+from aoa_localizer.engine.ingest.input_guard import StreamClock, Verdict
+from aoa_localizer.engine.rejections import Reason
 
 
 class Pending:
@@ -20,6 +22,16 @@ class Pending:
 
     def __init__(self, stamp: float, azimuth: float, quality: float, sigma: float, channel: str):
         self.stamp, self.azimuth, self.quality, self.sigma, self.channel = stamp, azimuth, quality, sigma, channel
+
+
+class Hold(NamedTuple):
+    """What became of a DF record handed to its station (Station.hold): the channel clock's verdict (None: not
+    asked), the station's own reason for refusing it (None: held, or refused by the verdict), and how many of
+    the channel's waiting bearings a clock jump dropped."""
+
+    verdict: Verdict | None
+    refused: Reason | None
+    dropped: int
 
 
 class PendingQueue:
@@ -121,6 +133,23 @@ class Station:
             return False
         last, newest = max(clocks, key=lambda pair: pair[0])
         return not newest.sparse() and stamp - last > self.cfg.max_stamp_jump_s
+
+    def hold(self, channel: str, stamp: float, azimuth: float, quality: float, sigma: float) -> Hold:
+        """A checked DF record of `channel` onto this station's timeline, held until a fix places it unless refused:
+        a new channel's first stamp far ahead of the timeline (BEARING_STAMP_JUMP, the clock not asked), the channel
+        clock's verdict, a stamp before the first fix (BEFORE_FIRST_FIX). On a CLOCK_JUMP the channel's bearings
+        waiting on the old timeline are dropped: no fix will place them in order any more."""
+        held = Pending(stamp, azimuth, quality, sigma, channel)
+        if channel not in self.df_clocks and self.ahead_of_timeline(stamp):
+            return Hold(None, Reason.BEARING_STAMP_JUMP, 0)
+        verdict = self.df_clock(channel).admit(stamp)
+        if verdict not in (Verdict.OK, Verdict.CLOCK_JUMP):
+            return Hold(verdict, None, 0)
+        dropped = self.pending.drop_channel(channel) if verdict is Verdict.CLOCK_JUMP else 0
+        if stamp < self.first_stamp:
+            return Hold(verdict, Reason.BEFORE_FIRST_FIX, dropped)
+        self.pending.push(held)
+        return Hold(verdict, None, dropped)
 
     def restart_gps(self):
         """A GPS clock jump: the track and the courses start again on the new timeline."""

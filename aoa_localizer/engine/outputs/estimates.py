@@ -1,0 +1,203 @@
+"""The engine's output side: the channels' tracks take the closed observation points, and each new estimate is made,
+kept as its channel's and the newest, and handed to `on_estimate`.
+
+The Localizer hands the points the intake closed to `Estimates.take_points` and never sees them again: the route of
+a point runs one way, from the intake through the tracks to the estimate (docs/design.md, "Data flow").
+"""
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from aoa_localizer.engine.channels import Channel, Channels, Closed
+from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.geodesy import LocalFrame, ground_to_map
+from aoa_localizer.engine.ingest.intake import Intake
+from aoa_localizer.engine.ingest.preprocess import reading_sigma
+from aoa_localizer.engine.outputs import survey_solver
+from aoa_localizer.engine.outputs.survey_log import SurveyFix, counted, live_fix
+from aoa_localizer.engine.rejections import Reason, Rejections
+from aoa_localizer.engine.scheduling import slices
+from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
+from aoa_localizer.engine.track.report import co_channel, others_share
+from aoa_localizer.engine.types import Estimate, Transmitter
+
+
+def positive_definite(cov) -> bool:
+    """Finite and full rank to working precision (a cloud of 2 particles, or all on one line, is not)."""
+    (a, _), (b, c) = np.asarray(cov, float).tolist()  # 2x2 symmetric: its eigenvalues in closed form
+    if not all(map(math.isfinite, (a, b, c))):
+        return False
+    high = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
+    return high > 0 and (a * c - b * b) / high > 1e-9 * high  # the low eigenvalue as det / high
+
+
+def noise_summary(channel: Channel, cfg: LocalizerConfig) -> dict:
+    """A channel's self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier
+    rates."""
+    return channel.track.calibration.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
+
+
+class Estimates:
+    """Points into tracks, tracks into estimates. `newest` is the newest estimate of any channel (None before one)
+    and `latest` its channel (the default channel before one); `on_estimate` is called with each new one."""
+
+    def __init__(self, cfg: LocalizerConfig, channels: Channels, intake: Intake, scheduler: Scheduler,
+                 reject: Rejections, on_estimate: Callable[[Estimate], None] | None = None):
+        self.cfg, self.channels, self.intake, self.scheduler, self.reject = cfg, channels, intake, scheduler, reject
+        self.on_estimate = on_estimate
+        self.newest: Estimate | None = None
+        self.latest: Channel = channels.default
+
+    def take_points(self, closed: Closed) -> Estimate | None:
+        """The channels' tracks take the closed points in order, the points of one track within one call's budget
+        for its jobs (slices.py; each track its own, so a channel's run never depends on another's); returns the
+        newest estimate they made (a survey-like channel's survey fix also while its filter has not started)."""
+        estimate = None
+        calls: dict[int, slices.Call] = {}
+        observer = self.intake.observer
+        for channel, readings in closed:
+            track = channel.track
+            with slices.one_call(calls.setdefault(id(track), slices.Call())):
+                self.scheduler.point_came(channel.surveying)
+                took = track.add(readings)
+                self.scheduler.take_turn(channel.surveying)  # its live survey fix's turn, after the track's
+            if observer is not None:
+                observer.on_point(readings, track.last_kept)
+            if took:
+                estimate = self.publish(channel) or estimate
+            elif self.cfg.end_of_data_model == "survey":  # a survey-like channel's fix needs no started filter
+                estimate = self._live_survey(channel) or estimate
+        return estimate
+
+    def publish(self, channel: Channel, end_of_data: bool = False) -> Estimate | None:
+        """The channel's new estimate, kept and handed to `on_estimate`; None (counted) when its covariance is not
+        positive definite. A survey-like channel's is the survey model's while it has a fix (_live_survey)."""
+        if not end_of_data and self.cfg.end_of_data_model == "survey":
+            live = self._live_survey(channel)
+            if live is not None:
+                return live
+        track = channel.track
+        mean, cov = track.estimate()
+        if not positive_definite(cov):
+            self.reject(Reason.COVARIANCE_DEGENERATE)
+            return None
+        frame = self.intake.datum_frame()
+        lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
+        from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
+        cloud = track.cloud
+        count = track.count_transmitters(final=end_of_data)
+        modes, state, warnings = track.assess(np.asarray(mean), np.asarray(cov), others_share(count, np.asarray(mean)))
+        transmitters: list[Transmitter] = []
+        if count is not None:
+            # the antennas only rate the transmitters' ellipses: a single transmitter (most channels) skips them
+            antennas = np.array([[g[0].east, g[0].north] for g in track.heard]) if count.transmitters else None
+            places, said = co_channel(count, antennas, self.cfg.max_emitters_per_channel)
+            warnings = warnings + said
+            for place, place_state in places:
+                t_lat, t_lon, _ = frame.to_geodetic(place.mean[0], place.mean[1])
+                transmitters.append(Transmitter(float(place.mean[0]), float(place.mean[1]), float(t_lat),
+                                                float(t_lon), place.cov.copy(), place.share, place_state))
+        estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
+                            lon=float(lon), cov=np.array(cov), ground_cov=from_map @ np.asarray(cov) @ from_map.T,
+                            bearings_used=track.bearings_used,
+                            points_used=track.points_used, ess=cloud.ess(), algorithm=self.cfg.algorithm,
+                            # the user's own copies: the filter's arrays are read-only and shared
+                            particles=cloud.x.copy(), weights=cloud.weights.copy(), modes=modes,
+                            noise=noise_summary(channel, self.cfg) if self.cfg.calibrate_noise else None,
+                            channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
+                            end_of_data=end_of_data, transmitter_count=count.count if count is not None else 1,
+                            count_probability=count.probability if count is not None else float("nan"),
+                            transmitters=transmitters)
+        return self._announce(channel, estimate)
+
+    def finish(self) -> Estimate | None:
+        """The end of data's estimates: the survey model's for the survey-like channels (with `end_of_data_model:
+        survey`), each other live channel's after its last global check. Returns the last of them."""
+        estimate = None
+        surveyed = self._survey_end() if self.cfg.end_of_data_model == "survey" else {}
+        for channel in self.channels.all():  # a survey's channels may have retired between its bearings
+            if channel.id in surveyed:
+                estimate = self._publish_survey(channel, surveyed[channel.id]) or estimate
+            elif not channel.retired and channel.track.finish():
+                estimate = self.publish(channel, end_of_data=True) or estimate
+        return estimate
+
+    def _survey_end(self) -> dict[str, SurveyFix]:
+        """The survey model's fixes of the survey-like channels (survey_log.py), {} without any or a solver."""
+        solve = survey_solver.solver()
+        if solve is None or self.intake.frame is None:
+            return {}
+        records = self.intake.survey_log.survey_records(self.intake.frame)
+        return solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel) if records else {}
+
+    def _live_survey(self, channel: Channel) -> Estimate | None:
+        """A survey-like channel's estimate while the data come (every bearing from a fixed site or a standing
+        antenna, from three places on): the survey model's fix of its bearings alone, made again as they grow
+        (SurveyLog.due) as a job of the scheduler's (the check worker's, or made in turns at the points that follow:
+        a fix that counts transmitters takes up to seconds) and published once it is done; until then the last one,
+        restamped; None (the filter's estimate) for any other channel or while the model has no fix for it. The end
+        of data pools every survey-like channel (finish)."""
+        survey, place = self.intake.survey_log, channel.surveying
+        done = self.scheduler.finished(place)
+        if done is not None:
+            return self._adopt_live_fix(channel, done)
+        solve = survey_solver.solver()
+        if solve is not None and survey.due(channel.id) and self.scheduler.job(place) is None:
+            survey.mark_solved(channel.id)
+            records = survey.survey_records(self.intake.datum_frame(), only=channel.id)
+            if survey.count_due(channel.id):
+                max_k, last = self.cfg.max_emitters_per_channel, None
+                survey.counted[channel.id] = (len(records), survey.counted.get(channel.id, (0, None))[1])
+            else:
+                max_k, last = 1, survey.counted[channel.id][1]
+            job = functools.partial(live_fix, solve, records, channel.id, self.cfg.receiver_class, max_k, last)
+            self.scheduler.start(place, job, slices.CHECK_BUDGET_US, None, [], first_turn=False)
+        last_made = survey.live.get(channel.id)
+        if last_made is None:
+            return None
+        return self._announce(channel, replace(last_made, stamp=channel.track.last_stamp))
+
+    def _adopt_live_fix(self, channel: Channel, done: PendingJob) -> Estimate | None:
+        """A live survey fix the scheduler finished, published (and its count kept when it made one)."""
+        survey = self.intake.survey_log
+        fix = self.scheduler.value(done, "a live survey fix")[1]
+        if fix is not None and fix.count is not None and channel.id in survey.counted:
+            survey.counted[channel.id] = (survey.counted[channel.id][0], fix.count)
+        made = self._publish_survey(channel, fix, end_of_data=False) if fix is not None else None
+        if made is None:
+            survey.live.pop(channel.id, None)
+        else:
+            survey.live[channel.id] = made
+        return made
+
+    def _publish_survey(self, channel: Channel, fix: SurveyFix, end_of_data: bool = True) -> Estimate | None:
+        """A survey-like channel's estimate from the survey model, in the map frame."""
+        if not positive_definite(fix.cov):
+            self.reject(Reason.COVARIANCE_DEGENERATE)
+            return None
+        frame = self.intake.datum_frame()
+        east, north = frame.to_enu(fix.lat, fix.lon)
+        track = channel.track
+        to_map = ground_to_map(frame.north_angle(fix.lat, fix.lon), LocalFrame.skew(east, north))
+        estimate = Estimate(stamp=track.last_stamp, east=float(east), north=float(north), lat=fix.lat, lon=fix.lon,
+                            cov=to_map @ fix.cov @ to_map.T, ground_cov=np.array(fix.cov),
+                            bearings_used=fix.bearings, points_used=track.points_used,
+                            ess=float("nan"), algorithm="survey", modes=[(float(east), float(north), 1.0)],
+                            noise=fix.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
+                            warnings=list(fix.warnings), end_of_data=end_of_data, regions=fix.regions,
+                            **counted(fix.count, frame))
+        return self._announce(channel, estimate)
+
+    def _announce(self, channel: Channel, estimate: Estimate) -> Estimate:
+        """Keep a channel's new estimate as its and the newest, and hand it to `on_estimate`."""
+        channel.published(estimate)
+        self.newest = estimate
+        self.latest = channel
+        if self.on_estimate is not None:
+            self.on_estimate(estimate)
+        return estimate
