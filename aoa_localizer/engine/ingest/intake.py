@@ -1,8 +1,9 @@
 """The Localizer's input side: the stations (their clocks, GPS tracks, headings and held bearings) and the datum.
 
-Fixes, headings and bearings come in as a vehicle gives them; each bearing waits until a fix after it lets its
-station's track place the antenna at its stamp, becomes a Reading in ENU, and joins its channel's open observation
-point. What comes out is the points that closed: (channel, readings) pairs for the channels' tracks.
+Fixes, headings and bearings come in as a vehicle gives them; each bearing is held by its station (station.py)
+until a fix after it lets the station's track place the antenna at its stamp, and the pairing (pairing.py) makes it
+a Reading in ENU in its channel's open observation point. What comes out is the points that closed: (channel,
+readings) pairs, returned to the Localizer for the channels' tracks.
 """
 from __future__ import annotations
 
