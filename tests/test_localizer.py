@@ -125,19 +125,25 @@ def test_unknown_quality_is_used_but_counted(loc):
 
 
 def test_a_readings_own_sigma_overrides_its_qualitys_and_a_pose_is_one_with_it(loc):
-    """sigma_deg (a hand-held bearing's, a pose's) is the reading's sigma; 0, negative or NaN: its quality's.
-    add_bearing_enu is add_bearing with the yaw as an azimuth and the variance as that sigma."""
+    """sigma_deg (a hand-held bearing's, a pose's) is the reading's sigma; NaN or None: its quality's; 0, negative,
+    infinite or not a number: refused. add_bearing_enu is add_bearing with the yaw as an azimuth and the variance
+    as that sigma."""
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(5.0, *fix_at(0.0, 0.0))
     loc.add_bearing(1.0, 10.0, 90.0, sigma_deg=4.0)
-    loc.add_bearing(2.0, 10.0, 90.0, sigma_deg=-1.0)
+    loc.add_bearing(2.0, 10.0, 90.0, sigma_deg=None)
     loc.add_bearing(3.0, 10.0, 90.0)
+    for bad in (0.0, -1.0, math.inf, "wide"):
+        loc.add_bearing(3.5, 10.0, 90.0, sigma_deg=bad)
+    assert loc.rejected == {"bad_sigma": 4}
     sigmas = [math.degrees(r.sigma) for r in open_point(loc)]
-    assert sigmas[0] == pytest.approx(4.0) and sigmas[1] == sigmas[2] != pytest.approx(4.0)
+    assert sigmas[0] == pytest.approx(4.0) and sigmas[1] == sigmas[2] != pytest.approx(4.0) and len(sigmas) == 3
     loc.add_bearing_enu(4.0, math.radians(80.0), math.radians(2.0) ** 2)  # unknown quality: a point of its own
     pose = open_point(loc)[-1]
     assert math.degrees(pose.sigma) == pytest.approx(2.0) and pose.stamp == 4.0
     assert math.degrees(pose.theta) == pytest.approx(80.0) and loc.unknown_quality == 1
+    loc.add_bearing_enu(4.5, math.radians(80.0), -1.0)  # a pose's variance not known: its quality's (none)
+    assert dict(loc.rejected) == {"bad_sigma": 4}
 
 
 def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):

@@ -311,11 +311,9 @@ class Localizer:
                     frequency_hz=float("nan"), sigma_deg=float("nan")) -> Estimate | None:
         """A DF record: azimuth (deg) and quality of the carrier at `frequency_hz` (0 or NaN: the default
         channel) seen from `station`; `sigma_deg` the reading's own sigma when it has one (a hand-held bearing's,
-        a pose's), which the quality's gives otherwise (NaN, 0 or negative: not known). Returns the estimate this
-        reading produced (when it closed an observation point), else None."""
-        sigma = as_float(sigma_deg)
-        sigma = math.radians(sigma) if 0 < sigma < math.inf else math.nan
-        closed = self._intake.take_bearing(stamp, azimuth_deg, quality, sigma, station, frequency_hz)
+        a pose's; NaN or None: the one its quality gives; 0, negative or not a number: refused, `bad_sigma`).
+        Returns the estimate this reading produced (when it closed an observation point), else None."""
+        closed = self._intake.take_bearing(stamp, azimuth_deg, quality, sigma_deg, station, frequency_hz)
         return self._estimates.take_points(closed)
 
     def add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan"), station: str = "",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 from collections import Counter
 
 from aoa_localizer.engine.channels import Channels, Closed
@@ -182,17 +183,21 @@ class Intake:
         elif not heading.add(stamp, yaw, math.sqrt(variance) if 0 < variance < math.inf else 0.0):
             self.reject(Reason.HEADING_OUT_OF_ORDER)
 
-    def take_bearing(self, stamp, azimuth_deg, quality, sigma, station: str, frequency_hz) -> Closed:
+    def take_bearing(self, stamp, azimuth_deg, quality, sigma_deg, station: str, frequency_hz) -> Closed:
         """A DF record, checked, found its channel and handed to its station, which holds it until a fix places it;
         returns the observation points it closed: the points of channels retired as silent by its stamp, then
         those its station's held bearings close now that they can be placed (Pairing). A refused record is
         counted under its reason and closes only what retiring made room for."""
         stamp, azimuth, quality, frequency = map(as_float, (stamp, azimuth_deg, quality, frequency_hz))
+        # a reading's own sigma: NaN or None when it has none; what is given must be a positive finite number
+        given = sigma_deg is not None and not (isinstance(sigma_deg, numbers.Real) and math.isnan(sigma_deg))
+        sigma = math.radians(as_float(sigma_deg)) if given else math.nan
         if not self.cfg.in_band(frequency):  # another node's (frequency_band_hz): not ours, not an error
             self.other_band += 1
             return []
         stamp += self.cfg.df_time_offset_s  # on the GPS clock
         why = (Reason.BAD_STAMP if not math.isfinite(stamp) else Reason.BAD_AZIMUTH if not math.isfinite(azimuth)
+               else Reason.BAD_SIGMA if given and not 0 < sigma < math.inf
                else Reason.BAD_QUALITY if not math.isnan(quality) and not 0 <= quality <= 100
                else Reason.LOW_QUALITY if quality < self.cfg.quality_min  # False for NaN: unknown quality passes
                else None)
