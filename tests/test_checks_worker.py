@@ -58,7 +58,7 @@ def test_realtime_scheduling_finds_the_emitter_as_reproducible_does(scenario):
     for mode in ("reproducible", "realtime"):
         loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling=mode)))
         play(loc, data)
-        assert loc.estimate is not None and track_of(loc).events["recalibrated"] >= 2, mode
+        assert loc.estimate is not None and loc.events["recalibrated"] >= 2, mode
         assert "internal_error" not in loc.rejected
         results[mode] = error_and_nees(loc, data)
         loc.close()
@@ -182,7 +182,7 @@ def test_a_failing_check_is_counted_and_the_track_goes_on(monkeypatch):
     play(loc, data)
     assert loc.rejected["internal_error"] >= 1
     err, _ = error_and_nees(loc, data)
-    assert track_of(loc).points_used == 60 and err < 5.0  # every point still used, the emitter still found
+    assert loc.track_status().points_used == 60 and err < 5.0  # every point still used, the emitter still found
     loc.close()
 
 
@@ -201,7 +201,7 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)
     err, nees = error_and_nees(loc, data)
-    assert track_of(loc).job is None and track_of(loc).events["recalibrated"] >= 2
+    assert track_of(loc).job is None and loc.events["recalibrated"] >= 2
     assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.rejected
     assert len(starts) == 1 and loc._scheduler.worker.unusable == "cannot start a process"
     said = [r.getMessage() for r in caplog.records if "check worker is given up" in r.getMessage()]
