@@ -79,6 +79,26 @@ def test_a_pose_bearing_is_read_as_a_df_record_with_its_own_sigma(yaw):
     assert df_record(df, "df_record") == df_from_vector3stamped(df)
 
 
+@pytest.mark.parametrize("yaw, variance", [(0.3, 0.0004), (-2.9, 1e-6), (math.pi / 2, 0.0), (1.0, -1.0)])
+def test_the_nodes_pose_path_and_add_bearing_enu_make_the_same_reading(yaw, variance):
+    """The pose's yaw and variance are turned into an azimuth and a sigma in the adapter (the node) and in
+    add_bearing_enu (the API, a bag's bearing_pose): bit for bit the same reading, so one pose gives one answer."""
+    from aoa_localizer import Localizer, LocalizerConfig
+    from conftest import open_point
+
+    r = df_record(build.pose_bearing(RCLPY, 1.0, yaw, variance), "pose")
+    readings = []
+    for feed in (lambda loc: loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, sigma_deg=r.sigma_deg),
+                 lambda loc: loc.add_bearing_enu(1.0, yaw, variance)):
+        loc = Localizer(LocalizerConfig(seed=1, datum_lat=39.1, datum_lon=117.2))
+        loc.add_fix(0.0, 39.1, 117.2)
+        loc.add_fix(2.0, 39.1, 117.2)
+        feed(loc)
+        readings.append(open_point(loc))
+        loc.close()
+    assert len(readings[0]) == 1 and readings[0] == readings[1]
+
+
 def test_emitter_pose_carries_the_estimate_and_its_covariance(estimate):
     msg = build.emitter_pose(RCLPY, estimate)
     assert msg.header.frame_id == "map"

@@ -139,7 +139,7 @@ class Localizer:
     @property
     def unknown_quality(self) -> int:
         """Readings used with NaN quality (no correction, the default sigma)."""
-        return self._intake.unknown_quality
+        return self._intake.pairing.unknown_quality
 
     @property
     def other_band(self) -> int:

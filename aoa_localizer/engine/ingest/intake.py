@@ -17,10 +17,9 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.ingest.gps_track import GpsTrack
 from aoa_localizer.engine.ingest.heading import ImuHeading, TrackHeading
-from aoa_localizer.engine.ingest.input_guard import StreamClock, Verdict, beyond_map, confirms, implausible_fix
+from aoa_localizer.engine.ingest.input_guard import Verdict, beyond_map, confirms, implausible_fix
 from aoa_localizer.engine.ingest.pairing import Pairing
 from aoa_localizer.engine.ingest.station import Station
-from aoa_localizer.engine.outputs.survey_log import SurveyLog
 from aoa_localizer.engine.rejections import Reason, Rejections
 
 log = logging.getLogger("aoa_localizer")
@@ -60,16 +59,6 @@ class Intake:
         self.stations = {}
         self.waiting_line = "waiting for a GPS fix"
         self.pairing.reset(channels)
-
-    @property
-    def survey_log(self) -> SurveyLog:
-        """The survey-like bearings placed so far (survey_log.py)."""
-        return self.pairing.survey_log
-
-    @property
-    def unknown_quality(self) -> int:
-        """Readings used with NaN quality (no correction, the default sigma)."""
-        return self.pairing.unknown_quality
 
     @property
     def waiting_for_gps(self) -> bool:
@@ -142,8 +131,8 @@ class Intake:
         if not st.fix_clock.future(stamp) and st.fix_clock.far_ahead(stamp):
             st.held_fix = fix
             return []
-        verdict = self._admit(st.fix_clock, "fix", "fix_clock_jump", stamp)
-        if verdict is None:
+        verdict = st.fix_clock.admit(stamp)
+        if not self._clock_said(verdict, "fix", "fix_clock_jump", stamp):
             return []
         if verdict is Verdict.CLOCK_JUMP:  # the track starts again on the new timeline
             st.restart_gps()  # a first fix on the old timeline confirms nothing now
@@ -208,27 +197,26 @@ class Intake:
         channel = self.channels.for_frequency(frequency)
         # with every channel taken, the silent ones are retired as of the record's stamp first, when that lies on
         # its station's timeline (a stamp from nowhere must not retire them)
-        if channel is Reason.CHANNEL_LIMIT and not (self.station(station).ahead_of_timeline(stamp)
-                                                    or self.station(station).fix_clock.future(stamp)):
-            before = len(self.channels.live)
-            room = self.channels.retire_silent(stamp, every_time=True)
-            if len(self.channels.live) < before:
-                channel = self.channels.for_frequency(frequency)
+        if channel is Reason.CHANNEL_LIMIT:
+            st = self.station(station)
+            if not (st.ahead_of_timeline(stamp) or st.fix_clock.future(stamp)):
+                before = len(self.channels.live)
+                room = self.channels.retire_silent(stamp, every_time=True)
+                if len(self.channels.live) < before:
+                    channel = self.channels.for_frequency(frequency)
         if isinstance(channel, Reason):
             self.reject(channel)
             return room
         st = self.station(station)
-        verdict, refused, dropped = st.hold(channel.id, stamp, azimuth % 360.0, quality, sigma)
-        if verdict in _CLOCK_REASONS:
-            refused = _CLOCK_REASONS[verdict][1]
-        elif verdict is Verdict.CLOCK_JUMP:
-            self.input_events["df_clock_jump"] += 1
-            log.warning("df_clock_jump: the clock jumped to %.3f; going on on the new timeline", stamp)
-            self.reject(Reason.CLOCK_JUMP, dropped)
-        if refused is not None:
+        hold = st.hold(channel.id, stamp, azimuth % 360.0, quality, sigma)
+        admitted = hold.verdict is None or self._clock_said(hold.verdict, "bearing", "df_clock_jump", stamp)
+        if admitted and hold.verdict is Verdict.CLOCK_JUMP:
+            self.reject(Reason.CLOCK_JUMP, hold.dropped)
+        if not admitted or hold.refused is not None:
             # a record refused here never opened its channel: one left open would hold a place among max_channels
             # that no bearing ever fills (a scanning receiver before its first fix filled them all)
-            self.reject(refused)
+            if hold.refused is not None:
+                self.reject(hold.refused)
             self.channels.discard_unheard(channel)
             return room
         self.reject.used()
@@ -251,17 +239,16 @@ class Intake:
                          for group in (builder.flush() for builder in channel.builders.values()) if group]
 
     # -- the steps ------------------------------------------------------------------------------------
-    def _admit(self, clock: StreamClock, kind: str, jump_event: str, stamp: float) -> Verdict | None:
-        """The stream clock's verdict on a stamp: None (refused, counted under its reason for a `kind` of input), OK,
-        or CLOCK_JUMP (counted under `jump_event`, logged); the caller moves to the new timeline."""
-        verdict = clock.admit(stamp)
+    def _clock_said(self, verdict: Verdict, kind: str, jump_event: str, stamp: float) -> bool:
+        """Count a stream clock's verdict on a stamp of a `kind` of input: False when it refuses it (counted under its
+        reason); a CLOCK_JUMP is counted under `jump_event` and logged (the caller moves to the new timeline)."""
         if verdict in _CLOCK_REASONS:
             self.reject(_CLOCK_REASONS[verdict][kind == "bearing"])
-            return None
+            return False
         if verdict is Verdict.CLOCK_JUMP:
             self.input_events[jump_event] += 1
             log.warning("%s: the clock jumped to %.3f; going on on the new timeline", jump_event, stamp)
-        return verdict
+        return True
 
     def _set_datum(self, lat, lon, alt, source="the first valid fix, confirmed by the next"):
         datum_alt = self.cfg.datum_alt if self.cfg.datum_alt is not None else (alt if math.isfinite(alt) else 0.0)

@@ -132,7 +132,7 @@ class Estimates:
         solve = survey_solver.solver()
         if solve is None or self.intake.frame is None:
             return {}
-        records = self.intake.survey_log.survey_records(self.intake.frame)
+        records = self.intake.pairing.survey_log.survey_records(self.intake.frame)
         return solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel) if records else {}
 
     def _live_survey(self, channel: Channel) -> Estimate | None:
@@ -142,7 +142,7 @@ class Estimates:
         a fix that counts transmitters takes up to seconds) and published once it is done; until then the last one,
         restamped; None (the filter's estimate) for any other channel or while the model has no fix for it. The end
         of data pools every survey-like channel (finish)."""
-        survey, place = self.intake.survey_log, channel.surveying
+        survey, place = self.intake.pairing.survey_log, channel.surveying
         done = self.scheduler.finished(place)
         if done is not None:
             return self._adopt_live_fix(channel, done)
@@ -164,7 +164,7 @@ class Estimates:
 
     def _adopt_live_fix(self, channel: Channel, done: PendingJob) -> Estimate | None:
         """A live survey fix the scheduler finished, published (and its count kept when it made one)."""
-        survey = self.intake.survey_log
+        survey = self.intake.pairing.survey_log
         fix = self.scheduler.value(done, "a live survey fix")[1]
         if fix is not None and fix.count is not None and channel.id in survey.counted:
             survey.counted[channel.id] = (survey.counted[channel.id][0], fix.count)
