@@ -3,8 +3,10 @@ import math
 
 import numpy as np
 import pytest
+from conftest import open_point
 from rclpy.serialization import serialize_message
 
+from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_points
 from aoa_localizer.engine.types import Estimate
 from msgs_adapters import build
@@ -83,9 +85,6 @@ def test_a_pose_bearing_is_read_as_a_df_record_with_its_own_sigma(yaw):
 def test_the_nodes_pose_path_and_add_bearing_enu_make_the_same_reading(yaw, variance):
     """The pose's yaw and variance are turned into an azimuth and a sigma in the adapter (the node) and in
     add_bearing_enu (the API, a bag's bearing_pose): bit for bit the same reading, so one pose gives one answer."""
-    from aoa_localizer import Localizer, LocalizerConfig
-    from conftest import open_point
-
     r = df_record(build.pose_bearing(RCLPY, 1.0, yaw, variance), "pose")
     readings = []
     for feed in (lambda loc: loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, sigma_deg=r.sigma_deg),
