@@ -59,3 +59,24 @@ def test_a_program_refused_at_start_exits_2_and_leaves_no_context(domain):
                          text=True, timeout=60)
     assert res.returncode == 2 and "refused: refusing to start: no good" in res.stderr, res.stderr
     assert "context left: False" in res.stdout
+
+
+def test_a_teardown_that_hangs_ends_the_program_with_its_code_said(domain):
+    """Fast DDS and rclpy have hung now and then in a node's destruction after its work was done (a launcher waited
+    for a vehicle that had played its scenario): past TEARDOWN_S the program says so and exits with its code."""
+    program = textwrap.dedent("""
+        import sys, time, rclpy
+        from aoa_localizer.ros import ros_main
+        ros_main.TEARDOWN_S = 1.0
+        def make():
+            node = rclpy.create_node("stuck")
+            node.destroy_node = lambda: time.sleep(120)  # the middleware's teardown never returns
+            return node
+        def run(node, stop):
+            print("work done", flush=True)
+        sys.exit(ros_main.run_node("stuck", make, run, (ValueError,), ["stuck"]))
+    """)
+    res = subprocess.run([sys.executable, "-c", program], env=ros_env(domain), cwd=ROOT, capture_output=True,
+                         text=True, timeout=60)
+    assert res.returncode == 0 and "work done" in res.stdout, res.stderr
+    assert "stuck: the ROS middleware did not shut down within 1 s; exiting without it" in res.stderr

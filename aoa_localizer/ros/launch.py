@@ -391,11 +391,21 @@ class Monitor:
         east, north = node.to_enu(lat, lon, self.node_datum.altitude)
         return float(east), float(north)
 
-    def close(self):
+    def close(self, exit_code: int):
+        """Close the recording, then the launcher's node and rclpy (within ros_main.TEARDOWN_S, else the process
+        exits with `exit_code`: the verdict is said by then)."""
+        from aoa_localizer.ros.ros_main import bounded_teardown
+
         if self.recorder:
             self.recorder.close()
-        self.node.destroy_node()
-        self.rclpy.try_shutdown()
+
+        def teardown():
+            try:
+                self.node.destroy_node()
+            finally:
+                self.rclpy.try_shutdown()
+
+        bounded_teardown("launch", teardown, exit_code)
 
 
 def _nearest(east: float, north: float, truths: list) -> tuple[int, float]:
@@ -587,6 +597,7 @@ class Run:
         self.source_name = "replay" if args.bag else "sim_vehicle"
         self.children: list[Child] = []
         self.monitor: Monitor | None = None
+        self.exit_code = 2  # the launcher's, once execute() gave its verdict (2: stopped or failed before one)
 
     def start(self, name: str, cmd: list[str]) -> Child:
         child = Child(name, cmd, self.env, self.logdir)
@@ -656,7 +667,7 @@ class Run:
         self.children = []
         if self.monitor is not None:
             recorder = self.monitor.recorder
-            self.monitor.close()
+            self.monitor.close(self.exit_code)
             self.monitor = None
             if recorder and recorder.failed:
                 print(f"recording stopped early ({recorder.failed}); {self.args.record} keeps what was written "
@@ -684,7 +695,7 @@ def main(argv=None) -> int:
         run = Run(args, logdir)
         source = args.bag if args.bag else f"scenario {args.scenario} at {args.speedup:g}x"
         print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {run.source_name}: {source}", flush=True)
-        code = run.execute()
+        code = run.exit_code = run.execute()
         if code == 0 and not args.keep_logs:  # nothing to look into: no aoa_launch_* folder left behind
             run.close()
             shutil.rmtree(logdir, ignore_errors=True)

@@ -10,6 +10,7 @@ from builtin_interfaces.msg import Time
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from aoa_localizer.ros.ros_main import bounded_teardown
 from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
 from msgs_adapters.bag_files import BagFiles, BagFilesError, describe_topics
 from msgs_adapters.types import message_class
@@ -138,7 +139,7 @@ def run_live(args) -> int:
     node = rclpy.create_node("aoa_replay")
     player = LivePlayer(node, topics, remap, args.clock)
     old = {s: signal.signal(s, player.stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    code = 0
+    code = 1  # until the bag was played whole
     try:
         player.wait_for_subscribers(args.wait)
         player.play(reader.messages(set(player.pubs)), args.rate, args.max_rate)
@@ -148,14 +149,20 @@ def run_live(args) -> int:
         if reader.damage:
             print(f"replay: {args.bag}: damaged ({'; '.join(reader.damage)}); every intact message was played",
                   file=sys.stderr)
-            code = 1
+        else:
+            code = 0
     except BagError as exc:
         print(f"replay: {exc}", file=sys.stderr)
-        code = 1
     finally:
         for s, handler in old.items():
             signal.signal(s, handler)
         files.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
+
+        def teardown():
+            try:
+                node.destroy_node()
+            finally:
+                rclpy.try_shutdown()
+
+        bounded_teardown("replay", teardown, code)
     return code

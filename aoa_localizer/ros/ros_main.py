@@ -1,10 +1,12 @@
 """The start-run-stop of a ROS program: refuse to start with a clear message (exit 2), run until done,
-SIGINT or SIGTERM, always destroy the node and shut rclpy down (exit 0)."""
+SIGINT or SIGTERM, always destroy the node and shut rclpy down (exit 0), within TEARDOWN_S."""
 from __future__ import annotations
 
 import os
 import signal
 import sys
+import threading
+from collections.abc import Callable
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
@@ -12,6 +14,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 POLL_S = 0.1  # how soon a spinning program notices SIGINT or SIGTERM
+# The middleware's teardown (a node destroyed, rclpy shut down) at most: past it a program whose work is done exits
+# without it. Fast DDS and rclpy have been seen to hang there now and then (a busy machine, a peer leaving)
+TEARDOWN_S = 10.0
 
 
 class Stop:
@@ -42,6 +47,26 @@ def spin(node, stop: Stop):
         executor.shutdown()
 
 
+def bounded_teardown(name: str, teardown: Callable[[], None], exit_code: int) -> None:
+    """`teardown()` (destroying a node, shutting rclpy down); should it hang past TEARDOWN_S, the process says so and
+    exits with `exit_code`: its work is done and what it had to say is said, only the middleware's goodbye is lost."""
+    guard = threading.Timer(TEARDOWN_S, _abandon_teardown, (name, exit_code))
+    guard.daemon = True
+    guard.start()
+    try:
+        teardown()
+    finally:
+        guard.cancel()
+
+
+def _abandon_teardown(name: str, exit_code: int) -> None:
+    print(f"{name}: the ROS middleware did not shut down within {TEARDOWN_S:g} s; exiting without it",
+          file=sys.stderr)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(exit_code)
+
+
 def wants_help(argv) -> bool:
     """-h or --help before any --ros-args: print usage, start nothing (not even on a ROS domain)."""
     args = list(sys.argv if argv is None else argv)
@@ -65,18 +90,26 @@ def run_node(name: str, make, run, refusals: tuple, argv=None, usage: str = "") 
         return 2
     stop = Stop()
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    node, code = None, 1  # 1: the run raised (its traceback follows the teardown)
+
+    def teardown():
+        try:
+            if node is not None:
+                node.destroy_node()
+        finally:
+            rclpy.try_shutdown()
+
     try:
         try:
             node = make()
         except refusals + (rclpy.exceptions.ParameterException,) as exc:
             print(f"{name}: refusing to start: {exc}", file=sys.stderr)
-            return 2
-        try:
-            run(node, stop)
-        finally:
-            node.destroy_node()
+            code = 2
+            return code
+        run(node, stop)
+        code = 0
     finally:
-        rclpy.try_shutdown()
+        bounded_teardown(name, teardown, code)
         for s, handler in old.items():
             signal.signal(s, handler)
-    return 0
+    return code
