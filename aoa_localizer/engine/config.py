@@ -258,8 +258,8 @@ class LocalizerConfig(GroupAccess):
     end_of_data_model: str = choice(
         "survey",
         ("survey", "filter"),
-        "at `finish()` (offline, the API): `survey` locates the channels whose every bearing came from a fixed station "
-        "or an antenna standing still (a surveyor's stops) by the survey model `locate` runs, the same answer; "
+        "at `finish()` (offline, the API): `survey` locates the channels whose every bearing came from a fixed "
+        "station, or from stops that show a steady site part, by the survey model `locate` runs, the same answer; "
         "`filter`: the particle filter's end-of-data check for every channel",
     )
     receiver_class: str = choice(

@@ -36,7 +36,7 @@ RECEIVER_CLASSES: dict[str, ReceiverClass] = {
     "mast": ReceiverClass(2.0, 0.8, (0.0,)),
     "indoor": ReceiverClass(10.0, 0.7, (0.0, 0.1), (0.5, 0.5)),
 }
-TAU_DEG = np.geomspace(0.2, 50.0, 15)  # a lab array to barely a direction
+TAU_DEG = np.geomspace(0.05, 50.0, 17)  # a site part of nearly none (below a lab array's) to barely a direction
 WILD = np.array([0.02, 0.12])  # a station's chance of being wild
 SCALE_BANDS = 3  # each band of scales is zoomed onto its own posterior, so a sharp one is resolved
 _LOG_2PI = math.log(2 * math.pi)
@@ -51,6 +51,7 @@ class NoiseGrid:
     log_prior: np.ndarray  # (H,)
     shared_place: np.ndarray  # (L,) the place-like error's hypotheses, shares of the truth's range
     shared_weight: np.ndarray  # (L,) their prior weights
+    repeated: bool = False  # the stations' readings repeat: tau is a site part that may be absent
 
     @property
     def size(self) -> int:
@@ -64,11 +65,17 @@ class NoiseGrid:
 
     def subset(self, index: np.ndarray) -> NoiseGrid:
         return NoiseGrid(self.tau[index], self.wild[index], self.log_prior[index], self.shared_place,
-                         self.shared_weight)
+                         self.shared_weight, self.repeated)
 
 
-def noise_grid(receiver_class: str) -> NoiseGrid:
-    """The hypotheses and their prior for a receiver class (a ValueError names the classes for any other)."""
+def noise_grid(receiver_class: str, repeated: bool = False) -> NoiseGrid:
+    """The hypotheses and their prior for a receiver class (a ValueError names the classes for any other).
+
+    With one reading a station, tau is the whole of a station's error and the class's prior holds it (three
+    bearings that cross well cannot prove a sharp receiver). With `repeated` readings at the stations, their own
+    scatter is measured apart and tau is only the steady site part on top of it, which may be absent: half the
+    prior is then spread evenly over log tau, so the readings decide (a precise instrument's site part of nearly
+    nothing is not held up by a prior made for people with Yagis)."""
     if receiver_class not in RECEIVER_CLASSES:
         raise ValueError(f"receiver_class {receiver_class!r} is not one of {', '.join(RECEIVER_CLASSES)}")
     cls = RECEIVER_CLASSES[receiver_class]
@@ -76,7 +83,11 @@ def noise_grid(receiver_class: str) -> NoiseGrid:
     tau_deg, wild = (a.ravel() for a in np.meshgrid(TAU_DEG, WILD, indexing="ij"))
     log_prior = -0.5 * ((np.log(tau_deg) - math.log(median)) / log_sd) ** 2
     log_prior -= logsumexp(log_prior, axis=0)
-    return NoiseGrid(np.radians(tau_deg), wild, log_prior, np.array(cls.shared_place), np.array(cls.shared_weight))
+    if repeated:
+        even = np.full(tau_deg.size, -math.log(tau_deg.size))
+        log_prior = np.logaddexp(log_prior, even) - math.log(2.0)
+    return NoiseGrid(np.radians(tau_deg), wild, log_prior, np.array(cls.shared_place), np.array(cls.shared_weight),
+                     repeated)
 
 
 def logsumexp(x: np.ndarray, axis: int) -> np.ndarray:

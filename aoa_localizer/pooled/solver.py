@@ -44,6 +44,12 @@ _OFF_Z = 3.0  # a station further off than this many of its expected errors is n
 _HELD_LOW, _HELD_HIGH = 0.90, 0.99  # a 95 % ellipse holding mass outside this range is said to mislead
 _FIT_P = 0.05  # a fix whose stations' residuals are this unlikely under their expected errors is not `tracking`
 _RANGE_CAP = 2.0  # a truth's range counts up to this many times the crossing's (beyond, the Cauchy prior rules)
+# The place-like error's prior was fitted to two walking observers (docs/design.md, "Errors that no crossing
+# shows"): a receiver as coarse as they were (a learned station error of about 7 deg), a handful of stations per
+# emitter. It is applied in that regime and fades outside it: half at this station error ...
+PLACE_LIKE_SCALE_DEG = 4.0
+REPEATED_READINGS = 3  # a group whose median station has this many readings measures their scatter apart
+PLACE_LIKE_STATIONS = 6  # ... and in proportion beyond this many stations of one emitter
 
 __all__ = ["EmitterFix", "PooledResult", "ReceiverCalibration", "SurveyReading", "locate_pooled"]
 
@@ -173,16 +179,26 @@ def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
     different receivers are independent instruments: a receiver with a single station shares nothing)."""
     e, region = geom.emitter, solved.regions[geom.emitter]
     most = Counter(geom.receivers).most_common(1)[0][1]
-    if most < 2 or not np.any(noise.shared_place > 0):
-        return region
+    if most < 2 or noise.repeated or not np.any(noise.shared_place > 0):
+        return region  # a station that repeats its readings is an instrument's, not an observer's stop
     rng_m = float(median_range(geom.xy, region.point[:1], region.point[1:])[0])
-    shares = noise.shared_place * most / len(geom.receivers)
+    shares = noise.shared_place * most / len(geom.receivers) * place_like_weight(
+        math.degrees(expected_error(noise, np.exp(solved.log_w))), len(geom.xy))
     cap = _RANGE_CAP * rng_m
     src = solved.boxes[e]
     out = widened(src, 3.0 * float(shares.max()) * cap)
     p = mixture(log_joint(geom, src, solved.shifts[e], solved.extra[e], noise), solved.log_z[e], solved.log_w)
     floor = 0.5 * min(src.hx, src.hy) / CELLS  # a share of 0 still moves the mass onto the wider grid
     return summarise(out, displaced(src, p, out, geom.xy, shares, noise.shared_weight, cap, geom.prior_scale, floor))
+
+
+def place_like_weight(scale_deg: float, stations: int) -> float:
+    """How much of the class's place-like error a receiver of this learned station error (deg) gets at an emitter
+    heard from this many stations: all of it for a coarse receiver (a person with a Yagi) and a handful of stations,
+    where it was fitted; little for bearings that agree to a degree or an emitter ringed by many stations (an
+    instrument, a network), where nothing suggests it and it would be the whole ellipse."""
+    coarse = 1.0 / (1.0 + (PLACE_LIKE_SCALE_DEG / max(scale_deg, 1e-9)) ** 6)
+    return coarse * min(1.0, PLACE_LIKE_STATIONS / stations)
 
 
 def _noise_summary(noise: NoiseGrid, log_w: np.ndarray, receivers: list[str], emitters: int) -> dict:
@@ -265,7 +281,7 @@ def _with_count(fix: EmitterFix, count: SurveyCount) -> EmitterFix:
 def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown", max_k: int = 3) -> PooledResult:
     """Every emitter's fix from a survey's readings (docs/interface.md, "locate"), each id's transmitters counted
     up to `max_k` (1: not counted); a ValueError for an unknown receiver class."""
-    noise = noise_grid(receiver_class)
+    noise_grid(receiver_class)  # an unknown class is refused before any work
     stations, warnings = make_stations(readings)
     result = PooledResult(warnings=warnings)
     scatter = pooled_scatter(stations)
@@ -284,6 +300,8 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
         heard[r.emitter].append(r)
     for names in _groups(geoms):
         group = {e: geoms[e] for e in names}
+        repeats = np.median([s.n for e in names for s in by_emitter[e]])
+        noise = noise_grid(receiver_class, repeated=bool(repeats >= REPEATED_READINGS))
         solved = _solve(group, noise)
         summary = _noise_summary(noise, solved.log_w, sorted({r for g in group.values() for r in g.receivers}),
                                  len(group))

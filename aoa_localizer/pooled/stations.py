@@ -18,7 +18,7 @@ import numpy as np
 from aoa_localizer.engine.geodesy import wrap_pi
 
 _MAD_TO_SIGMA = 1.4826  # a Gaussian's sigma over its median absolute deviation
-_MEDIAN_VAR = math.pi / 2  # a median's variance over the mean's, for a Gaussian sample
+_WILD_Z = 4.0  # a reading this many robust sigmas from its station's median is left out of the station's centre
 _OWN_SCATTER_MIN = 5  # readings from which a station's own scatter is trusted over the receiver's pooled one
 FIXED_SITE_READINGS = 5  # an instrument left at one place, not an observer taking a bearing and moving on
 SIGMA_RANGE_DEG = (1e-3, 180.0)  # a reading's own sigma outside this is no bearing's
@@ -57,7 +57,10 @@ class Station:
 
 
 def _centre(az: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:
-    """Robust centre (rad), its variance (rad^2; NaN when unknown) and the readings' robust sigma (NaN below 3)."""
+    """Centre (rad), its variance (rad^2; NaN when unknown) and the readings' robust sigma (NaN below 3). With
+    sigmas: their inverse-variance mean. Without, from 3 readings on: the mean of those within _WILD_Z robust sigmas
+    of the median (a wild reading left out, the rest used at full efficiency, not the median's pi/2), its variance
+    their scatter over their count; fewer: the median, its variance unknown."""
     if np.all(np.isfinite(sigma)):
         w = 1.0 / sigma**2
         mean = math.atan2(float(np.sum(w * np.sin(az))), float(np.sum(w * np.cos(az))))
@@ -65,12 +68,27 @@ def _centre(az: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:
     if az.size == 1:
         return float(az[0]), math.nan, math.nan
     mean = math.atan2(float(np.mean(np.sin(az))), float(np.mean(np.cos(az))))
-    dev = wrap_pi(az - mean)
-    centre = float(wrap_pi(mean + np.median(dev)))
+    median = float(wrap_pi(mean + np.median(wrap_pi(az - mean))))
     if az.size < 3:
-        return centre, math.nan, math.nan
-    scatter = _MAD_TO_SIGMA * float(np.median(np.abs(wrap_pi(az - centre))))
-    return centre, _MEDIAN_VAR * scatter**2 / az.size, scatter
+        return median, math.nan, math.nan
+    scatter = pair_scatter([az])
+    dev = wrap_pi(az - median)
+    kept = dev[np.abs(dev) <= _WILD_Z * scatter] if scatter > 0 else dev
+    centre = float(wrap_pi(median + np.mean(kept)))
+    return centre, scatter**2 / kept.size, scatter
+
+
+def pair_scatter(groups: list[np.ndarray]) -> float:
+    """The robust sigma (rad) of readings that scatter independently about a centre of their own, from the pairs of
+    readings within each group (a pair's difference has twice a reading's variance; the median of the pairs'
+    absolute differences is not pulled by a wild reading as a mean is, nor biased low as deviations from a sample's
+    own median are)."""
+    diffs = []
+    for az in groups:
+        i, j = np.triu_indices(az.size, 1)
+        diffs.append(np.abs(wrap_pi(az[i] - az[j])))
+    d = np.concatenate(diffs) if diffs else np.empty(0)
+    return _MAD_TO_SIGMA * float(np.median(d)) / math.sqrt(2.0) if d.size else math.nan
 
 
 def unusable(r: SurveyReading) -> str | None:
@@ -148,4 +166,4 @@ def station_variance(s: Station, receiver_scatter_var: float) -> float:
     readings or sigmas, else the receiver's pooled scatter over its readings."""
     if math.isfinite(s.var) and (s.n >= _OWN_SCATTER_MIN or not math.isfinite(s.scatter)):
         return s.var
-    return _MEDIAN_VAR * receiver_scatter_var / s.n if s.n > 1 else receiver_scatter_var
+    return receiver_scatter_var / s.n

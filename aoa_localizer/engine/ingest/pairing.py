@@ -81,9 +81,9 @@ class Pairing:
             if channel.id not in self.survey_log.not_survey:  # a drive's channel costs a set look-up a reading
                 # a survey's: from a fixed site, or from an antenna standing still (a surveyor's stop)
                 still = math.hypot(v_east, v_north) < STILL_MPS
-                self.survey_log.add(channel.id, st.fixed or still,
+                self.survey_log.add(channel.id, st.fixed, still,
                                     (st.name, p.stamp, east, north, theta, north_angle,
-                                     math.degrees(p.sigma) if math.isfinite(p.sigma) else math.nan))
+                                     math.degrees(p.sigma) if math.isfinite(p.sigma) else math.nan, sigma))
             closed += [(channel, group) for group in channel.builder(st.name).add(reading)]
         return closed
 

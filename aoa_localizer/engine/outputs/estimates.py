@@ -132,24 +132,28 @@ class Estimates:
         solve = survey_solver.solver()
         if solve is None or self.intake.frame is None:
             return {}
-        records = self.intake.pairing.survey_log.survey_records(self.intake.frame)
+        records = self.intake.pairing.survey_log.survey_records(self.intake.frame, self._started)
         return solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel) if records else {}
 
     def _live_survey(self, channel: Channel) -> Estimate | None:
-        """A survey-like channel's estimate while the data come (every bearing from a fixed site or a standing
-        antenna, from three places on): the survey model's fix of its bearings alone, made again as they grow
+        """A survey-like channel's estimate while the data come (every bearing from a fixed site, or stops that
+        show a site part; from three places on): the survey model's fix of its bearings alone, made again as they grow
         (SurveyLog.due) as a job of the scheduler's (the check worker's, or made in turns at the points that follow:
         a fix that counts transmitters takes up to seconds) and published once it is done; until then the last one,
         restamped; None (the filter's estimate) for any other channel or while the model has no fix for it. The end
         of data pools every survey-like channel (finish)."""
         survey, place = self.intake.pairing.survey_log, channel.surveying
         done = self.scheduler.finished(place)
+        if not survey.survey_like(channel.id, channel.track.filter is not None):  # a drive's, or clean stops
+            survey.live.pop(channel.id, None)
+            return None
         if done is not None:
             return self._adopt_live_fix(channel, done)
         solve = survey_solver.solver()
-        if solve is not None and survey.due(channel.id) and self.scheduler.job(place) is None:
+        if solve is not None and survey.due(channel.id, channel.track.filter is not None) and \
+                self.scheduler.job(place) is None:
             survey.mark_solved(channel.id)
-            records = survey.survey_records(self.intake.datum_frame(), only=channel.id)
+            records = survey.survey_records(self.intake.datum_frame(), self._started, only=channel.id)
             if survey.count_due(channel.id):
                 max_k, last = self.cfg.max_emitters_per_channel, None
                 survey.counted[channel.id] = (len(records), survey.counted.get(channel.id, (0, None))[1])
@@ -161,6 +165,11 @@ class Estimates:
         if last_made is None:
             return None
         return self._announce(channel, replace(last_made, stamp=channel.track.last_stamp))
+
+    def _started(self, cid: str) -> bool:
+        """Whether a channel's filter has started (a channel not found: no)."""
+        channel = self.channels.live.get(cid) or self.channels.retired.get(cid)
+        return channel is not None and channel.track.filter is not None
 
     def _adopt_live_fix(self, channel: Channel, done: PendingJob) -> Estimate | None:
         """A live survey fix the scheduler finished, published (and its count kept when it made one)."""

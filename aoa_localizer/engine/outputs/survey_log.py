@@ -1,7 +1,9 @@
 """Bearings taken like a survey's, kept so the end of data can hand them to the survey model.
 
 A channel is survey-like when every bearing it used came from a fixed station (a mast, an anchor: its position
-given once) or from an antenna standing still (a surveyor at a stop, whose GPS fix comes with each azimuth). At
+given once), or came from fixed stations or antennas standing still and its stops show a steady site part (their
+readings agree with one another better than with the other stops: `site_part_shown`). A stop alone is no proof of a
+site error: a DF crew that stops to read, on clean bearings, keeps the particle engine's exact answer. At
 `finish()`, with `end_of_data_model: survey`, such channels are located by the survey model `locate` runs
 (aoa_localizer.pooled, installed by the package as the solver below), so the API, offline replay and `locate`
 give one answer for the same bearings (docs/interface.md, "Survey model"). While the data come, a survey-like
@@ -18,14 +20,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import stats
 
-from aoa_localizer.engine.geodesy import LocalFrame, unturn
+from aoa_localizer.engine.geodesy import LocalFrame, unturn, wrap_pi
 from aoa_localizer.engine.inference.co_channel import COUNT_GROWTH
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
 LIVE_GROWTH = 1.25  # a live survey fix is made again once the channel's bearings grew by this factor ...
 LIVE_PLACES = 3  # ... or a place joined, from this many places on (fewer: no crossing, the filter's estimate)
+SITE_READINGS = 3  # a stop tells its own scatter from this many readings on ...
+SITE_PLACES = 4  # ... and the site part is judged from this many such stops on (fewer: the readings count alone)
+SITE_P = 1e-3  # the stops' centres scattered more than their readings allow at this level: a site part
+_MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True)
@@ -103,6 +110,74 @@ def live_fix(solve: Callable[[list[SurveyRecord], str, int], dict[str, SurveyFix
     return replace(fix, state=state, warnings=warnings, count=last)
 
 
+def site_part_shown(rows: list[tuple]) -> bool | None:
+    """Whether a channel's stops show a steady site part: the centres of the stops with SITE_READINGS or more
+    readings scatter about their crossing more than the readings' own scatter allows (chi-square of the centres'
+    residuals, the largest tenth left out for a wild stop, at SITE_P). Each reading counts with its sigma (the
+    quality's, or its own), scaled by what the pairs of readings within a stop say of them (a receiver noisier or
+    sharper than configured); a reading 4 of its sigmas from its stop's median is wild. None where the data cannot
+    tell a site part from the noise (too few such stops). `rows` are SurveyLog rows (station, stamp, east, north,
+    map angle, north angle, own sigma in deg, the reading's sigma in rad)."""
+    places: dict[tuple, list[tuple]] = defaultdict(list)
+    for r in rows:
+        places[(r[0], round(r[2], 1), round(r[3], 1))].append(r)
+    stops = [p for p in places.values() if len(p) >= SITE_READINGS]
+    if len(stops) < SITE_PLACES:
+        return None
+    pairs = []
+    for p in stops:
+        theta, sigma = np.array([r[4] for r in p]), np.array([r[7] for r in p])
+        i, j = np.triu_indices(len(p), 1)
+        pairs.append(wrap_pi(theta[i] - theta[j]) / np.hypot(sigma[i], sigma[j]))
+    scale = _MAD_TO_SIGMA * float(np.median(np.abs(np.concatenate(pairs))))  # the sigmas' true multiple
+    if not scale > 0:
+        return None
+    xy, centres, var = [], [], []
+    for p in stops:
+        theta, sigma = np.array([r[4] for r in p]), scale * np.array([r[7] for r in p])
+        median = _circular_median(theta)
+        inlier = np.abs(wrap_pi(theta - median)) <= 4.0 * sigma
+        if inlier.sum() < 2:
+            continue
+        w = 1.0 / sigma[inlier] ** 2
+        centres.append(float(wrap_pi(median + np.sum(w * wrap_pi(theta[inlier] - median)) / w.sum())))
+        var.append(1.0 / float(w.sum()))
+        xy.append((p[0][2], p[0][3]))
+    if len(xy) < SITE_PLACES:
+        return None
+    xy_a, centre = np.array(xy), np.array(centres)
+    point = _crossing(xy_a, centre)
+    if point is None:
+        return None
+    resid = wrap_pi(centre - np.arctan2(point[1] - xy_a[:, 1], point[0] - xy_a[:, 0]))
+    z2 = np.sort(resid**2 / np.array(var))
+    kept = z2[: len(z2) - math.ceil(0.1 * len(z2))]
+    if kept.size <= 2:
+        return None
+    return float(stats.chi2.sf(float(kept.sum()), kept.size - 2)) < SITE_P
+
+
+def _circular_median(theta: np.ndarray) -> float:
+    """The median of angles about their circular mean (rad)."""
+    mean = math.atan2(float(np.mean(np.sin(theta))), float(np.mean(np.cos(theta))))
+    return float(wrap_pi(mean + np.median(wrap_pi(theta - mean))))
+
+
+def _crossing(xy: np.ndarray, theta: np.ndarray) -> np.ndarray | None:
+    """The place nearest the lines from `xy` at map angles `theta` (rad, ENU), each weighted by its range once a
+    first unweighted fix gives one; None when they are parallel."""
+    normal = np.column_stack([-np.sin(theta), np.cos(theta)])
+    w = np.ones(len(xy))
+    point = None
+    for _ in range(2):
+        a = (normal * w[:, None]).T @ normal
+        if abs(np.linalg.det(a)) < 1e-12 * max(1.0, float(np.trace(a))) ** 2:
+            return None
+        point = np.linalg.solve(a, (normal * w[:, None]).T @ np.einsum("ki,ki->k", normal, xy))
+        w = 1.0 / np.maximum(np.sum((xy - point) ** 2, axis=1), 1e-6)  # an angle's error grows with range
+    return point
+
+
 def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:
     """An Estimate's count fields (transmitter_count, count_probability, transmitters in `frame`) from a count."""
     if count is None:
@@ -113,35 +188,59 @@ def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:
 
 class SurveyLog:
     """Per channel, the bearings it used while every one of them was taken like a survey's (kept in the map
-    plane: station, stamp, east, north, ENU angle, true north's ENU angle there, own sigma in deg)."""
+    plane: station, stamp, east, north, ENU angle, true north's ENU angle there, own sigma in deg, the sigma the
+    engine gives the reading in rad)."""
 
     def __init__(self):
         self.records: dict[str, list[tuple]] = defaultdict(list)
         self.not_survey: set[str] = set()  # channels that used a bearing from a moving, densely fixed station
+        self.stopped: set[str] = set()  # channels with a bearing from a standing antenna (not a fixed station)
+        self._judged: dict[str, tuple[int, bool | None]] = {}  # a stopped channel's rows when its site part was judged
         self.places: dict[str, set] = defaultdict(set)  # each channel's antenna places (decimetres)
         self.solved: dict[str, tuple[int, int]] = {}  # (bearings, places) at a channel's last live fix
         self.live: dict[str, Estimate] = {}  # a channel's last live survey estimate
         self.counted: dict[str, tuple[int, SurveyCount | None]] = {}  # bearings at its last count, and the count
 
-    def add(self, channel: str, survey_like: bool, row: tuple) -> None:
+    def add(self, channel: str, fixed: bool, still: bool, row: tuple) -> None:
+        """Keep a used bearing's row: from a fixed station, or an antenna standing still; one from a moving antenna
+        (or past MAX_RECORDS) makes its channel a drive's for good."""
         if channel in self.not_survey:
             return
-        if not survey_like or len(self.records[channel]) >= MAX_RECORDS:
+        if not (fixed or still) or len(self.records[channel]) >= MAX_RECORDS:
             self.not_survey.add(channel)
-            for kept in (self.records, self.places, self.solved, self.live, self.counted):
+            for kept in (self.records, self.places, self.solved, self.live, self.counted, self._judged):
                 kept.pop(channel, None)
+            self.stopped.discard(channel)
             return
+        if not fixed:
+            self.stopped.add(channel)
         self.records[channel].append(row)
         self.places[channel].add((round(row[2], 1), round(row[3], 1)))
 
-    def due(self, channel: str) -> bool:
+    def due(self, channel: str, started: bool) -> bool:
         """Whether a survey-like channel's live fix is to be made (again): from LIVE_PLACES places on, when its
         bearings grew by LIVE_GROWTH or a place joined since the last one."""
         if channel in self.not_survey or len(self.places.get(channel, ())) < LIVE_PLACES:
             return False
+        if not self.survey_like(channel, started):
+            return False
         last = self.solved.get(channel)
         now = (len(self.records[channel]), len(self.places[channel]))
         return last is None or now[1] > last[1] or now[0] >= LIVE_GROWTH * last[0]
+
+    def survey_like(self, channel: str, started: bool) -> bool:
+        """Whether a kept channel goes to the survey model: every bearing from a fixed station, or its stops show
+        a site part (judged again once its rows grew by LIVE_GROWTH), or they cannot tell and its filter has not
+        `started` (a surveyor's few single readings: the survey model's fix rather than none)."""
+        if channel in self.not_survey or channel not in self.records:
+            return False
+        if channel not in self.stopped:
+            return True
+        rows = self.records[channel]
+        judged = self._judged.get(channel)
+        if judged is None or len(rows) >= LIVE_GROWTH * judged[0]:
+            judged = self._judged[channel] = (len(rows), site_part_shown(rows))
+        return judged[1] is True or (judged[1] is None and not started)
 
     def count_due(self, channel: str) -> bool:
         """Whether a live fix counts the channel's transmitters again: its first, then whenever its bearings
@@ -152,13 +251,15 @@ class SurveyLog:
     def mark_solved(self, channel: str) -> None:
         self.solved[channel] = (len(self.records[channel]), len(self.places[channel]))
 
-    def survey_records(self, frame: LocalFrame, only: str | None = None) -> list[SurveyRecord]:
-        """Every survey-like channel's bearings (`only`: that channel's), in WGS84 with azimuths from true north."""
+    def survey_records(self, frame: LocalFrame, started: Callable[[str], bool],
+                       only: str | None = None) -> list[SurveyRecord]:
+        """Every survey-like channel's bearings (`only`: that channel's), in WGS84 with azimuths from true north;
+        `started` says whether a channel's filter has started."""
         out = []
         for channel, rows in self.records.items():
-            if not rows or channel in self.not_survey or (only is not None and channel != only):
+            if not rows or (only is not None and channel != only) or not self.survey_like(channel, started(channel)):
                 continue
-            station, stamp, east, north, theta, north_angle, sigma = (list(c) for c in zip(*rows, strict=True))
+            station, stamp, east, north, theta, north_angle, sigma, _ = (list(c) for c in zip(*rows, strict=True))
             lat, lon, _ = frame.to_geodetic(np.array(east), np.array(north))
             # the turn from north on the ground, which far from the datum is not the turn on the map (geodesy.turn)
             azimuth = [math.degrees(-unturn(t, a, LocalFrame.skew(e, n))) % 360.0
@@ -169,7 +270,8 @@ class SurveyLog:
         return out
 
     def clear(self) -> None:
-        for kept in (self.records, self.not_survey, self.places, self.solved, self.live, self.counted):
+        for kept in (self.records, self.not_survey, self.places, self.solved, self.live, self.counted, self.stopped,
+                     self._judged):
             kept.clear()
 
 
