@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.inference.triangulation import least_squares_crossing
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.types import Estimate
 
@@ -24,12 +25,7 @@ def survey_config(**changes) -> LocalizerConfig:
 
 def least_squares_fix(stations: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray | None:
     """The point nearest all bearing lines (perpendicular distances, plain least squares); None when parallel."""
-    theta = np.radians(90.0 - np.asarray(azimuth_deg, float))
-    n = np.column_stack([-np.sin(theta), np.cos(theta)])  # each line's normal
-    a = n.T @ n
-    if abs(np.linalg.det(a)) < 1e-9:
-        return None
-    return np.linalg.solve(a, n.T @ np.einsum("ki,ki->k", n, stations))
+    return least_squares_crossing(np.asarray(stations, float), np.radians(90.0 - np.asarray(azimuth_deg, float)))
 
 
 @dataclass(frozen=True)

@@ -48,8 +48,8 @@ _RANGE_CAP = 2.0  # a truth's range counts up to this many times the crossing's 
 # shows"): a receiver as coarse as they were (a learned station error of about 7 deg), a handful of stations per
 # emitter. It is applied in that regime and fades outside it: half at this station error ...
 PLACE_LIKE_SCALE_DEG = 4.0
-REPEATED_READINGS = 3  # a group whose median station has this many readings measures their scatter apart
 PLACE_LIKE_STATIONS = 6  # ... and in proportion beyond this many stations of one emitter
+REPEATED_READINGS = 3  # a group whose median station has this many readings measures their scatter apart
 
 __all__ = ["EmitterFix", "PooledResult", "ReceiverCalibration", "SurveyReading", "locate_pooled"]
 
@@ -281,7 +281,7 @@ def _with_count(fix: EmitterFix, count: SurveyCount) -> EmitterFix:
 def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown", max_k: int = 3) -> PooledResult:
     """Every emitter's fix from a survey's readings (docs/interface.md, "locate"), each id's transmitters counted
     up to `max_k` (1: not counted); a ValueError for an unknown receiver class."""
-    noise_grid(receiver_class)  # an unknown class is refused before any work
+    grids = {repeated: noise_grid(receiver_class, repeated) for repeated in (False, True)}  # a bad class: at once
     stations, warnings = make_stations(readings)
     result = PooledResult(warnings=warnings)
     scatter = pooled_scatter(stations)
@@ -301,7 +301,7 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
     for names in _groups(geoms):
         group = {e: geoms[e] for e in names}
         repeats = np.median([s.n for e in names for s in by_emitter[e]])
-        noise = noise_grid(receiver_class, repeated=bool(repeats >= REPEATED_READINGS))
+        noise = grids[bool(repeats >= REPEATED_READINGS)]
         solved = _solve(group, noise)
         summary = _noise_summary(noise, solved.log_w, sorted({r for g in group.values() for r in g.receivers}),
                                  len(group))

@@ -71,24 +71,19 @@ def _centre(az: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:
     median = float(wrap_pi(mean + np.median(wrap_pi(az - mean))))
     if az.size < 3:
         return median, math.nan, math.nan
-    scatter = pair_scatter([az])
+    scatter = pair_scatter(az)
     dev = wrap_pi(az - median)
     kept = dev[np.abs(dev) <= _WILD_Z * scatter] if scatter > 0 else dev
     centre = float(wrap_pi(median + np.mean(kept)))
     return centre, scatter**2 / kept.size, scatter
 
 
-def pair_scatter(groups: list[np.ndarray]) -> float:
-    """The robust sigma (rad) of readings that scatter independently about a centre of their own, from the pairs of
-    readings within each group (a pair's difference has twice a reading's variance; the median of the pairs'
-    absolute differences is not pulled by a wild reading as a mean is, nor biased low as deviations from a sample's
-    own median are)."""
-    diffs = []
-    for az in groups:
-        i, j = np.triu_indices(az.size, 1)
-        diffs.append(np.abs(wrap_pi(az[i] - az[j])))
-    d = np.concatenate(diffs) if diffs else np.empty(0)
-    return _MAD_TO_SIGMA * float(np.median(d)) / math.sqrt(2.0) if d.size else math.nan
+def pair_scatter(az: np.ndarray) -> float:
+    """The robust sigma (rad) of readings (2 or more) that scatter independently about their centre, from their
+    pairs (a pair's difference has twice a reading's variance; the median of the pairs' absolute differences is not
+    pulled by a wild reading as a mean is, nor biased low as deviations from a sample's own median are)."""
+    i, j = np.triu_indices(az.size, 1)
+    return _MAD_TO_SIGMA * float(np.median(np.abs(wrap_pi(az[i] - az[j])))) / math.sqrt(2.0)
 
 
 def unusable(r: SurveyReading) -> str | None:

@@ -28,15 +28,15 @@ def point_groups(data: ScenarioData) -> list[np.ndarray]:
     return np.split(np.arange(t.size), starts)
 
 
-def stopped(data: ScenarioData) -> ScenarioData:
+def stopped(data: ScenarioData, seed: int = 0) -> ScenarioData:
     """`data` with the vehicle stopped at each point: each point's readings from the point's mean true place (each
     reading's error kept: turned by the change of true azimuth), two fixes there around them (with the scenario's GPS
-    noise), no other fix. Needs azimuths from true north (no mount offset)."""
+    noise, drawn from `seed`), no other fix. Needs azimuths from true north (no mount offset)."""
     sc = data.scenario
     if sc.mount_offset_deg is not None:
         raise ValueError("stopped() needs azimuths from true north")
     frame = data.frame
-    rng = np.random.default_rng(int(abs(hash((sc.name, data.bearings[0, 0]))) % 2**32))
+    rng = np.random.default_rng(seed)
     place = np.empty_like(data.sensor_enu)
     fixes = []
     for idx in point_groups(data):

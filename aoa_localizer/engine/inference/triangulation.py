@@ -50,6 +50,17 @@ def intersect_rays(p1, t1, p2, t2):
     return p1 + s1[..., None] * u1, s1, s2
 
 
+def least_squares_crossing(xy: np.ndarray, theta: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray | None:
+    """The place nearest the lines from `xy` (K, 2) at ENU angles `theta` (K,): least squares of the perpendicular
+    distances, each weighted by `weights` (None: equally); None when the lines are parallel."""
+    normal = np.column_stack([-np.sin(theta), np.cos(theta)])
+    w = np.ones(len(xy)) if weights is None else np.asarray(weights, float)
+    a = (normal * w[:, None]).T @ normal
+    if abs(np.linalg.det(a)) <= 1e-12 * float(np.trace(a)) ** 2:  # parallel, whatever the weights' scale
+        return None
+    return np.linalg.solve(a, (normal * w[:, None]).T @ np.einsum("ki,ki->k", normal, xy))
+
+
 def sorted_pairs(points: list[ObservationPoint]) -> tuple[np.ndarray, np.ndarray]:
     """Index pairs (i, j): records sorted by bearing (around their circular mean), half the count apart."""
     theta = np.array([p.theta for p in points])

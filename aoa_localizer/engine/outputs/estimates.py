@@ -132,7 +132,8 @@ class Estimates:
         solve = survey_solver.solver()
         if solve is None or self.intake.frame is None:
             return {}
-        records = self.intake.pairing.survey_log.survey_records(self.intake.frame, self._started)
+        survey = self.intake.pairing.survey_log
+        records = survey.survey_records(self.intake.frame, [c.id for c in self.channels.all() if self._surveyed(c)])
         return solve(records, self.cfg.receiver_class, self.cfg.max_emitters_per_channel) if records else {}
 
     def _live_survey(self, channel: Channel) -> Estimate | None:
@@ -144,16 +145,15 @@ class Estimates:
         of data pools every survey-like channel (finish)."""
         survey, place = self.intake.pairing.survey_log, channel.surveying
         done = self.scheduler.finished(place)
-        if not survey.survey_like(channel.id, channel.track.filter is not None):  # a drive's, or clean stops
+        if not self._surveyed(channel):  # a drive's, or stops that show no site part: the filter's
             survey.live.pop(channel.id, None)
             return None
         if done is not None:
             return self._adopt_live_fix(channel, done)
         solve = survey_solver.solver()
-        if solve is not None and survey.due(channel.id, channel.track.filter is not None) and \
-                self.scheduler.job(place) is None:
+        if solve is not None and survey.due(channel.id) and self.scheduler.job(place) is None:
             survey.mark_solved(channel.id)
-            records = survey.survey_records(self.intake.datum_frame(), self._started, only=channel.id)
+            records = survey.survey_records(self.intake.datum_frame(), [channel.id])
             if survey.count_due(channel.id):
                 max_k, last = self.cfg.max_emitters_per_channel, None
                 survey.counted[channel.id] = (len(records), survey.counted.get(channel.id, (0, None))[1])
@@ -166,10 +166,10 @@ class Estimates:
             return None
         return self._announce(channel, replace(last_made, stamp=channel.track.last_stamp))
 
-    def _started(self, cid: str) -> bool:
-        """Whether a channel's filter has started (a channel not found: no)."""
-        channel = self.channels.live.get(cid) or self.channels.retired.get(cid)
-        return channel is not None and channel.track.filter is not None
+    def _surveyed(self, channel: Channel) -> bool:
+        """Whether the survey model makes a channel's estimate (SurveyLog.survey_like, told whether its filter has
+        started)."""
+        return self.intake.pairing.survey_log.survey_like(channel.id, channel.track.filter is not None)
 
     def _adopt_live_fix(self, channel: Channel, done: PendingJob) -> Estimate | None:
         """A live survey fix the scheduler finished, published (and its count kept when it made one)."""

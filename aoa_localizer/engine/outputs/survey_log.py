@@ -16,14 +16,16 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
 
-from aoa_localizer.engine.geodesy import LocalFrame, unturn, wrap_pi
+from aoa_localizer.engine.geodesy import LocalFrame, circular_mean, unturn, wrap_pi
 from aoa_localizer.engine.inference.co_channel import COUNT_GROWTH
+from aoa_localizer.engine.inference.triangulation import least_squares_crossing
+from aoa_localizer.engine.ingest.preprocess import point_outliers
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
@@ -33,6 +35,7 @@ SITE_READINGS = 3  # a stop tells its own scatter from this many readings on ...
 SITE_PLACES = 4  # ... and the site part is judged from this many such stops on (fewer: the readings count alone)
 SITE_P = 1e-3  # the stops' centres scattered more than their readings allow at this level: a site part
 _MAD_TO_SIGMA = 1.4826
+_WILD_SIGMAS = 4.0  # a reading this many of its sigmas from its stop's median is wild (a point's gate)
 
 
 @dataclass(frozen=True)
@@ -115,9 +118,9 @@ def site_part_shown(rows: list[tuple]) -> bool | None:
     readings scatter about their crossing more than the readings' own scatter allows (chi-square of the centres'
     residuals, the largest tenth left out for a wild stop, at SITE_P). Each reading counts with its sigma (the
     quality's, or its own), scaled by what the pairs of readings within a stop say of them (a receiver noisier or
-    sharper than configured); a reading 4 of its sigmas from its stop's median is wild. None where the data cannot
-    tell a site part from the noise (too few such stops). `rows` are SurveyLog rows (station, stamp, east, north,
-    map angle, north angle, own sigma in deg, the reading's sigma in rad)."""
+    sharper than configured); a reading _WILD_SIGMAS of its sigmas from its stop's median is wild. None where the
+    data cannot tell a site part from the noise (too few such stops). `rows` are SurveyLog rows (station, stamp,
+    east, north, map angle, north angle, own sigma in deg, the reading's sigma in rad)."""
     places: dict[tuple, list[tuple]] = defaultdict(list)
     for r in rows:
         places[(r[0], round(r[2], 1), round(r[3], 1))].append(r)
@@ -135,18 +138,19 @@ def site_part_shown(rows: list[tuple]) -> bool | None:
     xy, centres, var = [], [], []
     for p in stops:
         theta, sigma = np.array([r[4] for r in p]), scale * np.array([r[7] for r in p])
-        median = _circular_median(theta)
-        inlier = np.abs(wrap_pi(theta - median)) <= 4.0 * sigma
+        inlier = ~point_outliers(theta, sigma, _WILD_SIGMAS)
         if inlier.sum() < 2:
             continue
         w = 1.0 / sigma[inlier] ** 2
-        centres.append(float(wrap_pi(median + np.sum(w * wrap_pi(theta[inlier] - median)) / w.sum())))
+        centres.append(circular_mean(theta[inlier], w))
         var.append(1.0 / float(w.sum()))
         xy.append((p[0][2], p[0][3]))
     if len(xy) < SITE_PLACES:
         return None
     xy_a, centre = np.array(xy), np.array(centres)
-    point = _crossing(xy_a, centre)
+    point = least_squares_crossing(xy_a, centre)
+    if point is not None:  # again, each line weighted by its range's inverse square (an angle's error grows with it)
+        point = least_squares_crossing(xy_a, centre, 1.0 / np.maximum(np.sum((xy_a - point) ** 2, axis=1), 1e-6))
     if point is None:
         return None
     resid = wrap_pi(centre - np.arctan2(point[1] - xy_a[:, 1], point[0] - xy_a[:, 0]))
@@ -155,27 +159,6 @@ def site_part_shown(rows: list[tuple]) -> bool | None:
     if kept.size <= 2:
         return None
     return float(stats.chi2.sf(float(kept.sum()), kept.size - 2)) < SITE_P
-
-
-def _circular_median(theta: np.ndarray) -> float:
-    """The median of angles about their circular mean (rad)."""
-    mean = math.atan2(float(np.mean(np.sin(theta))), float(np.mean(np.cos(theta))))
-    return float(wrap_pi(mean + np.median(wrap_pi(theta - mean))))
-
-
-def _crossing(xy: np.ndarray, theta: np.ndarray) -> np.ndarray | None:
-    """The place nearest the lines from `xy` at map angles `theta` (rad, ENU), each weighted by its range once a
-    first unweighted fix gives one; None when they are parallel."""
-    normal = np.column_stack([-np.sin(theta), np.cos(theta)])
-    w = np.ones(len(xy))
-    point = None
-    for _ in range(2):
-        a = (normal * w[:, None]).T @ normal
-        if abs(np.linalg.det(a)) < 1e-12 * max(1.0, float(np.trace(a))) ** 2:
-            return None
-        point = np.linalg.solve(a, (normal * w[:, None]).T @ np.einsum("ki,ki->k", normal, xy))
-        w = 1.0 / np.maximum(np.sum((xy - point) ** 2, axis=1), 1e-6)  # an angle's error grows with range
-    return point
 
 
 def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:
@@ -217,12 +200,10 @@ class SurveyLog:
         self.records[channel].append(row)
         self.places[channel].add((round(row[2], 1), round(row[3], 1)))
 
-    def due(self, channel: str, started: bool) -> bool:
+    def due(self, channel: str) -> bool:
         """Whether a survey-like channel's live fix is to be made (again): from LIVE_PLACES places on, when its
         bearings grew by LIVE_GROWTH or a place joined since the last one."""
         if channel in self.not_survey or len(self.places.get(channel, ())) < LIVE_PLACES:
-            return False
-        if not self.survey_like(channel, started):
             return False
         last = self.solved.get(channel)
         now = (len(self.records[channel]), len(self.places[channel]))
@@ -251,13 +232,12 @@ class SurveyLog:
     def mark_solved(self, channel: str) -> None:
         self.solved[channel] = (len(self.records[channel]), len(self.places[channel]))
 
-    def survey_records(self, frame: LocalFrame, started: Callable[[str], bool],
-                       only: str | None = None) -> list[SurveyRecord]:
-        """Every survey-like channel's bearings (`only`: that channel's), in WGS84 with azimuths from true north;
-        `started` says whether a channel's filter has started."""
+    def survey_records(self, frame: LocalFrame, channels: Iterable[str]) -> list[SurveyRecord]:
+        """The bearings of these channels (the survey-like ones), in WGS84 with azimuths from true north."""
         out = []
-        for channel, rows in self.records.items():
-            if not rows or (only is not None and channel != only) or not self.survey_like(channel, started(channel)):
+        for channel in channels:
+            rows = self.records.get(channel)
+            if not rows or channel in self.not_survey:
                 continue
             station, stamp, east, north, theta, north_angle, sigma, _ = (list(c) for c in zip(*rows, strict=True))
             lat, lon, _ = frame.to_geodetic(np.array(east), np.array(north))
