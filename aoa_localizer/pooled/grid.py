@@ -14,11 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
+from aoa_localizer.engine.inference.triangulation import least_squares_crossing
 from aoa_localizer.engine.scheduling.slices import SURVEY_GRID, metered
 from aoa_localizer.pooled.noise_family import NoiseGrid, log_likelihood, logsumexp
 
 CELLS = 48  # cells a side
-_ELEMENTS_AT_ONCE = 20_000  # stations x hypotheses x cells a log joint makes at once: a millisecond or two
+_ELEMENTS_AT_ONCE = 20_000  # stations x scales x cells a log likelihood makes at once: well under a millisecond
 _FIRST_HALF_WIDTH = 12.0  # prior scales: the Cauchy prior holds 92 % within
 _KEEP = 0.9995  # the mass a zoomed box keeps
 _MAX_ZOOMS = 5
@@ -101,19 +102,30 @@ def log_joint(geom: Geometry, box: Box, shift: np.ndarray, extra_var: np.ndarray
     x, y, area = box.cells()
     gx, gy = np.meshgrid(x, y)
     gx, gy = gx.ravel(), gy.ravel()
-    pred = np.arctan2(gx[None, :] - geom.xy[:, :1], gy[None, :] - geom.xy[:, 1:])  # (K, C)
+    ex, ey = gx[None, :] - geom.xy[:, :1], gy[None, :] - geom.xy[:, 1:]
+    pred = np.arctan2(ex, ey)  # (K, C)
     resid = wrap_pi(geom.centre[:, None] - shift[:, None] - pred)
     prior = log_prior(x, y, geom.prior_scale) + math.log(area)
-    var = geom.var + extra_var
-    step = max(1, _ELEMENTS_AT_ONCE // (resid.shape[0] * noise.size))
-    parts = [_cells_log_likelihood(resid[:, lo:lo + step], var, noise) for lo in range(0, resid.shape[1], step)]
-    return np.concatenate(parts, axis=1) + prior[None, :]
+    # A cell is a place spread over its area, not its centre: the bearing to it spreads by the cell's width across
+    # the bearing over the range (uniform: a twelfth of its square), so a ridge thinner than a cell (precise
+    # bearings) keeps its mass wherever the cells' centres fall
+    dx, dy = 2 * box.hx / CELLS, 2 * box.hy / CELLS
+    across = ((dx * ey) ** 2 + (dy * ex) ** 2) / np.maximum(ex**2 + ey**2, 1e-300)
+    var = (geom.var + extra_var)[:, None] + across / (12.0 * np.maximum(ex**2 + ey**2, 1e-300))
+    return _log_likelihood_in_parts(resid, var, noise) + prior[None, :]
 
 
-@metered(SURVEY_GRID, lambda resid, var, noise: resid.size * noise.size)
+@metered(SURVEY_GRID, lambda resid, var, noise: resid.size * noise.scales[0].size)
 def _cells_log_likelihood(resid: np.ndarray, var: np.ndarray, noise: NoiseGrid) -> np.ndarray:
     """log_likelihood over some of a grid's cells (each cell's own: a grid's cells are made a part at a time)."""
     return log_likelihood(resid, var, noise)
+
+
+def _log_likelihood_in_parts(resid: np.ndarray, var: np.ndarray, noise: NoiseGrid) -> np.ndarray:
+    """log_likelihood over places (K, C), _ELEMENTS_AT_ONCE densities at a time (each part metered)."""
+    step = max(1, _ELEMENTS_AT_ONCE // (resid.shape[0] * noise.scales[0].size))
+    return np.concatenate([_cells_log_likelihood(resid[:, lo:lo + step], var[:, lo:lo + step], noise)
+                           for lo in range(0, resid.shape[1], step)], axis=1)
 
 
 def mixture(lj: np.ndarray, log_z: np.ndarray, log_w: np.ndarray) -> np.ndarray:
@@ -121,6 +133,48 @@ def mixture(lj: np.ndarray, log_z: np.ndarray, log_w: np.ndarray) -> np.ndarray:
     log_p = logsumexp(lj - log_z[:, None] + log_w[:, None], axis=0)
     p = np.exp(log_p - log_p.max())
     return p / p.sum()
+
+
+def log_density(geom: Geometry, shift: np.ndarray, extra_var: np.ndarray, noise: NoiseGrid, log_w: np.ndarray,
+                log_z: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The mixture posterior's log density (up to the same constant everywhere) at places (x[i], y[i]): what
+    `mixture` gives a grid's cells, at any place."""
+    pred = np.arctan2(x[None, :] - geom.xy[:, :1], y[None, :] - geom.xy[:, 1:])
+    resid = wrap_pi(geom.centre[:, None] - shift[:, None] - pred)
+    var = np.broadcast_to((geom.var + extra_var)[:, None], resid.shape)
+    lj = _log_likelihood_in_parts(resid, var, noise) + log_prior_at(x, y, geom.prior_scale)[None, :]
+    return logsumexp(lj - log_z[:, None] + log_w[:, None], axis=0)
+
+
+_REFINE_SIDE = 15  # a refining grid's points a side ...
+_REFINE_LEVELS = 6  # ... each level spanning two of the last level's spacings each way (a cell / 1900 at the end)
+
+
+def refined_mode(geom: Geometry, box: Box, p: np.ndarray, shift: np.ndarray, extra_var: np.ndarray,
+                 noise: NoiseGrid, log_w: np.ndarray, log_z: np.ndarray) -> np.ndarray:
+    """The posterior's mode past the grid's cells: from the three heaviest cells and the bearings' least-squares
+    crossing, finer grids around the best place so far, each spanning two spacings of the last. A peak far
+    narrower than a cell (precise bearings under a wide wild-share component) is found where the cells' centres
+    only brush it."""
+    x, y, _ = box.cells()
+    step = np.array([x[1] - x[0], y[1] - y[0]])
+    rows, cols = np.divmod(np.argsort(p)[::-1][:3], CELLS)
+    starts = [np.array([x[c], y[r]]) for r, c in zip(rows, cols, strict=True)]
+    cross = least_squares_crossing(geom.xy, np.pi / 2 - (geom.centre - shift))
+    if cross is not None and np.all(np.abs(cross - [box.cx, box.cy]) <= [box.hx, box.hy]):
+        starts.append(cross)
+    offsets = np.linspace(-2.0, 2.0, _REFINE_SIDE)
+    gx, gy = (g.ravel() for g in np.meshgrid(offsets, offsets))
+    best, best_value = starts[0], -np.inf
+    for _ in range(_REFINE_LEVELS):
+        cx = np.concatenate([s[0] + gx * step[0] for s in starts])
+        cy = np.concatenate([s[1] + gy * step[1] for s in starts])
+        value = log_density(geom, shift, extra_var, noise, log_w, log_z, cx, cy)
+        i = int(np.argmax(value))
+        if value[i] > best_value:
+            best, best_value = np.array([cx[i], cy[i]]), float(value[i])
+        starts, step = [best], step * 4.0 / (_REFINE_SIDE - 1)
+    return best
 
 
 def heaviest(p: np.ndarray) -> np.ndarray:
@@ -217,11 +271,12 @@ def displaced(src: Box, p: np.ndarray, out: Box, xy: np.ndarray, shares: np.ndar
     ox, oy, _ = out.cells()
     gx, gy = (g.ravel() for g in np.meshgrid(ox, oy))
     reach = np.minimum(median_range(xy, gx, gy), cap_m)
-    d2 = (gx[:, None] - ax[None, :]) ** 2 + (gy[:, None] - ay[None, :]) ** 2
+    # single precision for the (cells x places) kernel: a smoothing, read to a few digits
+    d2 = (np.subtract.outer(gx, ax, dtype=np.float32) ** 2 + np.subtract.outer(gy, ay, dtype=np.float32) ** 2)
     prior = np.exp(log_prior_at(gx, gy, scale))
     q = np.zeros(gx.size)
     for share, weight in zip(shares, weights, strict=True):
-        var = np.maximum(share * reach, floor_m)[:, None] ** 2
-        one = ((np.exp(-0.5 * d2 / var) / var) @ like) * prior
+        var = (np.maximum(share * reach, floor_m) ** 2).astype(np.float32)[:, None]
+        one = ((np.exp(d2 / (-2.0 * var)) / var) @ like.astype(np.float32)).astype(float) * prior
         q += weight * one / one.sum()  # each share's posterior, normalised, mixed by the shares' prior weights
     return q / q.sum()

@@ -9,6 +9,7 @@ part shared by a receiver's stations, on real and simulated bearings).
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -57,6 +58,13 @@ class NoiseGrid:
     def size(self) -> int:
         return int(self.tau.size)
 
+    @functools.cached_property
+    def scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """The distinct scales (U,) and each hypothesis's index among them (H,): a scale's densities serve each of
+        its wild shares."""
+        tau, which = np.unique(self.tau, return_inverse=True)
+        return tau, which
+
     def bands(self, count: int = SCALE_BANDS) -> list[np.ndarray]:
         """The hypotheses' indices in `count` bands of neighbouring scales."""
         edges = np.quantile(np.unique(self.tau), np.linspace(0, 1, count + 1)[1:-1])
@@ -100,18 +108,26 @@ def logsumexp(x: np.ndarray, axis: int) -> np.ndarray:
 
 
 def log_likelihood(resid: np.ndarray, own_var: np.ndarray, noise: NoiseGrid) -> np.ndarray:
-    """log p(station residuals | hypothesis) for residuals (K, C) rad and each station's own variance (K,) rad^2
-    besides tau^2: (H, C). Sums over no wild station and each single one (with three or more stations; two wild
-    stations of a handful are left to the scale's mixture)."""
+    """log p(station residuals | hypothesis) for residuals (K, C) rad and each station's own variance besides tau^2,
+    (K,) or per place (K, C) rad^2: (H, C). Sums over no wild station and each single one (with three or more
+    stations; two wild stations of a handful are left to the scale's mixture).
+
+    The densities depend on the scale alone, so they are made once per distinct tau and shared by its wild shares;
+    the sum over which single station is wild is the all-kept term times 1 + sum_k w / (1 - w) / (2 pi) / N_k."""
     k = resid.shape[0]
-    d = (noise.tau[:, None] ** 2 + own_var[None, :])[:, :, None]  # (H, K, 1)
-    each = -0.5 * (resid[None, :, :] ** 2 / d + np.log(d) + _LOG_2PI)  # (H, K, C)
-    log_keep, log_wild = np.log1p(-noise.wild)[:, None], np.log(noise.wild)[:, None]
-    total = each.sum(axis=1) + k * log_keep
+    own = own_var if own_var.ndim == 2 else own_var[:, None]
+    tau, which = noise.scales
+    # single precision for the per-station densities (a grid's log likelihoods need a millionth of a nat at most)
+    d = (tau[:, None, None] ** 2 + own[None, :, :]).astype(np.float32)  # (U, K, C or 1)
+    minus = 0.5 * (np.square(resid, dtype=np.float32)[None, :, :] / d + np.log(d) + np.float32(_LOG_2PI))
+    log_keep = np.log1p(-noise.wild)[:, None]
+    total = -minus.sum(axis=1, dtype=float)[which] + k * log_keep  # (H, C)
     if k < 3:
         return total
-    wild = total[None, :, :] - each.transpose(1, 0, 2) - log_keep + log_wild - _LOG_2PI  # (K, H, C)
-    return logsumexp(np.concatenate([total[None], wild]).astype(np.float32), axis=0).astype(float)
+    top = minus.max(axis=1)  # (U, C): the station least explained under each scale
+    spread = np.log(np.exp(minus - top[:, None, :]).sum(axis=1, dtype=float))  # log sum_k exp(-log N_k - top)
+    b = (np.log(noise.wild)[:, None] - log_keep - _LOG_2PI) + (top + spread)[which]  # log of the wild terms' sum
+    return total + np.logaddexp(0.0, b)
 
 
 def expected_error(noise: NoiseGrid, weights: np.ndarray) -> float:

@@ -65,11 +65,12 @@ def hpd_rings(box: Box, p: np.ndarray, mass: float) -> list[np.ndarray]:
     return [np.asarray(ring, float) for ring in lines if len(ring) >= 4]
 
 
-def summarise(box: Box, p: np.ndarray) -> Region:
+def summarise(box: Box, p: np.ndarray, point: np.ndarray | None = None) -> Region:
+    """The region of cells `p` on `box`, about `point` (None: the cells' own mode)."""
     x, y, _ = box.cells()
     gx, gy = np.meshgrid(x, y)
     xy = np.column_stack([gx.ravel(), gy.ravel()])
-    point = mode(box, p)
+    point = mode(box, p) if point is None else point
     d = xy - point
     cov = (d * p[:, None]).T @ d
     cov += np.diag([(2 * box.hx / CELLS) ** 2 / 12, (2 * box.hy / CELLS) ** 2 / 12])  # mass spread within a cell

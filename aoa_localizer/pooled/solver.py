@@ -31,6 +31,7 @@ from aoa_localizer.pooled.grid import (
     median_range,
     mixture,
     prior_scale,
+    refined_mode,
     widened,
     zoom,
 )
@@ -160,7 +161,11 @@ def _solve(geoms: dict[str, Geometry], noise: NoiseGrid) -> _Solved:
         boxes, regions = {}, {}
         for e, g in geoms.items():  # one emitter's grid at a time: a file of thousands of ids holds none of them
             z = zoom(g, shifts[e], extra[e], noise, log_w, found[e][1])
-            boxes[e], regions[e] = z.box, summarise(z.box, mixture(z.log_joint, log_z[e], log_w))
+            p = mixture(z.log_joint, log_z[e], log_w)
+            # past the cells, in every round: the biases are learned from these points, and a point a cell's
+            # resolution off would carry its own jitter into them
+            point = refined_mode(g, z.box, p, shifts[e], extra[e], noise, log_w, log_z[e])
+            boxes[e], regions[e] = z.box, summarise(z.box, p, point)
         biases = learn_biases(geoms, {e: r.point for e, r in regions.items()})
         if not biases or round_ == _ROUNDS - 1:
             break

@@ -38,8 +38,8 @@ BATCH_MADE = Cost(117.0, 0.95)  # point_batch: a batch's readings gathered (elem
 # co_channel: one EM iteration of a count's fit, its places' Gauss-Newton steps, scales and biases included (elements:
 # readings x places; least squares over fits of 60-1500 readings and 1-3 places, median model / real 0.93)
 COUNT_EM = Cost(238.0, 0.20)
-# pooled/grid: the survey model's log likelihood over some of a grid's cells (elements: stations x cells x noise
-# hypotheses; 0.007 us an element at the median of live survey fixes' parts, 0.028 at their 90th percentile)
+# pooled/grid: the survey model's log likelihood over some of a grid's cells (elements: stations x cells x distinct
+# noise scales; 0.005-0.010 us an element on this machine, 2026-11-27)
 SURVEY_GRID = Cost(150.0, 0.02)
 # What a job's stretch costs besides its kernel's model: the Python around it (a Gauss-Newton step's solve, an EM
 # step's sums). Chosen so a turn's time per metered microsecond, and when a start comes, are about what the
