@@ -95,3 +95,17 @@ def test_stops_whose_readings_share_a_steady_error_go_to_the_survey_model():
         bearings[idx, 1] = wrap_360(bearings[idx, 1] + rng.normal(0.0, 5.0))
     result = run(replace(data, bearings=bearings), LocalizerConfig(seed=7))
     assert result.estimates[-1].algorithm == "survey" and result.scores["inside95"]
+
+
+def test_a_minority_of_stops_far_off_is_no_site_part_and_a_typical_stop_scattering_is():
+    """A tenth of the stops taken over by a reflection (their residuals 20 sigmas) is not a site part; every stop
+    scattering twice as widely as its readings allow (four times the variance) is."""
+    from aoa_localizer.engine.outputs.survey_log import _scattered
+
+    rng = np.random.default_rng(0)
+    clean = rng.chisquare(1, 100)
+    assert not _scattered(clean)
+    taken = clean.copy()
+    taken[:10] = 400.0
+    assert not _scattered(taken)
+    assert _scattered(4.0 * clean)

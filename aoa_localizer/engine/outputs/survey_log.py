@@ -33,7 +33,9 @@ LIVE_GROWTH = 1.25  # a live survey fix is made again once the channel's bearing
 LIVE_PLACES = 3  # ... or a place joined, from this many places on (fewer: no crossing, the filter's estimate)
 SITE_READINGS = 3  # a stop tells its own scatter from this many readings on ...
 SITE_PLACES = 4  # ... and the site part is judged from this many such stops on (fewer: the readings count alone)
-SITE_P = 1e-3  # the stops' centres scattered more than their readings allow at this level: a site part
+SITE_P = 1e-3  # the stops' centres scattered more than their readings allow at this level: a site part ...
+SITE_CLIP = 9.0  # ... each stop's squared standardised residual counted up to this (three sigmas) ...
+SITE_RATIO = 2.0  # ... and the typical stop's at least this many times what independent readings give
 _MAD_TO_SIGMA = 1.4826
 _WILD_SIGMAS = 4.0  # a reading this many of its sigmas from its stop's median is wild (a point's gate)
 
@@ -115,12 +117,12 @@ def live_fix(solve: Callable[[list[SurveyRecord], str, int], dict[str, SurveyFix
 
 def site_part_shown(rows: list[tuple]) -> bool | None:
     """Whether a channel's stops show a steady site part: the centres of the stops with SITE_READINGS or more
-    readings scatter about their crossing more than the readings' own scatter allows (chi-square of the centres'
-    residuals, the largest tenth left out for a wild stop, at SITE_P). Each reading counts with its sigma (the
-    quality's, or its own), scaled by what the pairs of readings within a stop say of them (a receiver noisier or
-    sharper than configured); a reading _WILD_SIGMAS of its sigmas from its stop's median is wild. None where the
-    data cannot tell a site part from the noise (too few such stops). `rows` are SurveyLog rows (station, stamp,
-    east, north, map angle, north angle, own sigma in deg, the reading's sigma in rad)."""
+    readings scatter about their crossing more than the readings' own scatter allows (`_scattered`). Each reading
+    counts with its sigma (the quality's, or its own), scaled by what the pairs of readings within a stop say of
+    them (a receiver noisier or sharper than configured); a reading _WILD_SIGMAS of its sigmas from its stop's
+    median is wild. None where the data cannot tell a site part from the noise (too few such stops). `rows` are
+    SurveyLog rows (station, stamp, east, north, map angle, north angle, own sigma in deg, the reading's sigma in
+    rad)."""
     places: dict[tuple, list[tuple]] = defaultdict(list)
     for r in rows:
         places[(r[0], round(r[2], 1), round(r[3], 1))].append(r)
@@ -154,11 +156,22 @@ def site_part_shown(rows: list[tuple]) -> bool | None:
     if point is None:
         return None
     resid = wrap_pi(centre - np.arctan2(point[1] - xy_a[:, 1], point[0] - xy_a[:, 0]))
-    z2 = np.sort(resid**2 / np.array(var))
-    kept = z2[: len(z2) - math.ceil(0.1 * len(z2))]
-    if kept.size <= 2:
-        return None
-    return float(stats.chi2.sf(float(kept.sum()), kept.size - 2)) < SITE_P
+    return _scattered(resid**2 / np.array(var))
+
+
+def _scattered(z2: np.ndarray) -> bool:
+    """Whether stops' squared standardised residuals `z2` show a site part that matters: their sum, each clipped at
+    SITE_CLIP (a stop that a reflection or wild readings took over counts as one badly off stop, not as a
+    hundred), beyond what chi-square(1) draws give at SITE_P (normal approximation to the clipped sum, from its
+    exact moments), and their median at least SITE_RATIO times chi-square(1)'s: the typical stop scatters, so the
+    filter's ellipse, which takes the readings as independent, would be too small by more than sqrt(SITE_RATIO)."""
+    c, f1 = SITE_CLIP, float(stats.chi2.sf(SITE_CLIP, 1))
+    # x f_1(x) = f_3(x) and x^2 f_1(x) = 3 f_5(x) for chi-square densities: the clipped draw's moments in closed form
+    mean = float(stats.chi2.cdf(c, 3)) + c * f1
+    var = 3.0 * float(stats.chi2.cdf(c, 5)) + c * c * f1 - mean * mean
+    clipped = float(np.minimum(z2, c).sum())
+    beyond = float(stats.norm.sf((clipped - z2.size * mean) / math.sqrt(z2.size * var))) < SITE_P
+    return beyond and float(np.median(z2)) >= SITE_RATIO * float(stats.chi2.ppf(0.5, 1))
 
 
 def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:
