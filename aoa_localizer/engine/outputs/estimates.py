@@ -24,7 +24,9 @@ from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.track.report import co_channel, others_share
-from aoa_localizer.engine.types import Estimate, Transmitter
+from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
+
+AGREE_CHI2 = 9.21  # two places further apart than this (Mahalanobis, squared, both covariances: 1 % for 2-D)
 
 
 def positive_definite(cov) -> bool:
@@ -193,14 +195,38 @@ class Estimates:
         east, north = frame.to_enu(fix.lat, fix.lon)
         track = channel.track
         to_map = ground_to_map(frame.north_angle(fix.lat, fix.lon), LocalFrame.skew(east, north))
+        cov = to_map @ fix.cov @ to_map.T
+        state, warnings = self._against_filter(channel, np.array([east, north], float), cov, fix)
         estimate = Estimate(stamp=track.last_stamp, east=float(east), north=float(north), lat=fix.lat, lon=fix.lon,
-                            cov=to_map @ fix.cov @ to_map.T, ground_cov=np.array(fix.cov),
+                            cov=cov, ground_cov=np.array(fix.cov),
                             bearings_used=fix.bearings, points_used=track.points_used,
                             ess=float("nan"), algorithm="survey", modes=[(float(east), float(north), 1.0)],
-                            noise=fix.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=fix.state,
-                            warnings=list(fix.warnings), end_of_data=end_of_data, regions=fix.regions,
+                            noise=fix.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=state,
+                            warnings=warnings, end_of_data=end_of_data, regions=fix.regions,
                             **counted(fix.count, frame))
         return self._announce(channel, estimate)
+
+    def _against_filter(self, channel: Channel, place: np.ndarray, cov: np.ndarray,
+                        fix: SurveyFix) -> tuple[EstimateState, list[str]]:
+        """A stopped vehicle's survey fix checked against its own particle filter: the two models read one set of
+        readings (a site part in one, independent readings in the other), so where their places lie further apart
+        than both ellipses allow (AGREE_CHI2), one of them misreads the stops (a reflection's ghost in the stops'
+        readings pulls every stop one way, which the survey model takes for independent site errors): the fix is
+        `poorly_determined`, said. Fixed stations are not checked: there the filter is known to take a steady bias
+        for independent readings."""
+        warnings = list(fix.warnings)
+        track = channel.track
+        if channel.id not in self.intake.pairing.survey_log.stopped or track.filter is None:
+            return fix.state, warnings
+        mean, filter_cov = track.estimate()
+        gap = place - np.asarray(mean, float)
+        both = cov + np.asarray(filter_cov, float)
+        if not positive_definite(both) or float(gap @ np.linalg.solve(both, gap)) <= AGREE_CHI2:
+            return fix.state, warnings
+        warnings.append(f"the survey model and the particle filter disagree by {float(np.hypot(*gap)):.0f} m, more "
+                        "than both ellipses allow: the stops' readings share an error one of them misreads (a "
+                        "reflection?)")
+        return EstimateState.POORLY_DETERMINED, warnings
 
     def _announce(self, channel: Channel, estimate: Estimate) -> Estimate:
         """Keep a channel's new estimate as its and the newest, and hand it to `on_estimate`."""

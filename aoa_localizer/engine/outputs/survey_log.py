@@ -22,10 +22,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
-from aoa_localizer.engine.geodesy import LocalFrame, circular_mean, unturn, wrap_pi
+from aoa_localizer.engine.geodesy import LocalFrame, unturn, wrap_pi
 from aoa_localizer.engine.inference.co_channel import COUNT_GROWTH
 from aoa_localizer.engine.inference.triangulation import least_squares_crossing
-from aoa_localizer.engine.ingest.preprocess import point_outliers
+from aoa_localizer.engine.ingest.preprocess import circular_median, point_outliers
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
@@ -36,7 +36,8 @@ SITE_PLACES = 4  # ... and the site part is judged from this many such stops on 
 SITE_P = 1e-3  # the stops' centres scattered more than their readings allow at this level: a site part ...
 SITE_CLIP = 9.0  # ... each stop's squared standardised residual counted up to this (three sigmas) ...
 SITE_RATIO = 2.0  # ... and the typical stop's at least this many times what independent readings give
-_MAD_TO_SIGMA = 1.4826
+_PAIR_Q25 = float(stats.norm.ppf(0.625))  # the lower quartile of |a standard normal's draw|
+_MEDIAN_VAR = math.pi / 2  # a median's variance over the mean's (its large-sample value; 1.35 for three readings)
 _WILD_SIGMAS = 4.0  # a reading this many of its sigmas from its stop's median is wild (a point's gate)
 
 
@@ -134,7 +135,9 @@ def site_part_shown(rows: list[tuple]) -> bool | None:
         theta, sigma = np.array([r[4] for r in p]), np.array([r[7] for r in p])
         i, j = np.triu_indices(len(p), 1)
         pairs.append(wrap_pi(theta[i] - theta[j]) / np.hypot(sigma[i], sigma[j]))
-    scale = _MAD_TO_SIGMA * float(np.median(np.abs(np.concatenate(pairs))))  # the sigmas' true multiple
+    # the sigmas' true multiple, from the pairs' lower quartile: with 40 % wild readings, two pairs of three of a
+    # stop's three readings hold a wild one, and a median of the pairs would be a wild pair's
+    scale = float(np.quantile(np.abs(np.concatenate(pairs)), 0.25)) / _PAIR_Q25
     if not scale > 0:
         return None
     xy, centres, var = [], [], []
@@ -143,9 +146,10 @@ def site_part_shown(rows: list[tuple]) -> bool | None:
         inlier = ~point_outliers(theta, sigma, _WILD_SIGMAS)
         if inlier.sum() < 2:
             continue
-        w = 1.0 / sigma[inlier] ** 2
-        centres.append(circular_mean(theta[inlier], w))
-        var.append(1.0 / float(w.sum()))
+        # the median (a reading's worth of the stop's): one reading of three that a reflection's ghost or a wild
+        # draw took, within the gate, moves a mean by a third of its error and a median not at all
+        centres.append(circular_median(theta[inlier]))
+        var.append(_MEDIAN_VAR / float(np.sum(1.0 / sigma[inlier] ** 2)))
         xy.append((p[0][2], p[0][3]))
     if len(xy) < SITE_PLACES:
         return None
