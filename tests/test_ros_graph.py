@@ -583,11 +583,9 @@ def test_a_node_on_sim_time_follows_a_bag_replayed_with_clock(spawn, domain):
         node.create_subscription(PoseWithCovarianceStamped, "/emitter/pose", poses.append, latched)
         replay = spawn(["aoa_localizer.replay", str(ROOT / "bags/seed"), "--clock", "--rate", "4",
                         "--remap", "/df/bearing:=/df1/bearing"], domain)
-        # judged by the bag's progress, not a wall-clock allowance: on a loaded machine the replay plays slower than
-        # asked (a CI run beside heavy jobs reached 22 s of the bag in 90 s); it stops at the bag's end
-        spin_until(executor, lambda: len(diags) >= 5 and poses or replay.poll() is not None, 240)
-        spin_until(executor, lambda: len(diags) >= 5 and poses, 5)
-        assert len(diags) >= 5 and poses, (len(diags), len(poses), replay.poll())
+        # a loaded machine plays the bag slower than asked and the node works through its queue after it (a CI run
+        # beside heavy jobs had no pose after 90 s): the allowance is the whole test's, less the processes' start
+        assert spin_until(executor, lambda: len(diags) >= 5 and poses, 240), (len(diags), len(poses), replay.poll())
         assert "deprecated" not in open(replay.log_path).read()
         stamps = [d.header.stamp.sec + 1e-9 * d.header.stamp.nanosec for d in diags]
         assert stamps[-1] > stamps[0]  # moving
