@@ -200,7 +200,9 @@ def test_the_simulated_vehicle_plays_co_channel_transmitters_into_the_node(tmp_p
     from aoa_localizer.engine.geodesy import LocalFrame
     from aoa_localizer.simulation.scenarios import DATUM
 
-    res = launch(["--scenario", "seed", "--speedup", 80, "--seed", 1, "--domain-id", domain,
+    # at 40x, the pace the other graph tests play their drives at: at 80x, with the suite's other workers sharing the
+    # two cores, a transmitter was once 37 m off in CI
+    res = launch(["--scenario", "seed", "--speedup", 40, "--seed", 1, "--domain-id", domain,
                   "--vehicle-param", "co_channel=[600.0, 1300.0]", "--result", tmp_path / "r.json"])
     # each transmitter is scored against the nearest truth (the verdict's choice of truth: the test below)
     assert "2 transmitters on its frequency" in res.stdout, res.stdout + res.stderr

@@ -581,10 +581,10 @@ def test_a_node_on_sim_time_follows_a_bag_replayed_with_clock(spawn, domain):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(PoseWithCovarianceStamped, "/emitter/pose", poses.append, latched)
-        replay = spawn(["aoa_localizer.replay", str(ROOT / "bags/seed"), "--clock", "--rate", "4",
+        replay = spawn(["aoa_localizer.replay", str(ROOT / "bags/seed"), "--clock", "--rate", "2",
                         "--remap", "/df/bearing:=/df1/bearing"], domain)
-        # a loaded machine plays the bag slower than asked and the node works through its queue after it (a CI run
-        # beside heavy jobs had no pose after 90 s): the allowance is the whole test's, less the processes' start
+        # at twice the bag's pace (at 4x, with the suite's other workers sharing the two cores, the node once had no
+        # pose at all); the allowance is the whole test's, less the processes' start
         assert spin_until(executor, lambda: len(diags) >= 5 and poses, 240), (len(diags), len(poses), replay.poll())
         assert "deprecated" not in open(replay.log_path).read()
         stamps = [d.header.stamp.sec + 1e-9 * d.header.stamp.nanosec for d in diags]
