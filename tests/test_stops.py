@@ -112,12 +112,12 @@ def test_a_minority_of_stops_far_off_is_no_site_part_and_a_typical_stop_scatteri
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [4, 5, 8])
-def test_a_reflection_at_the_stops_is_never_a_confident_survey_fix(seed):
-    """A reflector's ghost in a fifth of the readings, the vehicle stopped at each point: in these three runs of ten
-    (seeds 0-9) the ghost biases the typical stop and the stops go to the survey model, which takes the stations'
-    errors as independent and lands 90-140 m off with a 30 m ellipse. Its own particle filter, on the same
+def test_a_reflection_at_the_stops_is_never_a_confident_survey_fix():
+    """A reflector's ghost in a fifth of the readings, the vehicle stopped at each point: in this run (one of three
+    of seeds 0-9 alike) the ghost biases the typical stop and the stops go to the survey model, which takes the
+    stations' errors as independent and lands 90 m off with a 30 m ellipse. Its own particle filter, on the same
     readings, is within metres: the two disagree beyond both ellipses, and the fix says so instead of `tracking`."""
+    seed = 8
     data = stopped(simulate(robustness_cells()["reflector"], seed))
     result = run(data, LocalizerConfig(seed=1000 + seed))
     final = result.estimates[-1]
