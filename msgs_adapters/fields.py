@@ -82,9 +82,28 @@ class PoseBearing(NamedTuple):
     variance_rad2: float
 
 
+# tf2's rule for a usable quaternion: its squared norm within 0.1 of one (tf2::Quaternion's "not properly
+# normalized" check). Inside it the quaternion is normalised; outside it, or zero or not finite, there is no yaw.
+QUATERNION_NORM2_TOLERANCE = 0.1
+
+
 def yaw_of(q) -> float:
-    """Yaw (rad) of a geometry_msgs/Quaternion, by field name."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    """Yaw (rad) of a geometry_msgs/Quaternion, by field name, after normalising it; NaN (the reading refused as
+    a bad azimuth or heading) when the quaternion is not finite or its squared norm is off one by more than 0.1."""
+    w, x, y, z = (_float(q.w), _float(q.x), _float(q.y), _float(q.z))
+    norm2 = w * w + x * x + y * y + z * z
+    if not math.isfinite(norm2) or abs(norm2 - 1.0) > QUATERNION_NORM2_TOLERANCE:
+        return math.nan
+    return math.atan2(2.0 * (w * z + x * y) / norm2, 1.0 - 2.0 * (y * y + z * z) / norm2)
+
+
+def sigma_deg_of_variance(variance_rad2: float) -> float:
+    """A pose's yaw variance (rad^2) as a reading's sigma (deg) by add_bearing's rule: NaN or 0 (the ROS
+    convention for a covariance not filled in) give NaN, the configured sigma; a negative or infinite variance
+    gives a negative or infinite sigma, which add_bearing refuses as `bad_sigma`."""
+    if math.isnan(variance_rad2) or variance_rad2 == 0.0:
+        return math.nan
+    return math.copysign(math.degrees(math.sqrt(abs(variance_rad2))), variance_rad2)
 
 
 class HeadingRecord(NamedTuple):
@@ -114,13 +133,11 @@ def bearing_from_pose(msg) -> PoseBearing:
 
 def df_from_pose(msg) -> DfRecord:
     """A `pose` bearing (bearing_from_pose) as a DF record: its yaw as an azimuth (deg clockwise from north), its
-    variance as the reading's sigma (NaN when not positive: the configured one), no quality, no frequency. The
-    same arithmetic as Localizer.add_bearing_enu, so a live pose and a replayed one give one answer."""
+    variance as the reading's sigma (sigma_deg_of_variance), no quality, no frequency. The same arithmetic as
+    Localizer.add_bearing_enu, so a live pose and a replayed one give one answer."""
     p = bearing_from_pose(msg)
     azimuth = 90.0 - math.degrees(p.yaw_rad) if math.isfinite(p.yaw_rad) else p.yaw_rad
-    var = p.variance_rad2
-    sigma = math.degrees(math.sqrt(var)) if var > 0 and math.isfinite(var) else math.nan
-    return DfRecord(p.stamp, azimuth, math.nan, math.nan, sigma)
+    return DfRecord(p.stamp, azimuth, math.nan, math.nan, sigma_deg_of_variance(p.variance_rad2))
 
 
 def df_record(msg, encoding: str) -> DfRecord:

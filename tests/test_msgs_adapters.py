@@ -81,12 +81,15 @@ def test_a_pose_bearing_is_read_as_a_df_record_with_its_own_sigma(yaw):
     assert df_record(df, "df_record") == df_from_vector3stamped(df)
 
 
-@pytest.mark.parametrize("yaw, variance", [(0.3, 0.0004), (-2.9, 1e-6), (math.pi / 2, 0.0), (1.0, -1.0)])
-def test_the_nodes_pose_path_and_add_bearing_enu_make_the_same_reading(yaw, variance):
+@pytest.mark.parametrize("yaw, variance, used", [(0.3, 0.0004, True), (-2.9, 1e-6, True), (math.pi / 2, 0.0, True),
+                                                 (0.5, math.nan, True), (1.0, -1.0, False), (1.0, math.inf, False)])
+def test_the_nodes_pose_path_and_add_bearing_enu_make_the_same_reading(yaw, variance, used):
     """The pose's yaw and variance are turned into an azimuth and a sigma in the adapter (the node) and in
-    add_bearing_enu (the API, a bag's bearing_pose): bit for bit the same reading, so one pose gives one answer."""
+    add_bearing_enu (the API, a bag's bearing_pose): bit for bit the same reading, so one pose gives one answer.
+    A variance of NaN or 0 stands for the configured sigma; a negative or infinite one is add_bearing's bad sigma,
+    refused by both paths (a decoy with an infinite variance was once used at the configured sigma)."""
     r = df_record(build.pose_bearing(RCLPY, 1.0, yaw, variance), "pose")
-    readings = []
+    readings, refused = [], []
     for feed in (lambda loc: loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, sigma_deg=r.sigma_deg),
                  lambda loc: loc.add_bearing_enu(1.0, yaw, variance)):
         loc = Localizer(LocalizerConfig(seed=1, datum_lat=39.1, datum_lon=117.2))
@@ -94,8 +97,45 @@ def test_the_nodes_pose_path_and_add_bearing_enu_make_the_same_reading(yaw, vari
         loc.add_fix(2.0, 39.1, 117.2)
         feed(loc)
         readings.append(open_point(loc))
+        refused.append(loc.rejected.get("bad_sigma", 0))
         loc.close()
-    assert len(readings[0]) == 1 and readings[0] == readings[1]
+    assert len(readings[0]) == int(used) and readings[0] == readings[1]
+    assert refused == [0, 0] if used else refused == [1, 1]
+
+
+def quaternion(yaw: float, scale: float = 1.0):
+    return RCLPY.Quaternion(x=0.0, y=0.0, z=scale * math.sin(yaw / 2), w=scale * math.cos(yaw / 2))
+
+
+@pytest.mark.parametrize("scale", [1.0, 1.02, 0.97, 1.04])
+def test_a_nearly_unit_quaternion_is_normalised_before_its_yaw_is_read(scale):
+    """A quaternion a little off unit length (rounding, a float32 publisher) gives its true yaw: read raw, x1.02
+    once moved the estimate 25 m."""
+    for yaw in (0.0, math.pi / 2, 2.5, -1.2):
+        msg = build.pose_bearing(RCLPY, 1.0, 0.0, 0.0004)
+        msg.pose.pose.orientation = quaternion(yaw, scale)
+        for m in flavours(msg, "geometry_msgs/msg/PoseWithCovarianceStamped"):
+            assert bearing_from_pose(m).yaw_rad == pytest.approx(yaw, abs=1e-12)
+
+
+@pytest.mark.parametrize("q", [(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 2 * math.sin(0.5), 2 * math.cos(0.5)),
+                               (0.0, 0.0, 0.5 * math.sin(0.5), 0.5 * math.cos(0.5)), (0.0, 0.0, math.inf, 1.0),
+                               (0.0, 0.0, 1e200, 1.0), (math.nan, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.1)])
+def test_a_zero_far_from_unit_or_non_finite_quaternion_gives_no_yaw_and_the_reading_is_refused(q):
+    """A quaternion whose squared norm is off one by more than tf2's 0.1, or zero, or not finite, has no yaw: the
+    pose bearing is refused as a bad azimuth, live and from a bag (once: x2 read -37 deg, a zero one 90 deg)."""
+    msg = build.pose_bearing(RCLPY, 1.0, 0.0, 0.0004)
+    msg.pose.pose.orientation = RCLPY.Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])
+    for m in flavours(msg, "geometry_msgs/msg/PoseWithCovarianceStamped"):
+        p = bearing_from_pose(m)
+        assert math.isnan(p.yaw_rad)
+        loc = Localizer(LocalizerConfig(seed=1, datum_lat=39.1, datum_lon=117.2))
+        loc.add_fix(0.0, 39.1, 117.2)
+        loc.add_bearing_enu(p.stamp, p.yaw_rad, p.variance_rad2)
+        r = df_record(m, "pose")
+        loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, sigma_deg=r.sigma_deg)
+        assert loc.rejected.get("bad_azimuth") == 2 and not open_point(loc)
+        loc.close()
 
 
 def test_emitter_pose_carries_the_estimate_and_its_covariance(estimate):

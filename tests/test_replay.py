@@ -110,9 +110,10 @@ def test_main_job_prints_the_estimate_and_its_error():
     assert "estimate (afsa" in res.stdout and "Cramer-Rao bound" in res.stdout
 
 
-def _bag_with(tmp_path, bearing_type: str, extra_string: bool):
-    """The seed scenario as a bag whose bearings are `bearing_type` (DF records, or the pose encoding), with one
-    std_msgs/String on /df/bearing in the middle if asked: written with rosbags, as ros2 bag would."""
+def _bag_with(tmp_path, bearing_type: str, extra_string: bool, scale: float = 1.0):
+    """The seed scenario as a bag whose bearings are `bearing_type` (DF records, or the pose encoding with each
+    quaternion times `scale`), with one std_msgs/String on /df/bearing in the middle if asked: written with
+    rosbags, as ros2 bag would."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     from msgs_adapters import build
@@ -125,8 +126,10 @@ def _bag_with(tmp_path, bearing_type: str, extra_string: bool):
     for b in data.bearings:
         if bearing_type == "pose":
             yaw = np.radians(90.0 - b[1])  # the yaw of an azimuth (the frame's small north rotation aside)
-            rows.append((b[0], "/df/bearing", "geometry_msgs/msg/PoseWithCovarianceStamped",
-                         build.pose_bearing(T, b[0], float(yaw), np.radians(1.117) ** 2)))
+            pose = build.pose_bearing(T, b[0], float(yaw), np.radians(1.117) ** 2)
+            q = pose.pose.pose.orientation
+            q.z, q.w = q.z * scale, q.w * scale
+            rows.append((b[0], "/df/bearing", "geometry_msgs/msg/PoseWithCovarianceStamped", pose))
         else:
             rows.append((b[0], "/df/bearing", "geometry_msgs/msg/Vector3Stamped", build.df_record(T, *b[:3])))
     if extra_string:
@@ -166,6 +169,24 @@ def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
     run_bag(bag, {}, loc, estimates.append)
     assert len(estimates) > 30 and loc.unknown_quality == 300
     assert np.hypot(loc.estimate.east - 1200.0, loc.estimate.north - 800.0) < 10.0
+
+
+@pytest.mark.slow
+def test_a_pose_bags_quaternions_are_normalised_or_refused(tmp_path):
+    """Every quaternion x1.02 gives the unit quaternions' answer bit for bit (read raw it was 25 m off, `tracking`);
+    x2 has no yaw, and every bearing is refused as a bad azimuth."""
+    from aoa_localizer.common.bag_run import run_bag
+
+    finals = []
+    for scale in (1.0, 1.02, 2.0):
+        loc = Localizer(LocalizerConfig(seed=1))
+        run_bag(_bag_with(tmp_path / str(scale), "pose", extra_string=False, scale=scale), {}, loc, lambda e: None)
+        finals.append((loc.estimate, dict(loc.rejected)))
+        loc.close()
+    (unit, _), (near, _), (far, refused) = finals
+    assert near is not None and unit is not None
+    assert (near.east, near.north) == pytest.approx((unit.east, unit.north), abs=1e-6)
+    assert far is None and refused["bad_azimuth"] == 300
 
 
 @pytest.mark.slow

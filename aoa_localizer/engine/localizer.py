@@ -319,11 +319,15 @@ class Localizer:
     def add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan"), station: str = "",
                         frequency_hz=float("nan")) -> Estimate | None:
         """A bearing as a REP-103 yaw (rad, counter-clockwise from east at the antenna) with its variance
-        (the `pose` encoding): add_bearing with its azimuth and sigma. No quality: counted as unknown quality;
-        NaN or non-positive variance means the configured sigma."""
+        (the `pose` encoding): add_bearing with its azimuth and sigma. No quality: counted as unknown quality.
+        A variance of NaN or 0 (ROS's "not filled in") means the configured sigma; a negative or infinite one is
+        refused as add_bearing refuses such a sigma (`bad_sigma`)."""
         yaw, var = as_float(yaw_rad), as_float(variance_rad2)
         azimuth = 90.0 - math.degrees(yaw) if math.isfinite(yaw) else yaw
-        sigma = math.degrees(math.sqrt(var)) if var > 0 and math.isfinite(var) else math.nan
+        if math.isnan(var) or var == 0.0:
+            sigma = math.nan
+        else:
+            sigma = math.copysign(math.degrees(math.sqrt(abs(var))), var)
         return self.add_bearing(stamp, azimuth, math.nan, station, frequency_hz, sigma)
 
     def feed(self, event: Input) -> Estimate | None:
