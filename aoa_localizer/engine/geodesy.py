@@ -99,6 +99,14 @@ def circular_mean(angles, weights=None) -> float:
     return float(np.arctan2(np.sum(w * np.sin(angles)), np.sum(w * np.cos(angles))))
 
 
+def centroid(lat_deg, lon_deg) -> tuple[float, float]:
+    """The (lat, lon) of the mean of the points' unit vectors: a frame origin that stays among the points across
+    the antimeridian and near a pole, where the plain mean of the longitudes lands half a world away."""
+    lat, lon = np.radians(np.asarray(lat_deg, float)), np.radians(np.asarray(lon_deg, float))
+    x, y, z = (np.mean(np.cos(lat) * np.cos(lon)), np.mean(np.cos(lat) * np.sin(lon)), np.mean(np.sin(lat)))
+    return math.degrees(math.atan2(z, math.hypot(x, y))), math.degrees(math.atan2(y, x))
+
+
 def azimuth_to_enu(azimuth_deg, north_angle=np.pi / 2):
     """DF azimuth (deg, clockwise from true north) to an ENU angle (rad, CCW from east).
 

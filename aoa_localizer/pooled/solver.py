@@ -18,7 +18,7 @@ import numpy as np
 from scipy import stats
 
 from aoa_localizer.engine.crlb import ellipse_axes
-from aoa_localizer.engine.geodesy import LocalFrame, wrap_pi
+from aoa_localizer.engine.geodesy import LocalFrame, centroid, wrap_pi
 from aoa_localizer.engine.outputs.survey_log import SurveyCount, SurveyTransmitter
 from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.pooled.bias import BIAS_MIN_EMITTERS, Bias, learn_biases, residuals
@@ -106,10 +106,13 @@ def _geometry(emitter: str, stations: list[Station], scatter: dict[str, float]) 
     """The emitter's geometry in a frame at its stations' centroid, or why it has none."""
     if len({(s.lat, s.lon) for s in stations}) < 2:
         return "all its bearings come from one place: a direction, but no range"
-    frame = LocalFrame(float(np.mean([s.lat for s in stations])), float(np.mean([s.lon for s in stations])), 0.0)
-    e, n = frame.to_enu(np.array([s.lat for s in stations]), np.array([s.lon for s in stations]))
+    frame = LocalFrame(*centroid([s.lat for s in stations], [s.lon for s in stations]), 0.0)
+    lat, lon = np.array([s.lat for s in stations]), np.array([s.lon for s in stations])
+    e, n = frame.to_enu(lat, lon)
     xy = np.column_stack([e, n])
-    centre = np.array([s.centre for s in stations])
+    # each station's azimuth from its own north, turned to the frame's (the meridians converge: near a pole
+    # stations a few km apart see north tens of degrees apart)
+    centre = wrap_pi(np.array([s.centre for s in stations]) + 0.5 * np.pi - frame.north_angle(lat, lon))
     var = np.array([station_variance(s, scatter.get(s.receiver, 0.0)) for s in stations])
     return Geometry(emitter, frame, xy, centre, var, tuple(s.receiver for s in stations),
                     tuple(s.name for s in stations), prior_scale(xy, centre))

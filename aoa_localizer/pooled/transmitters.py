@@ -37,10 +37,11 @@ def count_id(readings: list[SurveyReading], geom: Geometry, point: np.ndarray, s
     if max_k < 2 or len(used) < MIN_READINGS or not all(math.isfinite(r.stamp) for r in used):
         return None
     used = _thinned(sorted(used, key=lambda r: r.stamp), math.ceil(len(used) / _MAX_READINGS))
-    east, north = geom.frame.to_enu(np.array([r.lat for r in used]), np.array([r.lon for r in used]))
+    lat, lon = np.array([r.lat for r in used]), np.array([r.lon for r in used])
+    east, north = geom.frame.to_enu(lat, lon)
     sites: dict[tuple, int] = {}
     site = np.array([sites.setdefault(_site_of(r), len(sites)) for r in used])
-    theta = wrap_pi(0.5 * math.pi - np.radians([r.azimuth_deg for r in used]))
+    theta = wrap_pi(geom.frame.north_angle(lat, lon) - np.radians([r.azimuth_deg for r in used]))
     own = _successive_scatter(theta, site, len(sites))
     fallback = float(np.median(own[np.isfinite(own)])) if np.any(np.isfinite(own)) else site_error
     sigma = np.array([math.radians(r.sigma_deg) if math.isfinite(r.sigma_deg)
