@@ -142,8 +142,11 @@ def test_a_readings_own_sigma_overrides_its_qualitys_and_a_pose_is_one_with_it(l
     pose = open_point(loc)[-1]
     assert math.degrees(pose.sigma) == pytest.approx(2.0) and pose.stamp == 4.0
     assert math.degrees(pose.theta) == pytest.approx(80.0) and loc.unknown_quality == 1
-    loc.add_bearing_enu(4.5, math.radians(80.0), -1.0)  # a pose's variance not known: its quality's (none)
+    loc.add_bearing_enu(4.5, math.radians(80.0), 0.0)  # a pose's variance not filled in: its quality's (none)
     assert dict(loc.rejected) == {"bad_sigma": 4}
+    loc.add_bearing_enu(4.6, math.radians(80.0), -1.0)  # negative, as add_bearing's sigma: refused
+    loc.add_bearing_enu(4.7, math.radians(80.0), math.inf)
+    assert dict(loc.rejected) == {"bad_sigma": 6}
 
 
 def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):

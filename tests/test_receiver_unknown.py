@@ -168,7 +168,7 @@ def test_locate_reads_a_survey_csv_skips_a_bad_row_by_line_and_writes_one_line_p
     e, n = frame.to_enu(got["lat"], got["lon"])
     assert nees(np.array([e, n]), np.array(got["cov"])) < 3 * ELLIPSE_95
     assert {p.name for p in (tmp_path / "rep").iterdir()} == {"map.png", "emitter.kml", "emitter.geojson",
-                                                           "emitter_fox.cot", "maps"}  # TAK's: with pytak
+                                                           "emitter_fox.cot", "maps", "summary.md"}
     # the id's own map, zoomed to its bearings (issue 53, part 2: a map a person can read)
     assert (tmp_path / "rep/maps/fox.png").read_bytes()[:4] == b"\x89PNG"
 

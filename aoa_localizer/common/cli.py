@@ -38,9 +38,19 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 INTERRUPTED = 130  # the exit code after Ctrl-C: 128 + SIGINT, as a shell reports an interrupted program
 
 
-def interrupted(program: str, kept: str) -> int:
-    """Ctrl-C: one line saying what is kept (no traceback), and INTERRUPTED."""
-    print(f"{program}: interrupted (Ctrl-C); {kept}", file=sys.stderr)
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program handles a Ctrl-C, so both keep what is done."""
+
+
+def raise_terminated(_signum, _frame):
+    """A SIGTERM handler: the run stops as at a Ctrl-C."""
+    raise Terminated
+
+
+def interrupted(program: str, kept: str, exc: BaseException | None = None) -> int:
+    """Ctrl-C (or SIGTERM, `exc` a Terminated): one line saying what is kept (no traceback), and INTERRUPTED."""
+    print(f"{program}: interrupted ({'SIGTERM' if isinstance(exc, Terminated) else 'Ctrl-C'}); {kept}",
+          file=sys.stderr)
     return INTERRUPTED
 
 

@@ -13,7 +13,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from urllib.parse import urlparse
 
-from aoa_localizer.common.output import file_name
+from aoa_localizer.common.output import file_names
+from aoa_localizer.common.xml_text import xml_text
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 
 RETRY_S = 10.0  # after a failed send, the next tries this much later (a TCP server down costs no 2 s timeouts)
@@ -40,7 +41,7 @@ def estimate_event(est, stale_s: float, name: str = "") -> bytes:
     the 95 % ellipse's semi-major (m), a shape with the 95 % ellipse (semi-axes m, angle deg clockwise from north),
     the state and warnings in the remarks, stale `stale_s` from now."""
     pytak = _pytak()
-    ident = name or est.channel
+    ident = xml_text(name or est.channel)
     major, minor, azimuth = ellipse_axes(est.cov if est.ground_cov is None else est.ground_cov)
     shape = ET.Element("shape")
     ET.SubElement(shape, "ellipse", major=f"{major:.1f}", minor=f"{minor:.1f}", angle=f"{azimuth:.1f}")
@@ -48,7 +49,7 @@ def estimate_event(est, stale_s: float, name: str = "") -> bytes:
     detail = pytak.cot_detail(shape)
     pytak.add_remarks(detail, [f"aoa_localizer {ident}{frequency}: {est.state};",
                                f"95 % ellipse {major:.0f} x {minor:.0f} m ({ELLIPSE_95:.2f} sigma^2);",
-                               f"{est.bearings_used} bearings.", *est.warnings])
+                               f"{est.bearings_used} bearings.", *map(xml_text, est.warnings)])
     point = pytak.cot_point(est.lat, est.lon, ce=f"{major:.1f}", hae=None, le=None, precision=7)
     event = pytak.cot_event(uid=f"{UID_PREFIX}.{ident}", stale=max(1, round(stale_s)), cot_type=COT_TYPE,
                             point=point, detail=detail, callsign=f"DF {ident}")
@@ -59,15 +60,16 @@ FILE_STALE_S = 3600.0  # a .cot file's event stays fresh this long after it is w
 
 
 def write_cot_files(folder, estimates, stale_s: float = FILE_STALE_S) -> str:
-    """`emitter_<name>.cot` in `folder` for each estimate (named by its channel, or a survey's id: characters a file
-    name cannot hold become `_`), to drop onto a TAK device or send with any CoT tool; what was written, or why
-    nothing was (pytak missing)."""
+    """`emitter_<name>.cot` in `folder` for each estimate (named by its channel, or a survey's id, as
+    output.file_names names it: one file per id), to drop onto a TAK device or send with any CoT tool; what was
+    written, or why nothing was (pytak missing)."""
     try:
         events = [(est.channel, estimate_event(est, stale_s)) for est in estimates]
     except CotUnavailable as exc:
         return f"no .cot files: {exc}"
+    names = file_names(name for name, _ in events)
     for name, payload in events:
-        (Path(folder) / f"emitter_{file_name(name)}.cot").write_bytes(payload)
+        (Path(folder) / f"emitter_{names[name]}.cot").write_bytes(payload)
     return f"{len(events)} .cot file{'s' if len(events) != 1 else ''} for TAK"
 
 

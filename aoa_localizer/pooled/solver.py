@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -151,18 +152,23 @@ class _Solved:
     extra: dict
 
 
-def _solve(geoms: dict[str, Geometry], noise: NoiseGrid) -> _Solved:
+def _solve(geoms: dict[str, Geometry], noise: NoiseGrid, progress: Callable[[str, int, int], None]) -> _Solved:
     """Pool the group's evidence over the hypotheses, fix every emitter; then learn the biases and fix again."""
     shifts = {e: np.zeros(len(g.xy)) for e, g in geoms.items()}
     extra = {e: np.zeros(len(g.xy)) for e, g in geoms.items()}
     biases: dict[str, Bias] = {}
     for round_ in range(_ROUNDS):
-        found = {e: evidence(g, shifts[e], extra[e], noise) for e, g in geoms.items()}
+        stage = f"calibrating the receivers, round {round_ + 1} of {_ROUNDS}"
+        found = {}
+        for done, (e, g) in enumerate(geoms.items()):
+            progress(f"{stage}, evidence", done, len(geoms))
+            found[e] = evidence(g, shifts[e], extra[e], noise)
         log_z = {e: z for e, (z, _) in found.items()}
         total = noise.log_prior + sum(log_z.values())
         log_w = total - logsumexp(total, axis=0)
         boxes, regions = {}, {}
-        for e, g in geoms.items():  # one emitter's grid at a time: a file of thousands of ids holds none of them
+        for done, (e, g) in enumerate(geoms.items()):  # one emitter's grid at a time: thousands of ids hold none
+            progress(f"{stage}, fixes", done, len(geoms))
             z = zoom(g, shifts[e], extra[e], noise, log_w, found[e][1])
             p = mixture(z.log_joint, log_z[e], log_w)
             # past the cells, in every round: the biases are learned from these points, and a point a cell's
@@ -286,9 +292,17 @@ def _with_count(fix: EmitterFix, count: SurveyCount) -> EmitterFix:
     return replace(fix, state=state, warnings=warnings, count=count)
 
 
-def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown", max_k: int = 3) -> PooledResult:
+def _nothing(*_args) -> None:
+    return None
+
+
+def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown", max_k: int = 3,
+                  on_fix: Callable[[str, EmitterFix | str, dict | None], None] = _nothing,
+                  progress: Callable[[str, int, int], None] = _nothing) -> PooledResult:
     """Every emitter's fix from a survey's readings (docs/interface.md, "locate"), each id's transmitters counted
-    up to `max_k` (1: not counted); a ValueError for an unknown receiver class."""
+    up to `max_k` (1: not counted); a ValueError for an unknown receiver class. A long survey is followed by
+    `on_fix(id, fix or why none, its group's noise summary)` as each id is done (its group's noise learned), and
+    `progress(stage, done, of)` while its group is calibrated."""
     grids = {repeated: noise_grid(receiver_class, repeated) for repeated in (False, True)}  # a bad class: at once
     stations, warnings = make_stations(readings)
     result = PooledResult(warnings=warnings)
@@ -301,6 +315,7 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
         g = _geometry(e, mine, scatter)
         if isinstance(g, str):
             result.refused[e] = g
+            on_fix(e, g, None)
         else:
             geoms[e] = g
     heard: dict[str, list[SurveyReading]] = defaultdict(list)
@@ -310,7 +325,7 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
         group = {e: geoms[e] for e in names}
         repeats = np.median([s.n for e in names for s in by_emitter[e]])
         noise = grids[bool(repeats >= REPEATED_READINGS)]
-        solved = _solve(group, noise)
+        solved = _solve(group, noise, progress)
         summary = _noise_summary(noise, solved.log_w, sorted({r for g in group.values() for r in g.receivers}),
                                  len(group))
         result.noise.append(summary)
@@ -320,6 +335,7 @@ def locate_pooled(readings: list[SurveyReading], receiver_class: str = "unknown"
             counted = count_id(heard[e], g, region.point, math.radians(summary["scale_deg"]), max_k,
                                lambda part: _part_fix(part, receiver_class))
             result.fixes[e] = fix if counted is None else _with_count(fix, counted)
+            on_fix(e, result.fixes[e], summary)
         result.receivers.update(_calibrations(group, solved.biases))
     result.warnings += _receiver_warnings(result.receivers)
     return result

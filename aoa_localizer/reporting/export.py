@@ -4,23 +4,16 @@ time, algorithm, bearing count, channel and frequency as properties."""
 from __future__ import annotations
 
 import datetime
-import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from aoa_localizer.common.xml_text import xml_text
 from aoa_localizer.engine.crlb import ellipse_axes, ellipse_points
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.types import Estimate
 
 KML_NS = "http://www.opengis.net/kml/2.2"
-# Characters XML 1.0 cannot hold, escaped or not: a control character in an id or a channel name
-_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")
-
-
-def xml_text(value) -> str:
-    """`value` as text a KML can hold: each character XML forbids becomes U+FFFD."""
-    return _NOT_XML.sub("\ufffd", str(value))
 
 
 def properties(est: Estimate) -> dict:

@@ -31,6 +31,7 @@ from aoa_localizer.common.cli import (
     setup_logging,
 )
 from aoa_localizer.common.cot import write_cot_files
+from aoa_localizer.common.output import check_folder
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
@@ -248,6 +249,10 @@ def make_report(args) -> int:
     for path in (args.input, bag):
         if not path.exists():
             raise ReportError(f"no such input: {path}")
+    try:
+        check_folder(args.out, "--out")  # under a file, /proc: said now, not after the whole bag
+    except ValueError as exc:
+        raise ReportError(str(exc)) from None
     try:
         cfg = config_from_args(args, _made_with(args.input) if jsonl else None)
         stations = bag_stations(args)

@@ -130,13 +130,13 @@ def id_map(path: Path, frame: LocalFrame, ident: str, est, rows) -> None:
     span = max(float(np.ptp(xs)), float(np.ptp(ys)), 1e-6)
     ax.set_xlim(xs.min() - 0.15 * span, xs.max() + 0.15 * span)
     ax.set_ylim(ys.min() - 0.15 * span, ys.max() + 0.15 * span)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")  # the limits hold the view; the box takes the shape
     ax.set_xlabel(f"east (m) from {frame.lat0:.6f}, {frame.lon0:.6f}")
     ax.set_ylabel("north (m)")
     ax.set_title(f"{_printable(ident)}: {est.lat:.6f}, {est.lon:.6f} ({est.state}), "
                  f"{len(rows)} bearings", fontsize=10)
     _scale_bar(ax)
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.1, right=0.68, top=0.93, bottom=0.09)  # fixed: tight_layout cost a third of a map
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -35,6 +35,7 @@ from rclpy.node import Node
 
 from aoa_localizer.common.http_poll import DEFAULT_MAX_BYTES, PollFailed, http_get
 from aoa_localizer.common.kraken_csv import KrakenLine, LineFilter, MalformedLine, parse_line, quality_from_confidence
+from aoa_localizer.common.output import check_folder
 from aoa_localizer.engine.geodesy import wrap_360
 from aoa_localizer.ros.ros_main import Stop, run_node
 from msgs_adapters import build
@@ -64,8 +65,11 @@ def parse_args(argv) -> argparse.Namespace:
     parser.add_argument("--record", metavar="DIR", help="record every topic into this rosbag2 MCAP bag directory (it "
                         "must not exist yet)")
     args = parser.parse_args(own)
-    if args.record is not None and Path(args.record).exists():
-        parser.error(f"--record {args.record} exists: a bag is recorded into a new directory")
+    if args.record is not None:
+        try:
+            check_folder(Path(args.record), "--record", new=True)  # exists, under a file, /proc: before the graph
+        except ValueError as exc:
+            parser.error(str(exc))
     if not args.url.startswith(("http://", "https://")):
         parser.error(f"--url must be an http(s) address, got {args.url!r}")
     if not (0 < args.rate <= 1000 and 0 < args.timeout <= TIMEOUT_MAX_S and 1024 <= args.max_bytes <= 2**30):

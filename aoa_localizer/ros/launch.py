@@ -30,6 +30,7 @@ import numpy as np
 import yaml
 
 from aoa_localizer.common.cli import HelpFormatter, finite_number, integer_in, seed_value
+from aoa_localizer.common.output import check_folder
 from aoa_localizer.core.spec import ConfigError, unknown_names
 from aoa_localizer.engine.config import parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
@@ -508,8 +509,11 @@ def _vehicle_value_problem(name: str, text: str) -> str | None:
 
 def refusal(args) -> str | None:
     """Why the options cannot run, before anything starts (None: they can)."""
-    if args.record and args.record.exists():
-        return f"{args.record} exists; choose a new directory"
+    if args.record:
+        try:
+            check_folder(args.record, "--record", new=True)
+        except ValueError as exc:
+            return str(exc)
     if args.bag and not args.bag.exists():
         return f"no bag at {args.bag}"
     if args.params_file and not args.params_file.is_file():

@@ -21,13 +21,23 @@ import datetime
 import json
 import math
 import os
+import signal
 import sys
+import threading
+import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, interrupted, setup_logging
+from aoa_localizer.common.cli import (
+    HelpFormatter,
+    add_engine_args,
+    config_from_args,
+    interrupted,
+    raise_terminated,
+    setup_logging,
+)
 from aoa_localizer.common.cot import write_cot_files
-from aoa_localizer.common.output import check_output, file_name, write_staged
+from aoa_localizer.common.output import StagedFile, check_folder, check_output, file_names, write_staged
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -40,6 +50,8 @@ from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES
 from aoa_localizer.pooled.stations import SIGMA_RANGE_DEG
 
 PROG = "python -m aoa_localizer.locate"
+MAPS = 200  # --report's per-id maps by default: about a minute of drawing; the rest are listed in summary.md
+PROGRESS_S = 10.0  # a long run says how far it is on stderr this often
 SURVEY_SEED = 1  # `--model filter`'s seed unless --seed: the same file gives the same answer run after run
 
 
@@ -179,6 +191,17 @@ def _row(line: int, row: dict, to_wgs84, comma: bool, zone: datetime.tzinfo | No
                (row.get("station") or "").strip(), (row.get("id") or "").strip(), receiver)
 
 
+def _count(text: str) -> int:
+    """argparse type of --maps: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a count is an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a count is an integer >= 0, got {value}")
+    return value
+
+
 def _zone(text: str) -> datetime.tzinfo:
     """--time-zone: an IANA zone name (daylight saving applied per time) or a fixed offset (+HH:MM)."""
     try:
@@ -225,8 +248,8 @@ def check_outputs(source: Path, output: Path | None, report: Path | None):
     """Refuse, before any work, an output that cannot be written or would destroy the input (a ValueError)."""
     if output is not None:
         check_output(output, (source,))
-    if report is not None and report.exists() and not report.is_dir():
-        raise ValueError(f"--report {report} is a file; give a folder (made if missing)")
+    if report is not None:
+        check_folder(report, "--report")
 
 
 def record(ident: str, est: Estimate, rows: int) -> dict:
@@ -237,9 +260,11 @@ def record(ident: str, est: Estimate, rows: int) -> dict:
             **{k: whole[k] for k in ("modes", "transmitter_count", "count_probability", "transmitters")}}
 
 
-def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]]):
+def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, list[Row]]], maps: int,
+                 refused: dict[str, str]):
     """map.png (every id's estimate and 95 % ellipse, numbered), maps/<id>.png (each id zoomed to its bearings:
-    reporting/survey_map.py), emitter.kml, emitter.geojson and an emitter_<id>.cot (TAK) of every id."""
+    reporting/survey_map.py) for the first `maps` ids, emitter.kml, emitter.geojson, an emitter_<id>.cot (TAK) of
+    every id, and summary.md: each id's state and files (its file names as output.file_names makes them)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -252,26 +277,95 @@ def write_report(out: Path, frame: LocalFrame, found: dict[str, tuple[Estimate, 
     (out / "emitter.geojson").write_text(json.dumps(geojson(frame, named, {}), indent=1))
     (out / "emitter.kml").write_text(kml(frame, named, {}))
     print(f"locate: {write_cot_files(out, named)}", file=sys.stderr)
+    names = file_names(est.channel for est in named)
+    drawn = list(found)[:maps]
+    write_staged(out / "summary.md", summary(found, names, set(drawn), refused))
     survey_map.overview(out / "map.png", frame, found)
-    (out / "maps").mkdir(exist_ok=True)
-    for ident, (est, rows) in found.items():
-        survey_map.id_map(out / "maps" / f"{file_name(ident)}.png", frame, ident, est, rows)
+    if drawn:
+        (out / "maps").mkdir(exist_ok=True)
+    clock = _Clock("drawing the maps", len(drawn))
+    for k, ident in enumerate(drawn):
+        est, rows = found[ident]
+        survey_map.id_map(out / "maps" / f"{names[ident or 'default']}.png", frame, ident, est, rows)
+        clock.tick(k + 1)
+    if len(found) > maps:
+        print(f"locate: maps/ holds the first {maps} of {len(found)} ids (--maps to draw more); summary.md lists "
+              "every id", file=sys.stderr)
 
 
-def _filter_run(groups: dict[str, list[Row]], cfg, datum) -> tuple[dict, list[str], int]:
+def summary(found: dict[str, tuple[Estimate, list[Row]]], names: dict[str, str], drawn: set[str],
+            refused: dict[str, str]) -> str:
+    """summary.md of a survey's report: a row per id with its place, state and files."""
+    lines = ["# Survey report", "", f"{len(found)} ids located, {len(refused)} without an estimate.", "",
+             "| id | lat | lon | state | TAK file | map |", "|---|---|---|---|---|---|"]
+    for ident, (est, _) in found.items():
+        name = names[ident or "default"]
+        shown = json.dumps(ident)[1:-1].replace("|", "\\|")
+        lines.append(f"| {shown} | {est.lat:.6f} | {est.lon:.6f} | {est.state} | emitter_{name}.cot | "
+                     + (f"maps/{name}.png |" if ident in drawn else "not drawn (--maps) |"))
+    lines += [f"| {json.dumps(ident)[1:-1]} | - | - | no estimate: {why} | - | - |" for ident, why in refused.items()]
+    return "\n".join(lines) + "\n"
+
+
+class _Clock:
+    """A long stage's progress on stderr: a line every PROGRESS_S, from the first PROGRESS_S on (a short run
+    prints none)."""
+
+    def __init__(self, stage: str, total: int):
+        self.stage, self.total = stage, total
+        self.start = self.last = time.monotonic()
+
+    def tick(self, done: int, stage: str | None = None) -> None:
+        now = time.monotonic()
+        if now - self.last >= PROGRESS_S:
+            self.last = now
+            print(f"locate: {stage or self.stage}: {done} of {self.total} ids, {now - self.start:.0f} s",
+                  file=sys.stderr, flush=True)
+
+
+class _Lines:
+    """Where each id's result goes as it is done: the table row now, its JSON line into --output (placed at the
+    first line and flushed a line at a time, so an interrupted run keeps every id done), and the progress."""
+
+    def __init__(self, output: Path | None, total: int):
+        self.staged = StagedFile(output) if output is not None else None
+        self.clock = _Clock("located", total)
+        self.written = self.failed = 0
+        self.found: dict[str, tuple[Estimate, list[Row]]] = {}
+        self.refused: dict[str, str] = {}
+
+    def fixed(self, ident: str, est: Estimate, group: list[Row], line: dict) -> None:
+        self.found[ident] = (est, group)
+        if self.staged is not None:
+            self.staged.place()
+            self.staged.file.write(json.dumps(line) + "\n")
+            self.staged.file.flush()
+        self.written += 1
+        _print_row(ident, est)  # after its line: a row on the table is an id kept
+        self.clock.tick(self.written + self.failed)
+
+    def none(self, ident: str, why: str) -> None:
+        self.refused[ident] = why
+        self.failed += 1
+        print(f"{ident or '-':<12} no estimate: {why}")
+
+    def close(self, whole: bool) -> None:
+        """Keep what was written: the whole file, or (interrupted) the ids done, each line whole."""
+        if self.staged is not None:
+            if whole or self.written:
+                self.staged.keep()
+            else:
+                self.staged.drop()
+
+
+def _filter_run(groups: dict[str, list[Row]], cfg, datum, lines: _Lines) -> None:
     """--model filter: each id through its own particle filter (the round-3 engine)."""
-    found: dict[str, tuple[Estimate, list[Row]]] = {}
-    lines, failed = [], 0
     for ident, group in groups.items():
         est, loc = locate(group, cfg, datum)
         if est is None:
-            failed += 1
-            print(f"{ident or '-':<12} no estimate: {loc.status}")
-            continue
-        found[ident] = (est, group)
-        _print_row(ident, est)
-        lines.append(json.dumps(record(ident, est, len(group))))
-    return found, lines, failed
+            lines.none(ident, loc.status)
+        else:
+            lines.fixed(ident, est, group, record(ident, est, len(group)))
 
 
 def _print_row(ident: str, est: Estimate):
@@ -280,42 +374,45 @@ def _print_row(ident: str, est: Estimate):
           f"{est.state}" + "".join(f"\n{'':<12} {w}" for w in est.warnings))
 
 
-def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class: str, max_k: int):
-    """--model pooled: every id at once, each receiver calibrated over the ids it heard (aoa_localizer.pooled)."""
+def _pooled_run(groups: dict[str, list[Row]], frame: LocalFrame, receiver_class: str, max_k: int,
+                lines: _Lines) -> None:
+    """--model pooled: every id at once, each receiver calibrated over the ids it heard (aoa_localizer.pooled);
+    each id's line goes out as soon as its group's noise is learned."""
     readings = [SurveyReading(row.id, row.lat, row.lon, row.azimuth_deg, row.station, row.receiver, row.sigma_deg,
                               row.stamp) for group in groups.values() for row in group]
-    result = locate_pooled(readings, receiver_class, max_k)
-    for warning in result.warnings:
-        print(f"locate: warning: {warning}", file=sys.stderr)
-    found: dict[str, tuple[Estimate, list[Row]]] = {}
-    lines, failed = [], 0
-    for ident, group in groups.items():
-        fix = result.fixes.get(ident)
-        if fix is None:
-            failed += 1
-            print(f"{ident or '-':<12} no estimate: {result.refused.get(ident, 'no usable bearing')}")
-            continue
+    calibrating = _Clock("calibrating", len(groups))
+
+    def on_fix(ident: str, fix, noise: dict | None) -> None:
+        if isinstance(fix, str):
+            lines.none(ident, fix)
+            return
+        group = groups[ident]
         east, north = frame.to_enu(fix.lat, fix.lon)
         est = Estimate(group[-1].stamp, float(east), float(north), fix.lat, fix.lon, fix.cov, fix.readings,
                        fix.stations, float("nan"), "pooled", modes=[(float(east), float(north), 1.0)],
                        channel=ident or "default", state=fix.state, warnings=list(fix.warnings), regions=fix.hpd,
                        **counted(fix.count, frame))
-        found[ident] = (est, group)
-        _print_row(ident, est)
-        lines.append(json.dumps(pooled_record(ident, est, fix, len(group), result)))
+        lines.fixed(ident, est, group, pooled_record(ident, est, fix, len(group), noise))
+
+    result = locate_pooled(readings, receiver_class, max_k, on_fix,
+                           lambda stage, done, of: calibrating.tick(done, stage))
+    for warning in result.warnings:
+        print(f"locate: warning: {warning}", file=sys.stderr)
+    for ident in groups:
+        if ident not in result.fixes and ident not in lines.refused:
+            lines.none(ident, "no usable bearing")
     for text in receiver_lines(result):
         print(text)
-    return found, lines, failed
 
 
-def pooled_record(ident: str, est: Estimate, fix, rows: int, result) -> dict:
-    """A JSON line of the pooled model (docs/interface.md, "locate"): the filter's fields and the regions."""
+def pooled_record(ident: str, est: Estimate, fix, rows: int, noise: dict | None) -> dict:
+    """A JSON line of the pooled model (docs/interface.md, "locate"): the filter's fields and the regions, and the
+    noise of the group its receivers are in."""
     out = record(ident, est, rows)
-    group = next((g for g in result.noise if set(fix.receivers) <= set(g["receivers"])), None)
     out.update({"model": "pooled", "stations": fix.stations, "receivers": fix.receivers,
                 "hpd": est.to_json_dict()["hpd"],
                 "ellipse_mass": {f"{100 * lvl:.0f}": round(m, 3) for lvl, m in fix.ellipse_mass.items()},
-                "noise": group})
+                "noise": noise})
     return out
 
 
@@ -360,12 +457,17 @@ class _Table:
 
 def main(argv=None) -> int:
     stdout, sys.stdout = sys.stdout, _Table(sys.stdout)
+    terminate = None
+    if threading.current_thread() is threading.main_thread():  # SIGTERM ends a run as Ctrl-C does: what is done stays
+        terminate = signal.signal(signal.SIGTERM, raise_terminated)
     try:
         return _main(argv)
-    except KeyboardInterrupt:
-        return interrupted("locate", "nothing written (every id's fix is written at the end of the run)")
+    except KeyboardInterrupt as exc:  # before the run started: nothing to keep
+        return interrupted("locate", "nothing written", exc)
     finally:
         sys.stdout = stdout
+        if terminate is not None:
+            signal.signal(signal.SIGTERM, terminate)
 
 
 def _main(argv=None) -> int:
@@ -373,6 +475,9 @@ def _main(argv=None) -> int:
     parser.add_argument("csv", type=Path, help="the bearings (CSV with a header)")
     parser.add_argument("--output", type=Path, metavar="OUT.jsonl", help="one JSON line per id")
     parser.add_argument("--report", type=Path, metavar="DIR", help="map.png, emitter.kml, emitter.geojson")
+    parser.add_argument("--maps", type=_count, default=MAPS, metavar="N",
+                        help=f"with --report: draw maps/<id>.png for the first N ids (a map takes about 0.3 s; "
+                             f"summary.md lists every id; default {MAPS})")
     parser.add_argument("--crs", metavar="EPSG:NNNN", help="the CRS of projected x, y columns (instead of lat, lon)")
     parser.add_argument("--model", choices=("pooled", "filter"), default="pooled",
                         help="pooled: every id at once on a grid, receivers calibrated jointly (default); filter: "
@@ -407,12 +512,21 @@ def _main(argv=None) -> int:
     for row in rows:
         groups.setdefault(row.id, []).append(row)
     print(f"{'id':<12} {'lat':>11} {'lon':>12} {'95% semi-axes (m)':>18} {'bearings':>8}  state")
-    if args.model == "filter":
-        found, lines, failed = _filter_run(groups, cfg, datum)
-    else:
-        found, lines, failed = _pooled_run(groups, frame, args.receiver_class, cfg.max_emitters_per_channel)
-    if args.output:
-        write_staged(args.output, "".join(line + "\n" for line in lines))
-    if args.report and found:
-        write_report(args.report, frame, found)
-    return 1 if failed else 0
+    lines = _Lines(args.output, len(groups))
+    try:
+        if args.model == "filter":
+            _filter_run(groups, cfg, datum, lines)
+        else:
+            _pooled_run(groups, frame, args.receiver_class, cfg.max_emitters_per_channel, lines)
+    except KeyboardInterrupt as exc:
+        lines.close(whole=False)
+        kept = (f"{lines.written} of {len(groups)} ids' lines kept in {args.output}" if args.output and lines.written
+                else "no id was done: nothing written")
+        return interrupted("locate", kept + ("; no report" if args.report else ""), exc)
+    lines.close(whole=True)
+    if args.report and lines.found:
+        try:
+            write_report(args.report, frame, lines.found, args.maps, lines.refused)
+        except KeyboardInterrupt as exc:
+            return interrupted("locate", f"--output is whole; the report in {args.report} is not complete", exc)
+    return 1 if lines.failed else 0
