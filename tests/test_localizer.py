@@ -149,6 +149,37 @@ def test_a_readings_own_sigma_overrides_its_qualitys_and_a_pose_is_one_with_it(l
     assert dict(loc.rejected) == {"bad_sigma": 6}
 
 
+@pytest.mark.parametrize("sigma", [1e-6, 1e-7, 1e-9, 200.0])
+def test_a_sigma_no_bearing_has_is_refused_and_fixed_stations_at_the_finest_one_are_located(sigma):
+    """Issue 64, item 11: sigma_deg 1e-6 from fixed stations ended finish() in `LinAlgError: Singular matrix`, 1e-7
+    to 1e-9 in internal errors and no estimate. Outside [0.001, 180] deg: `bad_sigma`; at 0.001 deg a fix."""
+    from aoa_localizer.engine.geodesy import LocalFrame
+
+    frame = LocalFrame(47.0, 8.0, 0.0)
+    places = {"a": (0.0, 0.0), "b": (600.0, 0.0), "c": (0.0, 800.0), "d": (600.0, 800.0)}
+    for s, expect in ((sigma, None), (1e-3, "tracking")):
+        loc = Localizer(LocalizerConfig(seed=1))
+        for name, (e, n) in places.items():
+            loc.add_station(name, fixed=True)
+            loc.set_station_position(name, *frame.to_geodetic(e, n)[:2])
+        for k in range(20):
+            name = "abcd"[k % 4]
+            e, n = places[name]
+            lat, lon, _ = frame.to_geodetic(e, n)
+            azimuth = float(frame.north_angle(lat, lon))  # the true azimuth at the station, meridians turned
+            azimuth = math.degrees(azimuth - math.atan2(400.0 - n, 300.0 - e))
+            loc.add_bearing(float(k + 1), azimuth % 360.0, 80.0, station=name, sigma_deg=s)
+        loc.flush()
+        loc.finish()
+        est = loc.estimate
+        if expect is None:
+            assert est is None and dict(loc.rejected) == {"bad_sigma": 20}
+        else:
+            assert est is not None and est.state.value == expect and "internal_error" not in loc.rejected
+            assert math.hypot(est.east - 300.0, est.north - 400.0) < 0.1
+        loc.close()
+
+
 def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(2.0, *fix_at(0.0, 0.0))

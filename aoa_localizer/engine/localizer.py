@@ -311,7 +311,8 @@ class Localizer:
                     frequency_hz=float("nan"), sigma_deg=float("nan")) -> Estimate | None:
         """A DF record: azimuth (deg) and quality of the carrier at `frequency_hz` (0 or NaN: the default
         channel) seen from `station`; `sigma_deg` the reading's own sigma when it has one (a hand-held bearing's,
-        a pose's; NaN or None: the one its quality gives; 0, negative or not a number: refused, `bad_sigma`).
+        a pose's; NaN or None: the one its quality gives; outside [0.001, 180] deg or not a number: refused,
+        `bad_sigma`).
         Returns the estimate this reading produced (when it closed an observation point), else None."""
         closed = self._intake.take_bearing(stamp, azimuth_deg, quality, sigma_deg, station, frequency_hz)
         return self._estimates.take_points(closed)

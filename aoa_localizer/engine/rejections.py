@@ -26,7 +26,7 @@ class Reason(StrEnum):
 
     BAD_STAMP = "bad_stamp", "stamp is not a finite number"
     BAD_AZIMUTH = "bad_azimuth", "azimuth is NaN or infinite"
-    BAD_SIGMA = "bad_sigma", "a reading's own sigma (sigma_deg) given but not a positive finite number"
+    BAD_SIGMA = "bad_sigma", "a reading's own sigma (sigma_deg) given but not a number in [0.001, 180] deg"
     BAD_QUALITY = "bad_quality", "quality outside 0..100"
     LOW_QUALITY = "low_quality", "quality below quality_min"
     BEARING_OUT_OF_ORDER = "bearing_out_of_order", "bearing stamp older than the previous bearing"

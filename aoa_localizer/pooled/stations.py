@@ -16,12 +16,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from aoa_localizer.engine.geodesy import wrap_pi
+from aoa_localizer.engine.ingest.intake import SIGMA_RANGE_DEG
 
 _MAD_TO_SIGMA = 1.4826  # a Gaussian's sigma over its median absolute deviation
 _WILD_Z = 4.0  # a reading this many robust sigmas from its station's median is left out of the station's centre
 _OWN_SCATTER_MIN = 5  # readings from which a station's own scatter is trusted over the receiver's pooled one
 FIXED_SITE_READINGS = 5  # an instrument left at one place, not an observer taking a bearing and moving on
-SIGMA_RANGE_DEG = (1e-3, 180.0)  # a reading's own sigma outside this is no bearing's
 
 
 @dataclass(frozen=True)

@@ -347,7 +347,7 @@ def _gn_step(x, pts: Points, rob: Robust, widen_m, prec):
     rhs = np.einsum("mk,mki->mi", w * resid, grad)
     if rob.prior_prec is not None:
         rhs = rhs - (x - rob.prior_mean) @ prec.T
-    delta = np.linalg.solve(info, rhs[..., None])[..., 0]
+    delta = np.einsum("mij,mj->mi", inverse_2x2(info), rhs)  # NaN where singular: no step (below)
     # Along a ray the bearing-only posterior is nearly flat: never step farther than the distance from the
     # points (plus a margin), so a nearly singular information cannot throw x to 1e150 m.
     reach = np.hypot(x[:, 0] - pts.east.mean(), x[:, 1] - pts.north.mean()) + _MIN_STEP_LIMIT_M

@@ -30,6 +30,12 @@ _CLOCK_REASONS = {  # (the fix's, the bearing's) reason for each refusing verdic
     Verdict.AHEAD: (Reason.FIX_STAMP_JUMP, Reason.BEARING_STAMP_JUMP),
 }
 
+# A reading's own sigma outside this is no bearing's: below a thousandth of a degree (3.6 arcseconds) the
+# crossings' information overflows double precision (1e-6 deg once ended a run in a singular matrix), and past 180
+# deg a reading says nothing. The survey reader (pooled.stations) refuses the same.
+SIGMA_RANGE_DEG = (1e-3, 180.0)
+SIGMA_RANGE_RAD = (math.radians(SIGMA_RANGE_DEG[0]), math.radians(SIGMA_RANGE_DEG[1]))
+
 
 def as_float(value) -> float:
     """`value` as a float; NaN for what is not a number (bad input is refused by its reason, never raised)."""
@@ -178,7 +184,7 @@ class Intake:
         those its station's held bearings close now that they can be placed (Pairing). A refused record is
         counted under its reason and closes only what retiring made room for."""
         stamp, azimuth, quality, frequency = map(as_float, (stamp, azimuth_deg, quality, frequency_hz))
-        # a reading's own sigma: NaN or None when it has none; what is given must be a positive finite number
+        # a reading's own sigma: NaN or None when it has none; what is given must lie in SIGMA_RANGE_DEG
         given = sigma_deg is not None and not (isinstance(sigma_deg, numbers.Real) and math.isnan(sigma_deg))
         sigma = math.radians(as_float(sigma_deg)) if given else math.nan
         if not self.cfg.in_band(frequency):  # another node's (frequency_band_hz): not ours, not an error
@@ -186,7 +192,7 @@ class Intake:
             return []
         stamp += self.cfg.df_time_offset_s  # on the GPS clock
         why = (Reason.BAD_STAMP if not math.isfinite(stamp) else Reason.BAD_AZIMUTH if not math.isfinite(azimuth)
-               else Reason.BAD_SIGMA if given and not 0 < sigma < math.inf
+               else Reason.BAD_SIGMA if given and not SIGMA_RANGE_RAD[0] <= sigma <= SIGMA_RANGE_RAD[1]
                else Reason.BAD_QUALITY if not math.isnan(quality) and not 0 <= quality <= 100
                else Reason.LOW_QUALITY if quality < self.cfg.quality_min  # False for NaN: unknown quality passes
                else None)
