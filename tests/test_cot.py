@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import takproto
 
-from aoa_localizer.common.cot import CotSender, estimate_event, write_cot_files
+from aoa_localizer.common.cot import QUEUE_MAX, CotSender, estimate_event, parse_cot_url, write_cot_files
 from aoa_localizer.engine.types import Estimate
 
 
@@ -43,21 +43,70 @@ def test_udp_and_tcp_listeners_receive_the_event_and_a_dead_server_is_counted_no
     rx.bind(("127.0.0.1", 0))
     rx.settimeout(5)
     udp = CotSender(f"udp://127.0.0.1:{rx.getsockname()[1]}")
-    assert udp.send(payload) and rx.recv(65536) == payload and udp.sent == 1
+    udp.send(payload)
+    assert rx.recv(65536) == payload and udp.flush() and udp.sent == 1
     server = socket.create_server(("127.0.0.1", 0))
     port = server.getsockname()[1]
     tcp = CotSender(f"tcp://127.0.0.1:{port}")
-    assert tcp.send(payload)
+    tcp.send(payload)
     conn, _ = server.accept()
     conn.settimeout(5)
     assert conn.recv(65536).rstrip(b"\n") == payload
     conn.close()
     server.close()
     dead = CotSender(f"tcp://127.0.0.1:{port}")  # nobody listens any more
-    assert not dead.send(payload) and dead.failed == 1 and "ConnectionRefused" in dead.last_error
-    assert not dead.send(payload) and dead.failed == 2  # within RETRY_S: not tried again, counted
-    for bad in ("http://host:80", "udp://", "tcp+ro://host:8087"):
-        with pytest.raises(ValueError):
-            CotSender(bad)
+    dead.send(payload)
+    assert dead.flush() and dead.failed == 1 and "ConnectionRefused" in dead.last_error
+    dead.send(payload)
+    assert dead.flush() and dead.failed == 2  # within RETRY_S: not tried again, counted
+    for sender in (udp, tcp, dead):
+        sender.close()
     assert write_cot_files(tmp_path, [estimate]) == "1 .cot file for TAK"
     assert (tmp_path / "emitter_f433920000.cot").read_bytes().startswith(b"<?xml")
+
+
+@pytest.mark.parametrize("bad", ["http://host:80", "udp://", "tcp+ro://host:8087", "udp://127.0.0.1:99999",
+                                 "udp://127.0.0.1:-1", "udp://127.0.0.1:70000", "udp://127.0.0.1:0", "udp://host",
+                                 "udp://user:pw@host:6969", "udp://[::1", "tcp://host:8087/path", "udp://h:x"])
+def test_a_cot_url_that_cannot_work_is_refused_at_start(bad):
+    """Issue 64, item 9: ports outside 0-65535 were taken at start and the node died at its first estimate
+    (OverflowError from sendto); no port, credentials and brackets were taken and could never work."""
+    with pytest.raises(ValueError, match="cot_url"):
+        parse_cot_url(bad)
+    with pytest.raises(ValueError, match="cot_url"):
+        CotSender(bad)
+
+
+def test_ipv6_works_and_a_host_that_does_not_resolve_is_counted_not_raised(estimate):
+    payload = estimate_event(estimate, 60.0)
+    assert parse_cot_url("udp://[::1]:6969") == (False, "::1", 6969)
+    rx = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+    rx.bind(("::1", 0))
+    rx.settimeout(5)
+    six = CotSender(f"udp://[::1]:{rx.getsockname()[1]}")
+    six.send(payload)
+    assert rx.recv(65536) == payload
+    nowhere = CotSender("udp://no-such-host.invalid:6969")
+    nowhere.send(payload)
+    assert nowhere.flush() and nowhere.failed == 1 and nowhere.last_error
+    for sender in (six, nowhere):
+        sender.close()
+
+
+def test_a_tak_server_that_never_reads_costs_the_caller_nothing(estimate):
+    """Issue 64, item 6: `send` ran in the node's input callback with a 2 s timeout; a server that accepts and
+    never reads held the pose latency at 2 s with 40 channels. Now send only queues: 500 events in well under a
+    second while the sender's thread is stuck, the oldest beyond QUEUE_MAX dropped and counted."""
+    import time
+
+    payload = estimate_event(estimate, 60.0) * 200  # 100 kB an event: the socket's buffers fill at once
+    server = socket.create_server(("127.0.0.1", 0))
+    server.listen()
+    stuck = CotSender(f"tcp://127.0.0.1:{server.getsockname()[1]}")
+    start = time.monotonic()
+    for _ in range(500):
+        stuck.send(payload)
+    assert time.monotonic() - start < 1.0  # 500 x the 2 s timeout, were the sends made here
+    assert stuck.dropped >= 500 - QUEUE_MAX - 2
+    stuck.close()
+    server.close()

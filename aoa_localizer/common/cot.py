@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import math
 import socket
+import threading
 import time
 import warnings
 import xml.etree.ElementTree as ET
+from collections import deque
 from pathlib import Path
-from urllib.parse import urlparse
+from urllib.parse import urlsplit
 
 from aoa_localizer.common.output import file_names
 from aoa_localizer.common.xml_text import xml_text
@@ -73,34 +75,94 @@ def write_cot_files(folder, estimates, stale_s: float = FILE_STALE_S) -> str:
     return f"{len(events)} .cot file{'s' if len(events) != 1 else ''} for TAK"
 
 
+QUEUE_MAX = 64  # events waiting for the sender's thread; more: the oldest are dropped (counted)
+TIMEOUT_S = 2.0  # a TCP connect or send may take this long, on the sender's own thread
+
+
+def parse_cot_url(url: str) -> tuple[bool, str, int]:
+    """(tcp, host, port) of `udp://HOST:PORT` or `tcp://HOST:PORT` (HOST a name, an IPv4 address or an IPv6 one
+    in brackets); a ValueError naming what cannot work: another scheme, no host, no port or one outside 1-65535,
+    credentials, a path."""
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError as exc:
+        raise ValueError(f"cot_url {url!r}: {exc}") from None
+    if parts.scheme not in ("udp", "tcp"):
+        raise ValueError(f"cot_url {url!r}: the scheme must be udp:// or tcp:// (pytak's convention)")
+    if parts.username is not None or parts.password is not None:
+        raise ValueError(f"cot_url {url!r}: credentials are not supported (TAK's UDP and TCP inputs take none)")
+    if not parts.hostname:
+        raise ValueError(f"cot_url {url!r}: no host")
+    if port is None or not 0 < port <= 65535:
+        raise ValueError(f"cot_url {url!r}: a port in 1-65535 is needed (udp://HOST:PORT)")
+    if parts.path not in ("", "/") or parts.query or parts.fragment:
+        raise ValueError(f"cot_url {url!r}: a path, query or fragment means nothing to a CoT input")
+    return parts.scheme == "tcp", parts.hostname, port
+
+
 class CotSender:
-    """Sends CoT events to one URL; a failure to send is counted and kept (`last_error`), never raised: a TAK
-    server that is down must not stop the localizer. A TCP connection is made again at the next event."""
+    """Sends CoT events to one URL from a thread of its own: `send` only queues (at most QUEUE_MAX, the oldest
+    dropped and counted), so a TAK server that is slow, down or never reads costs the caller nothing. A failure is
+    counted and kept (`last_error`), never raised; a TCP connection is made again RETRY_S after a failure."""
 
     def __init__(self, url: str):
-        """ValueError for a URL this sender cannot take (its scheme or its host and port)."""
-        pytak = _pytak()
-        parsed = urlparse(url)
-        scheme, _, read_only = pytak.parse_cot_scheme(parsed.scheme)
-        if scheme not in ("udp", "tcp") or read_only:
-            raise ValueError(f"cot_url {url!r}: the scheme must be udp:// or tcp:// (pytak's convention)")
-        try:
-            self.host, self.port = pytak.parse_url(parsed)
-        except (ValueError, AssertionError) as exc:
-            raise ValueError(f"cot_url {url!r}: no host:port ({exc})") from exc
-        if not self.host:
-            raise ValueError(f"cot_url {url!r}: no host")
-        self.url, self.tcp = url, scheme == "tcp"
-        self.sent = self.failed = 0
+        """ValueError for a URL this sender cannot take (parse_cot_url); CotUnavailable without pytak."""
+        _pytak()  # the events need it: said at start, not at the first estimate
+        self.tcp, self.host, self.port = parse_cot_url(url)
+        self.url = url
+        self.sent = self.failed = self.dropped = 0
         self.last_error = ""
         self._sock: socket.socket | None = None
         self._retry_at = 0.0  # monotonic s: no try before (RETRY_S after a failure)
+        self._queue: deque[bytes] = deque()
+        self._wake = threading.Condition()
+        self._closed = self._busy = False
+        self._thread = threading.Thread(target=self._run, name="cot_sender", daemon=True)
+        self._thread.start()
 
-    def send(self, payload: bytes) -> bool:
-        """True when the event went out (False, counted: it failed, or the last failure is under RETRY_S old)."""
+    def send(self, payload: bytes) -> None:
+        """Queue an event for the sender's thread (never blocks, never raises)."""
+        with self._wake:
+            if self._closed:
+                return
+            if len(self._queue) >= QUEUE_MAX:
+                self._queue.popleft()
+                self.dropped += 1
+            self._queue.append(payload)
+            self._wake.notify()
+
+    def flush(self, timeout: float = 5.0) -> bool:
+        """Wait until every queued event was tried (True), or `timeout` s passed (False)."""
+        end = time.monotonic() + timeout
+        with self._wake:
+            while self._queue or self._busy:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._wake.wait(left)
+        return True
+
+    def _run(self) -> None:
+        while True:
+            with self._wake:
+                while not self._queue and not self._closed:
+                    self._wake.wait()
+                if self._closed:
+                    return
+                payload = self._queue.popleft()
+                self._busy = True
+            try:
+                self._send_now(payload)
+            finally:
+                with self._wake:
+                    self._busy = False
+                    self._wake.notify_all()
+
+    def _send_now(self, payload: bytes) -> None:
         if time.monotonic() < self._retry_at:
             self.failed += 1
-            return False
+            return
         try:
             if self._sock is None:
                 self._sock = self._connect()
@@ -108,24 +170,36 @@ class CotSender:
                 self._sock.sendall(payload + b"\n")
             else:
                 self._sock.sendto(payload, (self.host, self.port))
-        except OSError as exc:
+        except Exception as exc:  # noqa: BLE001 - whatever the network says, the localizer goes on
             self.failed += 1
             self.last_error = f"{type(exc).__name__}: {exc}"
             self._retry_at = time.monotonic() + RETRY_S
-            self.close()
-            return False
+            self._close_socket()
+            return
         self.sent += 1
-        return True
 
     def _connect(self) -> socket.socket:
         if self.tcp:
-            return socket.create_connection((self.host, self.port), timeout=2.0)
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)  # multicast stays on the local network
+            return socket.create_connection((self.host, self.port), timeout=TIMEOUT_S)
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        sock.settimeout(TIMEOUT_S)
+        if family == socket.AF_INET:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)  # multicast stays on the local network
+        else:
+            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, 1)
         return sock
 
-    def close(self) -> None:
+    def _close_socket(self) -> None:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
+
+    def close(self) -> None:
+        """Stop the thread (what is still queued is dropped) and close the socket."""
+        with self._wake:
+            self._closed = True
+            self._wake.notify_all()
+        self._thread.join(TIMEOUT_S + 1.0)
+        self._close_socket()

@@ -279,6 +279,8 @@ class LocalizerNode(Node):
         engine_log.removeHandler(self.log_bridge)
         engine_log.level, engine_log.propagate = self._engine_log_was
         self.loc.close()
+        if self.cot is not None:
+            self.cot.close()
         return super().destroy_node()
 
     # -- parameters ---------------------------------------------------------------------------------
@@ -434,7 +436,7 @@ class LocalizerNode(Node):
                 self.get_logger().warning(words)
         level, message, values = self.monitor.diagnostics(self.loc, self._now(), self.pending_params, problems)
         if self.cot is not None:  # what went to TAK, and why not
-            values.update(cot_sent=self.cot.sent, cot_failed=self.cot.failed)
+            values.update(cot_sent=self.cot.sent, cot_failed=self.cot.failed, cot_dropped=self.cot.dropped)
             if self.cot.last_error:
                 values["cot_last_error"] = self.cot.last_error
         return level, message, values
