@@ -43,6 +43,11 @@ class TopicInfo:
 SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # the same safe subset of YAML, in C
 
 
+def _bag_file(name: str) -> bool:
+    """A storage file's name (name.mcap, name.db3, or compressed whole: name.mcap.zstd)."""
+    return name.endswith(STORAGE_SUFFIXES) or name.endswith(tuple(s + ".zstd" for s in STORAGE_SUFFIXES))
+
+
 class BagFiles:
     """The storage files of a bag at `path` (a bag directory, or one .mcap/.db3 file), decompressed into a temporary
     directory when the bag compresses whole files. Use as a context manager; `files` are in recording order."""
@@ -66,6 +71,11 @@ class BagFiles:
         if not path.is_dir():  # a FIFO, a device: reading one would wait for ever or never end
             raise BagFilesError(f"{path}: neither a bag folder nor a regular file (a pipe or a device?)")
         meta = path / "metadata.yaml"
+        special = [f.name for f in path.iterdir() if (_bag_file(f.name) or f == meta) and f.exists()
+                   and not f.is_file()]
+        if special:  # /dev/zero behind bag_0.mcap grew the reader to 5.9 GB; a FIFO waited for ever
+            raise BagFilesError(f"{path}: {', '.join(sorted(special))} is not a regular file (a pipe, a device or a "
+                                "link to one): not read")
         if meta.is_file() and meta.stat().st_size > METADATA_MAX_BYTES:
             log.warning("%s: %d bytes, more than any bag's metadata (%d): not read; reading the storage files", meta,
                         meta.stat().st_size, METADATA_MAX_BYTES)
@@ -83,8 +93,7 @@ class BagFiles:
             files = [path / n for n in names if (path / n).is_file()]
             if files:
                 return self._plains(files)
-        files = sorted(f for f in path.iterdir() if f.name.endswith(STORAGE_SUFFIXES)
-                       or f.name.endswith(tuple(s + ".zstd" for s in STORAGE_SUFFIXES)))
+        files = sorted(f for f in path.iterdir() if _bag_file(f.name) and f.is_file())
         if not files:
             raise BagFilesError(f"{path}: not a rosbag2 bag (no .mcap or .db3 file)")
         return self._plains(files)

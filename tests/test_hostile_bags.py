@@ -172,3 +172,27 @@ def test_a_huge_metadata_yaml_is_not_parsed(tmp_path, data):
     (tmp_path / "bag" / "metadata.yaml").write_text("a: [" + "1, " * 3_000_000 + "1]\n")
     got = _count(tmp_path / "bag")
     assert (got["fix"], got["bearing"], got["damage"]) == (len(data.fixes), len(data.bearings), None)
+
+
+@pytest.mark.parametrize("special", ["zero", "fifo", "fifo_meta"])
+@pytest.mark.parametrize("program", ["replay", "report"])
+def test_a_special_file_in_a_bag_folder_is_refused_at_once(tmp_path, data, special, program):
+    """Issue 64, item 7: bag_0.mcap a link to /dev/zero grew `replay --offline` to 5.9 GB without end; a FIFO named
+    bag_0.mcap (or metadata.yaml) hung `replay` and `report`. Refused with the reason, exit 2, in bounded time."""
+    import os
+
+    bag = tmp_path / "bag"
+    write_bag(bag, data.fixes, data.bearings)
+    target = bag / ("metadata.yaml" if special == "fifo_meta" else "extra_1.mcap")
+    target.unlink(missing_ok=True)
+    if special == "zero":
+        target.symlink_to("/dev/zero")
+    else:
+        os.mkfifo(target)
+    with pytest.raises(BagFilesError, match="not a regular file"):
+        BagFiles(bag)
+    args = ([bag, "--offline", "--output", tmp_path / "o.jsonl"] if program == "replay"
+            else [bag, "--out", tmp_path / "rep"])
+    res = subprocess.run([sys.executable, "-m", f"aoa_localizer.{program}", *map(str, args)], capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 2 and "not a regular file" in res.stderr and "Traceback" not in res.stderr
