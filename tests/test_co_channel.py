@@ -264,3 +264,23 @@ def test_the_launchers_verdict_takes_the_truth_the_estimate_follows():
     assert ok and figures["co_channel_truth"] == 1 and figures["error_m"] == pytest.approx(math.hypot(5, 4))
     ok, why, _ = verdict({**state, "truths": [(1200.0, 800.0)]}, 1000.0)
     assert not ok and "the truth is 774" in why
+
+
+def test_counts_that_keep_agreeing_are_made_ever_less_often():
+    """Issue 64, item 8: a count of two transmitters taking turns costs about a second, and one every 5000 readings
+    made such a channel 3-10 times the cost of one transmitter's. Counts that agree, each surely, space out
+    (doubling up to COUNT_EVERY_MAX readings); a count that changes, or an unsure one, brings them back."""
+    from aoa_localizer.engine.inference.co_channel import Count
+    from aoa_localizer.engine.track.emitter_track import COUNT_EVERY_MAX, HEARD_READINGS, count_every
+
+    def said(k, p):
+        return Count(k, p, [], [], {k: p}, False, np.zeros(0, int))
+
+    every, seen = HEARD_READINGS, []
+    for _ in range(6):
+        every = count_every(every, said(2, 1.0), said(2, 0.99))
+        seen.append(every)
+    assert seen == [10_000, 20_000, 40_000, 40_000, 40_000, 40_000] and COUNT_EVERY_MAX == 40_000
+    assert count_every(every, said(2, 1.0), said(1, 1.0)) == HEARD_READINGS  # it changed
+    assert count_every(every, said(2, 1.0), said(2, 0.6)) == HEARD_READINGS  # unsure
+    assert count_every(every, None, said(2, 1.0)) == HEARD_READINGS  # the first

@@ -201,7 +201,12 @@ def multiple_try(x, target, log_target: LogTarget, rng: np.random.Generator, tri
     refs = y[:, None, :] + rng.standard_normal((n, tries - 1, d)) @ chol.T
     ref_t = log_target(refs.reshape(-1, d), np.repeat(np.arange(n), tries - 1)).reshape(n, tries - 1)
     ref_all = np.concatenate([ref_t, target[:, None]], axis=1)
-    ref_w = np.exp(np.where(np.isfinite(ref_all), ref_all, -np.inf) - top[:, None]).sum(axis=1)
+    ref_all = np.where(np.isfinite(ref_all), ref_all, -np.inf)
+    # each side's sum about its own top: the references may lie far above the looks (all looks poor), where one
+    # shared top overflowed exp
+    ref_top = np.max(ref_all, axis=1)
+    ref_top = np.where(np.isfinite(ref_top), ref_top, 0.0)
+    ref_w = np.exp(ref_all - ref_top[:, None]).sum(axis=1)
     with np.errstate(divide="ignore"):
-        log_ratio = np.where(finite & (w_sum > 0), np.log(w_sum) - np.log(ref_w), -np.inf)
+        log_ratio = np.where(finite & (w_sum > 0), top + np.log(w_sum) - ref_top - np.log(ref_w), -np.inf)
     return accept(x, target, y, y_t, log_ratio, rng)

@@ -41,7 +41,7 @@ from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
 from aoa_localizer.engine.track.calibrator import Recalibration
-from aoa_localizer.engine.track.held import HEARD_READINGS, Held
+from aoa_localizer.engine.track.held import COUNT_EVERY_MAX, HEARD_READINGS, Held
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
 from aoa_localizer.engine.track.state import Phase, Status, WindowEntry
 from aoa_localizer.engine.track.supervisor import CheckVerdict, Moved, Supervisor, Watch
@@ -390,14 +390,15 @@ class EmitterTrack(Held):
 
     def _count(self, final: bool = False):
         """A count that finished is adopted; a new one is started when the readings heard doubled since the last
-        began or grew by HEARD_READINGS (so a long run's newest are counted), or at the end of data whenever they
-        grew: a job of the scheduler's (the check worker's, or made in turns), made here at the end of data. No count
+        began or grew by count_every (HEARD_READINGS, longer while counts agree; a long run's newest are counted),
+        or at the end of data whenever they grew: a job of the scheduler's (the check worker's, or made in turns),
+        made here at the end of data. No count
         before MIN_READINGS, with `max_emitters_per_channel` 1, or while the bearings are turned by the course."""
         self._adopt_count(self.scheduler.finished(self.counting, wait=final))
         cfg, c = self.cfg, self.calibration
         grown = self.heard_readings > self.counted_readings
         due = grown and (final or self.heard_readings >= min(COUNT_GROWTH * self.counted_readings,
-                                                              self.counted_readings + HEARD_READINGS))
+                                                              self.counted_readings + self.count_every))
         if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < MIN_READINGS or not due
                 or not self.estimating or self.scheduler.job(self.counting) is not None):
             return
@@ -422,6 +423,7 @@ class EmitterTrack(Held):
         if done is not None:
             ok, count = self.scheduler.value(done, "a transmitter count")
             if ok:
+                self.count_every = count_every(self.count_every, self.counted, count)
                 self.counted = count
 
     def batch_estimate(self) -> Mode | None:
@@ -431,6 +433,14 @@ class EmitterTrack(Held):
         if modes and self.cfg.calibrate_noise and self._calibrate([m.mean for m in modes[:2]], True):
             modes = find_modes(self.points(), self.robust(), by_density=True)
         return modes[0] if modes else None
+
+
+def count_every(every: int, before: Count | None, now: Count | None) -> int:
+    """The readings until the count after `now`: twice `every` (at most COUNT_EVERY_MAX) when `now` says what
+    `before` said, each surely (p >= 0.9); else HEARD_READINGS again."""
+    agree = (before is not None and now is not None and before.count == now.count
+             and min(before.probability, now.probability) >= 0.9)
+    return min(2 * every, COUNT_EVERY_MAX) if agree else HEARD_READINGS
 
 
 def _by_group(groups: Iterable[list[Reading]], built: list[Built]) -> dict[int, tuple[list[Reading], Built]]:

@@ -27,6 +27,10 @@ from aoa_localizer.filters.base import ParticleFilter
 
 _CURRENT_SHARE = 0.9  # a provisional sample's share of the points held for it to count as current
 HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter count looks at: about 1 MB a channel
+# Counts that keep agreeing are made ever less often, up to every this many readings (a count of transmitters taking
+# turns costs about a second: every HEARD_READINGS it was 3 times the rest of a channel's work); one that changes
+# brings them back to every HEARD_READINGS
+COUNT_EVERY_MAX = 8 * HEARD_READINGS
 
 
 class Held:
@@ -61,6 +65,7 @@ class Held:
         self.heard_readings = 0  # readings heard since the start
         self.counted: Count | None = None
         self.counted_readings = 0  # readings heard when the count under way (or the last) began
+        self.count_every = HEARD_READINGS  # readings between counts past the doubling ones: longer while they agree
         self.counting = JobPlace()
 
     @property
