@@ -7,7 +7,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from aoa_localizer.engine.outputs.survey_solver import install_solver
+from aoa_localizer.engine.survey.survey_solver import install_solver
 
 if TYPE_CHECKING:
     from aoa_localizer.core.spec import ConfigError

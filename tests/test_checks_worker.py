@@ -13,8 +13,8 @@ from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.inference import checks
-from aoa_localizer.engine.ingest.preprocess import columns
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.points.preprocess import columns
 from aoa_localizer.engine.track import initiator as initiator_module
 from aoa_localizer.engine.track import supervisor as supervisor_module
 from aoa_localizer.engine.track.initiator import Outcome
@@ -288,7 +288,7 @@ def test_the_worker_and_the_resource_tracker_die_with_a_killed_parent(tmp_path):
     script = tmp_path / "parent.py"
     script.write_text(
         "import math, multiprocessing.resource_tracker as rt, time\n"
-        "from aoa_localizer.engine.inference.checks import CheckWorker\n"
+        "from aoa_localizer.engine.scheduling.worker import CheckWorker\n"
         "if __name__ == '__main__':\n"
         "    w = CheckWorker()\n"
         "    w.submit(math.pi.__float__).result(60)\n"

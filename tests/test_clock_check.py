@@ -1,8 +1,8 @@
 """The DF clock check on hand-made points: bearings taken 1 s before their stamps on a drive with a turn."""
 import numpy as np
 
+from aoa_localizer.engine.inference import clock_check
 from aoa_localizer.engine.inference.global_search import Points, Robust
-from aoa_localizer.engine.ingest import clock_check
 
 
 def best_shift(*args):

@@ -1,4 +1,4 @@
-"""Bearings from the vehicle's forward axis read as azimuths (engine/ingest/course.py): turned by the course over
+"""Bearings from the vehicle's forward axis read as azimuths (engine/points/course.py): turned by the course over
 ground, learned at a check when they explain the drive, and not taken for an emitter that moved."""
 import math
 import re
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from aoa_localizer import LocalizerConfig
-from aoa_localizer.engine.ingest.course import courses, turned
-from aoa_localizer.engine.ingest.point_batch import PointBatch
-from aoa_localizer.engine.ingest.preprocess import Group, make_point
+from aoa_localizer.engine.inference.point_batch import PointBatch
+from aoa_localizer.engine.points.course import courses, turned
+from aoa_localizer.engine.points.preprocess import Group, make_point
 from aoa_localizer.engine.types import EstimateState, Reading
 from aoa_localizer.simulation.evaluation import run
 from aoa_localizer.simulation.scenarios import SCENARIOS, mounted, receiver_settings, robustness_cells, simulate

@@ -1,4 +1,4 @@
-"""Every point of a check remade at once (engine/ingest/point_batch.py) agrees with make_point, point by point."""
+"""Every point of a check remade at once (engine/inference/point_batch.py) agrees with make_point, point by point."""
 import math
 
 import numpy as np
@@ -7,8 +7,8 @@ from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.inference.noise import NoiseModel
-from aoa_localizer.engine.ingest.point_batch import PointBatch, offset_point, sigmas
-from aoa_localizer.engine.ingest.preprocess import Group, columns, make_point
+from aoa_localizer.engine.inference.point_batch import PointBatch, offset_point, sigmas
+from aoa_localizer.engine.points.preprocess import Group, columns, make_point
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.simulation.evaluation import scenario_config
 from aoa_localizer.simulation.scenarios import simulate

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.ingest.preprocess import (
+from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.points.preprocess import (
     SMALL_POINT,
     Group,
     PointBuilder,
@@ -17,7 +18,6 @@ from aoa_localizer.engine.ingest.preprocess import (
     reading_sigma,
     recursive_corrected_mean,
 )
-from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.types import Estimate, Reading
 
 

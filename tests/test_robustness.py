@@ -11,8 +11,8 @@ from aoa_localizer.engine.inference import noise as noise_module
 from aoa_localizer.engine.inference.global_search import Points, Robust, find_modes
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.safety import HealthMonitor, ModeProposal
-from aoa_localizer.engine.ingest.preprocess import reading_sigma
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.track.report import merge_overlapping
 from aoa_localizer.filters.moves import independence_from
 from aoa_localizer.simulation.evaluation import run
@@ -300,8 +300,8 @@ def test_a_points_noise_scales_in_plain_floats_are_numpys_interpolation_to_the_b
 def test_a_points_calibrated_sigmas_are_the_same_from_its_readings_and_from_the_workers_columns():
     """The caller makes a point's sigmas from its readings, the worker from their packed columns: the same values
     to the bit, and numpy's (the reference for more readings) to rounding."""
-    from aoa_localizer.engine.ingest.point_batch import sigmas
-    from aoa_localizer.engine.ingest.preprocess import Group, columns
+    from aoa_localizer.engine.inference.point_batch import sigmas
+    from aoa_localizer.engine.points.preprocess import Group, columns
     from aoa_localizer.engine.types import Reading
 
     model = NoiseModel(0.1)

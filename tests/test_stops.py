@@ -10,7 +10,7 @@ import pytest
 
 from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.geodesy import wrap_360, wrap_pi
-from aoa_localizer.engine.outputs.survey_log import site_part_shown
+from aoa_localizer.engine.survey.survey_log import site_part_shown
 from aoa_localizer.simulation.evaluation import run
 from aoa_localizer.simulation.scenarios import SCENARIOS, robustness_cells, simulate
 from aoa_localizer.simulation.stops import point_groups, stopped
@@ -100,7 +100,7 @@ def test_stops_whose_readings_share_a_steady_error_go_to_the_survey_model():
 def test_a_minority_of_stops_far_off_is_no_site_part_and_a_typical_stop_scattering_is():
     """A tenth of the stops taken over by a reflection (their residuals 20 sigmas) is not a site part; every stop
     scattering twice as widely as its readings allow (four times the variance) is."""
-    from aoa_localizer.engine.outputs.survey_log import _scattered
+    from aoa_localizer.engine.survey.survey_log import _scattered
 
     rng = np.random.default_rng(0)
     clean = rng.chisquare(1, 100)

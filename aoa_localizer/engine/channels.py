@@ -12,7 +12,7 @@ import numpy as np
 from aoa_localizer.engine.config import FREQUENCY_MAX_HZ, LocalizerConfig
 from aoa_localizer.engine.inference.global_search import Mode
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise, pooled_noise
-from aoa_localizer.engine.ingest.preprocess import PointBuilder
+from aoa_localizer.engine.points.preprocess import PointBuilder
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import JobPlace, Scheduler
 from aoa_localizer.engine.track.emitter_track import EmitterTrack

@@ -28,10 +28,10 @@ from aoa_localizer.engine.ingest.station import Station
 from aoa_localizer.engine.outputs.estimates import Estimates, noise_summary
 from aoa_localizer.engine.outputs.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid, posterior_grid
-from aoa_localizer.engine.outputs.survey_log import survey_sentence
 from aoa_localizer.engine.rejections import Rejections
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
+from aoa_localizer.engine.survey.survey_log import survey_sentence
 from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
 

@@ -8,6 +8,12 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+# A reading's own sigma outside this is no bearing's: below a thousandth of a degree (3.6 arcseconds) the
+# crossings' information is too large for double precision (a singular matrix at 1e-6 deg), and past 180
+# deg a reading says nothing. The survey reader (pooled.stations) refuses the same.
+SIGMA_RANGE_DEG = (1e-3, 180.0)
+SIGMA_RANGE_RAD = (math.radians(SIGMA_RANGE_DEG[0]), math.radians(SIGMA_RANGE_DEG[1]))
+
 
 class Input(NamedTuple):
     """One input as a source gives it (Localizer.feed and run): `kind` fix, bearing, bearing_pose or heading (other

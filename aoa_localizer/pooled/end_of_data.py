@@ -1,13 +1,13 @@
 """The survey model as the engine's end of data: a Localizer's survey-like channels located as `locate` would.
 
-The engine keeps the bearings of channels heard only from fixed stations or a surveyor (engine/outputs/survey_log.py)
+The engine keeps the bearings of channels heard only from fixed stations or a surveyor (engine/survey/survey_log.py)
 and, at `finish()`, hands them here: each channel is an emitter and each Localizer station a station (at each of
 its places); which stations share a receiver follows the same rule as a survey file without a `receiver` column
 (stations.py), so the API and `locate` give one answer for the same bearings.
 """
 from __future__ import annotations
 
-from aoa_localizer.engine.outputs.survey_log import SurveyFix, SurveyRecord
+from aoa_localizer.engine.survey.survey_log import SurveyFix, SurveyRecord
 from aoa_localizer.pooled.solver import PooledResult, locate_pooled
 from aoa_localizer.pooled.stations import SurveyReading
 

@@ -20,7 +20,7 @@ from scipy import stats
 
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame, centroid, wrap_pi
-from aoa_localizer.engine.outputs.survey_log import SurveyCount, SurveyTransmitter
+from aoa_localizer.engine.survey.survey_log import SurveyCount, SurveyTransmitter
 from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.pooled.bias import BIAS_MIN_EMITTERS, Bias, learn_biases, residuals
 from aoa_localizer.pooled.grid import (

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from aoa_localizer.engine.geodesy import wrap_pi
-from aoa_localizer.engine.ingest.intake import SIGMA_RANGE_DEG
+from aoa_localizer.engine.types import SIGMA_RANGE_DEG
 
 _MAD_TO_SIGMA = 1.4826  # a Gaussian's sigma over its median absolute deviation
 _WILD_Z = 4.0  # a reading this many robust sigmas from its station's median is left out of the station's centre

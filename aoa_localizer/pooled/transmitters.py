@@ -15,7 +15,7 @@ import numpy as np
 
 from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.inference.co_channel import MIN_READINGS, Place, Readings, count_transmitters, mode_starts
-from aoa_localizer.engine.outputs.survey_log import SurveyCount, SurveyTransmitter
+from aoa_localizer.engine.survey.survey_log import SurveyCount, SurveyTransmitter
 from aoa_localizer.engine.track.report import co_channel
 from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.pooled.grid import Geometry

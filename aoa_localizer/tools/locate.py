@@ -41,11 +41,10 @@ from aoa_localizer.common.output import StagedFile, check_folder, check_output, 
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.ingest.intake import SIGMA_RANGE_DEG
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.outputs.survey_log import counted
 from aoa_localizer.engine.site_bearings import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
-from aoa_localizer.engine.types import Estimate
+from aoa_localizer.engine.survey.survey_log import counted
+from aoa_localizer.engine.types import SIGMA_RANGE_DEG, Estimate
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES
 

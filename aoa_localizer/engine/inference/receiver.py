@@ -17,7 +17,7 @@ import numpy as np
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import TWO_PI
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
-from aoa_localizer.engine.ingest.preprocess import reading_sigma
+from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.scheduling.slices import DENSITIES, metered
 
 SIGMA_SPAN_DEG = (0.5, 45.0)  # the bearing sigmas the prior covers

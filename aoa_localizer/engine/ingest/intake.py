@@ -21,6 +21,7 @@ from aoa_localizer.engine.ingest.input_guard import Verdict, beyond_map, confirm
 from aoa_localizer.engine.ingest.pairing import Pairing
 from aoa_localizer.engine.ingest.station import Station
 from aoa_localizer.engine.rejections import Reason, Rejections
+from aoa_localizer.engine.types import SIGMA_RANGE_RAD
 
 log = logging.getLogger("aoa_localizer")
 
@@ -29,12 +30,6 @@ _CLOCK_REASONS = {  # (the fix's, the bearing's) reason for each refusing verdic
     Verdict.OUT_OF_ORDER: (Reason.FIX_OUT_OF_ORDER, Reason.BEARING_OUT_OF_ORDER),
     Verdict.AHEAD: (Reason.FIX_STAMP_JUMP, Reason.BEARING_STAMP_JUMP),
 }
-
-# A reading's own sigma outside this is no bearing's: below a thousandth of a degree (3.6 arcseconds) the
-# crossings' information overflows double precision (1e-6 deg once ended a run in a singular matrix), and past 180
-# deg a reading says nothing. The survey reader (pooled.stations) refuses the same.
-SIGMA_RANGE_DEG = (1e-3, 180.0)
-SIGMA_RANGE_RAD = (math.radians(SIGMA_RANGE_DEG[0]), math.radians(SIGMA_RANGE_DEG[1]))
 
 
 def as_float(value) -> float:

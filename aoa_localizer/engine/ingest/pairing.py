@@ -10,10 +10,10 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, Skew, turn
 from aoa_localizer.engine.ingest.gps_track import STILL_MPS, Where
 from aoa_localizer.engine.ingest.heading import ImuHeading
-from aoa_localizer.engine.ingest.preprocess import reading_sigma
 from aoa_localizer.engine.ingest.station import Station
-from aoa_localizer.engine.outputs.survey_log import SurveyLog
+from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
+from aoa_localizer.engine.survey.survey_log import SurveyLog
 from aoa_localizer.engine.types import Reading
 
 MAX_PENDING = 100_000  # bearings waiting for a fix, at most (the age limit normally binds long before)

@@ -17,12 +17,12 @@ from aoa_localizer.engine.channels import Channel, Channels, Closed
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, ground_to_map
 from aoa_localizer.engine.ingest.intake import Intake
-from aoa_localizer.engine.ingest.preprocess import reading_sigma
-from aoa_localizer.engine.outputs import survey_solver
-from aoa_localizer.engine.outputs.survey_log import SurveyFix, counted, live_fix
+from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
+from aoa_localizer.engine.survey import survey_solver
+from aoa_localizer.engine.survey.survey_log import SurveyFix, counted, live_fix
 from aoa_localizer.engine.track.report import co_channel, others_share
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 

@@ -21,7 +21,6 @@ from weakref import WeakKeyDictionary
 
 import numpy as np
 
-from aoa_localizer.engine.inference.checks import CheckWorker
 from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.slices import (
@@ -32,6 +31,7 @@ from aoa_localizer.engine.scheduling.slices import (
     metered_since,
     spent_ns,
 )
+from aoa_localizer.engine.scheduling.worker import CheckWorker
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.resample_move import ResampleMove

@@ -16,11 +16,11 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import fit_noise
 from aoa_localizer.engine.inference.global_search import Robust, residuals
 from aoa_localizer.engine.inference.noise import NoiseModel, point_outlier_prob
+from aoa_localizer.engine.inference.point_batch import Built, PointBatch, offset_point, points_of, sigmas
 from aoa_localizer.engine.inference.receiver import NoiseGrid
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
-from aoa_localizer.engine.ingest.course import group_courses, turned
-from aoa_localizer.engine.ingest.point_batch import Built, PointBatch, offset_point, points_of, sigmas
-from aoa_localizer.engine.ingest.preprocess import columns, make_point
+from aoa_localizer.engine.points.course import group_courses, turned
+from aoa_localizer.engine.points.preprocess import columns, make_point
 from aoa_localizer.engine.track.state import WindowEntry
 from aoa_localizer.engine.types import ObservationPoint, Reading
 

@@ -35,8 +35,8 @@ from aoa_localizer.engine.inference.co_channel import (
 )
 from aoa_localizer.engine.inference.global_search import Mode, find_modes
 from aoa_localizer.engine.inference.noise import NoiseModel
+from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
-from aoa_localizer.engine.ingest.point_batch import Built
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US

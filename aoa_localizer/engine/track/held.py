@@ -15,8 +15,8 @@ from aoa_localizer.engine.inference.co_channel import Count
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, radio_reach
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
+from aoa_localizer.engine.inference.point_batch import points_of, rows_of
 from aoa_localizer.engine.inference.safety import ModeProposal
-from aoa_localizer.engine.ingest.point_batch import points_of, rows_of
 from aoa_localizer.engine.scheduling.scheduler import JobPlace, PendingJob, Scheduler
 from aoa_localizer.engine.track.calibrator import Calibrator
 from aoa_localizer.engine.track.report import assess, cloud_estimate, mode_masses, spatial_median, wide_for_range

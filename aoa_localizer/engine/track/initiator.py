@@ -17,11 +17,11 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, search_start
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode
+from aoa_localizer.engine.inference.point_batch import points_of
 from aoa_localizer.engine.inference.receiver import NoiseGrid
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.inference.start_grid import StartGrid
 from aoa_localizer.engine.inference.triangulation import initial_particles
-from aoa_localizer.engine.ingest.point_batch import points_of
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
 from aoa_localizer.engine.types import ObservationPoint
 from aoa_localizer.filters import make_filter

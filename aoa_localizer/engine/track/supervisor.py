@@ -16,10 +16,10 @@ import numpy as np
 
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import CheckResult, Snapshot, run_check
+from aoa_localizer.engine.inference.clock_check import ClockHint
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Points, Robust, find_modes, inlier_share, log_posterior
 from aoa_localizer.engine.inference.safety import HealthMonitor
-from aoa_localizer.engine.ingest.clock_check import ClockHint
 from aoa_localizer.engine.scheduling.scheduler import PendingJob
 from aoa_localizer.engine.track.initiator import MIN_INLIERS
 from aoa_localizer.filters.base import ParticleFilter

@@ -12,8 +12,8 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import wrap_pi, wrap_pi_float
 from aoa_localizer.engine.inference.global_search import Points
 from aoa_localizer.engine.inference.noise import NoiseModel
-from aoa_localizer.engine.ingest.course import group_courses, turned_group
-from aoa_localizer.engine.ingest.preprocess import (
+from aoa_localizer.engine.points.course import group_courses, turned_group
+from aoa_localizer.engine.points.preprocess import (
     SMALL_POINT,
     TIE_RAD,
     Columns,

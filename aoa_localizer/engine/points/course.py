@@ -15,7 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from aoa_localizer.engine.geodesy import wrap_pi
-from aoa_localizer.engine.ingest.preprocess import Columns, Group, columns
+from aoa_localizer.engine.points.preprocess import Columns, Group, columns
 from aoa_localizer.engine.types import Reading
 
 MIN_SPEED_MPS = 1.0

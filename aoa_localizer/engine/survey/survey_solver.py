@@ -7,7 +7,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from aoa_localizer.engine.outputs.survey_log import SurveyFix, SurveyRecord
+    from aoa_localizer.engine.survey.survey_log import SurveyFix, SurveyRecord
 
     SurveySolver = Callable[[list[SurveyRecord], str, int], dict[str, SurveyFix]]
 

@@ -25,7 +25,7 @@ from scipy import stats
 from aoa_localizer.engine.geodesy import LocalFrame, unturn, wrap_pi
 from aoa_localizer.engine.inference.co_channel import COUNT_GROWTH
 from aoa_localizer.engine.inference.triangulation import least_squares_crossing
-from aoa_localizer.engine.ingest.preprocess import circular_median, point_outliers
+from aoa_localizer.engine.points.preprocess import circular_median, point_outliers
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 MAX_RECORDS = 20_000  # per channel: more than any survey, and a bound for a node fed for days
