@@ -202,6 +202,13 @@ def test_an_emitter_moved_400_m_is_noticed_and_re_found():
     assert loc.rejected["emitter_moved"] > 0
     assert np.hypot(est.east - new[0], est.north - new[1]) < 20
     assert len(est.modes) == 1
+    # /diagnostics counts one restart here (issue 67, item 1: the bearings the move dropped were counted too, and a
+    # good co-channel run read ERROR, "the filter restarted 201 times")
+    from aoa_localizer.ros.node_monitor import restarts_made
+
+    assert restarts_made(loc)["emitter_moved"] == 1
+    assert sum(restarts_made(loc).values()) == loc.events["emitter_moved"] + loc.events["global_restart"] + \
+        loc.rejected["filter_diverged"]
 
 
 def test_the_start_never_uses_a_crossing_a_clear_majority_contradicts():

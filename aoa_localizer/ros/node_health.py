@@ -10,7 +10,7 @@ import numpy as np
 
 RESTARTS_FOR_ERROR = 3  # restarts within RESTART_WINDOW_S that turn /diagnostics to ERROR
 RESTART_WINDOW_S = 60.0
-RESTART_KINDS = ("global_restart", "emitter_moved", "filter_diverged")  # events and rejections that restart
+RESTART_KINDS = ("global_restart", "emitter_moved", "filter_diverged")  # node_monitor.restarts_made's kinds
 
 
 class Overload:

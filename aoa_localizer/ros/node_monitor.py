@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from collections.abc import Callable
 from typing import Any
 
@@ -122,7 +122,7 @@ class NodeMonitor:
                       df_missing_by_stamp=sum(g.missing for g in self.df_gaps.values()),
                       fix_stamp_gaps=sum(g.gaps for g in self.fix_gaps.values()),
                       fixes_missing_by_stamp=sum(g.missing for g in self.fix_gaps.values()))
-        self.health.count_restarts(now, loc.events + loc.rejected)
+        self.health.count_restarts(now, restarts_made(loc))
         warnings = self._warnings(loc, wrong) + self.health.stale(now)
         error = self.health.restart_error()
         if error:
@@ -262,3 +262,14 @@ class NodeMonitor:
             message = f"retired (silent for channel_timeout_s); {track.text}" if channel.retired else track.text
             out.append((f"{diag_name} channel {channel.id}", level, message, values))
         return out
+
+
+def restarts_made(loc) -> Counter:
+    """The restarts of every channel's filter so far, by kind: a re-start from a global check or because the
+    emitter moved (one event each; the bearings an `emitter_moved` restart drops are rejections, not restarts),
+    and a diverged filter (one rejection each)."""
+    made: Counter = Counter()
+    for channel in loc.channels.all():
+        made.update({k: channel.track.events.get(k, 0) for k in ("global_restart", "emitter_moved")})
+    made["filter_diverged"] = loc.rejected.get("filter_diverged", 0)
+    return made
