@@ -7,8 +7,6 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from aoa_localizer.engine.survey.survey_solver import install_solver
-
 if TYPE_CHECKING:
     from aoa_localizer.core.spec import ConfigError
     from aoa_localizer.engine.config import LocalizerConfig
@@ -30,12 +28,3 @@ def __getattr__(name: str) -> Any:
     value = globals()[name] = getattr(importlib.import_module(home), name)
     return value
 
-
-def _survey_model(records, receiver_class, max_k):
-    """The engine's end-of-data survey model (aoa_localizer.pooled), imported when first needed."""
-    from aoa_localizer.pooled.end_of_data import solve
-
-    return solve(records, receiver_class, max_k)
-
-
-install_solver(_survey_model)

@@ -404,3 +404,42 @@ def test_a_localizer_is_neither_pickled_nor_copied_and_says_so(how):
             act(loc)
     finally:
         loc.close()
+
+
+def _fixed_sites(loc):
+    """Four fixed sites around (300, 400) m, five readings each of 1 deg."""
+    from aoa_localizer.engine.geodesy import LocalFrame
+
+    frame, rng = LocalFrame(47.0, 8.0, 0.0), np.random.default_rng(2)
+    places = {"a": (0.0, 0.0), "b": (600.0, 0.0), "c": (0.0, 800.0), "d": (600.0, 800.0)}
+    for name, (e, n) in places.items():
+        loc.add_station(name, fixed=True)
+        loc.set_station_position(name, *frame.to_geodetic(e, n)[:2])
+    for k in range(20):
+        name = "abcd"[k % 4]
+        e, n = places[name]
+        lat, lon, _ = frame.to_geodetic(e, n)
+        azimuth = math.degrees(float(frame.north_angle(lat, lon)) - math.atan2(400.0 - n, 300.0 - e))
+        loc.add_bearing(float(k + 1), (azimuth + rng.normal(0.0, 1.0)) % 360.0, 80.0, station=name, sigma_deg=1.0)
+    loc.flush()
+    loc.finish()
+    return loc.estimate
+
+
+def test_the_survey_model_is_handed_to_the_localizer_not_installed_by_an_import():
+    """Issue 65, item 5: the survey solver was installed into the engine when aoa_localizer/__init__ ran. Now a
+    Localizer is handed one (default: aoa_localizer.pooled's); a solver of one's own is called with the survey's
+    records; None: no survey model, and fixed sites' channels keep their filter's estimate."""
+    from aoa_localizer.engine.survey.survey_solver import pooled_solver
+
+    calls = []
+
+    def mine(records, receiver_class, max_k):
+        calls.append((len(records), receiver_class, max_k))
+        return pooled_solver(records, receiver_class, max_k)
+
+    est = _fixed_sites(Localizer(LocalizerConfig(seed=1), survey_solver=mine))
+    assert calls and calls[-1][1:] == ("unknown", 3) and est.algorithm == "survey"
+    assert math.hypot(est.east - 300.0, est.north - 400.0) < 20.0
+    est = _fixed_sites(Localizer(LocalizerConfig(seed=1), survey_solver=None))
+    assert est is not None and est.algorithm != "survey" and math.hypot(est.east - 300.0, est.north - 400.0) < 20.0

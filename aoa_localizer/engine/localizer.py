@@ -29,9 +29,9 @@ from aoa_localizer.engine.outputs.estimates import Estimates, noise_summary
 from aoa_localizer.engine.outputs.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid, posterior_grid
 from aoa_localizer.engine.rejections import Rejections
-from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
 from aoa_localizer.engine.survey.survey_log import survey_sentence
+from aoa_localizer.engine.survey.survey_solver import SurveySolver, pooled_solver
 from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
 
@@ -68,14 +68,17 @@ class Localizer:
     track per emitter (channel, by frequency) and one GPS track per station."""
 
     def __init__(self, config: LocalizerConfig | None = None, observer: Observer | None = None,
-                 on_estimate: Callable[[Estimate], None] | None = None, live: bool = False):
+                 on_estimate: Callable[[Estimate], None] | None = None, live: bool = False,
+                 survey_solver: SurveySolver | None = pooled_solver):
         """`observer`: told of every accepted fix and every closed point (see Observer), for reports.
         `on_estimate`: called with every new estimate, whichever input made it (a fix often closes the point
         that makes it); `estimate` always holds the latest one (None before the first). `live`: a node's
-        Localizer, scheduled `realtime` under `scheduling: auto`."""
+        Localizer, scheduled `realtime` under `scheduling: auto`. `survey_solver`: the survey model of the
+        channels heard from fixed sites or standing antennas (default aoa_localizer.pooled's; None: none, such a
+        channel keeps its filter's estimate)."""
         self._lock = threading.RLock()  # the calls below are made one at a time (_one_at_a_time)
         self._cfg = cfg = config or LocalizerConfig()
-        keep_freed_memory()  # the particle temporaries are reused, not mapped afresh (memory.py)
+        self._survey_solver = survey_solver
         self._rng = np.random.default_rng(cfg.seed)
         frame = None
         if cfg.datum_lat is not None and cfg.datum_lon is not None:
@@ -91,7 +94,7 @@ class Localizer:
     def _start_tracks(self, on_estimate: Callable[[Estimate], None] | None):
         """The state of a fresh start on the current channels (the fixed stations placed again)."""
         self._estimates = Estimates(self._cfg, self.channels, self._intake, self._scheduler, self._rejections,
-                                    on_estimate)
+                                    on_estimate, self._survey_solver)
         for name, position in self._fixed_stations.items():
             self._intake.add_station(name, fixed=True)
             if position is not None:

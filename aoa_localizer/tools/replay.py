@@ -135,6 +135,7 @@ def _told(loc: Localizer, run, written: int, output: str) -> int:
 
 
 def main(argv=None) -> int:
+    keep_freed_memory()  # the particle temporaries reused, not mapped afresh (scheduling/memory.py)
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.replay", description=__doc__,
                                      formatter_class=HelpFormatter)
     parser.add_argument("bag", help="rosbag2 bag: a directory (MCAP or sqlite3, split, compressed; metadata.yaml "

@@ -21,8 +21,8 @@ from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
-from aoa_localizer.engine.survey import survey_solver
 from aoa_localizer.engine.survey.survey_log import SurveyFix, counted, live_fix
+from aoa_localizer.engine.survey.survey_solver import SurveySolver
 from aoa_localizer.engine.track.report import co_channel, others_share
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
@@ -49,9 +49,11 @@ class Estimates:
     and `latest` its channel (the default channel before one); `on_estimate` is called with each new one."""
 
     def __init__(self, cfg: LocalizerConfig, channels: Channels, intake: Intake, scheduler: Scheduler,
-                 reject: Rejections, on_estimate: Callable[[Estimate], None] | None = None):
+                 reject: Rejections, on_estimate: Callable[[Estimate], None] | None = None,
+                 survey_solver: SurveySolver | None = None):
         self.cfg, self.channels, self.intake, self.scheduler, self.reject = cfg, channels, intake, scheduler, reject
         self.on_estimate = on_estimate
+        self.survey_solver = survey_solver  # None: no survey model (a standing antenna's channel keeps its filter's)
         self.newest: Estimate | None = None
         self.latest: Channel = channels.default
 
@@ -131,7 +133,7 @@ class Estimates:
 
     def _survey_end(self) -> dict[str, SurveyFix]:
         """The survey model's fixes of the survey-like channels (survey_log.py), {} without any or a solver."""
-        solve = survey_solver.solver()
+        solve = self.survey_solver
         if solve is None or self.intake.frame is None:
             return {}
         survey = self.intake.pairing.survey_log
@@ -152,7 +154,7 @@ class Estimates:
             return None
         if done is not None:
             return self._adopt_live_fix(channel, done)
-        solve = survey_solver.solver()
+        solve = self.survey_solver
         if solve is not None and survey.due(channel.id) and self.scheduler.job(place) is None:
             survey.mark_solved(channel.id)
             records = survey.survey_records(self.intake.datum_frame(), [channel.id])

@@ -1,7 +1,8 @@
 """Memory settings for a long-running process. keep_freed_memory: the C allocator keeps freed memory for reuse (the
 filters' particles x points temporaries are a few MB each, and glibc by default maps each afresh and returns it at
-free, so every temporary paid its pages' first-touch faults: 2-4x the arithmetic on this machine); a Localizer
-calls it when made, and the check worker at its start. OldObjects: the node's kept readings out of
+free, so every temporary paid its pages' first-touch faults: 2-4x the arithmetic on this machine); the programs
+call it (node, replay, simulate, report, locate, the benchmarks' runs) and the check worker at its start, never
+a Localizer: a process's allocator is its program's to set. OldObjects: the node's kept readings out of
 the cyclic garbage collector's full passes (docs/ros.md, "Latency")."""
 from __future__ import annotations
 
