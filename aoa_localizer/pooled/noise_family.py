@@ -136,7 +136,15 @@ def expected_error(noise: NoiseGrid, weights: np.ndarray) -> float:
 
 
 def quantile_of(values: np.ndarray, weights: np.ndarray, q: float) -> float:
-    """The q-quantile of a per-hypothesis value under posterior weights."""
-    order = np.argsort(values)
-    cum = np.cumsum(weights[order])
-    return float(values[order][min(int(np.searchsorted(cum, q)), cum.size - 1)])
+    """The q-quantile of a positive per-hypothesis value under posterior weights, each grid value standing for the
+    bin around it in log scale (to the midpoints with its neighbours): a posterior on one value of the grid gives
+    that bin's interval, never a point (`5.8-5.8 deg at 90 %` said more than the grid knows)."""
+    v, inverse = np.unique(values, return_inverse=True)
+    if v.size == 1:
+        return float(v[0])
+    w = np.bincount(inverse, weights=weights)
+    log_v = np.log(v)
+    mid = 0.5 * (log_v[1:] + log_v[:-1])
+    edges = np.concatenate([[2.0 * log_v[0] - mid[0]], mid, [2.0 * log_v[-1] - mid[-1]]])
+    cdf = np.concatenate([[0.0], np.cumsum(w)]) / w.sum()
+    return float(np.exp(np.interp(q, cdf, edges)))

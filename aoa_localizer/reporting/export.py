@@ -18,8 +18,9 @@ KML_NS = "http://www.opengis.net/kml/2.2"
 
 def properties(est: Estimate) -> dict:
     a, b, azimuth = ellipse_axes(est.cov)
-    return {"time": datetime.datetime.fromtimestamp(est.stamp, datetime.UTC).isoformat(),
-            "stamp": est.stamp, "algorithm": est.algorithm, "bearings_used": est.bearings_used,
+    timed = bool(np.isfinite(est.stamp))  # a survey without times has none
+    return {"time": datetime.datetime.fromtimestamp(est.stamp, datetime.UTC).isoformat() if timed else None,
+            "stamp": est.stamp if timed else None, "algorithm": est.algorithm, "bearings_used": est.bearings_used,
             "points_used": est.points_used, "ellipse95_semi_major_m": round(a, 2),
             "ellipse95_semi_minor_m": round(b, 2), "ellipse95_major_azimuth_deg": round(azimuth, 1),
             "channel": est.channel,
@@ -118,7 +119,8 @@ def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarr
         pm = ET.SubElement(doc, q("Placemark"))
         ET.SubElement(pm, q("name")).text = xml_text(name)
         if props is not None:
-            ET.SubElement(ET.SubElement(pm, q("TimeStamp")), q("when")).text = props["time"]
+            if props["time"] is not None:
+                ET.SubElement(ET.SubElement(pm, q("TimeStamp")), q("when")).text = props["time"]
             data = ET.SubElement(pm, q("ExtendedData"))
             for key, value in props.items():
                 ET.SubElement(ET.SubElement(data, q("Data"), name=key), q("value")).text = xml_text(value)

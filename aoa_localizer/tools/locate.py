@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
+import difflib
 import json
 import math
 import os
@@ -71,9 +72,15 @@ class Row:
     receiver: str = ""
 
 
+class NoOffset(ValueError):
+    """A time without a UTC offset and no --time-zone: the rows are summed up in one message."""
+
+
 def _stamp(text: str, decimal_comma: bool = False, zone: datetime.tzinfo | None = None) -> float:
     """Epoch seconds from epoch seconds or ISO 8601 with an offset; a time without one is in `zone` (--time-zone),
-    and refused without it (it is ambiguous)."""
+    and refused without it (it is ambiguous: NoOffset); no time at all is NaN (a survey without times)."""
+    if not text.strip():
+        return math.nan
     try:
         value = float(text.replace(",", ".") if decimal_comma else text)
     except ValueError:
@@ -88,8 +95,7 @@ def _stamp(text: str, decimal_comma: bool = False, zone: datetime.tzinfo | None 
         raise ValueError(f"time {text!r} is neither epoch seconds nor an ISO 8601 time") from None
     if when.tzinfo is None:
         if zone is None:
-            raise ValueError(f"time {text!r} has no UTC offset (write e.g. {text}+00:00, or give the zone the "
-                             "times were taken in: --time-zone Europe/Berlin, --time-zone +02:00)")
+            raise NoOffset(f"time {text!r} has no UTC offset")
         when = when.replace(tzinfo=zone)
     return when.timestamp()
 
@@ -119,11 +125,13 @@ def read_rows(path: Path, crs: str | None, zone: datetime.tzinfo | None = None) 
     milliseconds (then read as such); raises OSError, ValueError."""
     to_wgs84 = _projection(crs)
     rows, bad = [], []
+    no_offset: list[tuple[int, str]] = []
     with open(path, newline="", encoding="utf-8-sig") as fh:
         delimiter = _delimiter(fh.readline())
         fh.seek(0)
         reader = csv.DictReader(fh, delimiter=delimiter)
         _check_header(path, reader.fieldnames or [], ("x", "y") if to_wgs84 else ("lat", "lon"))
+        header = {name.strip().lower() for name in reader.fieldnames or []}
         comma = delimiter != ","  # a locale whose lists take semicolons writes decimal commas
         while True:
             try:
@@ -136,11 +144,23 @@ def read_rows(path: Path, crs: str | None, zone: datetime.tzinfo | None = None) 
             try:
                 rows.append(_row(reader.line_num, {k.strip().lower(): v for k, v in record.items() if k is not None},
                                  to_wgs84, comma, zone))
+            except NoOffset as exc:
+                no_offset.append((reader.line_num, str(exc)))
             except ValueError as exc:
                 bad.append(f"{path}:{reader.line_num}: {exc}; row skipped")
-    if rows and all(_MILLISECONDS[0] <= r.stamp < _MILLISECONDS[1] for r in rows):
-        bad.append(f"{path}: the times look like milliseconds since 1970 ({rows[0].stamp:.6g}): read as such")
+    if no_offset:  # one message for them all: a file of local times would otherwise give a line a row
+        lines = ", ".join(str(n) for n, _ in no_offset[:5]) + (", ..." if len(no_offset) > 5 else "")
+        bad.append(f"{path}: {len(no_offset)} rows (lines {lines}) skipped: {no_offset[0][1]} (write e.g. "
+                   "2024-05-01T10:00:00+00:00, or give the zone the times were taken in: --time-zone Europe/Berlin, "
+                   "--time-zone +02:00)")
+    timed = [r for r in rows if math.isfinite(r.stamp)]
+    if timed and all(_MILLISECONDS[0] <= r.stamp < _MILLISECONDS[1] for r in timed):
+        bad.append(f"{path}: the times look like milliseconds since 1970 ({timed[0].stamp:.6g}): read as such")
         rows = [replace(r, stamp=r.stamp / 1000.0) for r in rows]
+    if len(timed) < len(rows):
+        bad.append(f"{path}: {len(rows) - len(timed)} of {len(rows)} rows have no time: located as a survey "
+                   "without times (an id's transmitters are not counted: that needs every reading's time; "
+                   f"--model filter takes such an id's rows in the file's order){_renames(header, _untimed(header))}")
     return rows, bad
 
 
@@ -167,10 +187,15 @@ def _check_header(path: Path, fieldnames, position: tuple[str, str]) -> None:
         raise ValueError(f"{path}: the header names {', '.join(twice)} more than once (names are read in any "
                          "case): which one holds the data?")
     header = set(names)
-    missing = [c for c in ("time", *position, "azimuth_deg") if c not in header]
-    if missing:
+    missing = [c for c in (*position, "azimuth_deg") if c not in header]
+    if missing:  # a time is optional, but when the file seems to hold it under another name that is said too
         raise ValueError(f"{path}: the header lacks column(s) {', '.join(missing)} "
-                         f"(has: {', '.join(sorted(header))}){_renames(header, missing)}")
+                         f"(has: {', '.join(sorted(header))}){_renames(header, [*_untimed(header), *missing])}")
+
+
+def _untimed(header: set[str]) -> list[str]:
+    """["time"] when the header has no time column, else []."""
+    return [] if "time" in header else ["time"]
 
 
 def _row(line: int, row: dict, to_wgs84, comma: bool, zone: datetime.tzinfo | None = None) -> Row:
@@ -232,15 +257,22 @@ _OTHER_NAMES = {"lat": ("latitude",), "lon": ("longitude", "long", "lng"), "x": 
 
 
 def _renames(header: set[str], missing: list[str]) -> str:
-    """A hint for the columns missing from `header` that it seems to hold under other names."""
-    hints = [f"{other} -> {name}" for name in missing for other in _OTHER_NAMES.get(name, ()) if other in header]
+    """A hint for the columns missing from `header` that it seems to hold under other names, or under a name
+    spelt nearly like it (`azimuth_dge`)."""
+    hints = []
+    for name in missing:
+        others = [o for o in _OTHER_NAMES.get(name, ()) if o in header]
+        others = others or difflib.get_close_matches(name, sorted(header), n=1, cutoff=0.7)
+        hints += [f"{other} -> {name}" for other in others]
     return f"; if they hold what this program reads, rename {', '.join(hints)}" if hints else ""
 
 
 def locate(rows: list[Row], cfg, datum: tuple[float, float]) -> tuple[Estimate | None, Localizer]:
-    """The end-of-data estimate of one emitter's bearings (each row a site of its own) and its Localizer."""
-    bearings = [SiteBearing(f"{row.station or 'row'}@{row.line}", row.stamp, row.lat, row.lon, row.azimuth_deg,
-                            row.quality, row.sigma_deg) for row in rows]
+    """The end-of-data estimate of one emitter's bearings (each row a site of its own) and its Localizer; an id
+    with a row without a time takes its rows in the file's order (a second a line)."""
+    untimed = any(not math.isfinite(row.stamp) for row in rows)
+    bearings = [SiteBearing(f"{row.station or 'row'}@{row.line}", float(row.line) if untimed else row.stamp,
+                            row.lat, row.lon, row.azimuth_deg, row.quality, row.sigma_deg) for row in rows]
     return locate_bearings(bearings, cfg.with_changes(datum_lat=datum[0], datum_lon=datum[1]))
 
 
@@ -368,9 +400,14 @@ def _filter_run(groups: dict[str, list[Row]], cfg, datum, lines: _Lines) -> None
             lines.fixed(ident, est, group, record(ident, est, len(group)))
 
 
+def _size(metres: float) -> str:
+    """A semi-axis for the table: whole metres from 100 m on (1780, not 1.78e+03), three figures below."""
+    return f"{metres:.0f}" if metres >= 100 else f"{metres:.3g}"
+
+
 def _print_row(ident: str, est: Estimate):
-    a, b, _ = ellipse_axes(est.cov)
-    print(f"{ident or '-':<12} {est.lat:11.6f} {est.lon:12.6f} {a:8.3g} x {b:<8.3g} {est.bearings_used:8d}  "
+    a, b, _ = (_size(v) for v in ellipse_axes(est.cov))
+    print(f"{ident or '-':<12} {est.lat:11.6f} {est.lon:12.6f} {a:>8} x {b:<8} {est.bearings_used:8d}  "
           f"{est.state}" + "".join(f"\n{'':<12} {w}" for w in est.warnings))
 
 
