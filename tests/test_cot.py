@@ -1,6 +1,5 @@
 """Cursor-on-Target for TAK (issue 53, part 3): the event an estimate makes, parsed as a TAK receiver would
 (takproto, the TAK protocol's maintained library), and sent over UDP and TCP to listeners on this machine."""
-import math
 import socket
 import xml.etree.ElementTree as ET
 
@@ -24,7 +23,13 @@ def test_an_estimate_is_a_cot_event_with_its_point_ellipse_and_state(estimate):
     assert event.get("uid") == "aoa_localizer.f433920000" and event.get("type") == "a-u-G"
     point = event.find("point")
     assert float(point.get("lat")) == 39.1072166 and float(point.get("lon")) == 117.2138794
-    assert float(point.get("ce")) == pytest.approx(math.sqrt(5.991 * 9.0), abs=0.1)
+    # CoT's ce is CE90, the circle holding 90 % (ATAK's CotPoint): for sigmas 3 m and 1 m, 5.05 m (a Monte Carlo
+    # check below); the height is not estimated (le, hae: CoT's 9999999, unknown)
+    assert float(point.get("ce")) == pytest.approx(5.05, abs=0.05)
+    rng = np.random.default_rng(0)
+    draws = rng.multivariate_normal([0.0, 0.0], np.diag([1.0, 9.0]), 200_000)
+    assert np.mean(np.hypot(*draws.T) <= float(point.get("ce"))) == pytest.approx(0.9, abs=0.005)
+    assert float(point.get("le")) == float(point.get("hae")) == 9999999.0
     ellipse = event.find("detail/shape/ellipse")
     assert float(ellipse.get("major")) == pytest.approx(7.3, abs=0.1) and float(ellipse.get("minor")) == pytest.approx(
         2.4, abs=0.1) and float(ellipse.get("angle")) in (0.0, 180.0)  # the major axis north-south

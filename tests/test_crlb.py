@@ -36,3 +36,17 @@ def test_crlb_so_far_grows_into_the_batch_bound():
     bound = crlb_so_far([0.0, 0.0], sensors, sigmas, stamps, [0.5, 2.5, 4.0])
     assert bound[0] == float("inf") and bound[1] == float("inf")  # nothing yet; then two collinear rays only
     assert bound[2] == pytest.approx(crlb_rmse([0.0, 0.0], sensors, sigmas))
+
+
+def test_the_circular_error_holds_its_share_of_a_gaussian():
+    """CE90 (CoT's `ce`): sqrt(2 ln 10) sigma for a circle, 1.645 sigma for a line, and 90 % of draws otherwise."""
+    import math
+
+    from aoa_localizer.engine.crlb import circular_error
+
+    assert circular_error(np.eye(2) * 4.0) == pytest.approx(2.0 * math.sqrt(2.0 * math.log(10.0)), rel=1e-5)
+    assert circular_error(np.diag([9.0, 0.0])) == pytest.approx(3.0 * 1.6448536, rel=1e-6)
+    cov = np.array([[9.0, 2.0], [2.0, 1.0]])
+    draws = np.random.default_rng(1).multivariate_normal([0.0, 0.0], cov, 200_000)
+    assert np.mean(np.hypot(*draws.T) <= circular_error(cov)) == pytest.approx(0.9, abs=0.004)
+    assert circular_error(cov, 0.5) < circular_error(cov, 0.9) < circular_error(cov, 0.99)

@@ -1133,6 +1133,26 @@ def test_the_node_sends_each_estimate_to_tak_as_cursor_on_target(spawn, domain):
     assert refused.returncode == 2 and "the scheme must be udp:// or tcp://" in refused.stderr
 
 
+def test_a_tak_server_that_is_down_makes_the_diagnostics_warn_and_the_log_say_it(spawn, domain):
+    """Issue 67, item 5: with nothing listening, /diagnostics stayed OK with cot_failed=14 and no log line."""
+    import socket
+
+    closed = socket.socket()
+    closed.bind(("127.0.0.1", 0))
+    port = closed.getsockname()[1]
+    closed.close()  # nobody listens on it
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1", "-p", "diagnostics_period_s:=0.3", "-p",
+                    f"cot_url:=tcp://127.0.0.1:{port}"], domain)
+    with client(domain) as (node, executor):
+        diag: dict = {}
+        node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
+            diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        _publish_drive(node, executor, (600.0, 400.0))
+        assert spin_until(executor, lambda: "TAK:" in diag.get("message", ""), 20), json.dumps(diag)
+        assert diag["level"] in ("1", "2") and int(diag["cot_failed"]) >= 1
+    assert "TAK: " in open(node_p.log_path).read() and "not sent" in open(node_p.log_path).read()
+
+
 def test_the_launcher_reports_every_transmitter_against_its_own_truth(domain):
     """Issue 53, items 2 and 5: `--vehicle-param emitters=[433.92e6,...]` (numbers YAML 1.1 reads as text, as
     `simulate --emitters` takes them) plays two transmitters; the vehicle publishes each one's truth on

@@ -17,7 +17,7 @@ from urllib.parse import urlsplit
 
 from aoa_localizer.common.output import file_names
 from aoa_localizer.common.xml_text import xml_text
-from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
+from aoa_localizer.engine.crlb import ELLIPSE_95, circular_error, ellipse_axes
 
 RETRY_S = 10.0  # after a failed send, the next tries this much later (a TCP server down costs no 2 s timeouts)
 COT_TYPE = "a-u-G"  # an unknown ground object: what a transmitter found by DF is until someone says more
@@ -40,7 +40,7 @@ def _pytak():
 
 def estimate_event(est, stale_s: float, name: str = "") -> bytes:
     """One estimate as a CoT event (XML bytes): uid `aoa_localizer.<channel or name>`, its point to 1e-7 deg, `ce`
-    the 95 % ellipse's semi-major (m), a shape with the 95 % ellipse (semi-axes m, angle deg clockwise from north),
+    its CE90 (m; `le` and `hae` unknown), a shape with the 95 % ellipse (semi-axes m, angle deg clockwise from north),
     the state and warnings in the remarks, stale `stale_s` from now."""
     pytak = _pytak()
     ident = xml_text(name or est.channel)
@@ -52,7 +52,10 @@ def estimate_event(est, stale_s: float, name: str = "") -> bytes:
     pytak.add_remarks(detail, [f"aoa_localizer {ident}{frequency}: {est.state};",
                                f"95 % ellipse {major:.0f} x {minor:.0f} m ({ELLIPSE_95:.2f} sigma^2);",
                                f"{est.bearings_used} bearings.", *map(xml_text, est.warnings)])
-    point = pytak.cot_point(est.lat, est.lon, ce=f"{major:.1f}", hae=None, le=None, precision=7)
+    ground = est.cov if est.ground_cov is None else est.ground_cov
+    # CoT's ce is CE90 (the circle holding 90 %; ATAK's CotPoint), le LE90 of the height, which is not estimated:
+    # CoT's 9999999 for "unknown", as hae
+    point = pytak.cot_point(est.lat, est.lon, ce=f"{circular_error(ground, 0.9):.1f}", hae=None, le=None, precision=7)
     event = pytak.cot_event(uid=f"{UID_PREFIX}.{ident}", stale=max(1, round(stale_s)), cot_type=COT_TYPE,
                             point=point, detail=detail, callsign=f"DF {ident}")
     return pytak.serialize_cot(event)

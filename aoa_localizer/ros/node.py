@@ -161,6 +161,8 @@ class LocalizerNode(Node):
                                    self.get_parameter("emitter_frame").value, self._now)
         self.cot = self._cot_sender()  # raises ConfigError: the caller refuses to start
         self.cot_sent_at: dict[str, float] = {}  # each channel's last CoT event (monotonic s)
+        self.cot_unsent = 0  # CoT events failed or dropped, as of the last /diagnostics
+        self.cot_failing = False  # the last period had some: said in the log once per run of failing periods
         self._init_inputs()
         self.pub_diag = self.create_publisher(self.types.DiagnosticArray, "/diagnostics", 10)
         self.diag_name = f"{self.get_fully_qualified_name().lstrip('/')}: localizer"  # like diagnostic_updater
@@ -439,7 +441,24 @@ class LocalizerNode(Node):
             values.update(cot_sent=self.cot.sent, cot_failed=self.cot.failed, cot_dropped=self.cot.dropped)
             if self.cot.last_error:
                 values["cot_last_error"] = self.cot.last_error
+            level, message = self._cot_health(level, message)
         return level, message, values
+
+    def _cot_health(self, level: int, message: str) -> tuple[int, str]:
+        """WARN, with the words in the message, for a period in which CoT events failed or were dropped; the log
+        says so when such periods begin (a TAK server down or never reading was once only a count)."""
+        assert self.cot is not None
+        unsent = self.cot.failed + self.cot.dropped
+        failing, self.cot_unsent = unsent > self.cot_unsent, unsent
+        if not failing:
+            self.cot_failing = False
+            return level, message
+        words = (f"TAK: {self.cot.failed} CoT events not sent, {self.cot.dropped} dropped, to {self.cot.url} "
+                 f"({self.cot.last_error or 'the sender fell behind'})")
+        if not self.cot_failing:
+            self.get_logger().warning(words)
+        self.cot_failing = True
+        return max(level, 1), (f"{message}; {words}" if message else words)
 
     def _publisher_problems(self) -> dict[str, list[str]]:
         """What is wrong with the publishers on our input topics, by diagnostics key: `wrong_encoding`, another
