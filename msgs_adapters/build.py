@@ -109,10 +109,12 @@ def emitter_pose(T, est, frame_id: str = "map"):
 
 
 def emitter_fix(T, est, alt: float, frame_id: str = "emitter"):
-    """emitter/fix: lat/lon with the covariance in east/north at the emitter (m^2), COVARIANCE_TYPE_APPROXIMATED."""
+    """emitter/fix: lat/lon with the covariance in east/north at the emitter (m^2), COVARIANCE_TYPE_APPROXIMATED;
+    the altitude is not estimated (UNESTIMATED_VARIANCE, as emitter/pose's z: 0 would say it is exact)."""
     cov = np.zeros(9)
     ground = getattr(est, "ground_cov", None)
     cov[[0, 1, 3, 4]] = np.asarray(est.cov if ground is None else ground, float).reshape(4)
+    cov[8] = UNESTIMATED_VARIANCE
     return navsatfix(T, est.stamp, est.lat, est.lon, alt, status=0, frame_id=frame_id, covariance=cov,
                      covariance_type=1)
 

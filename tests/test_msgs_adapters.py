@@ -157,6 +157,9 @@ def test_emitter_fix_is_lat_lon_with_an_approximated_enu_covariance(estimate):
         assert (r.lat, r.lon, r.alt) == (39.1072, 117.2139, 5.0)
         assert m.position_covariance_type == 1
         assert np.array(m.position_covariance).reshape(3, 3)[:2, :2] == pytest.approx(estimate.cov)
+        # the altitude is not estimated: unknown, as emitter/pose's z (0 said it was exact; issue 67, item 4)
+        assert m.position_covariance[8] == build.UNESTIMATED_VARIANCE and not np.array(m.position_covariance)[
+            [2, 5, 6, 7]].any()
 
 
 def test_particles_become_poses(estimate):

@@ -338,6 +338,9 @@ def test_frames_datum_path_and_stale_inputs_in_a_namespace(spawn, domain):
         datum = got["datum"][0]
         lat0, lon0, alt0 = frame.to_geodetic(0.0, 0.0)  # the first fix: the datum when none is configured
         assert datum.header.frame_id == "site" and (datum.latitude, datum.longitude) == pytest.approx((lat0, lon0))
+        # stamped in measurement time, as every output (the node's wall clock once: 5 days from a bag's stamps)
+        fix_stamps = [p.header.stamp.sec + 1e-9 * p.header.stamp.nanosec for p in got["path"].poses]
+        assert fix_stamps[0] <= datum.header.stamp.sec + 1e-9 * datum.header.stamp.nanosec <= fix_stamps[-1]
         assert got["pose"].header.frame_id == "site" and got["fix"].header.frame_id == "emitter"
         path = got["path"]
         assert path.header.frame_id == "site" and len(path.poses) == 31  # a fix a second for 30 s

@@ -383,7 +383,7 @@ class LocalizerNode(Node):
         mon.fix_stamp(station, r.stamp)
         self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
         self._publish_made()
-        self.outputs.datum(self.loc)
+        self.outputs.datum(self.loc, r.stamp)
         mon.timed(t0)
 
     def on_heading(self, msg, station: str = ""):

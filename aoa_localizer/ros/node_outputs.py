@@ -204,11 +204,13 @@ class NodeOutputs:
             self.pub_channels.publish(self.types.String(data=json.dumps({"channels": summary}, sort_keys=True)))
             self.summary_sent = summary
 
-    def datum(self, loc: Localizer):
-        """emitter/datum (latched) whenever the map frame's origin is new: set from a fix, or configured."""
+    def datum(self, loc: Localizer, stamp: float | None = None):
+        """emitter/datum (latched) whenever the map frame's origin is new: set from a fix (stamped with the fix that
+        made it known: measurement time, as every output), or configured (the node's clock: no measurement yet)."""
         datum = loc.frame
         if datum is not None and datum != self.datum_sent:
-            self.pub_datum.publish(build.datum_fix(self.types, self.now(), datum.lat0, datum.lon0, datum.alt0,
+            when = self.now() if stamp is None else stamp
+            self.pub_datum.publish(build.datum_fix(self.types, when, datum.lat0, datum.lon0, datum.alt0,
                                                    self.map_frame))
             self.datum_sent = datum
 
