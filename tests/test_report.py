@@ -91,6 +91,8 @@ def test_report_on_a_sample_bag_writes_every_file(tmp_path):
     assert (tmp_path / "r/map.png").read_bytes()[:4] == b"\x89PNG"
     summary = (tmp_path / "r/summary.md").read_text()
     assert "Final error against the truth" in summary and "Inputs not used" in summary
+    # every file it wrote is named, the TAK one too, and the file ends its last line (issue 67, item 8)
+    assert all(f"`{name}`" in summary for name in files) and summary.endswith("`\n")
 
 
 @pytest.mark.slow

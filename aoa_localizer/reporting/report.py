@@ -31,7 +31,7 @@ from aoa_localizer.common.cli import (
     setup_logging,
 )
 from aoa_localizer.common.cot import write_cot_files
-from aoa_localizer.common.output import check_folder
+from aoa_localizer.common.output import check_folder, file_names
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, ellipse_axes, inside_ellipse
@@ -132,7 +132,7 @@ def _error_words(est: Estimate, truth) -> str:
 
 
 def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, truth, bound, damage, others=(),
-                  truths=None):
+                  truths=None, cot_files=()):
     a, b, azimuth = ellipse_axes(est.cov)
     used = int(sum(1 for r in trace.readings if r[5]))
     lines = [
@@ -190,10 +190,10 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
         lines.append("none")
     lines += [
         "",
-        "Files: `map.png`, `emitter.kml`, `emitter.geojson`" + (", `error.png`" if truth is not None else ""),
-        "",
+        "Files: `map.png`, `emitter.kml`, `emitter.geojson`" + (", `error.png`" if truth is not None else "")
+        + "".join(f", `{name}`" for name in cot_files) + ", `summary.md`",
     ]
-    path.write_text("\n".join(lines))
+    path.write_text("\n".join(lines) + "\n")
 
 
 def _mhz(frequency_hz: float) -> str:
@@ -313,7 +313,9 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     (args.out / "emitter.kml").write_text(export.kml(frame, finals, enu))
     (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, finals, enu), indent=1))
     print(f"report: {write_cot_files(args.out, finals)}", file=sys.stderr)
-    write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage, others, truths)
+    cot = [f"emitter_{name}.cot" for name in file_names(e.channel for e in finals).values()]
+    write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage, others, truths,
+                  [name for name in cot if (args.out / name).exists()])
 
 
 if __name__ == "__main__":

@@ -315,10 +315,11 @@ class Monitor:
             if entry.get("transmitter_count", 1) >= 2:
                 # the default channel's transmitters against the vehicle's transmitters on its frequency
                 near = truths if channel == "default" and len(truths) > 1 else []
-                places = "; ".join(f"E {t['east']:.1f} N {t['north']:.1f} ({100 * t['share']:.0f} %, {t['state']}"
+                places = "; ".join(f"transmitter_{j}: E {t['east']:.1f} N {t['north']:.1f} ({100 * t['share']:.0f} %, "
+                                   f"{t['state']}"
                                    + (f", {_nearest(t['east'], t['north'], near)[1]:.1f} m from the nearest truth"
                                       if near else "") + ")"
-                                   for t in entry["transmitters"])
+                                   for j, t in enumerate(entry["transmitters"], start=1))
                 lines.append(f"channel {channel}: {entry['transmitter_count']} transmitters on its frequency "
                              f"(p = {entry['count_probability']:.2f}): {places}")
         return lines
@@ -445,7 +446,7 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
         k, _ = _nearest(state["east"], state["north"], state.get("truths") or [state["truth"]])
         truth = (state.get("truths") or [state["truth"]])[k]
         if k:
-            figures["co_channel_truth"] = k
+            figures["co_channel_truth"] = [float(truth[0]), float(truth[1])]
         err = np.array([state["east"] - truth[0], state["north"] - truth[1]])
         figures["error_m"] = float(np.hypot(*err))
         figures["nees"] = nees = crlb_nees(err, cov)
@@ -743,8 +744,9 @@ def print_result(ok: bool, why: str, f: dict):
             f"95% ellipse semi-axes {f['ellipse95_m'][0]:.1f} m x {f['ellipse95_m'][1]:.1f} m"
         )
         if "error_m" in f:
-            which = (f" (co_channel transmitter {f['co_channel_truth']}, the nearest: the estimate follows one of "
-                     "the transmitters on its frequency)" if f.get("co_channel_truth") else "")
+            near = f.get("co_channel_truth")
+            which = (f" (the nearest truth: the vehicle's co_channel transmitter at E {near[0]:.1f} N {near[1]:.1f}; "
+                     "the channel's estimate follows one of the transmitters on its frequency)" if near else "")
             print(f"error against the simulated truth: {f['error_m']:.2f} m{which}")
         if "state" in f:
             print(f"state: {f['state']}")

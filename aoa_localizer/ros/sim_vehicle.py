@@ -317,7 +317,8 @@ class SimVehicle(Node):
 def usage() -> str:
     """--help: how to start the vehicle and its parameters."""
     lines = [
-        "usage: ros2 run aoa_localizer sim_vehicle [-h] [--ros-args -p NAME:=VALUE]",
+        "usage: aoa_sim_vehicle [-h] [--ros-args -p NAME:=VALUE]",
+        "   or: ros2 run aoa_localizer aoa_sim_vehicle [-h] [--ros-args ...]",
         "   or: python -m aoa_localizer.sim_vehicle [-h] [--ros-args ...]",
         "",
         __doc__.strip(),
