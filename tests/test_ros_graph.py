@@ -1,5 +1,6 @@
 """Launch tests: the real node, vehicle, launcher and replay as processes over Fast DDS, each test in its
 own ROS domain; children are killed by process group whether the test passes or not."""
+import functools
 import json
 import math
 import os
@@ -21,7 +22,7 @@ from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.simulation.scenarios import SCENARIOS
+from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 from msgs_adapters import build
 from msgs_adapters.bag import read_bag
 from msgs_adapters.fields import diagnostics_values, estimate_from_pose
@@ -531,6 +532,38 @@ def test_the_vehicle_refuses_bad_parameters_at_start(domain, args, words):
                          env=ros_env(domain), cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert res.returncode == 2 and words in res.stderr, res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_sim_truth_and_emitter_pose_share_one_map_frame(spawn, domain):
+    """Issue 67, item 3: sim/truth was in the scenario's datum and emitter/pose in the node's first fix's, both
+    `map`: a client comparing them saw 5.2 m where the error was 1.3 m. The vehicle publishes its truths again in the
+    node's frame once emitter/datum says where it is; sim/datum then names that frame."""
+    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1"], domain)
+    vehicle = spawn(["aoa_localizer.sim_vehicle", "--ros-args", "-p", "speedup:=40.0", "-p", "data_seed:=2",
+                     "-p", "wait_for_subscribers:=1"], domain)
+    with client(domain) as (node, executor):
+        got: dict = {}
+        latched = QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+        for topic, kind in (("sim/truth", T.PointStamped), ("sim/datum", T.NavSatFix),
+                            ("emitter/datum", T.NavSatFix), ("emitter/pose", T.PoseWithCovarianceStamped)):
+            node.create_subscription(kind, topic, functools.partial(got.__setitem__, topic), latched)
+
+        def one_frame() -> bool:
+            if len(got) < 4:
+                return False
+            same = (got["sim/datum"].latitude, got["sim/datum"].longitude) == pytest.approx(
+                (got["emitter/datum"].latitude, got["emitter/datum"].longitude), abs=1e-9)
+            return same and vehicle.poll() is not None  # the drive is played
+        assert spin_until(executor, one_frame, 120), open(vehicle.log_path).read() + open(node_p.log_path).read()
+        spin_until(executor, lambda: False, 2.0)  # the last points' estimate
+    _, east, north, cov = estimate_from_pose(got["emitter/pose"])
+    truth = got["sim/truth"].point
+    # the truth in the node's frame: the error the launcher reports, inside the pose's own ellipse scale
+    data = simulate("seed", 2)
+    lat, lon, _ = data.frame.to_geodetic(*data.emitter_enu)
+    node_frame = LocalFrame(got["emitter/datum"].latitude, got["emitter/datum"].longitude)
+    assert (truth.x, truth.y) == pytest.approx(tuple(map(float, node_frame.to_enu(lat, lon))), abs=0.01)
+    assert math.hypot(east - truth.x, north - truth.y) < 3.0 * math.sqrt(np.trace(np.array(cov))) + 1.0
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])

@@ -6,8 +6,8 @@ Parameters pick a public scenario (docs/benchmarks.md) and override any part of 
 emitter, datum, GPS rate/noise/drop-outs, DF rate, bearing noise, quality range, wild-bearing share,
 the data seed. Messages are paced in real time divided by `speedup` (0: as fast as `max_rate_hz`
 allows); header stamps follow the simulated clock, starting at the wall time of the start. The
-truth goes out latched on `sim/truth` (PointStamped, emitter in `map` at the scenario's datum) and
-`sim/datum` (NavSatFix of that datum). The node exits when the scenario is played. A scenario with several
+truth goes out latched on `sim/truth` (PointStamped, emitter in `map`) and `sim/datum` (NavSatFix of the datum
+`map` is at): the scenario's, then the node's once it publishes emitter/datum, so the graph has one map frame. The node exits when the scenario is played. A scenario with several
 stations (`pair`: two cars) plays each on NAME/gps/fix and NAME/df/bearing; overrides apply to single-vehicle
 scenarios only. With `drive:=goal` the vehicle drives its track until the localizer publishes `emitter/next_goal`,
 then towards the newest goal, stop by stop (simulation/goal_drive.py), for `duration_s` or as long as its scenario.
@@ -181,8 +181,10 @@ class SimVehicle(Node):
         self.channel_truths = {channel: self.create_publisher(self.T.PointStamped, f"sim/{channel}/truth", latched)
                                for channel in self.truths}
         self.pub_datum = self.create_publisher(self.T.NavSatFix, "sim/datum", latched)
+        self.truth_stamp: float | None = None  # when the truths went out (None: not yet)
+        # one map for the graph: the truths go out again in the node's frame once it says where that is
+        self.create_subscription(self.T.NavSatFix, "emitter/datum", self.on_node_datum, latched)
         if s["drive"] == "goal":
-            self.create_subscription(self.T.NavSatFix, "emitter/datum", self.on_node_datum, latched)
             self.create_subscription(self.T.PoseStamped, "emitter/next_goal", self.on_goal, 1)
 
     def _goal_drive(self, overrides: dict) -> list[str]:
@@ -213,7 +215,28 @@ class SimVehicle(Node):
         return [""]
 
     def on_node_datum(self, msg):
+        """The node's map frame: the truths are published again in it, so a client comparing sim/truth with
+        emitter/pose in `map` compares them in one frame."""
         self.node_datum = LocalFrame(msg.latitude, msg.longitude, msg.altitude)
+        if self.truth_stamp is not None:
+            self._publish_truths(self.truth_stamp)
+
+    def _publish_truths(self, stamp: float):
+        """sim/datum, sim/truth and each channel's truth, in the node's map frame when it is known (emitter/datum),
+        else in the scenario's."""
+        T, scenario = self.T, LocalFrame(*self.datum)
+        frame = self.node_datum or scenario
+        self.truth_stamp = stamp
+
+        def moved(where) -> tuple[float, float]:
+            lat, lon, _ = scenario.to_geodetic(float(where[0]), float(where[1]))
+            east, north = frame.to_enu(float(lat), float(lon))
+            return float(east), float(north)
+
+        self.pub_datum.publish(build.navsatfix(T, stamp, frame.lat0, frame.lon0, frame.alt0, frame_id="map"))
+        self.pub_truth.publish(build.point_stamped(T, stamp, *moved(self.emitter)))
+        for channel, where in self.truths.items():
+            self.channel_truths[channel].publish(build.point_stamped(T, stamp, *moved(where)))
 
     def on_goal(self, msg):
         """The localizer's goal, from its map frame (at emitter/datum) into the scenario's."""
@@ -274,10 +297,7 @@ class SimVehicle(Node):
             self.serve(0.05)
         self.serve(self.start_delay_s)
         base = time.time()
-        self.pub_datum.publish(build.navsatfix(T, base, *self.datum, frame_id="map"))
-        self.pub_truth.publish(build.point_stamped(T, base, *self.emitter))
-        for channel, where in self.truths.items():
-            self.channel_truths[channel].publish(build.point_stamped(T, base, *where))
+        self._publish_truths(base)
         events = self.events
         if self.counts is None:
             end = self.duration_s or self.goal_end_s
