@@ -1,5 +1,5 @@
-"""`scheduling: realtime`: global checks and start searches in the worker thread (engine/inference/checks.py), move
-sweeps spread over the points after a resampling (filters/resample_move.py)."""
+"""`scheduling: realtime`: global checks and start searches in the worker process (engine/inference/checks.py,
+scheduling/worker.py), move sweeps spread over the points after a resampling (filters/resample_move.py)."""
 import multiprocessing
 import os
 import pickle
@@ -15,6 +15,7 @@ from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.inference import checks
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.points.preprocess import columns
+from aoa_localizer.engine.scheduling import worker as worker_module
 from aoa_localizer.engine.track import initiator as initiator_module
 from aoa_localizer.engine.track import supervisor as supervisor_module
 from aoa_localizer.engine.track.initiator import Outcome
@@ -196,7 +197,7 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
         starts.append(1)
         raise OSError("cannot start a process")
 
-    monkeypatch.setattr(checks, "ProcessPoolExecutor", cannot_start)
+    monkeypatch.setattr(worker_module, "ProcessPoolExecutor", cannot_start)
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)

@@ -196,7 +196,10 @@ def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dic
     read from the bag when not given), then the user's -p."""
     if found is None:
         found = stations_of_bag(args)
-    params: dict = {}
+    # The launcher's own sources (its vehicle, a bag it plays) are read reliably: on a machine too busy for the pace
+    # they are played at, a best-effort read lost half the bearings before the first estimate (a receiver's own
+    # stream stays best effort, the node's default; -p input_reliability wins)
+    params: dict = {"input_reliability": "reliable"}
     if args.scenario:
         fleet = FLEETS.get(args.scenario)
         sc = fleet.first if fleet else SCENARIOS[args.scenario]
@@ -253,6 +256,8 @@ class Monitor:
         self.T, self.latched = T, latched
         self.channel_poses: dict[str, Any] = {}
         self.channel_truths: dict[str, Any] = {}
+        self.truths_followed: set[str] = set()  # channels whose sim/CHANNEL/truth is subscribed
+        self.truths_looked = 0.0  # when the graph was last looked at for them (monotonic s)
         self.summary: dict[str, dict] = {}  # the latest emitter/channels: each channel's entry
         self.transmitter_poses: dict[str, Any] = {}  # topic: the latest pose of a co-channel transmitter
         self.node.create_subscription(T.String, "emitter/channels", self._on_channels, latched)
@@ -271,6 +276,24 @@ class Monitor:
             self.rclpy.spin_once(self.node, timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
             if self.recorder:
                 self.recorder.poll()
+            if time.monotonic() >= self.truths_looked + 0.5:
+                self._follow_truths()
+
+    def _follow_truths(self) -> None:
+        """Each transmitter's truth (sim/CHANNEL/truth) taken as soon as the vehicle offers it: the vehicle's
+        latched truths leave with it, and a subscription made once the node named the channel came too late on a
+        busy machine (a channel's line then had no error against its truth)."""
+        self.truths_looked = time.monotonic()
+        for name, _ in self.node.get_topic_names_and_types():
+            parts = name.strip("/").split("/")
+            if len(parts) == 3 and parts[0] == "sim" and parts[2] == "truth":
+                self._truth_of(parts[1])
+
+    def _truth_of(self, channel: str) -> None:
+        if channel not in self.truths_followed:
+            self.truths_followed.add(channel)
+            self.node.create_subscription(self.T.PointStamped, f"sim/{channel}/truth",
+                                          functools.partial(self.channel_truths.__setitem__, channel), self.latched)
 
     def _on_channels(self, msg) -> None:
         self.summary = json.loads(msg.data).get("channels", {})
@@ -288,8 +311,7 @@ class Monitor:
             self.channel_poses[channel] = None
             self.node.create_subscription(self.T.PoseWithCovarianceStamped, f"emitter/{channel}/pose",
                                           functools.partial(self.channel_poses.__setitem__, channel), self.latched)
-            self.node.create_subscription(self.T.PointStamped, f"sim/{channel}/truth",
-                                          functools.partial(self.channel_truths.__setitem__, channel), self.latched)
+            self._truth_of(channel)
 
     def channel_lines(self) -> list[str]:
         """One line per frequency channel: its estimate, and its error against its own truth when the simulation

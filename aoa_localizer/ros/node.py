@@ -35,6 +35,7 @@ from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.rejections import REASONS
 from aoa_localizer.engine.scheduling.memory import OldObjects, keep_freed_memory
 from aoa_localizer.ros.declare import declare, refuse_unknown, value_of
+from aoa_localizer.ros.fix_wait import FixWait
 from aoa_localizer.ros.node_monitor import NodeMonitor
 from aoa_localizer.ros.node_outputs import NodeOutputs, PosteriorWork
 from aoa_localizer.ros.node_params import NODE_PARAMS, STATION_POSITION
@@ -210,6 +211,7 @@ class LocalizerNode(Node):
         declare(self, parameter_specs(), check=False)  # the engine's values are checked together, by its config
         node_values = declare(self, NODE_PARAMS)
         self.station_names, self.fixed_positions = self._stations(node_values)
+        self.fix_wait = FixWait(self._feed_bearing)  # DF records that came before their fix (fix_wait.py)
         moving = [name for name in self.station_names if name not in self.fixed_positions]
         self.vehicle = moving[0] if moving else None  # the station emitter/next_goal guides
         refuse_unknown(self)
@@ -344,6 +346,7 @@ class LocalizerNode(Node):
         old = self.loc
         old.close()
         self.cfg, self.loc = cfg, self._new_localizer(cfg)
+        self.fix_wait.reset()  # what waited goes to the new engine; its fixes start again
         if names & DATUM_PARAMS:
             self.path.clear()  # drawn in the old map frame
         else:
@@ -382,6 +385,7 @@ class LocalizerNode(Node):
             return
         mon.fix_stamp(station, r.stamp)
         self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
+        self.fix_wait.fix(station, r.stamp)  # the DF records that waited for it follow it
         self._publish_made()
         self.outputs.datum(self.loc, r.stamp)
         mon.timed(t0)
@@ -402,14 +406,20 @@ class LocalizerNode(Node):
         mon.health.reading(self._now())
         try:
             r = df_record(msg, self.cfg.bearing_encoding)
-            mon.df_stamp(station, r.stamp, r.frequency_hz)
-            self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz,
-                                 sigma_deg=r.sigma_deg)
         except (AttributeError, TypeError, ValueError):
             mon.counts["adapter_errors"] += 1
             return
+        mon.df_stamp(station, r.stamp, r.frequency_hz)
+        if station in self.fixed_positions:  # placed by its position: no fix to wait for
+            self._feed_bearing(station, r)
+        else:
+            self.fix_wait.bearing(station, r, time.monotonic())
         self._publish_made()
         mon.timed(t0)
+
+    def _feed_bearing(self, station: str, r) -> None:
+        self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz,
+                             sigma_deg=r.sigma_deg)
 
     # -- outputs ------------------------------------------------------------------------------------
     def _publish_made(self, latency: bool = True):
@@ -437,6 +447,8 @@ class LocalizerNode(Node):
             for words in said:
                 self.get_logger().warning(words)
         level, message, values = self.monitor.diagnostics(self.loc, self._now(), self.pending_params, problems)
+        values.update(df_waiting_for_fix=self.fix_wait.count, df_waited_for_fix=self.fix_wait.waited,
+                      df_fix_wait_timed_out=self.fix_wait.timed_out)
         if self.cot is not None:  # what went to TAK, and why not
             values.update(cot_sent=self.cot.sent, cot_failed=self.cot.failed, cot_dropped=self.cot.dropped)
             if self.cot.last_error:
@@ -498,6 +510,7 @@ class LocalizerNode(Node):
         survived leave the garbage collector's full passes (docs/ros.md, "Latency")."""
         t0 = time.perf_counter()
         self._apply_parameters()
+        self.fix_wait.due(time.monotonic())
         self.loc.idle()
         self._publish_made(latency=False)  # no input made these: no latency to count
         self.monitor.posterior_work.add(self.outputs.posteriors(

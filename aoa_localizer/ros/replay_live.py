@@ -15,13 +15,16 @@ from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
 from msgs_adapters.bag_files import BagFiles, BagFilesError, describe_topics
 from msgs_adapters.types import message_class
 
+HISTORY_DEPTH = 2000  # messages a replayed topic keeps for a reliable reader's resend
+
 
 def live_qos(profiles):
-    """The recorded offered QoS as an rclpy profile (reliable/volatile, depth 100, when none was recorded)."""
+    """The recorded offered QoS as an rclpy profile (reliable/volatile when none was recorded), with a history of
+    at least HISTORY_DEPTH: a reliable reader that fell behind a fast replay gets what it missed again."""
     if not profiles:
-        return QoSProfile(depth=100)
+        return QoSProfile(depth=HISTORY_DEPTH)
     q = profiles[0]
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(100, int(q.depth)),
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(HISTORY_DEPTH, int(q.depth)),
                       reliability=ReliabilityPolicy(q.reliability.value) if q.reliability.value in (1, 2)
                       else ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy(q.durability.value) if q.durability.value in (1, 2)

@@ -2,12 +2,12 @@
 
     python -m aoa_localizer.sim_vehicle --ros-args -p scenario:=urban -p speedup:=10.0
 
-Parameters pick a public scenario (docs/benchmarks.md) and override any part of it: track, speed,
-emitter, datum, GPS rate/noise/drop-outs, DF rate, bearing noise, quality range, wild-bearing share,
-the data seed. Messages are paced in real time divided by `speedup` (0: as fast as `max_rate_hz`
-allows); header stamps follow the simulated clock, starting at the wall time of the start. The
-truth goes out latched on `sim/truth` (PointStamped, emitter in `map`) and `sim/datum` (NavSatFix of the datum
-`map` is at): the scenario's, then the node's once it publishes emitter/datum, so the graph has one map frame. The node exits when the scenario is played. A scenario with several
+Parameters pick a public scenario (docs/benchmarks.md) and override any part of it: track, speed, emitter, datum,
+GPS rate/noise/drop-outs, DF rate, bearing noise, quality range, wild-bearing share, the data seed. Messages are
+paced in real time divided by `speedup` (0: as fast as `max_rate_hz` allows); header stamps follow the simulated
+clock, starting at the wall time of the start. The truth goes out latched on `sim/truth` (PointStamped, emitter in
+`map`) and `sim/datum` (NavSatFix of the datum `map` is at): the scenario's, then the node's once it publishes
+emitter/datum, so the graph has one map frame. The node exits when the scenario is played. A scenario with several
 stations (`pair`: two cars) plays each on NAME/gps/fix and NAME/df/bearing; overrides apply to single-vehicle
 scenarios only. With `drive:=goal` the vehicle drives its track until the localizer publishes `emitter/next_goal`,
 then towards the newest goal, stop by stop (simulation/goal_drive.py), for `duration_s` or as long as its scenario.
@@ -34,6 +34,8 @@ from aoa_localizer.simulation.fleet import FLEETS, Fleet, simulate_fleet
 from aoa_localizer.simulation.goal_drive import GoalDrive
 from aoa_localizer.simulation.scenarios import SCENARIOS, Trajectory, mounted, simulate
 from msgs_adapters import build
+
+HISTORY_DEPTH = 2000  # messages a publisher keeps for a reliable reader's resend: seconds of a fast play
 
 
 def _number(doc: str, kind: type = float, **bounds) -> Spec:
@@ -175,8 +177,9 @@ class SimVehicle(Node):
         self.pubs = {}
         for name in self.stations:
             prefix = f"{name}/" if name else ""
-            self.pubs[name] = (self.create_publisher(self.T.NavSatFix, prefix + "gps/fix", 100),
-                               self.create_publisher(bearing_type, prefix + "df/bearing", 100))
+            # a deep history: a reliable reader that fell behind gets what it missed again
+            self.pubs[name] = (self.create_publisher(self.T.NavSatFix, prefix + "gps/fix", HISTORY_DEPTH),
+                               self.create_publisher(bearing_type, prefix + "df/bearing", HISTORY_DEPTH))
         self.pub_truth = self.create_publisher(self.T.PointStamped, "sim/truth", latched)
         self.channel_truths = {channel: self.create_publisher(self.T.PointStamped, f"sim/{channel}/truth", latched)
                                for channel in self.truths}
