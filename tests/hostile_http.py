@@ -28,6 +28,7 @@ REPLIES = {
 
 class _Handler(socketserver.BaseRequestHandler):
     def handle(self):
+        self.server.requests += 1  # type: ignore[attr-defined]  # HostileServer's count
         request = self.request.recv(4096).decode("latin-1")
         path = request.split(" ")[1] if request.count(" ") >= 2 else "/"
         start, sent = time.monotonic(), 0
@@ -57,6 +58,7 @@ class HostileServer(socketserver.ThreadingTCPServer):
 
     def __init__(self):
         super().__init__(("127.0.0.1", 0), _Handler)
+        self.requests = 0  # requests taken so far: a test waits on it, never on a fixed sleep
         self.thread = threading.Thread(target=self.serve_forever, daemon=True)
 
     def url(self, path: str) -> str:
