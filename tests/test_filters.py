@@ -7,7 +7,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.likelihood import (
     BearingLikelihood,
-    gaussian_loglik,
+    gaussian_loglik_var,
     mixture_loglik,
 )
 from aoa_localizer.engine.scheduling import slices
@@ -417,3 +417,9 @@ def test_the_cloud_summary_is_made_once_per_cloud_and_follows_a_replaced_cloud()
         assert np.isfinite(f.x).all() and not f.finite()  # finite particles, but the covariance overflows
         f.x, f.logw = np.zeros((4, 2)), np.array([0.0, np.nan, 0.0, 0.0])
         assert not f.finite()  # a NaN weight: the mean is NaN
+
+
+def gaussian_loglik(residual, sigma):
+    """log N(residual; 0, sigma^2): the paper's likelihood (eq. 24) with its normalising constant, the reference
+    the engine's variance form is held to."""
+    return gaussian_loglik_var(residual, np.square(sigma))

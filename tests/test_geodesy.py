@@ -7,7 +7,6 @@ from aoa_localizer.engine.geodesy import (
     LocalFrame,
     azimuth_to_enu,
     circular_mean,
-    enu_to_azimuth,
     wrap_360,
     wrap_pi,
 )
@@ -137,3 +136,8 @@ def test_a_float_angle_is_wrapped_by_math_to_the_same_bit_as_numpy():
     az, north = rng.uniform(-400, 400, 20000), rng.uniform(1.5, 1.6, 20000)
     scalar = np.array([azimuth_to_enu(float(a), float(n)) for a, n in zip(az, north, strict=True)])
     assert np.array_equal(scalar, azimuth_to_enu(az, north))
+
+
+def enu_to_azimuth(theta, north_angle=np.pi / 2):
+    """ENU angle (rad, CCW from east) to a DF azimuth in [0, 360) degrees."""
+    return wrap_360(np.degrees(north_angle - np.asarray(theta)))

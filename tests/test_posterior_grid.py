@@ -1,9 +1,11 @@
 """The posterior on a map grid (emitter/posterior): the density the global checks use, evaluated per cell."""
+import math
+
 import numpy as np
 import pytest
 
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.outputs.posterior_grid import CELLS, REGION, region_mass
+from aoa_localizer.engine.outputs.posterior_grid import CELLS, REGION, PosteriorGrid
 from aoa_localizer.simulation.evaluation import run
 from aoa_localizer.simulation.scenarios import simulate
 
@@ -30,3 +32,14 @@ def test_no_grid_before_the_first_estimate():
     from aoa_localizer import Localizer
 
     assert Localizer(LocalizerConfig(seed=1)).posterior_grid() is None
+
+
+def region_mass(grid: PosteriorGrid, particles: np.ndarray, weights: np.ndarray) -> float:
+    """The weighted share of `particles` in the cells the grid shows (value > 0): about REGION when the grid and
+    the cloud describe the same posterior."""
+    rows, cols = grid.cell_of(particles[:, 0], particles[:, 1])
+    n = grid.value.shape[0]
+    inside = (rows >= 0) & (rows < n) & (cols >= 0) & (cols < n)
+    shown = np.zeros(len(particles), bool)
+    shown[inside] = grid.value[rows[inside], cols[inside]] > 0
+    return float(np.sum(weights[shown]) / np.sum(weights)) if math.isfinite(np.sum(weights)) else 0.0

@@ -16,7 +16,6 @@ from aoa_localizer.engine.points.preprocess import (
     point_coefficients,
     quality_weight,
     reading_sigma,
-    recursive_corrected_mean,
 )
 from aoa_localizer.engine.types import Estimate, Reading
 
@@ -191,3 +190,13 @@ def test_more_readings_than_a_small_point_are_made_by_the_numpy_code():
     readings = random_group(np.random.default_rng(1), SMALL_POINT + 5)
     cfg = LocalizerConfig()
     assert make_point(readings, cfg)[0] == make_point_arrays(readings, cfg)[0]
+
+
+def recursive_corrected_mean(gammas, weights) -> float:
+    """The paper's recursion (eqs. 19-21) literally, on unwrapped angles: the reference for tests."""
+    mean = cmean = 0.0
+    for n, (g, w) in enumerate(zip(gammas, weights, strict=False), start=1):
+        mean = ((n - 1) * mean + g) / n
+        corrected = g - (g - mean) * w
+        cmean = ((n - 1) * cmean + corrected) / n
+    return cmean

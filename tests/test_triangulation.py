@@ -7,7 +7,6 @@ from aoa_localizer.engine.inference.triangulation import (
     good_pairs,
     initial_particles,
     intersect_rays,
-    intersect_tan,
     sorted_pairs,
 )
 from aoa_localizer.engine.types import ObservationPoint
@@ -72,3 +71,11 @@ def test_one_wild_bearing_does_not_seed_the_cloud():
     assert good_pairs(pts, 10.0, 0.0)[0].size == 1  # without the support check it would seed the cloud
     i, j, why = good_pairs(pts, 10.0, 0.6)
     assert i.size == 0 and "supported" in why
+
+
+def intersect_tan(x1, y1, t1, x2, y2, t2):
+    """Eqs. 22-23 as printed: the crossing of two bearing lines (ENU angles), with tangents."""
+    a, b = np.tan(t1), np.tan(t2)
+    x = (y2 - y1 + x1 * a - x2 * b) / (a - b)
+    y = (a * b * (x1 - x2) + y2 * a - y1 * b) / (a - b)
+    return x, y

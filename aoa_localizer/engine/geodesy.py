@@ -118,11 +118,6 @@ def azimuth_to_enu(azimuth_deg, north_angle=np.pi / 2):
     return wrap_pi(north_angle - np.radians(azimuth_deg))
 
 
-def enu_to_azimuth(theta, north_angle=np.pi / 2):
-    """ENU angle (rad, CCW from east) to a DF azimuth in [0, 360) degrees."""
-    return wrap_360(np.degrees(north_angle - np.asarray(theta)))
-
-
 Skew = tuple[float, float] | None
 
 

@@ -11,11 +11,6 @@ _LOG_SQRT_2PI = 0.5 * math.log(TWO_PI)
 _BELOW_FLOOR = 40.0  # exp(-40) = 4e-18 < 2^-53: below this under log(c), exp(g) + c == c
 
 
-def gaussian_loglik(residual, sigma):
-    """log N(residual; 0, sigma^2): the paper's likelihood (eq. 24) with its normalising constant."""
-    return gaussian_loglik_var(residual, np.square(sigma))
-
-
 def gaussian_loglik_var(residual, var):
     """log N(residual; 0, var), from the variance: no square root where the variance varies per particle."""
     if np.ndim(var) == 0:

@@ -23,14 +23,6 @@ _DRAW_FACTOR = 4
 _SUPPORT_SIGMAS = 3.0
 
 
-def intersect_tan(x1, y1, t1, x2, y2, t2):
-    """Eqs. 22-23 as printed: the crossing of two bearing lines (ENU angles), with tangents."""
-    a, b = np.tan(t1), np.tan(t2)
-    x = (y2 - y1 + x1 * a - x2 * b) / (a - b)
-    y = (a * b * (x1 - x2) + y2 * a - y1 * b) / (a - b)
-    return x, y
-
-
 def intersect_rays(p1, t1, p2, t2):
     """Crossing of rays p1 + s1 u(t1) and p2 + s2 u(t2), the same point as eqs. 22-23 without tangents.
 

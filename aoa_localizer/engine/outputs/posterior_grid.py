@@ -102,12 +102,3 @@ def _mode_masses(modes: Sequence[Mode], pts: Points, rob: Robust, east0: float, 
     return out
 
 
-def region_mass(grid: PosteriorGrid, particles: np.ndarray, weights: np.ndarray) -> float:
-    """The weighted share of `particles` in the cells the grid shows (value > 0): about REGION when the grid and
-    the cloud describe the same posterior."""
-    rows, cols = grid.cell_of(particles[:, 0], particles[:, 1])
-    n = grid.value.shape[0]
-    inside = (rows >= 0) & (rows < n) & (cols >= 0) & (cols < n)
-    shown = np.zeros(len(particles), bool)
-    shown[inside] = grid.value[rows[inside], cols[inside]] > 0
-    return float(np.sum(weights[shown]) / np.sum(weights)) if math.isfinite(np.sum(weights)) else 0.0

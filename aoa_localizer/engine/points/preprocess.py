@@ -68,16 +68,6 @@ def point_coefficients(quality: np.ndarray, sigma: np.ndarray, weighting: str) -
     return w / w.sum()
 
 
-def recursive_corrected_mean(gammas, weights) -> float:
-    """The paper's recursion (eqs. 19-21) literally, on unwrapped angles: the reference for tests."""
-    mean = cmean = 0.0
-    for n, (g, w) in enumerate(zip(gammas, weights, strict=False), start=1):
-        mean = ((n - 1) * mean + g) / n
-        corrected = g - (g - mean) * w
-        cmean = ((n - 1) * cmean + corrected) / n
-    return cmean
-
-
 TIE_RAD = 1e-9  # spreads this close are a tie (an even count has two central readings): the first one wins
 
 
