@@ -4,7 +4,7 @@
 roulette selection by fitness; arithmetic crossover of pairs with the adaptive probability pc of eq. 18
 (f' the fitter parent); Gaussian mutation with the adaptive probability pm of eq. 19 (f the individual's own
 fitness); no other resampling. The selection already used the newest likelihood, so the offspring carry equal
-weights (round 1 weighted them by the likelihood again: the newest measurement counted twice, every ellipse
+weights (weighting them by the likelihood again would count the newest measurement twice: every ellipse
 over-confident).
 
 The adaptive curves: A = 9.9034 is the constant of Kuang et al.'s adaptive sigmoid,

@@ -7,8 +7,8 @@ propagate the children through the state model (eq. 12) and weight them by their
 resampling"), and the N children with their normalised likelihoods form a pool of 2N from which N go on,
 with equal weights. `espf.selection: draw` (default) draws the N from the pool in proportion to the weights
 (systematic); `top` keeps the N largest. The paper says "select N"; `top` with every resampled particle at
-1/N breaks the ties by position, and as the resampled block sits in ancestor order that culled the tail of
-the block at every step (CHANGELOG, round 1).
+1/N breaks the ties by position, and as the resampled block sits in ancestor order that would cull the tail of
+the block at every step.
 
 `espf.variant: mcmc` (default, the emitter): resample-move with SBX as a pair move accepted with
 beta^d pi(c1) pi(c2) / (pi(x_i) pi(x_j)) (moves.pair_scale) plus a small random-walk MH step (SBX keeps each

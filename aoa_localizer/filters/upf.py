@@ -10,7 +10,7 @@
 The estimate is the mean weighted by the final fitness. These are the `paper` variants (`upf.variant`,
 `de.variant`). The paper never says what a DE trial's fitness is: `de.fitness: posterior` (default) scores it by
 L p, the path posterior; `ratio` by the importance ratio L p / q, which is unbounded (DE then maximises a
-ratio and walks particles out of their proposal: the emitter run-aways of round 1).
+ratio and walks particles out of their proposal: the emitter runs away).
 
 The `mcmc` variants (default, the emitter) are resample-move on the static posterior: `upf` proposes from the
 UKF's Gaussian (the cloud before the newest point, updated with it, widened) as an independence MH move, plus a
