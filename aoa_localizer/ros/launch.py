@@ -357,7 +357,8 @@ class Monitor:
 
     def settle(self, at_least_s: float, at_most_s: float) -> bool:
         """Spin until the node has worked through what it received: two /diagnostics in a row with the same counts
-        (fixes and bearings received and used) and the same newest estimate, after `at_least_s`; False when
+        (fixes and bearings received and used) and the same newest estimate, no search or check of its own still
+        under way (`jobs_running`), after `at_least_s`; False when
         `at_most_s` passed first (a busy machine's node still working, or a node that says nothing)."""
         start = time.monotonic()
         seen, last, same = self.diagnostics_seen, None, 0
@@ -370,7 +371,9 @@ class Monitor:
             now = (tuple(state.get("diag", {}).get(k) for k in SETTLED_COUNTS), state.get("stamp"),
                    state.get("east"))
             same, last = (same + 1 if now == last else 0), now
-            if same >= 1 and time.monotonic() - start >= at_least_s:
+            # a start search or check still under way (a busy machine's worker) is work the verdict must wait for
+            working = state.get("diag", {}).get("jobs_running", "0") != "0"
+            if same >= 1 and not working and time.monotonic() - start >= at_least_s:
                 return True
         return False
 

@@ -83,7 +83,7 @@ class Held:
         """The track as programs read it (Localizer.track_status)."""
         sup = self.supervisor
         return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used,
-                           self.last_update_s)
+                           self.last_update_s, self.job is not None)
 
     def snapshot(self) -> Snapshot:
         """What a start search or global check needs, copied: it may run in the worker while the track goes on."""

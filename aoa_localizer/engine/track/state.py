@@ -59,7 +59,8 @@ class Status:
 class TrackStatus:
     """A track as programs read it (the node's /diagnostics): its state, its status (`text`: its words), whether
     the cloud no longer explains the newest points (the estimate is being checked), the share of recent points it
-    explains only as outliers, the points and bearings its estimate uses, and what its latest point cost (s)."""
+    explains only as outliers, the points and bearings its estimate uses, what its latest point cost (s), and
+    whether a start search or global check is under way (`working`: its result is still to come)."""
 
     state: TrackState
     status: Status
@@ -68,6 +69,7 @@ class TrackStatus:
     points_used: int
     bearings_used: int
     update_s: float
+    working: bool = False
 
     @property
     def text(self) -> str:
