@@ -5,7 +5,8 @@ no single call carries a whole global check and a seed still repeats a run. Only
 The kernels declare what they cost by a model of their size (`metered`); the scheduler's meter counts it, and a
 job's thread gives its turn back after a kernel once the call's metered cost, the filter's step included, with one
 more stretch like the last would reach the job's budget. How far a job has got depends on the points alone, never
-on the clock; the maths knows nothing of turns or budgets."""
+on the clock. The maths knows nothing of turns or budgets, but its kernels declare their cost here (`metered`): the
+one import from the numerical modules to this room."""
 from __future__ import annotations
 
 import functools
