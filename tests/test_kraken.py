@@ -10,7 +10,7 @@ import threading
 
 import numpy as np
 import pytest
-from test_ros_graph import client, spin_until
+from test_ros_graph import client, spin_until, wait_for
 
 from aoa_localizer.common.kraken_csv import LineFilter, MalformedLine, parse_line, quality_from_confidence
 from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
@@ -193,7 +193,7 @@ def test_a_dead_server_is_retried_with_one_log_line_and_the_bridge_stops_cleanly
     bridge = spawn(["aoa_localizer.kraken_bridge", "--url", f"http://127.0.0.1:{port}/DOA_value.html"], domain)
     # the first failed poll said, and two retries after it: waited on, not slept (a fixed 4 s failed beside a
     # heavy job, issue 67 item 2)
-    assert _until(lambda: "cannot read" in open(bridge.log_path).read(), 60), open(bridge.log_path).read()
+    assert wait_for(lambda: "cannot read" in open(bridge.log_path).read(), 60), open(bridge.log_path).read()
     time.sleep(2.5)
     bridge.send_signal(signal.SIGTERM)
     assert bridge.wait(15) == 0
@@ -218,7 +218,7 @@ def test_a_hostile_server_neither_kills_the_bridge_nor_holds_its_sigterm(spawn, 
         # the bridge is in its poll (the trickle) or past its failure (the others): waited on, not slept
         done = (lambda: server.requests >= 1) if path == "/trickle_headers" else (
             lambda: "cannot read" in open(bridge.log_path).read())
-        assert _until(done, 60), open(bridge.log_path).read()
+        assert wait_for(done, 60), open(bridge.log_path).read()
         time.sleep(0.5)
         assert bridge.poll() is None, open(bridge.log_path).read()
         start = time.monotonic()
@@ -229,15 +229,3 @@ def test_a_hostile_server_neither_kills_the_bridge_nor_holds_its_sigterm(spawn, 
     assert "Traceback" not in log, log
     if path != "/trickle_headers":  # its one poll was still under way, 60 s allowed: stopped mid-poll
         assert log.count("cannot read") == 1 and "poll_failed" in log, log
-
-
-def _until(condition, timeout_s: float) -> bool:
-    """True once `condition()` holds, False after `timeout_s`."""
-    import time
-
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return False

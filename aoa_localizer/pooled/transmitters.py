@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from aoa_localizer.engine.geodesy import wrap_pi
+from aoa_localizer.engine.geodesy import azimuth_to_enu, wrap_pi
 from aoa_localizer.engine.inference.co_channel import MIN_READINGS, Place, Readings, count_transmitters, mode_starts
 from aoa_localizer.engine.survey.survey_log import SurveyCount, SurveyTransmitter
 from aoa_localizer.engine.track.report import co_channel
@@ -41,7 +41,7 @@ def count_id(readings: list[SurveyReading], geom: Geometry, point: np.ndarray, s
     east, north = geom.frame.to_enu(lat, lon)
     sites: dict[tuple, int] = {}
     site = np.array([sites.setdefault(_site_of(r), len(sites)) for r in used])
-    theta = wrap_pi(geom.frame.north_angle(lat, lon) - np.radians([r.azimuth_deg for r in used]))
+    theta = azimuth_to_enu(np.array([r.azimuth_deg for r in used]), geom.frame.north_angle(lat, lon))
     own = _successive_scatter(theta, site, len(sites))
     fallback = float(np.median(own[np.isfinite(own)])) if np.any(np.isfinite(own)) else site_error
     sigma = np.array([math.radians(r.sigma_deg) if math.isfinite(r.sigma_deg)

@@ -33,6 +33,7 @@ from aoa_localizer.common.cli import (
     HelpFormatter,
     add_engine_args,
     config_from_args,
+    integer_in,
     interrupted,
     raise_terminated,
     setup_logging,
@@ -214,17 +215,6 @@ def _row(line: int, row: dict, to_wgs84, comma: bool, zone: datetime.tzinfo | No
     receiver = (row.get("receiver") or row.get("observer") or "").strip()
     return Row(line, stamp, lat, lon, _number(row, "azimuth_deg", True, comma), quality, sigma,
                (row.get("station") or "").strip(), (row.get("id") or "").strip(), receiver)
-
-
-def _count(text: str) -> int:
-    """argparse type of --maps: an integer >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"a count is an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"a count is an integer >= 0, got {value}")
-    return value
 
 
 def _zone(text: str) -> datetime.tzinfo:
@@ -513,7 +503,7 @@ def _main(argv=None) -> int:
     parser.add_argument("csv", type=Path, help="the bearings (CSV with a header)")
     parser.add_argument("--output", type=Path, metavar="OUT.jsonl", help="one JSON line per id")
     parser.add_argument("--report", type=Path, metavar="DIR", help="map.png, emitter.kml, emitter.geojson")
-    parser.add_argument("--maps", type=_count, default=MAPS, metavar="N",
+    parser.add_argument("--maps", type=integer_in(0, 1_000_000), default=MAPS, metavar="N",
                         help=f"with --report: draw maps/<id>.png for the first N ids (a map takes about 0.3 s; "
                              f"summary.md lists every id; default {MAPS})")
     parser.add_argument("--crs", metavar="EPSG:NNNN", help="the CRS of projected x, y columns (instead of lat, lon)")
