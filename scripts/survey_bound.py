@@ -42,8 +42,9 @@ def one_run(rng: np.random.Generator, sigma_deg: float, stations: int, layout: f
         st = masts if masts is not None else ring(rng, t, stations, layout)
         truth[str(e)], places[str(e)] = t, st
         lat, lon, _ = FRAME.to_geodetic(st[:, 0], st[:, 1])
+        north = FRAME.north_angle(lat, lon)  # each station's true north in the plane (meridians converge)
         for k in range(stations):
-            az = math.degrees(math.atan2(t[0] - st[k, 0], t[1] - st[k, 1]))
+            az = math.degrees(north[k] - math.atan2(t[1] - st[k, 1], t[0] - st[k, 0]))
             for _ in range(readings):
                 rows.append(SurveyReading(str(e), float(lat[k]), float(lon[k]), az + rng.normal(0.0, sigma_deg),
                                           f"m{k}" if network else f"s{e}_{k}"))
