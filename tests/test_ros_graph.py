@@ -592,7 +592,10 @@ def test_the_node_and_live_replay_stop_cleanly_on_a_signal(spawn, domain, sig):
             name="diagnostics_period_s", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2.0))])
         result = call(executor, node, SetParameters, "/aoa_localizer/set_parameters", read_only).results[0]
         assert not result.successful and "read-only" in result.reason  # fixed at start, says so
-    time.sleep(7.0)  # past the replay's wait for subscribers (5 s): it is playing now, at the bag's pace
+        fixes: list = []
+        node.create_subscription(T.NavSatFix, "gps/fix", fixes.append, QoSProfile(depth=10))
+        # the replay plays at the bag's pace once its wait for subscribers (5 s) is over: stop it while it plays
+        assert spin_until(executor, lambda: fixes, 60), "the replay played nothing within 60 s"
     for p in (player, node_p):
         p.send_signal(sig)
         assert p.wait(15) == 0, open(p.log_path).read()

@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -61,17 +62,29 @@ class Stop(Exception):
 
 class _StopOnce:
     """Signal handler: the first SIGINT or SIGTERM raises Stop; later ones (a second Ctrl-C while the children
-    are being stopped) only say so, so the cleanup finishes instead of ending in a traceback."""
+    are being stopped) only say so, so the cleanup finishes instead of ending in a traceback.
+
+    An exception raised from a handler lands wherever the main thread is, and some places swallow it (logging's
+    after-fork hook while a child starts: the launcher then ran on to its timeout), so the loops also ask
+    `check()`, which raises the signal's Stop once it was missed."""
 
     def __init__(self):
         self.stopping = self.signalled = False
+        self.name = ""
+        self.handled = False  # main() caught the Stop
 
     def __call__(self, signum, frame):
         if self.stopping:
             print("launch: already stopping; the children get a few seconds to exit", file=sys.stderr)
             return
         self.stopping = self.signalled = True
-        raise Stop(signal.Signals(signum).name)
+        self.name = signal.Signals(signum).name
+        self.check()
+
+    def check(self) -> None:
+        """Raise the signal's Stop if a signal came and main() has not caught its Stop yet."""
+        if self.signalled and not self.handled:
+            raise Stop(self.name)
 
 
 def ros_value(v) -> str:
@@ -225,9 +238,12 @@ def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dic
 class Monitor:
     """The launcher's own node: follows emitter/pose, sim/truth, /diagnostics; records if asked."""
 
-    def __init__(self, record: Path | None, co_channel: list[tuple[float, float]] | None = None):
+    def __init__(self, record: Path | None, co_channel: list[tuple[float, float]] | None = None,
+                 check_signal: Callable[[], None] = lambda: None):
         """`co_channel`: the vehicle's other transmitters on the emitter's frequency (east, north in the simulation's
-        map, as sim/truth's), each a truth the channel's estimate and transmitters may be nearest."""
+        map, as sim/truth's), each a truth the channel's estimate and transmitters may be nearest; `check_signal`
+        raises once the launcher was told to stop (asked between spins)."""
+        self.check_signal = check_signal
         import rclpy
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -273,6 +289,7 @@ class Monitor:
     def spin(self, seconds: float):
         end = time.monotonic() + seconds
         while time.monotonic() < end:
+            self.check_signal()
             self.rclpy.spin_once(self.node, timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
             if self.recorder:
                 self.recorder.poll()
@@ -621,8 +638,8 @@ def foreign_publishers(domain: int, wait_s: float = 1.5) -> str:
 class Run:
     """One launch: the node, the data source (vehicle or bag replay), the monitor; `close()` stops them all."""
 
-    def __init__(self, args, logdir: Path):
-        self.args, self.logdir = args, logdir
+    def __init__(self, args, logdir: Path, stop: _StopOnce):
+        self.args, self.logdir, self.stop = args, logdir, stop
         self.env = dict(os.environ, PYTHONUNBUFFERED="1")
         self.source_name = "replay" if args.bag else "sim_vehicle"
         self.children: list[Child] = []
@@ -641,7 +658,8 @@ class Run:
         node_cmd, source_cmd = build_commands(args, node_parameters(args, found), found)
         co = parse_params(args.vehicle_param, "--vehicle-param").get("co_channel")
         flat = [float(v) for v in vehicle_value(co)] if co else []
-        self.monitor = monitor = Monitor(args.record, list(zip(flat[::2], flat[1::2], strict=False)))
+        self.monitor = monitor = Monitor(args.record, list(zip(flat[::2], flat[1::2], strict=False)),
+                                                self.stop.check)
         node = self.start("aoa_localizer", node_cmd)
         monitor.spin(1.5)  # let the node come up and the monitor discover it
         if not node.running():
@@ -722,7 +740,7 @@ def main(argv=None) -> int:
         if domain is None:
             return 2
         logdir = Path(tempfile.mkdtemp(prefix="aoa_launch_"))
-        run = Run(args, logdir)
+        run = Run(args, logdir, stop)
         source = args.bag if args.bag else f"scenario {args.scenario} at {args.speedup:g}x"
         print(f"ROS_DOMAIN_ID={domain}; logs in {logdir}; {run.source_name}: {source}", flush=True)
         code = run.exit_code = run.execute()
@@ -732,6 +750,7 @@ def main(argv=None) -> int:
             print(f"logs removed (the run converged; --keep-logs keeps them in {logdir.parent})")
         return code
     except Stop as exc:
+        stop.handled = True
         print(f"launch: stopped by {exc}", file=sys.stderr)
         return 2
     finally:
