@@ -155,9 +155,10 @@ def test_the_launcher_gives_the_vehicles_encoding_and_a_bags_scenario_settings_t
     params = node_parameters(parse_args(["--vehicle-param", "bearing_encoding=pose"]))
     assert params["bearing_encoding"] == "pose" and params["datum_lat"] == SCENARIOS["seed"].datum[0]
     params = node_parameters(parse_args(["--bag", "b", "--scenario", "urban"]))
-    assert params == {"input_reliability": "reliable", **SCENARIOS["urban"].filter_overrides}
+    own = {"input_reliability": "reliable", "input_queue_depth": 2000}
+    assert params == {**own, **SCENARIOS["urban"].filter_overrides}
     # the node's defaults, as the README says, but that its own sources are read reliably (a busy machine lost them)
-    assert node_parameters(parse_args(["--bag", "b"])) == {"input_reliability": "reliable"}
+    assert node_parameters(parse_args(["--bag", "b"])) == own
     assert node_parameters(parse_args(["--bag", "b", "-p", "input_reliability=best_effort"]))[
         "input_reliability"] == "best_effort"  # the user's -p wins
     params = node_parameters(parse_args(["--vehicle-param", "mount_offset_deg=30"]))

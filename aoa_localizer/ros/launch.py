@@ -212,7 +212,7 @@ def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dic
     # The launcher's own sources (its vehicle, a bag it plays) are read reliably: on a machine too busy for the pace
     # they are played at, a best-effort read lost half the bearings before the first estimate (a receiver's own
     # stream stays best effort, the node's default; -p input_reliability wins)
-    params: dict = {"input_reliability": "reliable"}
+    params: dict = {"input_reliability": "reliable", "input_queue_depth": 2000}  # the sources' own history's depth
     if args.scenario:
         fleet = FLEETS.get(args.scenario)
         sc = fleet.first if fleet else SCENARIOS[args.scenario]
