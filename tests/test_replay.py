@@ -65,6 +65,19 @@ def test_offline_replay_gives_the_engines_own_answer(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_bag_replayed_twice_offline_without_a_seed_gives_identical_lines(tmp_path):
+    """Co-channel II, item 7: offline replay is repeatable by default (the seed is fixed, as locate's), and says
+    the seed it used in its header line."""
+    outs = [tmp_path / f"{k}.jsonl" for k in range(2)]
+    for out in outs:
+        res = replay(ROOT / "bags/co_channel", "--offline", "--output", out)
+        assert res.returncode == 0, res.stderr
+    assert outs[0].read_bytes() == outs[1].read_bytes() and len(lines(outs[0])) > 10
+    header = json.loads(outs[0].read_text().splitlines()[0])
+    assert header["configuration"]["seed"] == 1
+
+
+@pytest.mark.slow
 def test_truncated_bag_keeps_the_estimates_made_before_the_damage(tmp_path):
     long_drive = Scenario("long", (1200, 800), ((0, 0), (1000, 400), (1500, 600), (1600, 1400), (1500, 600),
                                                 (1000, 400), (0, 0), (1000, 400), (1600, 1400)),

@@ -139,7 +139,8 @@ def add_engine_args(parser: argparse.ArgumentParser, particles: int = LocalizerC
     parser.add_argument("--algorithm", choices=ALGORITHMS, help="filter (unset: afsa, or the params file's)")
     parser.add_argument("--particles", type=int,
                         help=f"number of particles (unset: {particles}, or the params file's)")
-    parser.add_argument("--seed", type=seed_value, help="filter seed: the same seed reproduces a run")
+    parser.add_argument("--seed", type=seed_value,
+                        help="filter seed: the same seed reproduces a run (unset: a fixed seed, one input one answer)")
     parser.add_argument(
         "--params-file",
         metavar="YAML",
@@ -199,6 +200,14 @@ def config_from_args(args, base: LocalizerConfig | None = None) -> LocalizerConf
     short = {name: value for name, value in (("algorithm", args.algorithm), ("num_particles", args.particles),
                                              ("seed", args.seed)) if value is not None}
     return cfg.with_changes(**short) if short else cfg
+
+
+OFFLINE_SEED = 1  # the filter's seed offline unless --seed: one input gives one answer, run after run
+
+
+def seeded(cfg: LocalizerConfig) -> LocalizerConfig:
+    """`cfg` with the offline programs' seed where it has none (a bag or a survey file is repeatable)."""
+    return cfg if cfg.seed is not None else cfg.with_changes(seed=OFFLINE_SEED)
 
 
 def setup_logging(verbose: bool):

@@ -28,6 +28,7 @@ from aoa_localizer.common.cli import (
     bag_topics,
     config_from_args,
     interrupted,
+    seeded,
     setup_logging,
 )
 from aoa_localizer.common.cot import write_cot_files
@@ -256,7 +257,7 @@ def make_report(args) -> int:
     except ValueError as exc:
         raise ReportError(str(exc)) from None
     try:
-        cfg = config_from_args(args, _made_with(args.input) if jsonl else None)
+        cfg = seeded(config_from_args(args, _made_with(args.input) if jsonl else None))
         stations = bag_stations(args)
     except ConfigError as exc:
         raise ReportError(str(exc)) from exc

@@ -36,6 +36,7 @@ from aoa_localizer.common.cli import (
     integer_in,
     interrupted,
     raise_terminated,
+    seeded,
     setup_logging,
 )
 from aoa_localizer.common.cot import write_cot_files
@@ -54,7 +55,6 @@ from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES
 PROG = "python -m aoa_localizer.locate"
 MAPS = 200  # --report's per-id maps by default: about a minute of drawing; the rest are listed in summary.md
 PROGRESS_S = 10.0  # a long run says how far it is on stderr this often
-SURVEY_SEED = 1  # `--model filter`'s seed unless --seed: the same file gives the same answer run after run
 
 
 @dataclass(frozen=True)
@@ -520,7 +520,7 @@ def _main(argv=None) -> int:
     setup_logging(args.verbose)
     try:
         cfg = config_from_args(args, survey_config())
-        cfg = cfg if cfg.seed is not None else cfg.with_changes(seed=SURVEY_SEED)  # one file, one answer
+        cfg = seeded(cfg)  # one file, one answer
         check_outputs(args.csv, args.output, args.report)
         if args.csv.is_file() and args.csv.stat().st_size == 0:
             raise ValueError(f"{args.csv} is empty: a header line (time,lat,lon,azimuth_deg,...) and a row a "

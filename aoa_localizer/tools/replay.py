@@ -30,6 +30,7 @@ from aoa_localizer.common.cli import (
     config_from_args,
     finite_number,
     interrupted,
+    seeded,
     setup_logging,
 )
 from aoa_localizer.common.output import StagedFile, check_output
@@ -51,7 +52,7 @@ def _staged(args) -> StagedFile | None:
 
 def run_offline(args) -> int:
     try:
-        cfg = config_from_args(args, LocalizerConfig())
+        cfg = seeded(config_from_args(args, LocalizerConfig()))
         stations = bag_stations(args)
         staged = _staged(args)  # placed at --output once the bag proved readable: a typo destroys nothing
     except (ConfigError, ValueError) as exc:
