@@ -29,47 +29,67 @@ import numpy as np
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, inside_ellipse
+from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.simulation.evaluation import scenario_config
 from aoa_localizer.simulation.scenarios import SCENARIOS, Scenario, robustness_cells, simulate
 
 DISTANCES_M = (300.0, 650.0, 1000.0)
 
 
-def cells() -> dict[str, Scenario]:
+def cells() -> dict[str, tuple[Scenario, dict]]:
+    """Each cell's scenario and its configuration's changes from the defaults."""
     robust = robustness_cells()
     base = robust["wild0"]
-    return {"two 50/50": replace(base, co_shares=(0.5, 0.5)), "two 80/20": replace(base, co_shares=(0.8, 0.2)),
-            "two interleaved": replace(base, co_shares=(0.5, 0.5), bursts_s=None),
-            "three 40/30/30": replace(base, co_shares=(0.4, 0.3, 0.3)),
-            "one": base, "wild 20 %": robust["wild20"], "reflector 20 %": robust["reflector"]}
+    five = replace(base, co_shares=(0.2,) * 5)
+    return {"two 50/50": (replace(base, co_shares=(0.5, 0.5)), {}),
+            "two 80/20": (replace(base, co_shares=(0.8, 0.2)), {}),
+            "two interleaved": (replace(base, co_shares=(0.5, 0.5), bursts_s=None), {}),
+            "three 40/30/30": (replace(base, co_shares=(0.4, 0.3, 0.3)), {}),
+            "five limit 3": (five, {}), "five limit 5": (five, {"max_emitters_per_channel": 5}),
+            "one": (base, {}), "wild 20 %": (robust["wild20"], {}), "reflector 20 %": (robust["reflector"], {}),
+            "site field 3 deg": (replace(base, site_field_deg=3.0), {})}
 
 
 def placed(sc: Scenario, run: int) -> Scenario:
-    """A co-channel cell's other transmitters for run `run` (none for the one-transmitter cells)."""
+    """A co-channel cell's other transmitters for run `run` (none for the one-transmitter cells): the k-th at
+    DISTANCES_M[(run + k) % 3] from the emitter, evenly round it (at least 120 deg apart), turning with the run."""
     if not sc.co_shares:
         return sc
+    n = len(sc.co_shares) - 1
     others = []
-    for k in range(len(sc.co_shares) - 1):
-        d, angle = DISTANCES_M[(run + k) % 3], 2.0 * math.pi * run / 20.0 + k * 2.0 * math.pi / 3.0
+    for k in range(n):
+        d, angle = DISTANCES_M[(run + k) % 3], 2.0 * math.pi * run / 20.0 + k * 2.0 * math.pi / max(3, n)
         others.append((sc.emitter[0] + d * math.cos(angle), sc.emitter[1] + d * math.sin(angle)))
     return replace(sc, co_channel=tuple(others))
 
 
 def one_run(name: str, run: int) -> dict:
-    sc = placed(cells()[name], run)
+    sc, changes = cells()[name]
+    sc = placed(sc, run)
     data = simulate(sc, run)
-    loc = Localizer(LocalizerConfig(seed=1000 + run))
+    loc = Localizer(LocalizerConfig(seed=1000 + run, **changes))
     final = None
     for est in loc.run(data.inputs()):
         final = est if est is not None else final
+    offset_said = loc.events.get("offset_learned", 0) > loc.events.get("offset_taken_back", 0)  # standing at the end
     loc.close()
     if final is None:
         return {"count": 0}
-    out: dict = {"count": final.transmitter_count, "p": final.count_probability,
-                 "ghost": any("interleaved" in w for w in final.warnings)}
     truths = data.transmitters_enu if data.transmitters_enu is not None else data.emitter_enu[None, :]
+    mean = np.array([final.east, final.north])
+    channel_inside = any(inside_ellipse(mean - t, final.cov) for t in truths)
+    places = [(np.array([t.east, t.north]), t.cov, t.state) for t in final.transmitters] or [
+        (mean, final.cov, final.state)]
+    out: dict = {"count": final.transmitter_count, "p": final.count_probability,
+                 "ghost": any("interleaved" in w for w in final.warnings),
+                 "more_said": any("more transmitters than" in w for w in final.warnings),
+                 "offset_said": offset_said,
+                 "channel_ok": channel_inside or final.state != EstimateState.TRACKING,
+                 "tracking_places": sum(st == EstimateState.TRACKING for _, _, st in places),
+                 "confidently_wrong": sum(st == EstimateState.TRACKING and not any(
+                     inside_ellipse(x - t, c) for t in truths) for x, c, st in places)}
     if len(truths) == 1 and final.transmitter_count == 1:  # one transmitter: the estimate itself
-        err = np.array([final.east, final.north]) - data.emitter_enu
+        err = mean - data.emitter_enu
         mine = ~data.wild
         out["transmitters"] = [{"error": float(np.hypot(*err)), "inside": bool(inside_ellipse(err, final.cov)),
                                 "crlb": crlb_rmse(data.emitter_enu, data.sensor_enu[mine], data.sigma[mine])}]
@@ -110,15 +130,20 @@ def main() -> None:
     ap.add_argument("--cells", help="a comma-separated subset of the cells (default: all)")
     ap.add_argument("--no-cost", action="store_true", help="skip the public scenarios' cost rows")
     args = ap.parse_args()
-    chosen = {n: sc for n, sc in cells().items() if not args.cells or n in args.cells.split(",")}
+    chosen = {n: c for n, c in cells().items() if not args.cells or n in args.cells.split(",")}
     print("| cell | count right | count (runs) | median p | error / CRLB (RMS, each transmitter) | inside 95 % | "
-          "ghost said |")
-    print("|---|---|---|---|---|---|---|")
+          "ghost said | offset standing | 'more than' said | channel estimate inside or not tracking | tracking places "
+          "outside |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    said: list[tuple[float, bool]] = []  # (p, right) of every count whose truth is within its limit
     with ProcessPoolExecutor(args.jobs) as pool:
-        for name, sc in chosen.items():
+        for name, (sc, changes) in chosen.items():
             res = list(pool.map(one_run, [name] * args.runs, range(args.runs)))
             truth = len(sc.co_shares) if sc.co_shares and sc.bursts_s is not None else 1
+            limit = changes.get("max_emitters_per_channel", LocalizerConfig().max_emitters_per_channel)
             counts = [r["count"] for r in res]
+            if truth <= limit:
+                said += [(r["p"], r["count"] == truth) for r in res if math.isfinite(r.get("p", math.nan))]
             tally = ", ".join(f"{c}: {counts.count(c)}" for c in sorted(set(counts)))
             ps = [r["p"] for r in res if "p" in r and math.isfinite(r["p"])]
             scored = [t for r in res for t in r.get("transmitters", [])]
@@ -127,7 +152,18 @@ def main() -> None:
             inside = f"{sum(t['inside'] for t in scored)}/{len(scored)}" if scored else "-"
             print(f"| {name} | {counts.count(truth)}/{len(res)} | {tally} | "
                   f"{statistics.median(ps) if ps else float('nan'):.2f} | {ratio:.2f} | {inside} | "
-                  f"{sum(r.get('ghost', False) for r in res)}/{len(res)} |", flush=True)
+                  f"{sum(r.get('ghost', False) for r in res)}/{len(res)} | "
+                  f"{sum(r.get('offset_said', False) for r in res)}/{len(res)} | "
+                  f"{sum(r.get('more_said', False) for r in res)}/{len(res)} | "
+                  f"{sum(r.get('channel_ok', False) for r in res)}/{len(res)} | "
+                  f"{sum(r.get('confidently_wrong', 0) for r in res)}/{sum(r.get('tracking_places', 0) for r in res)}"
+                  " |", flush=True)
+    print("\n| count probability | counts said | right |")
+    print("|---|---|---|")
+    for lo, hi in ((0.0, 0.5), (0.5, 0.7), (0.7, 0.9), (0.9, 0.99), (0.99, 1.01)):
+        band = [right for p, right in said if lo <= p < hi]
+        share = f"{100 * sum(band) / len(band):.0f} %" if band else "-"
+        print(f"| {lo:.2f}-{min(hi, 1.0):.2f} | {len(band)} | {share} |")
     if args.no_cost:
         return
     print("\n| public scenario | s per run, never counted (max 1) | s per run, counted (max 3) | ratio |")

@@ -286,3 +286,71 @@ def test_counts_that_keep_agreeing_are_made_ever_less_often():
     assert count_every(every, said(2, 1.0), said(1, 1.0)) == HEARD_READINGS  # it changed
     assert count_every(every, said(2, 1.0), said(2, 0.6)) == HEARD_READINGS  # unsure
     assert count_every(every, None, said(2, 1.0)) == HEARD_READINGS  # the first
+
+
+@pytest.mark.slow
+def test_a_transmitter_beyond_the_limit_is_said_even_when_no_start_reaches_it():
+    """Co-channel II, item 2: three in turns, limit 2, and the starts offer only two places (so no fit with three
+    is ever tried): the readings left over by the best two meet at the third, and that is said."""
+    rng = np.random.default_rng(5)
+    r = readings(bursts(450, 3, rng), rng)
+    count = count_transmitters(r, PLACES[0], lambda scale: [PLACES[0] + 50.0, PLACES[1] - 50.0], 2)
+    assert count is not None and count.count == 2 and count.more_than_allowed
+
+
+def field_readings(rng: np.random.Generator, n: int, sd_deg: float, stretch_m: float) -> Readings:
+    """One transmitter's readings on the square drive with a smooth site error (sd `sd_deg`, correlation over
+    `stretch_m` of road, as simulation.scenarios.site_field) added to each."""
+    from dataclasses import replace as with_fields
+
+    from aoa_localizer.simulation.scenarios import Scenario, site_field
+
+    r = readings(np.zeros(n, int), rng)
+    field = site_field(Scenario("f", (0, 0), ((0, 0), (1, 0)), site_field_deg=sd_deg, site_field_m=stretch_m), rng,
+                       np.column_stack([r.east, r.north]))
+    return with_fields(r, theta=r.theta + np.radians(field))
+
+
+def test_errors_that_repeat_along_the_drive_weigh_less_and_independent_ones_fully():
+    """Co-channel II, item 1: the one place's residuals, where a stretch of road shares its error, give a
+    dispersion above 1 (the count's evidence is divided by it); independent errors give exactly 1."""
+    from aoa_localizer.engine.inference.co_channel import _best_fit, _dependence, _first_scale
+
+    def dispersion(r: Readings) -> float:
+        bins = np.unique(np.floor((r.stamp - r.stamp.min()) / 2.0), return_inverse=True)[1]
+        one = _best_fit(r, bins, [PLACES[0]], True, _first_scale(r, PLACES[0], 0.0), 0.0)
+        return _dependence(r, one, bins)
+
+    rng = np.random.default_rng(8)
+    assert all(dispersion(readings(np.zeros(400, int), rng)) == 1.0 for _ in range(5))
+    assert dispersion(field_readings(rng, 400, 6.0, 300.0)) > 2.0
+
+
+@pytest.mark.slow
+def test_a_site_error_along_the_drive_is_not_a_second_transmitter():
+    """Co-channel II, item 1: one transmitter whose readings carry a smooth site error (sd 3 deg over a few hundred
+    metres of road) is counted as one in each of five drives."""
+    for seed in range(5):
+        rng = np.random.default_rng(20 + seed)
+        r = field_readings(rng, 400, 3.0, 300.0)
+        count = count_transmitters(r, PLACES[0], starts(r), 3)
+        assert count is not None and count.count == 1, (seed, count.probabilities)
+
+
+def test_a_channel_estimate_between_its_transmitters_is_said_and_one_at_a_transmitter_is_not():
+    """Co-channel II, item 4: the channel's own estimate at none of its transmitters (the filter followed their
+    mixed bearings) is named; one within a transmitter's ellipse, or a channel of one transmitter, is not."""
+    from aoa_localizer.engine.inference.co_channel import Count, Place
+    from aoa_localizer.engine.track.report import between_transmitters
+
+    places = [Place(PLACES[k].copy(), np.eye(2) * 25.0, 0.5) for k in range(2)]
+    count = Count(2, 0.99, places, [], {2: 0.99}, False, np.zeros(0, int))
+    between = 0.5 * (PLACES[0] + PLACES[1])
+    said = between_transmitters(count, between, np.eye(2) * 16.0)
+    far = f"{np.hypot(*(between - PLACES[0])):.0f} m"
+    assert said is not None and "none of the 2 transmitters" in said and far in said
+    assert between_transmitters(count, PLACES[1] + 5.0, np.eye(2) * 16.0) is None  # d2 = 50 / 41 < 5.99
+    assert between_transmitters(count, PLACES[1] + 20.0, np.eye(2) * 16.0) is not None  # d2 = 800 / 41
+    one = Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int))
+    assert between_transmitters(one, between, np.eye(2)) is None
+    assert between_transmitters(None, between, np.eye(2)) is None

@@ -353,3 +353,27 @@ def test_em_runs_merge_only_where_one_reached_an_earlier_one():
     kept_k2, kept_eps = noise_module._distinct_runs(k2, eps)
     np.testing.assert_array_equal(kept_k2, k2[:2])
     np.testing.assert_array_equal(kept_eps, eps[:2])
+
+
+@pytest.mark.slow
+def test_a_tracking_estimates_findings_leave_diagnostics_ok_and_a_poor_one_warns():
+    """What a user meets II: two transmitters found on a frequency is a finding, not a fault: /diagnostics says it
+    in its message at level OK while the estimate is tracking; the same estimate made poorly_determined is WARN."""
+    import time
+    from dataclasses import replace
+
+    from aoa_localizer.engine.types import EstimateState
+    from aoa_localizer.ros.node_monitor import NodeMonitor
+    from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
+
+    data = simulate(replace(SCENARIOS["seed"], co_channel=((300.0, 1200.0),)), 0)
+    loc = Localizer(LocalizerConfig(seed=1))
+    for _ in loc.run(data.inputs()):
+        pass
+    monitor = NodeMonitor(time.monotonic(), 1e9, lambda: 1.0)
+    assert loc.estimate is not None and loc.estimate.state == EstimateState.TRACKING
+    level, message, _ = monitor.diagnostics(loc, time.monotonic(), {}, {})
+    assert level == 0 and "2 transmitters on this frequency" in message
+    loc._estimates.newest = replace(loc.estimate, state=EstimateState.POORLY_DETERMINED)
+    level, message, _ = monitor.diagnostics(loc, time.monotonic(), {}, {})
+    assert level == 1 and "2 transmitters on this frequency" in message

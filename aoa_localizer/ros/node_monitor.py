@@ -111,7 +111,9 @@ class NodeMonitor:
     # -- /diagnostics ---------------------------------------------------------------------------------
     def diagnostics(self, loc: Localizer, now: float, held: dict, wrong: dict[str, list[str]]) -> tuple[int, str, dict]:
         """(level, message, values) of the localizer's state: WARN before the first estimate, while a global check
-        runs, and while any warning holds (its words join the message); ERROR while the filter keeps restarting.
+        runs, while the estimate is not `tracking` and while any input or node warning holds (its words join the
+        message; a tracking estimate's own warnings are findings: in the message, OK); ERROR while the filter keeps
+        restarting.
         `held`: parameters waiting for the rest of their group; `wrong`: what is wrong with the inputs' publishers,
         by diagnostics key (Node._publisher_problems)."""
         values = self._state_values(loc)
@@ -130,12 +132,18 @@ class NodeMonitor:
         values.update({key: value for key, value, _ in warnings})
         checking = loc.track_status().alarm  # the cloud no longer explains the newest points
         est = loc.estimate
+        # A tracking estimate's own warnings are findings (two transmitters on the frequency, an offset learned and
+        # taken off): said in the message, OK; an estimate that is not tracking makes them WARN
+        findings: list[tuple[str, str, str]] = []
         if est is not None:
             values["state"] = est.state
-            warnings += [(f"warning_{i}", text, text) for i, text in enumerate(est.warnings)]
-        suspect = est is not None and est.state == EstimateState.SUSPECT
-        level = 2 if error else 1 if est is None or checking or warnings or suspect else 0
-        return level, "; ".join([loc.status] + [words for _, _, words in warnings]), values
+            said = [(f"warning_{i}", text, text) for i, text in enumerate(est.warnings)]
+            if est.state == EstimateState.TRACKING:
+                findings = said
+            else:
+                warnings += said
+        level = 2 if error else 1 if est is None or checking or warnings or est.state != EstimateState.TRACKING else 0
+        return level, "; ".join([loc.status] + [words for _, _, words in warnings + findings]), values
 
     def _state_values(self, loc: Localizer) -> dict[str, Any]:
         """Counts, rejections by reason, callback load and the estimate."""

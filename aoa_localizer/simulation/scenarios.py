@@ -67,6 +67,10 @@ class Scenario:
     co_channel: tuple[tuple[float, float], ...] = ()
     co_shares: tuple[float, ...] = ()
     bursts_s: tuple[float, float] | None = (5.0, 30.0)
+    # Site error that repeats along the road: a smooth random field over the antenna's place (sd `site_field_deg`,
+    # squared-exponential correlation over `site_field_m`) added to every reading that is not wild.
+    site_field_deg: float = 0.0
+    site_field_m: float = 300.0
 
 
 SCENARIOS = {
@@ -241,9 +245,22 @@ def simulate(scenario: Scenario | str, seed: int) -> ScenarioData:
     source = np.zeros(t_df.size, int)
     if sc.co_channel:  # drawn after everything else: a scenario without them keeps its data to the bit
         source = co_channel_records(sc, frame, rng, bearings, sensor, sigma, wild)
+    if sc.site_field_deg:  # drawn last too
+        bearings[~wild, 1] = wrap_360(bearings[~wild, 1] + site_field(sc, rng, sensor[~wild]))
     e_lat, e_lon, _ = frame.to_geodetic(emitter[0], emitter[1])
     return ScenarioData(sc, fixes, bearings, sensor, sigma, wild, emitter, (float(e_lat), float(e_lon)), source,
                         np.array([emitter, *sc.co_channel], float))
+
+
+_FIELD_WAVES = 64  # random Fourier features of the site-error field
+
+
+def site_field(sc: Scenario, rng: np.random.Generator, places: np.ndarray) -> np.ndarray:
+    """The scenario's site-error field (deg) at the antenna `places` (N, 2): one draw of a Gaussian field with sd
+    `site_field_deg` and a squared-exponential correlation over `site_field_m` (random Fourier features)."""
+    waves = rng.standard_normal((_FIELD_WAVES, 2)) / sc.site_field_m
+    phase = rng.uniform(0.0, 2.0 * np.pi, _FIELD_WAVES)
+    return sc.site_field_deg * np.sqrt(2.0 / _FIELD_WAVES) * np.cos(places @ waves.T + phase).sum(axis=1)
 
 
 def on_air(sc: Scenario, rng: np.random.Generator, t: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -70,6 +70,7 @@ class Fit:
     loglik: float
     bic: float
     resp: np.ndarray  # (N, K): each reading's responsibility of each place
+    offset: float = 0.0  # rad, the receiver's offset the fit took off (shift without the sites' biases)
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,8 @@ class Count:
     `ghosts`: places whose readings interleave with the transmitter's (a reflection, or a second carrier on at the
     same time), when the interleaved model is the likeliest; `probabilities` by count; `more_than_allowed`: a fit
     with one more transmitter than `max_k` is likelier than every allowed one; `assigned`: each reading's most
-    likely transmitter (an index into `transmitters`; empty below two)."""
+    likely transmitter (an index into `transmitters`; empty below two); `fitted`: the count's fit's places (the
+    transmitters, or the one and its ghosts) and `offset` the bearing offset it took off."""
 
     count: int
     probability: float
@@ -89,6 +91,8 @@ class Count:
     probabilities: dict[int, float]
     more_than_allowed: bool
     assigned: np.ndarray
+    fitted: list[Place] = field(default_factory=list)  # every place of the fit the count is made from, heaviest first
+    offset: float = 0.0  # rad, the receiver's offset that fit took off (the calibration's, or none)
 
 
 @dataclass(frozen=True)
@@ -136,11 +140,11 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     crossings = _wild_crossings(r, one, unexplained) if unexplained.sum() >= _UNEXPLAINED_MIN else []
     if np.median(one.scale) <= _QUIET_SCALE and not any(m.inliers >= need / 2 for m in crossings):
         # One place explains them at their own noise, and the rest do not meet anywhere: no room for another
-        return Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int))
+        return Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int), list(one.places), one.offset)
     wide = float(np.median(one.scale))
     candidates = [one.places[0].mean, *(m.mean for m in crossings)]  # the one, then where its wild ones cross
     candidates += [np.asarray(s, float) for s in starts(1.0) + starts(wide)]
-    starts_k = _distinct(candidates, _START_APART_M)[:_MAX_STARTS]
+    starts_k = _distinct(candidates, _START_APART_M)[:max(_MAX_STARTS, max_k + 1)]
     fits = [one]
     for k in range(2, min(max_k + 1, len(starts_k)) + 1):
         for in_turns in (True, False):
@@ -149,8 +153,11 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
             if fit is not None and min(p.share for p in fit.places) >= MIN_SHARE:
                 fits.append(fit)
     allowed = [f for f in fits if f.k <= max_k]
+    # Errors that repeat along the drive make a stretch of road read as a second place in turns: the evidence is
+    # weighed as the one place's residuals say it is worth (a quasi-likelihood's dispersion; 1 for independent ones)
+    dispersion = _dependence(r, one, bins) if len(allowed) > 1 else 1.0
     by_count: dict[int, float] = {}
-    for f, w in zip(allowed, _bic_weights([f.bic for f in allowed]), strict=True):
+    for f, w in zip(allowed, _bic_weights([_tempered_bic(f, dispersion) for f in allowed]), strict=True):
         n = f.k if f.in_turns else 1
         by_count[n] = by_count.get(n, 0.0) + float(w)
     by_count = dict(sorted(by_count.items()))
@@ -162,8 +169,8 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     ghosts = places[1:] if not best.in_turns else []
     assigned = np.argmax(best.resp[:, order], axis=1) if count >= 2 else np.zeros(0, int)
     beyond = min(fits, key=lambda f: f.bic)
-    return Count(count, by_count[count], transmitters, ghosts, by_count, beyond.k > max_k and beyond.in_turns,
-                 assigned)
+    more = (beyond.k > max_k and beyond.in_turns) or (count == max_k and _left_over(r, best, need))
+    return Count(count, by_count[count], transmitters, ghosts, by_count, more, assigned, places, best.offset)
 
 
 def count_job(r: Readings, first: np.ndarray, max_k: int, offset: float) -> Count | None:
@@ -179,6 +186,42 @@ def mode_starts(r: Readings) -> Callable[[float], list[np.ndarray]]:
         rows = np.column_stack([r.east, r.north, r.theta, scale * r.sigma, np.zeros(len(r))])
         return [m.mean for m in find_modes(Points.of(rows), Robust(_STARTS_OUTLIER_PROB), by_density=True)]
     return modes
+
+
+def _dependence(r: Readings, fit: Fit, bins: np.ndarray) -> float:
+    """How many times the readings' log-likelihood overstates its evidence under `fit`, where their errors repeat
+    along the drive (a site error a stretch of road shares): the long-run variance of the inliers' standardised
+    residuals (summed per time bin, the bins' sums' autocovariances to lag L with Bartlett weights) over their
+    plain variance; 1 for independent errors (and where the excess is within its chance spread)."""
+    order = np.argsort(r.stamp, kind="stable")
+    place = np.argmax(fit.resp, axis=1)
+    turned = _turned(r, fit.shift)
+    resid = np.empty(len(r))
+    for j, p in enumerate(fit.places):
+        mine = place == j
+        resid[mine] = _jacobian(replace(turned, **{f: getattr(turned, f)[mine] for f in
+                                                   ("stamp", "east", "north", "theta", "sigma", "quality")},
+                                        site=None), p.mean)[0]
+    z = resid / (fit.scale * r.sigma)
+    z = np.where(np.abs(z) <= 3.0, z, 0.0)[order]  # the wild ones say nothing of the others' dependence
+    b = bins[order]
+    _, which = np.unique(b, return_inverse=True)
+    sums = np.bincount(which, z)
+    plain = float(np.sum(z * z))
+    n = sums.size
+    if plain <= 0.0 or n < 8:
+        return 1.0
+    lags = int(math.ceil(n ** (1.0 / 3.0)))
+    long_run = float(sums @ sums) + 2.0 * sum((1.0 - lag / (lags + 1)) * float(sums[lag:] @ sums[:-lag])
+                                              for lag in range(1, min(lags, n - 1) + 1))
+    factor = long_run / plain
+    spread = math.sqrt(2.0 * (2 * lags + 1) / n)  # the ratio's chance spread for independent errors, roughly
+    return factor if factor > 1.0 + 3.0 * spread else 1.0
+
+
+def _tempered_bic(fit: Fit, dispersion: float) -> float:
+    """The fit's BIC with its log-likelihood divided by `dispersion` (its penalty as it was)."""
+    return fit.bic + 2.0 * fit.loglik * (1.0 - 1.0 / dispersion)
 
 
 def _bic_weights(bics: list[float]) -> np.ndarray:
@@ -198,23 +241,32 @@ def _first_scale(r: Readings, x: np.ndarray, offset: float) -> np.ndarray:
     return np.full(len(r), float(np.clip(np.median(np.abs(resid) / r.sigma) / 0.6745, 1.0, _SCALE_RANGE[1])))
 
 
-def _unexplained(r: Readings, one: Fit) -> np.ndarray:
-    """Which readings lie off the one-transmitter fit's place: more than _WILD_MADS robust sigmas (the median
-    absolute residual of their quality band, which another transmitter's readings cannot widen as they widen the
-    fit's own scale)."""
-    resid, _ = _jacobian(_turned(r, one.shift), one.places[0].mean)
-    z = np.abs(resid) / r.sigma
+def _left_over(r: Readings, fit: Fit, need: float) -> bool:
+    """Whether the readings that none of `fit`'s places explains still meet at a place of their own, with half a
+    transmitter's share: one more transmitter than the fit has (the count is at its limit, or its starts missed
+    one)."""
+    unexplained = _unexplained(r, fit)
+    if unexplained.sum() < _UNEXPLAINED_MIN:
+        return False
+    return any(m.inliers >= need / 2 for m in _wild_crossings(r, fit, unexplained))
+
+
+def _unexplained(r: Readings, fit: Fit) -> np.ndarray:
+    """Which readings lie off every place of `fit`: more than _WILD_MADS robust sigmas from each (the median
+    absolute residual of their quality band at their nearest place, which another transmitter's readings cannot
+    widen as they widen the fit's own scale)."""
+    turned = _turned(r, fit.shift)
+    z = np.min([np.abs(_jacobian(turned, p.mean)[0]) for p in fit.places], axis=0) / r.sigma
     band = r.band
     mad = np.array([np.median(z[band == b]) if np.any(band == b) else 1.0 for b in range(band.max() + 1)]) / 0.6745
     return z > _WILD_MADS * np.maximum(mad, 1e-9)[band]
 
 
-def _wild_crossings(r: Readings, one: Fit, wild: np.ndarray) -> list[Mode]:
-    """Where the readings the one-transmitter fit calls wild cross (the best two modes, with the readings each
-    explains): a second transmitter's start that the modes of all the readings missed (its crossing drowned in the
-    first's)."""
-    turned = _turned(r, one.shift)
-    rows = np.column_stack([r.east, r.north, turned.theta, one.scale * r.sigma, np.zeros(len(r))])[wild]
+def _wild_crossings(r: Readings, fit: Fit, wild: np.ndarray) -> list[Mode]:
+    """Where the readings `fit` calls wild cross (the best two modes, with the readings each explains): a further
+    transmitter's start that the modes of all the readings missed (its crossing drowned in the others')."""
+    turned = _turned(r, fit.shift)
+    rows = np.column_stack([r.east, r.north, turned.theta, fit.scale * r.sigma, np.zeros(len(r))])[wild]
     return find_modes(Points.of(rows), Robust(0.2), by_density=True)[:2]
 
 
@@ -274,7 +326,7 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
            for j in range(k)]
     params = 2 * k + (k - 1) + 1 + len(np.unique(band))  # places, shares, the wild share, the scales
     shift = offset + (bias[r.site] if r.site is not None else np.zeros(len(r)))
-    return Fit(k, in_turns, out, scale, shift, loglik, -2.0 * loglik + params * math.log(len(r)), resp)
+    return Fit(k, in_turns, out, scale, shift, loglik, -2.0 * loglik + params * math.log(len(r)), resp, offset)
 
 
 def _biased(r: Readings, bias: np.ndarray) -> Readings:

@@ -30,7 +30,8 @@ log = logging.getLogger("aoa_localizer")
 @dataclass
 class Recalibration:
     """What a new calibration makes of a track's points: them rebuilt with it, how many more of their readings it
-    gates out (fewer: negative), and the events it counts (recalibrated, offset_learned, course_learned)."""
+    gates out (fewer: negative), and the events it counts (recalibrated, offset_learned, offset_taken_back,
+    course_learned)."""
 
     window: deque[WindowEntry]
     gated: int
@@ -129,11 +130,11 @@ class Calibrator:
                         "north; learned, and each is turned by the vehicle's course (%s)", self.offset_advice())
         if offset != self.offset:
             self.offset = offset
-            events.append("offset_learned")
-            if self.course:
+            events.append("offset_learned" if offset else "offset_taken_back")  # taken back: the taker says why
+            if offset and self.course:
                 log.warning("the bearings turned by the vehicle's course look %+.1f deg off: learned (%s)",
                             self.offset_deg, self.offset_advice())
-            else:
+            elif offset:
                 log.warning("the bearings look %+.1f deg off the true bearings: learned, and taken off every bearing "
                             "(%s)", self.offset_deg, self.offset_advice())
         if window_courses is not None and window_courses.size:

@@ -361,6 +361,10 @@ class EmitterTrack(Held):
 
     def _recalibrate(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]],
                      offset: float, course: bool):
+        if self.counted is not None and self.counted.count >= 2:
+            # several transmitters on the air: their bearings, fitted as one, differ by an angle that is no
+            # receiver's offset (the count fits its own offset beside none); the offset in use stays
+            offset = self.calibration.offset
         self._adopt(self.calibration.apply(noise, at, built, offset, course, self.window))
 
     def _adopt(self, recalibration: Recalibration):
@@ -425,6 +429,18 @@ class EmitterTrack(Held):
             if ok:
                 self.count_every = count_every(self.count_every, self.counted, count)
                 self.counted = count
+                self._offset_taken_back(count)
+
+    def _offset_taken_back(self, count: Count | None):
+        """An offset learned from the bearings of several transmitters read as one (the count places them at no
+        offset) is taken back: the points are rebuilt without it."""
+        c = self.calibration
+        if count is None or count.count < 2 or count.offset != 0.0 or c.offset == 0.0 or c.course:
+            return
+        log.warning("the bearing offset learned (%+.1f deg) was %d transmitters' bearings read as one: taken back",
+                    c.offset_deg, count.count)
+        at = self.filter.estimate()[0] if self.filter is not None else count.transmitters[0].mean
+        self._adopt(c.apply(c.noise, np.asarray(at, float), {}, 0.0, False, self.window))
 
     def batch_estimate(self) -> Mode | None:
         """Robust batch maximum likelihood over every point held (no filter): global search, joint noise

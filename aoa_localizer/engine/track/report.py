@@ -163,6 +163,31 @@ def others_share(count: Count | None, mean: np.ndarray) -> float:
     return sum(p.share for p in count.transmitters) - nearest.share
 
 
+def between_transmitters(count: Count | None, mean: np.ndarray, cov: np.ndarray) -> str | None:
+    """Why a channel's estimate is at none of the places its count found (the filter followed the bearings of two
+    transmitters, or of one and its interleaved ghost, mixed: a place between them), or None: it lies within the
+    95 % region of one place (their covariances summed), or the count found one place."""
+    if count is None or (count.count < 2 and not count.ghosts):
+        return None
+    places = count.transmitters if count.count >= 2 else count.fitted
+    def d2(p: Place) -> float:
+        diff = np.asarray(mean, float) - p.mean
+        try:
+            return float(diff @ np.linalg.solve(np.asarray(cov) + p.cov, diff))
+        except np.linalg.LinAlgError:
+            return math.inf
+    nearest = min(places, key=d2)
+    if d2(nearest) <= ELLIPSE_95:
+        return None
+    far = float(np.hypot(*(np.asarray(mean, float) - nearest.mean)))
+    if count.count >= 2:
+        return (f"this estimate is at none of the {count.count} transmitters ({far:.0f} m from the nearest, outside "
+                "both their ellipses): the bearings of several are mixed in it; each transmitter's place is in "
+                "`transmitters`")
+    return (f"this estimate is at neither place whose bearings interleave ({far:.0f} m from the nearer, outside both "
+            "their ellipses): the bearings of both are mixed in it")
+
+
 def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
                name: Callable[[np.ndarray], str] | None = None, estimate_is: str = "the track's"
                ) -> tuple[list[tuple[Place, EstimateState]], list[str]]:
