@@ -33,10 +33,11 @@ from aoa_localizer.engine.inference.co_channel import (
     Readings,
     count_job,
 )
-from aoa_localizer.engine.inference.global_search import Mode, find_modes
+from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
+from aoa_localizer.engine.inference.site_part import site_part_spread
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
@@ -52,6 +53,8 @@ log = logging.getLogger("aoa_localizer")
 
 _CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
 COUNT_MAX_READINGS = 1500  # more heard: every k-th point's readings (whole points: a bin's readings stay together)
+SITE_MIN_POINTS = 12  # the site part is fitted from this many of the filter's points on ...
+SITE_GROWTH = 1.25  # ... and again once they grew by this factor (a fit costs 5-30 ms)
 
 
 class EmitterTrack(Held):
@@ -73,7 +76,7 @@ class EmitterTrack(Held):
         opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
-        for place in (self, self.counting):
+        for place in (self, self.counting, self.site_fitting):
             self.scheduler.point_came(place)
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         self.heard.append(readings)
@@ -98,6 +101,8 @@ class EmitterTrack(Held):
             took = self.estimating
         self.scheduler.take_turn(self.counting)
         self._count()
+        self.scheduler.take_turn(self.site_fitting)
+        self.fit_site_part()
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took
 
@@ -168,6 +173,10 @@ class EmitterTrack(Held):
             self._global_check(inline=True)
             self.apply_job(wait=True)  # the start search of an emitter-moved re-start
             changed = True
+        if self.filter is not None:  # the site part at the final place, over every point kept
+            before = self.site_spread
+            self.fit_site_part(final=True)
+            changed = changed or self.site_spread is not before
         self.last_update_s = time.perf_counter() - t0
         return changed and self.estimating
 
@@ -442,6 +451,39 @@ class EmitterTrack(Held):
         at = self.filter.estimate()[0] if self.filter is not None else count.transmitters[0].mean
         self._adopt(c.apply(c.noise, np.asarray(at, float), {}, 0.0, False, self.window))
 
+    def fit_site_part(self, final: bool = False):
+        """A finished site-part fit adopted; a new one started once the filter's points grew by SITE_GROWTH since the
+        last (from site_part.MIN_POINTS), made here at the end of data (`final`)."""
+        self._adopt_site_part(self.scheduler.finished(self.site_fitting, wait=final))
+        f = self.filter
+        if f is None or self.scheduler.job(self.site_fitting) is not None:
+            return
+        pts = self.posterior_points()
+        n = pts.east.size
+        fresh = self.site_filter is not f
+        if n < SITE_MIN_POINTS or not (final or fresh or n >= SITE_GROWTH * self.site_points) or (
+                final and not fresh and n == self.site_points):
+            return
+        job = partial(site_part_fit, id(f), pts, np.asarray(f.estimate()[0], float), self.robust())
+        self.site_points = n
+        if final:
+            self._adopt_site_part_value(job())
+            return
+        self.scheduler.start(self.site_fitting, job, CHECK_BUDGET_US, None, [])
+        self._adopt_site_part(self.scheduler.finished(self.site_fitting))
+
+    def _adopt_site_part(self, done: PendingJob | None):
+        if done is not None:
+            ok, value = self.scheduler.value(done, "a site part's fit")
+            if ok:
+                self._adopt_site_part_value(value)
+
+    def _adopt_site_part_value(self, value: tuple[int, np.ndarray]):
+        """A fit's covariance, kept while the filter it was made for runs."""
+        made_for, spread = value
+        if self.filter is not None and id(self.filter) == made_for:
+            self.site_filter, self.site_spread = self.filter, spread
+
     def batch_estimate(self) -> Mode | None:
         """Robust batch maximum likelihood over every point held (no filter): global search, joint noise
         calibration, Gauss-Newton; the best mode with its Laplace covariance. The benchmark's reference."""
@@ -449,6 +491,12 @@ class EmitterTrack(Held):
         if modes and self.cfg.calibrate_noise and self._calibrate([m.mean for m in modes[:2]], True):
             modes = find_modes(self.points(), self.robust(), by_density=True)
         return modes[0] if modes else None
+
+
+def site_part_fit(made_for: int, pts: Points, at: np.ndarray, rob: Robust) -> tuple[int, np.ndarray]:
+    """site_part_spread as a job (a plain function of its inputs): the covariance, with `made_for`, the identity of
+    the filter whose points were read."""
+    return made_for, site_part_spread(pts, at, rob)
 
 
 def count_every(every: int, before: Count | None, now: Count | None) -> int:

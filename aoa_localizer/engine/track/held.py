@@ -67,6 +67,12 @@ class Held:
         self.counted_readings = 0  # readings heard when the count under way (or the last) began
         self.count_every = HEARD_READINGS  # readings between counts past the doubling ones: longer while they agree
         self.counting = JobPlace()
+        # The site part's fit (site_part.py), made beside the points as a count is: the covariance it adds, the
+        # filter it was fitted for (a re-started filter starts without it) and the points it read
+        self.site_fitting = JobPlace()
+        self.site_spread = np.zeros((2, 2))
+        self.site_filter: ParticleFilter | None = None
+        self.site_points = 0
 
     @property
     def job(self) -> PendingJob | None:
@@ -169,15 +175,18 @@ class Held:
     # -- estimates ------------------------------------------------------------------------------------
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """The published place and covariance, marginalised over the residual bearing offset the points cannot tell
-        from a place (offset.marginalise): a running filter's mean and covariance, or where its ellipse is wide for
-        the range (its tails along the rays drag the mean out), its spatial median with the ellipse holding 95 % of
-        the cloud; a provisional sample's highest-density place (its best mode) with that ellipse."""
+        from a place (offset.marginalise): a running filter's mean and covariance (with what the points' shared site
+        part adds, once fitted), or where its ellipse is wide for the range (its tails along the rays drag the mean
+        out), its spatial median with the ellipse holding 95 % of the cloud; a provisional sample's highest-density
+        place (its best mode) with that ellipse."""
         if self.filter is None:
             mean, cov = cloud_estimate(self.cloud, self.modes[0].mean)
         else:
             mean, cov = self.filter.estimate()
             if wide_for_range(self.model.history.data, mean, cov)[0]:
                 mean, cov = cloud_estimate(self.filter, spatial_median(self.filter.x, self.filter.weights))
+        if self.filter is not None and self.site_filter is self.filter:
+            cov = cov + self.site_spread  # the points' shared site part (site_part.py)
         sd = math.inf if self.calibration.offset else prior_sd(self.cfg)
         if sd == 0.0:
             return mean, cov
