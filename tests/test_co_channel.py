@@ -354,3 +354,34 @@ def test_a_channel_estimate_between_its_transmitters_is_said_and_one_at_a_transm
     one = Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int))
     assert between_transmitters(one, between, np.eye(2)) is None
     assert between_transmitters(None, between, np.eye(2)) is None
+
+
+@pytest.mark.slow
+def test_a_biased_second_receiver_is_a_site_bias_not_a_transmitter():
+    """Co-channel II, item 1: two stations' readings of one transmitter, the second's receiver +12 deg off: with the
+    stations as sites (each its steady bias) the count is one, and the bias is found on the second."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(9)
+    r = readings(np.zeros(400, int), rng)
+    site = (np.arange(400) // 12) % 2  # the two stations report in turns
+    r = replace(r, theta=r.theta - np.radians(12.0) * site)  # +12 deg of azimuth is -12 deg of map angle
+    as_one = count_transmitters(r, PLACES[0], starts(r), 3)
+    assert as_one is not None and as_one.count >= 2  # what the count said before it knew the stations
+    count = count_transmitters(replace(r, site=site, site_sd=math.radians(5.0)), PLACES[0], starts(r), 3)
+    assert count is not None and count.count == 1 and not count.transmitters
+    assert math.degrees(count.site_bias[0] - count.site_bias[1]) == pytest.approx(12.0, abs=1.0)
+
+
+def test_stations_that_disagree_are_said_in_azimuth_degrees():
+    from dataclasses import replace
+
+    from aoa_localizer.engine.inference.co_channel import Count
+    from aoa_localizer.engine.track.report import stations_disagree
+
+    count = Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int))
+    assert stations_disagree(count) is None and stations_disagree(None) is None
+    biased = replace(count, site_bias=np.radians([0.5, -11.5]), site_names=("car1", "car2"))
+    said = stations_disagree(biased)
+    assert said is not None and "disagree by 12.0 deg" in said and "car2 +11.5 deg" in said
+    assert stations_disagree(replace(biased, site_bias=np.radians([0.5, -2.0]))) is None  # within 3 deg

@@ -62,6 +62,7 @@ class Reading:
     # sigma of the vehicle's heading a vehicle-relative bearing was turned by (rad; 0: none, or exact). The readings
     # of one point share the heading's error, so the point adds it whole, not averaged down.
     heading_sigma: float = 0.0
+    station: str = ""  # the station that took it ("": the default one)
 
 
 @dataclass(frozen=True)

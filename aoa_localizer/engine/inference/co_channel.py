@@ -82,7 +82,8 @@ class Count:
     same time), when the interleaved model is the likeliest; `probabilities` by count; `more_than_allowed`: a fit
     with one more transmitter than `max_k` is likelier than every allowed one; `assigned`: each reading's most
     likely transmitter (an index into `transmitters`; empty below two); `fitted`: the count's fit's places (the
-    transmitters, or the one and its ghosts) and `offset` the bearing offset it took off."""
+    transmitters, or the one and its ghosts), `offset` the bearing offset it took off and `site_bias` each site's
+    fitted bias (readings of several stations: a station is a site)."""
 
     count: int
     probability: float
@@ -93,6 +94,8 @@ class Count:
     assigned: np.ndarray
     fitted: list[Place] = field(default_factory=list)  # every place of the fit the count is made from, heaviest first
     offset: float = 0.0  # rad, the receiver's offset that fit took off (the calibration's, or none)
+    site_bias: np.ndarray = field(default_factory=lambda: np.zeros(0))  # rad, each site's fitted bias (sites only)
+    site_names: tuple[str, ...] = ()  # the sites' names where the caller gave them (its stations)
 
 
 @dataclass(frozen=True)
@@ -140,7 +143,8 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     crossings = _wild_crossings(r, one, unexplained) if unexplained.sum() >= _UNEXPLAINED_MIN else []
     if np.median(one.scale) <= _QUIET_SCALE and not any(m.inliers >= need / 2 for m in crossings):
         # One place explains them at their own noise, and the rest do not meet anywhere: no room for another
-        return Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int), list(one.places), one.offset)
+        return Count(1, 1.0, [], [], {1: 1.0}, False, np.zeros(0, int), list(one.places), one.offset,
+                     _site_bias(r, one))
     wide = float(np.median(one.scale))
     candidates = [one.places[0].mean, *(m.mean for m in crossings)]  # the one, then where its wild ones cross
     candidates += [np.asarray(s, float) for s in starts(1.0) + starts(wide)]
@@ -170,13 +174,16 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     assigned = np.argmax(best.resp[:, order], axis=1) if count >= 2 else np.zeros(0, int)
     beyond = min(fits, key=lambda f: f.bic)
     more = (beyond.k > max_k and beyond.in_turns) or (count == max_k and _left_over(r, best, need))
-    return Count(count, by_count[count], transmitters, ghosts, by_count, more, assigned, places, best.offset)
+    return Count(count, by_count[count], transmitters, ghosts, by_count, more, assigned, places, best.offset,
+                 _site_bias(r, best))
 
 
-def count_job(r: Readings, first: np.ndarray, max_k: int, offset: float) -> Count | None:
-    """count_transmitters from the readings' own modes: a plain function of its inputs, as the scheduler runs it (in
-    the check worker, or in turns within the calls)."""
-    return count_transmitters(r, first, mode_starts(r), max_k, offset)
+def count_job(r: Readings, first: np.ndarray, max_k: int, offset: float, site_names: tuple[str, ...] = ()
+              ) -> Count | None:
+    """count_transmitters from the readings' own modes, its sites named `site_names`: a plain function of its
+    inputs, as the scheduler runs it (in the check worker, or in turns within the calls)."""
+    count = count_transmitters(r, first, mode_starts(r), max_k, offset)
+    return replace(count, site_names=site_names) if count is not None and site_names else count
 
 
 def mode_starts(r: Readings) -> Callable[[float], list[np.ndarray]]:
@@ -217,6 +224,15 @@ def _dependence(r: Readings, fit: Fit, bins: np.ndarray) -> float:
     factor = long_run / plain
     spread = math.sqrt(2.0 * (2 * lags + 1) / n)  # the ratio's chance spread for independent errors, roughly
     return factor if factor > 1.0 + 3.0 * spread else 1.0
+
+
+def _site_bias(r: Readings, fit: Fit) -> np.ndarray:
+    """Each site's bias (rad) in `fit` (its shift without the common offset); empty without sites."""
+    if r.site is None:
+        return np.zeros(0)
+    sites = int(r.site.max()) + 1
+    return np.bincount(r.site, fit.shift - fit.offset, minlength=sites) / np.maximum(
+        np.bincount(r.site, minlength=sites), 1)
 
 
 def _tempered_bic(fit: Fit, dispersion: float) -> float:

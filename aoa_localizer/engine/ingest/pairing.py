@@ -77,7 +77,7 @@ class Pairing:
                 self.unknown_quality += 1
             sigma = reading_sigma(p.quality, self.cfg) if math.isnan(p.sigma) else p.sigma
             reading = Reading(p.stamp, theta, p.quality, sigma, east, north, float(gps_sigma), float(v_east),
-                              float(v_north), heading_sigma)
+                              float(v_north), heading_sigma, st.name)
             if channel.id not in self.survey_log.not_survey:  # a drive's channel costs a set look-up a reading
                 # a survey's: from a fixed site, or from an antenna standing still (a surveyor's stop)
                 still = math.hypot(v_east, v_north) < STILL_MPS

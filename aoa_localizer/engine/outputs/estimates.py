@@ -23,7 +23,7 @@ from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.survey.survey_log import SurveyFix, counted, live_fix
 from aoa_localizer.engine.survey.survey_solver import SurveySolver
-from aoa_localizer.engine.track.report import between_transmitters, co_channel, others_share
+from aoa_localizer.engine.track.report import between_transmitters, co_channel, others_share, stations_disagree
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 AGREE_CHI2 = 9.21  # two places further apart than this (Mahalanobis, squared, both covariances: 1 % for 2-D)
@@ -102,11 +102,11 @@ class Estimates:
             antennas = np.array([[g[0].east, g[0].north] for g in track.heard]) if count.transmitters else None
             places, said = co_channel(count, antennas, self.cfg.max_emitters_per_channel)
             warnings = warnings + said
-            mixed = between_transmitters(count, np.asarray(mean), np.asarray(cov))
-            if mixed is not None:
-                warnings.append(mixed)
-                if state == EstimateState.TRACKING:
-                    state = EstimateState.POORLY_DETERMINED
+            for said_too in (between_transmitters(count, np.asarray(mean), np.asarray(cov)), stations_disagree(count)):
+                if said_too is not None:
+                    warnings.append(said_too)
+                    if state == EstimateState.TRACKING:
+                        state = EstimateState.POORLY_DETERMINED
             for place, place_state in places:
                 t_lat, t_lon, _ = frame.to_geodetic(place.mean[0], place.mean[1])
                 transmitters.append(Transmitter(float(place.mean[0]), float(place.mean[1]), float(t_lat),

@@ -20,6 +20,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
+from dataclasses import replace
 from functools import partial
 
 import numpy as np
@@ -53,6 +54,7 @@ log = logging.getLogger("aoa_localizer")
 
 _CALIBRATION_SWEEPS = 2  # moves after a calibration that left the cloud's weights degenerate
 COUNT_MAX_READINGS = 1500  # more heard: every k-th point's readings (whole points: a bin's readings stay together)
+STATION_BIAS_SD_DEG = 5.0  # the prior sd of each station's steady bias in a count of several stations' readings
 SITE_MIN_POINTS = 12  # the site part is fitted from this many of the filter's points on ...
 SITE_GROWTH = 1.25  # ... and again once they grew by this factor (a fit costs 5-30 ms)
 
@@ -422,8 +424,12 @@ class EmitterTrack(Held):
         # transmitters' bearings reads them as one wide noise or an offset; the count fits its own of both
         rows = np.array([[r.stamp, r.east, r.north, r.theta, r.sigma, r.quality] for r in readings])
         heard = Readings(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], np.maximum(rows[:, 4], 1e-4), rows[:, 5])
+        names, station = np.unique([r.station for r in readings], return_inverse=True)
+        if names.size >= 2:  # each station's receiver may carry a steady bias of its own: a site of the count's
+            heard = replace(heard, site=station, site_sd=math.radians(STATION_BIAS_SD_DEG))
         first = self.filter.estimate()[0] if self.filter is not None else self.modes[0].mean
-        job = partial(count_job, heard, np.asarray(first, float), cfg.max_emitters_per_channel, c.offset)
+        job = partial(count_job, heard, np.asarray(first, float), cfg.max_emitters_per_channel, c.offset,
+                      tuple(str(n) for n in names) if names.size >= 2 else ())
         self.counted_readings = self.heard_readings
         if final:
             self.counted = job()

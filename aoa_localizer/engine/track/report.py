@@ -188,6 +188,24 @@ def between_transmitters(count: Count | None, mean: np.ndarray, cov: np.ndarray)
             "their ellipses): the bearings of both are mixed in it")
 
 
+STATIONS_DISAGREE_DEG = 3.0  # stations' fitted biases further apart than this are said
+
+
+def stations_disagree(count: Count | None) -> str | None:
+    """What a count over several stations' readings found of their steady biases, when they are further apart than
+    STATIONS_DISAGREE_DEG (one receiver's bias or north reference, which the channel's filter, taking the stations
+    as one receiver, cannot learn); None otherwise."""
+    if count is None or count.site_bias.size < 2 or len(count.site_names) != count.site_bias.size:
+        return None
+    deg = -np.degrees(count.site_bias)  # as azimuths read them (clockwise): the site's map-angle bias turned
+    if float(deg.max() - deg.min()) <= STATIONS_DISAGREE_DEG:
+        return None
+    each = ", ".join(f"{name} {d:+.1f} deg" for name, d in zip(count.site_names, deg, strict=True))
+    return (f"the stations' bearings disagree by {float(deg.max() - deg.min()):.1f} deg ({each} against the "
+            "place): a receiver's steady bias or north reference (bearing_reference, mount_offset_deg); the "
+            "estimate mixes them")
+
+
 def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
                name: Callable[[np.ndarray], str] | None = None, estimate_is: str = "the track's"
                ) -> tuple[list[tuple[Place, EstimateState]], list[str]]:
