@@ -143,8 +143,7 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
         f": {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
         f"of the datum {loc.datum_frame().lat0:.7f}, {loc.datum_frame().lon0:.7f})",
         f"* **95 % error ellipse**: semi-axes {a:.1f} m x {b:.1f} m, major axis at {azimuth:.0f} deg from north",
-        f"* **Algorithm**: {est.algorithm}, N = {loc.config.num_particles}, "
-        + ("seed unset (a random run)" if loc.config.seed is None else f"seed {loc.config.seed}"),
+        f"* **Algorithm**: {est.algorithm}, N = {loc.config.num_particles}, seed {loc.config.seed}",
         f"* **Bearings used**: {est.bearings_used} in {est.points_used} observation points "
         f"(of {len(trace.readings)} paired with a GPS position; {used} kept inside their points)",
     ]

@@ -30,6 +30,7 @@ MIN_READINGS = 30  # a channel's transmitters are counted from this many reading
 COUNT_GROWTH = 2.0  # ... and again once they grew by this factor (a count costs 0.01-1 s)
 BIN_S = 2.0  # readings within one such bin of time are taken as one transmitter's (in turns)
 MIN_SHARE = 0.08  # a transmitter (or a ghost) explains at least this share of the readings
+COUNT_SURE = 0.9  # a count this probable is sure: its places may be `tracking`, and they question the estimate
 _EM_ITERATIONS = 40
 _EM_TOL = 1e-6  # stop when the log-likelihood gains less than this (relative)
 _GN_STEPS = 2  # Gauss-Newton steps of each place per EM iteration

@@ -29,6 +29,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.checks import CheckResult, refined
 from aoa_localizer.engine.inference.co_channel import (
     COUNT_GROWTH,
+    COUNT_SURE,
     MIN_READINGS,
     Count,
     Readings,
@@ -372,7 +373,7 @@ class EmitterTrack(Held):
 
     def _recalibrate(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]],
                      offset: float, course: bool):
-        if self.counted is not None and self.counted.count >= 2:
+        if self.counted is not None and self.counted.count >= 2 and self.counted.probability >= COUNT_SURE:
             # several transmitters on the air: their bearings, fitted as one, differ by an angle that is no
             # receiver's offset (the count fits its own offset beside none); the offset in use stays
             offset = self.calibration.offset
@@ -450,7 +451,8 @@ class EmitterTrack(Held):
         """An offset learned from the bearings of several transmitters read as one (the count places them at no
         offset) is taken back: the points are rebuilt without it."""
         c = self.calibration
-        if count is None or count.count < 2 or count.offset != 0.0 or c.offset == 0.0 or c.course:
+        if (count is None or count.count < 2 or count.probability < COUNT_SURE or count.offset != 0.0
+                or c.offset == 0.0 or c.course):
             return
         log.warning("the bearing offset learned (%+.1f deg) was %d transmitters' bearings read as one: taken back",
                     c.offset_deg, count.count)

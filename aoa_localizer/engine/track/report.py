@@ -9,7 +9,7 @@ import numpy as np
 
 from aoa_localizer.engine.crlb import ELLIPSE_95
 from aoa_localizer.engine.inference.checks import ellipse_and_reach
-from aoa_localizer.engine.inference.co_channel import Count, Place
+from aoa_localizer.engine.inference.co_channel import COUNT_SURE, Count, Place
 from aoa_localizer.engine.inference.global_search import Mode
 from aoa_localizer.engine.inference.safety import HealthMonitor
 from aoa_localizer.engine.track.calibrator import Calibrator
@@ -151,9 +151,6 @@ def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor
     return EstimateState.TRACKING, []
 
 
-_COUNT_SURE = 0.9  # a count this probable: its transmitters may be `tracking`
-
-
 def others_share(count: Count | None, mean: np.ndarray) -> float:
     """The share of a channel's readings that its other transmitters explain (the track follows the one nearest its
     estimate `mean`); 0 with one transmitter."""
@@ -167,8 +164,8 @@ def between_transmitters(count: Count | None, mean: np.ndarray, cov: np.ndarray)
     """Why a channel's estimate is at none of the places its count found (the filter followed the bearings of two
     transmitters, or of one and its interleaved ghost, mixed: a place between them), or None: it lies within the
     95 % region of one place (their covariances summed), or the count found one place."""
-    if count is None or (count.count < 2 and not count.ghosts):
-        return None
+    if count is None or (count.count < 2 and not count.ghosts) or count.probability < COUNT_SURE:
+        return None  # an unsure count's places do not question the estimate
     places = count.transmitters if count.count >= 2 else count.fitted
     def d2(p: Place) -> float:
         diff = np.asarray(mean, float) - p.mean
@@ -220,7 +217,7 @@ def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
         assert antennas is not None  # given whenever there are transmitters
         size, reach = ellipse_and_reach(place.mean, place.cov, antennas[:, 0], antennas[:, 1])
         # more on the air than allowed: a place may hold another's readings too, so none is sure
-        sure = (count.probability >= _COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
+        sure = (count.probability >= COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
                 and not count.more_than_allowed)
         out.append((place, EstimateState.TRACKING if sure else EstimateState.POORLY_DETERMINED))
     if count.count >= 2:
@@ -230,7 +227,7 @@ def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
                         "alone while the direct path was blocked looks the same)")
     for ghost in count.ghosts:
         where = f"a second place, {name(ghost.mean)}, explains {100 * ghost.share:.0f} %"
-        if count.probabilities.get(2, 0.0) >= 1.0 - _COUNT_SURE:  # the turns and the interleaving fit alike
+        if count.probabilities.get(2, 0.0) >= 1.0 - COUNT_SURE:  # the turns and the interleaving fit alike
             warnings.append(f"{where} of the bearings: a second transmitter taking turns, or a reflection; the "
                             f"readings are too far apart in time to tell (p = {count.probabilities[2]:.2f} for two)")
         else:
