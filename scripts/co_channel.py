@@ -10,7 +10,8 @@ in quality), the default configuration, run r on data seed r and filter seed 100
 * `two interleaved`: the same at 50/50, reading by reading (bearings alone cannot tell it from a reflection);
 * `three 40/30/30`: a second and a third transmitter, 300, 650 or 1000 m from the first (the third a step further
   in that list), 120 deg apart around it, in bursts;
-* `one`, `wild 20 %`, `reflector 20 %`: one transmitter, clean, with 20 % wild bearings, with a reflection's ghost;
+* `one`, `wild 20 %`, `wild 25 %`, `reflector 20 %`: one transmitter, clean, with 20 or 25 % wild bearings, with a
+  reflection's ghost;
 * `five limit 3`, `five limit 5`: five transmitters at 20 % each, under the default limit and with `max_emitters_per_
   channel` 5; `site field 3 deg`: one transmitter, a smooth site error (sd 3 deg over 300 m of road);
 * `second receiver +6 deg`, `+12 deg`: one transmitter heard by two cars (biased_pair), the second's receiver off.
@@ -50,7 +51,9 @@ def cells() -> dict[str, tuple[Scenario, dict]]:
             "two interleaved": (replace(base, co_shares=(0.5, 0.5), bursts_s=None), {}),
             "three 40/30/30": (replace(base, co_shares=(0.4, 0.3, 0.3)), {}),
             "five limit 3": (five, {}), "five limit 5": (five, {"max_emitters_per_channel": 5}),
-            "one": (base, {}), "wild 20 %": (robust["wild20"], {}), "reflector 20 %": (robust["reflector"], {}),
+            "one": (base, {}), "wild 20 %": (robust["wild20"], {}),
+            "wild 25 %": (replace(base, name="wild25", wild_share=0.25), {}),
+            "reflector 20 %": (robust["reflector"], {}),
             "site field 3 deg": (replace(base, site_field_deg=3.0), {})}
 
 
