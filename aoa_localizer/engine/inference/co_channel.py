@@ -260,8 +260,8 @@ def _first_scale(r: Readings, x: np.ndarray, offset: float) -> np.ndarray:
 
 def _left_over(r: Readings, fit: Fit, need: float) -> bool:
     """Whether the readings that none of `fit`'s places explains still meet at a place of their own, with a third
-    of a transmitter's share (places at the limit absorb some of the others' readings: at half, one of 20 runs of
-    five at a limit of 3 went unsaid): one more transmitter than the fit has."""
+    of a transmitter's share (places at the limit absorb some of the others' readings): one more transmitter than
+    the fit has."""
     unexplained = _unexplained(r, fit)
     if unexplained.sum() < _UNEXPLAINED_MIN:
         return False
