@@ -93,3 +93,22 @@ def test_a_drive_with_a_site_field_gets_an_honest_ellipse_and_a_clean_one_keeps_
         track = next(iter(loc.channels.all())).track
         widened.append(math.sqrt(np.trace(final.cov) / np.trace(final.cov - track.site_spread)))
     assert inside >= 4 and max(widened) < 1.5, (inside, widened)
+
+
+@pytest.mark.parametrize("value", ["-1", "31", "3,0", "3,-5", "abc", "3,300,1", "nan", "3,inf"])
+def test_simulate_refuses_a_site_field_it_cannot_make(cli, value):
+    from aoa_localizer.tools.simulate import main
+
+    res = cli(main, "--site-field", value)
+    assert res.returncode == 2 and "a site field is SD_DEG (0-30) or SD_DEG,STRETCH_M (> 0)" in res.stderr
+
+
+@pytest.mark.slow
+def test_simulate_with_a_site_field_keeps_the_truth_inside_the_ellipse(cli):
+    """`simulate --site-field 3`: the seed drive under a 3 deg site error over 300 m; the error is several times the
+    independent-error bound, and the ellipse, with the site part, still holds the truth."""
+    from aoa_localizer.tools.simulate import main
+
+    res = cli(main, "--site-field", "3")
+    error = float(res.stdout.split("error ")[1].split(" m")[0])
+    assert error > 3.0 and "truth inside the ellipse: yes" in res.stdout, res.stdout

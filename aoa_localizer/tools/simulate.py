@@ -72,6 +72,19 @@ def finite_degrees(text: str) -> float:
     return value
 
 
+def site_field_value(text: str) -> tuple[float, float]:
+    """argparse type of --site-field SD_DEG[,STRETCH_M]: a site error's sd (deg, 0-30) and its correlation's
+    scale along the road (m, > 0; default 300)."""
+    parts = text.split(",")
+    try:
+        sd, stretch = float(parts[0]), float(parts[1]) if len(parts) == 2 else 300.0
+    except (ValueError, IndexError):
+        sd = stretch = math.nan
+    if len(parts) > 2 or not (0.0 <= sd <= 30.0 and 0.0 < stretch < math.inf):
+        raise argparse.ArgumentTypeError(f"a site field is SD_DEG (0-30) or SD_DEG,STRETCH_M (> 0), got {text!r}")
+    return sd, stretch
+
+
 def receiver_config(mount_offset_deg: float | None) -> LocalizerConfig:
     """The defaults with the settings that read the simulated array's azimuths as it took them."""
     return LocalizerConfig().with_changes(**receiver_settings(mount_offset_deg))
@@ -96,13 +109,17 @@ def main(argv=None) -> int:
                         help="air-time shares of the emitter and each --co-channel transmitter (default: equal)")
     parser.add_argument("--interleaved", action="store_true",
                         help="--co-channel transmitters interleaved reading by reading, not in bursts")
+    parser.add_argument("--site-field", type=site_field_value, metavar="SD_DEG[,STRETCH_M]",
+                        help="a site error the readings share along the road (multipath off the same buildings): a "
+                        "smooth field over the antenna's place, sd SD_DEG, correlated over STRETCH_M (default 300)")
     parser.add_argument("--write-bag", metavar="DIR", help="also write the simulated run as a rosbag2 MCAP bag")
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
     if args.scenario in FLEETS or args.emitters:
-        if args.co_channel:
-            parser.error("--co-channel is for one vehicle and one frequency (not with --emitters or pair)")
+        if args.co_channel or args.site_field:
+            parser.error("--co-channel and --site-field are for one vehicle and one frequency (not with --emitters or "
+                         "pair)")
         return run_fleet(args)
     if args.co_channel and args.mount_offset_deg is not None:
         parser.error("--co-channel transmitters are simulated with azimuths from true north (no --mount-offset-deg)")
@@ -110,8 +127,10 @@ def main(argv=None) -> int:
     if shares and (len(shares) != 1 + len(args.co_channel) or not all(v > 0 and math.isfinite(v) for v in shares)):
         parser.error(f"--co-shares needs {1 + len(args.co_channel)} positive shares (the emitter's, then each "
                      "--co-channel transmitter's)")
+    field_deg, field_m = args.site_field or (0.0, 300.0)
     scenario = replace(mounted(SCENARIOS[args.scenario], args.mount_offset_deg), co_channel=tuple(args.co_channel),
-                       co_shares=shares, bursts_s=None if args.interleaved else (5.0, 30.0))
+                       co_shares=shares, bursts_s=None if args.interleaved else (5.0, 30.0),
+                       site_field_deg=field_deg, site_field_m=field_m)
     data = simulate(scenario, args.data_seed)
     try:
         cfg = config_from_args(args, receiver_config(args.mount_offset_deg))
