@@ -227,3 +227,25 @@ def test_the_maths_has_no_turns_and_no_meter_inside_it():
                 found.append(f"{path.relative_to(engine)}:{node.lineno} charge()")
     assert not found, found
     assert (engine / "inference" / "global_search.py").read_text().count("@metered(") == 1  # the test sees them
+
+
+def test_no_exception_for_control_flow_is_a_base_exception_and_no_maths_catches_every_exception():
+    """Architecture IV: a dropped job's thread ends by an ordinary exception raised at its next kernel
+    (slices._Cancelled); that works only while the numerical code catches named errors, never a bare `except`,
+    `except Exception` or `except BaseException`, which would swallow it and leave the thread running."""
+    pkg = Path(aoa_localizer.__file__).parent
+    bases, broad = [], []
+    for path in pkg.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ClassDef) and any(getattr(b, "id", "") == "BaseException" for b in node.bases):
+                bases.append(f"{path.relative_to(pkg)}:{node.name}")
+        maths = path.relative_to(pkg).parts[0] in ("filters", "models", "pooled") or (
+            path.relative_to(pkg).parts[:2] == ("engine", "inference"))
+        if maths:
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ExceptHandler) and (
+                        node.type is None or getattr(node.type, "id", "") in ("Exception", "BaseException")):
+                    broad.append(f"{path.relative_to(pkg)}:{node.lineno}")
+    assert not bases, bases
+    assert not broad, broad

@@ -144,8 +144,9 @@ def one_call(call: Call | None = None) -> Iterator[None]:
         _meter.call = outer
 
 
-class _Cancelled(BaseException):
-    """Raised in a dropped job's thread at its next kernel, so the thread ends."""
+class _Cancelled(Exception):
+    """Raised in a dropped job's thread at its next kernel, so the thread ends (no job catches a broad Exception:
+    tests/test_layout.py keeps the maths to named errors)."""
 
 
 class _Turns:
