@@ -56,7 +56,9 @@ def mean_tau2(east: np.ndarray, north: np.ndarray, resid: np.ndarray, jac: np.nd
               ) -> dict[float, float]:
     """Each stretch's share of the posterior mean of tau^2 (rad^2) given the points' residuals (rad) and gradients at
     the estimate: the restricted likelihood over a grid of tau, the noise's scale and the stretch (equal prior
-    weight each stretch; tau = 0 _ZERO_PRIOR of it, the rest even in log tau; the scale even in log)."""
+    weight each stretch; tau = 0 _ZERO_PRIOR of it, the rest even in log tau; the scale even in log). Zero where the
+    posterior holds half or more of its mass at tau = 0: precise bearings that show no site part keep their ellipse
+    (a site part the data cannot rule out would otherwise widen it, two cars' fused ellipse 1.9x)."""
     rw, xw = resid / sigma, jac / sigma[:, None]  # whitened by the points' own sigmas
     d2 = np.square(east[:, None] - east[None, :]) + np.square(north[:, None] - north[None, :])
     c2 = np.square(_SCALES)[:, None, None]
@@ -77,4 +79,6 @@ def mean_tau2(east: np.ndarray, north: np.ndarray, resid: np.ndarray, jac: np.nd
     stacked = np.stack(lls)  # (stretches, scales, taus)
     post = np.exp(stacked - stacked.max())
     post /= post.sum()
+    if post[:, :, _TAUS == 0.0].sum() >= 0.5:  # the data favour no site part: the filter's own ellipse stands
+        return {stretch: 0.0 for stretch in shares}
     return {stretch: float((post[k] * np.square(_TAUS)[None, :]).sum()) for k, stretch in enumerate(shares)}
