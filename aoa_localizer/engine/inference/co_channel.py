@@ -202,14 +202,9 @@ def _dependence(r: Readings, fit: Fit, bins: np.ndarray) -> float:
     residuals (summed per time bin, the bins' sums' autocovariances to lag L with Bartlett weights) over their
     plain variance; 1 for independent errors (and where the excess is within its chance spread)."""
     order = np.argsort(r.stamp, kind="stable")
-    place = np.argmax(fit.resp, axis=1)
     turned = _turned(r, fit.shift)
-    resid = np.empty(len(r))
-    for j, p in enumerate(fit.places):
-        mine = place == j
-        resid[mine] = _jacobian(replace(turned, **{f: getattr(turned, f)[mine] for f in
-                                                   ("stamp", "east", "north", "theta", "sigma", "quality")},
-                                        site=None), p.mean)[0]
+    by_place = np.column_stack([_jacobian(turned, p.mean)[0] for p in fit.places])
+    resid = np.take_along_axis(by_place, np.argmax(fit.resp, axis=1)[:, None], axis=1)[:, 0]  # at its own place
     z = resid / (fit.scale * r.sigma)
     z = np.where(np.abs(z) <= 3.0, z, 0.0)[order]  # the wild ones say nothing of the others' dependence
     b = bins[order]

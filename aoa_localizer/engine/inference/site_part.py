@@ -64,7 +64,7 @@ def mean_tau2(east: np.ndarray, north: np.ndarray, resid: np.ndarray, jac: np.nd
     c2 = np.square(_SCALES)[:, None, None]
     t2 = np.square(_TAUS)[None, :, None]
     log_prior = np.log(np.where(_TAUS == 0.0, _ZERO_PRIOR, (1.0 - _ZERO_PRIOR) / (_TAUS.size - 1)))[None, :]
-    lls, shares = [], []
+    lls = []
     for stretch in STRETCHES_M:
         lam, u = np.linalg.eigh(np.exp(-0.5 * d2 / stretch**2) / np.outer(sigma, sigma))
         rt, xt = u.T @ rw, u.T @ xw
@@ -75,10 +75,9 @@ def mean_tau2(east: np.ndarray, north: np.ndarray, resid: np.ndarray, jac: np.nd
         explained = (m11 * b0**2 - 2.0 * m01 * b0 * b1 + m00 * b1**2) / det
         ll = -0.5 * (-np.log(inv_d).sum(axis=-1) + np.log(det) + inv_d @ rt**2 - explained) + log_prior
         lls.append(ll)
-        shares.append(stretch)
     stacked = np.stack(lls)  # (stretches, scales, taus)
     post = np.exp(stacked - stacked.max())
     post /= post.sum()
     if post[:, :, _TAUS == 0.0].sum() >= 0.5:  # the data favour no site part: the filter's own ellipse stands
-        return {stretch: 0.0 for stretch in shares}
-    return {stretch: float((post[k] * np.square(_TAUS)[None, :]).sum()) for k, stretch in enumerate(shares)}
+        return {stretch: 0.0 for stretch in STRETCHES_M}
+    return {stretch: float((post[k] * np.square(_TAUS)[None, :]).sum()) for k, stretch in enumerate(STRETCHES_M)}
