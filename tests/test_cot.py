@@ -1,11 +1,13 @@
 """Cursor-on-Target for TAK (issue 53, part 3): the event an estimate makes, parsed as a TAK receiver would
 (takproto, the TAK protocol's maintained library), and sent over UDP and TCP to listeners on this machine."""
 import socket
+import time
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
 import takproto
+from tak_listener import PytakListener
 
 from aoa_localizer.common.cot import QUEUE_MAX, CotSender, estimate_event, parse_cot_url, write_cot_files
 from aoa_localizer.engine.types import Estimate
@@ -115,3 +117,21 @@ def test_a_tak_server_that_never_reads_costs_the_caller_nothing(estimate):
     assert stuck.dropped >= 500 - QUEUE_MAX - 2
     stuck.close()
     server.close()
+
+
+def test_pytaks_own_reader_receives_the_event_with_the_estimates_point_and_error(estimate):
+    """Issue 67, item 5: a TAK client from PyPI (pytak's UDP reader and receive worker) takes the event off the
+    wire; its point, CE90 and ellipse are the estimate's."""
+    with PytakListener() as tak:
+        sender = CotSender(tak.url)
+        deadline = time.monotonic() + 10
+        while not tak.events and time.monotonic() < deadline:  # UDP: sent again until pytak has read one
+            sender.send(estimate_event(estimate, 60.0))
+            time.sleep(0.05)
+        sender.close()
+    assert tak.events, "pytak read nothing"
+    event = ET.fromstring(tak.events[0])
+    point = event.find("point")
+    assert float(point.get("lat")) == estimate.lat and float(point.get("lon")) == estimate.lon
+    assert float(point.get("ce")) == pytest.approx(5.05, abs=0.05)  # CE90 of sigmas 3 m and 1 m (above)
+    assert float(event.find("detail/shape/ellipse").get("major")) == pytest.approx(7.3, abs=0.1)

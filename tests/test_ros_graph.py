@@ -1132,40 +1132,41 @@ def test_two_nodes_with_one_name_are_named_in_the_diagnostics(spawn, domain):
 
 
 def test_the_node_sends_each_estimate_to_tak_as_cursor_on_target(spawn, domain):
-    """Issue 53, part 3: `cot_url:=udp://127.0.0.1:PORT` (a TAK receiver's UDP input on this machine): CoT events
-    arrive as the estimate changes (at most one a cot_period_s: the drive's points come in two seconds here) with
-    the emitter's place, and /diagnostics counts them; a cot_url the node cannot use refuses the start."""
-    import socket
+    """Issue 53, part 3, and issue 67, item 5: `cot_url:=udp://127.0.0.1:PORT` (a TAK receiver's UDP input on this
+    machine, read by pytak, a TAK client from PyPI): CoT events arrive as the estimate changes (at most one a
+    cot_period_s: the drive's points come in two seconds here) with a point and CE90 that the node published on
+    emitter/fix, and /diagnostics counts them; a cot_url the node cannot use refuses the start."""
     import xml.etree.ElementTree as ET
 
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind(("127.0.0.1", 0))
-    rx.setblocking(False)
-    node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1", "-p", "diagnostics_period_s:=0.3", "-p",
-                    f"cot_url:=udp://127.0.0.1:{rx.getsockname()[1]}"], domain)
+    from tak_listener import PytakListener
+
     emitter = (600.0, 400.0)
-    events = []
-
-    def take():
-        try:
-            while True:
-                events.append(ET.fromstring(rx.recv(65536)))
-        except BlockingIOError:
-            return False
-
-    with client(domain) as (node, executor):
+    fixes: list = []
+    with PytakListener() as tak, client(domain) as (node, executor):
+        node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1", "-p", "diagnostics_period_s:=0.3",
+                        "-p", f"cot_url:={tak.url}"], domain)
         diag: dict = {}
         node.create_subscription(T.DiagnosticArray, "/diagnostics", lambda m: diag.update(
             diagnostics_values(m).get("aoa_localizer: localizer", {})), 10)
+        node.create_subscription(T.NavSatFix, "emitter/fix", fixes.append, QoSProfile(depth=1000))
         _publish_drive(node, executor, emitter)
-        assert spin_until(executor, lambda: take() or len(events) >= 1, 20), open(node_p.log_path).read()
+        assert spin_until(executor, lambda: len(tak.events) >= 1, 20), open(node_p.log_path).read()
         spin_until(executor, lambda: False, 1.5)  # the drive's last points, and a diagnostics period
-        take()
-        assert spin_until(executor, lambda: int(diag.get("cot_sent", 0)) == len(events), 5), json.dumps(diag)
+        assert spin_until(executor, lambda: int(diag.get("cot_sent", 0)) == len(tak.events), 5), json.dumps(diag)
+    events = [ET.fromstring(e) for e in tak.events]
     last = events[-1]
     assert last.get("uid") == "aoa_localizer.default" and last.get("type") == "a-u-G"
-    east, north = LocalFrame(*DATUM).to_enu(float(last.find("point").get("lat")), float(last.find("point").get("lon")))
+    point = last.find("point")
+    lat, lon, ce = (float(point.get(k)) for k in ("lat", "lon", "ce"))
+    east, north = LocalFrame(*DATUM).to_enu(lat, lon)
     assert math.hypot(east - emitter[0], north - emitter[1]) < 30.0
+    # the event is one the node published: its point (to CoT's 1e-7 deg) and its CE90, the circle that holds 90 %
+    # of the fix's east-north covariance (counted here over draws, not by the node's formula)
+    same = [f for f in fixes if abs(f.latitude - lat) < 2e-7 and abs(f.longitude - lon) < 2e-7]
+    assert same, (lat, lon, [(f.latitude, f.longitude) for f in fixes[-3:]])
+    c = np.array(same[-1].position_covariance, float).reshape(3, 3)[:2, :2]
+    draws = np.random.default_rng(0).multivariate_normal([0.0, 0.0], c, 200_000)
+    assert np.mean(np.hypot(*draws.T) <= ce) == pytest.approx(0.9, abs=0.01)
     assert diag["cot_failed"] == "0"
     refused = subprocess.run([sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p", "cot_url:=http://x:1"],
                              env=ros_env(domain), cwd=ROOT, capture_output=True, text=True, timeout=60)
