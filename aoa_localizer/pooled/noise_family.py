@@ -30,8 +30,10 @@ class ReceiverClass:
 # A hand-held survey's place-like error: the two-scale mixture fitted (maximum likelihood against the surveyed
 # truth) to two real observers' 46 collars, docs/design.md "Honest on real bearings"
 _HAND_HELD_PLACE = {"shared_place": (0.2, 0.6), "shared_weight": (0.75, 0.25)}
+# An unknown receiver's scale: a few degrees, but wide (a factor e^2 a standard deviation), so that a handful of
+# stations whose readings agree to a fraction of a degree can show it; an observer's survey pools its ids anyway
 RECEIVER_CLASSES: dict[str, ReceiverClass] = {
-    "unknown": ReceiverClass(6.0, 1.0, **_HAND_HELD_PLACE),
+    "unknown": ReceiverClass(6.0, 2.0, **_HAND_HELD_PLACE),
     "handheld": ReceiverClass(15.0, 0.6, **_HAND_HELD_PLACE),
     "electronic": ReceiverClass(3.0, 0.8, (0.0,)),
     "mast": ReceiverClass(2.0, 0.8, (0.0,)),
