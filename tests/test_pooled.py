@@ -665,7 +665,7 @@ def test_five_precise_fixed_sites_on_one_id_give_an_ellipse_near_the_bound_that_
     lat, lon, _ = FRAME.to_geodetic(sites[:, 0], sites[:, 1])
     north = FRAME.north_angle(lat, lon)
     sharp, inside = [], 0
-    for run in range(10):
+    for _ in range(10):
         t = rng.uniform(-300.0, 300.0, 2)
         rows = [SurveyReading("x", float(lat[k]), float(lon[k]), math.degrees(
             north[k] - math.atan2(t[1] - sites[k, 1], t[0] - sites[k, 0])) + rng.normal(0.0, 0.2), f"m{k}")
