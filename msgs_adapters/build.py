@@ -3,6 +3,7 @@
 The outputs of the node (pose, fix, particles, markers, diagnostics) are built with rclpy's classes."""
 from __future__ import annotations
 
+import array
 import math
 import zlib
 from types import SimpleNamespace
@@ -23,6 +24,7 @@ def rosbags_types(typestore) -> SimpleNamespace:
         Quaternion=t["geometry_msgs/msg/Quaternion"], Pose=t["geometry_msgs/msg/Pose"],
         PoseWithCovariance=t["geometry_msgs/msg/PoseWithCovariance"],
         PoseWithCovarianceStamped=t["geometry_msgs/msg/PoseWithCovarianceStamped"],
+        PointCloud2=t["sensor_msgs/msg/PointCloud2"], PointField=t["sensor_msgs/msg/PointField"], numpy_bytes=True,
     )
 
 
@@ -43,14 +45,15 @@ def rclpy_types() -> SimpleNamespace:
         Vector3Stamped,
     )
     from nav_msgs.msg import MapMetaData, OccupancyGrid, Path
-    from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+    from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, PointCloud2, PointField
     from std_msgs.msg import ColorRGBA, Header, String
     from visualization_msgs.msg import Marker, MarkerArray
 
     return SimpleNamespace(**{c.__name__: c for c in (
         Time, Header, NavSatFix, NavSatStatus, Vector3Stamped, Vector3, PointStamped, Point, Pose, PoseArray,
         PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, ColorRGBA, Marker, MarkerArray,
-        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu, String, OccupancyGrid, MapMetaData)})
+        DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu, String, OccupancyGrid, MapMetaData,
+        PointCloud2, PointField)})
 
 
 def header(T, stamp: float, frame_id: str):
@@ -72,6 +75,26 @@ def df_record(T, stamp: float, azimuth_deg: float, quality: float, frequency_hz:
     """geometry_msgs/Vector3Stamped DF record."""
     return T.Vector3Stamped(header=header(T, stamp, frame_id),
                             vector=T.Vector3(x=float(azimuth_deg), y=float(quality), z=float(frequency_hz)))
+
+
+def df_scan(T, stamp: float, azimuth_deg, quality=None, frequency_hz=None, sigma_deg=None,
+            frame_id: str = "df_antenna"):
+    """sensor_msgs/PointCloud2 DF scan (one point per channel read at `stamp`): FLOAT64 fields azimuth_deg and, when
+    given, quality, frequency_hz and sigma_deg (docs/interface.md, "A scan as one message")."""
+    given = {"azimuth_deg": azimuth_deg, "quality": quality, "frequency_hz": frequency_hz, "sigma_deg": sigma_deg}
+    columns = {k: np.asarray(v, float).reshape(-1) for k, v in given.items() if v is not None}
+    n = len(columns["azimuth_deg"])
+    fields = [T.PointField(name=k, offset=8 * i, datatype=8, count=1) for i, k in enumerate(columns)]
+    data = np.column_stack(list(columns.values())).astype("<f8").tobytes() if n else b""
+    return T.PointCloud2(header=header(T, stamp, frame_id), height=1, width=n, fields=fields, is_bigendian=False,
+                         point_step=8 * len(columns), row_step=8 * len(columns) * n, data=_bytes_for(T, data),
+                         is_dense=True)
+
+
+def _bytes_for(T, data: bytes):
+    """A message's uint8[] as its classes take it without a check per byte: rosbags' as a numpy array, rclpy's as
+    an array('B')."""
+    return np.frombuffer(data, np.uint8).copy() if getattr(T, "numpy_bytes", False) else array.array("B", data)
 
 
 def pose_bearing(T, stamp: float, yaw_rad: float, variance_rad2: float, frame_id: str = "df_antenna"):

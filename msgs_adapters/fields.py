@@ -4,6 +4,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+
 # sensor_msgs/NavSatStatus.STATUS_NO_FIX; STATUS_FIX is 0 and augmented fixes are higher.
 STATUS_NO_FIX = -1
 
@@ -72,6 +74,48 @@ def df_from_vector3stamped(msg) -> DfRecord:
     """geometry_msgs/Vector3Stamped DF record -> DfRecord (x azimuth deg, y quality, z frequency Hz)."""
     v = msg.vector
     return DfRecord(stamp_seconds(msg.header), _float(v.x), _float(v.y), _float(v.z))
+
+
+# A scan's fields (docs/interface.md, "A scan as one message"): azimuth_deg is needed, the others are optional
+SCAN_FIELDS = ("azimuth_deg", "quality", "frequency_hz", "sigma_deg")
+SCAN_MAX_RECORDS = 100_000  # a cloud claiming more records than this is refused, not allocated
+# sensor_msgs/PointField datatypes (INT8 .. FLOAT64) as numpy's
+_POINT_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+
+
+def df_scan(msg) -> list[DfRecord]:
+    """sensor_msgs/PointCloud2 DF scan -> one DfRecord per point, every one at the header's stamp: a receiver's
+    channels read at one instant (a KrakenSDR's VFOs, a band scan). Fields by name, any numeric PointField type,
+    any offsets, either byte order; a missing optional field reads NaN (quality, sigma_deg) or 0 (frequency_hz, the
+    default channel). ValueError for a cloud whose layout does not hold its records or has no azimuth_deg."""
+    stamp = stamp_seconds(msg.header)
+    width, height, step = int(msg.width), int(msg.height), int(msg.point_step)
+    n = width * height
+    if n == 0:
+        return []
+    if n > SCAN_MAX_RECORDS or step <= 0 or int(msg.row_step) < width * step:
+        raise ValueError(f"a scan of {width} x {height} points of {step} bytes (row {msg.row_step}) is no layout")
+    data = np.frombuffer(msg.data, np.uint8)
+    starts = (np.arange(height)[:, None] * int(msg.row_step) + np.arange(width)[None, :] * step).ravel()
+    if starts[-1] + step > data.size:
+        raise ValueError(f"a scan of {n} points of {step} bytes holds only {data.size} bytes")
+    order = ">" if msg.is_bigendian else "<"
+    fields = {f.name: f for f in msg.fields}
+    if "azimuth_deg" not in fields:
+        raise ValueError("a DF scan needs an azimuth_deg field")
+    columns = {}
+    for name in SCAN_FIELDS:
+        f = fields.get(name)
+        if f is None:
+            columns[name] = np.full(n, 0.0 if name == "frequency_hz" else math.nan)
+            continue
+        dtype = np.dtype(order + _POINT_TYPES[int(f.datatype)]) if int(f.datatype) in _POINT_TYPES else None
+        if dtype is None or int(f.count) != 1 or not 0 <= int(f.offset) <= step - dtype.itemsize:
+            raise ValueError(f"the scan's field {name} (type {f.datatype}, count {f.count}, offset {f.offset}) "
+                             "is not one number inside a point")
+        raw = data[starts[:, None] + int(f.offset) + np.arange(dtype.itemsize)[None, :]]
+        columns[name] = raw.reshape(-1).view(dtype).astype(float)
+    return [DfRecord(stamp, *row) for row in zip(*(columns[k].tolist() for k in SCAN_FIELDS), strict=True)]
 
 
 class PoseBearing(NamedTuple):

@@ -67,6 +67,8 @@ def main():
                         help="a node parameter besides the defaults (repeatable), e.g. num_particles:=50")
     parser.add_argument("--attach", type=int, metavar="PID",
                         help="measure a node already running (e.g. under a profiler) in ROS_DOMAIN_ID, not a new one")
+    parser.add_argument("--scan", action="store_true",
+                        help="each stamp's records as one scan on df/scan (PointCloud2), not one message each")
     parser.add_argument("--json", help="write the figures here too")
     parser.add_argument("--listen-posteriors", action="store_true",
                         help="subscribe to every channel's emitter/<channel>/posterior (a map client's load)")
@@ -106,8 +108,11 @@ def main():
                 rss.append((round(t, 1), round(rss_mb(rig.proc.pid), 1), round(tree_rss_mb(rig.proc.pid), 1)))
                 next_rss += 10.0
             az = np.degrees(np.arctan2(emitters[:, 0] - east, emitters[:, 1] - north)) + rng.normal(0, 2.0, len(freqs))
-            for a, f in zip(az % 360, freqs, strict=True):
-                rig.pub_df.publish(build.df_record(T, stamp0 + t, float(a), args.quality, float(f)))
+            if args.scan:
+                rig.pub_scan.publish(build.df_scan(T, stamp0 + t, az % 360, np.full(len(freqs), args.quality), freqs))
+            else:
+                for a, f in zip(az % 360, freqs, strict=True):
+                    rig.pub_df.publish(build.df_record(T, stamp0 + t, float(a), args.quality, float(f)))
             sent += len(freqs)
             scans += 1
             rig.spin_until(t0 + scans / args.df_hz)
@@ -131,7 +136,7 @@ def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> di
     warm = [m for t, m, _ in rss if t >= 60.0]  # after the channels and their filters exist
     warm_tree = [m for t, _, m in rss if t >= 60.0]
     return {
-        "emitters": args.emitters, "df_hz_each": args.df_hz, "seconds": args.seconds,
+        "emitters": args.emitters, "df_hz_each": args.df_hz, "seconds": args.seconds, "scan": args.scan,
         "df_records_sent": sent, "df_records_received": int(last.get("bearings_received", 0)),
         "fixes_received": int(last.get("fixes_received", 0)), "bearings_used": int(last.get("bearings_used", 0)),
         "rejected": {k: v for k, v in last.items() if k.startswith("rejected.")},

@@ -28,6 +28,9 @@ class Attached:
     def terminate(self):
         pass
 
+    def kill(self):
+        pass
+
     def poll(self):
         return None if os.path.exists(f"/proc/{self.pid}") else 0
 
@@ -37,7 +40,7 @@ class Attached:
 
 class NodeRig:
     """`with NodeRig(["num_particles:=50"]) as rig:` a node and a client whose gps/fix and df/bearing publishers
-    (rig.pub_fix, rig.pub_df) have matched it; rig.on_status(values) is called with each localizer status.
+    (rig.pub_fix, rig.pub_df, rig.pub_scan) have matched it; rig.on_status(values) is called with each localizer status.
     `attach`: the pid of a node already running in ROS_DOMAIN_ID instead of a new one."""
 
     def __init__(self, node_params: list[str], on_status=None, attach: int | None = None):
@@ -61,11 +64,13 @@ class NodeRig:
         self.node.create_subscription(T.DiagnosticArray, "/diagnostics", self._diagnostics, 10)
         self.pub_fix = self.node.create_publisher(T.NavSatFix, "gps/fix", QoSProfile(depth=100))
         self.pub_df = self.node.create_publisher(T.Vector3Stamped, "df/bearing", QoSProfile(depth=1000))
+        self.pub_scan = self.node.create_publisher(T.PointCloud2, "df/scan", QoSProfile(depth=100))
         self.executor = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         end = time.monotonic() + 10
         while time.monotonic() < end and not (self.pub_df.get_subscription_count()
-                                              and self.pub_fix.get_subscription_count()):
+                                              and self.pub_fix.get_subscription_count()
+                                              and self.pub_scan.get_subscription_count()):
             self.executor.spin_once(timeout_sec=0.05)
             self._alive()
         if not (self.pub_df.get_subscription_count() and self.pub_fix.get_subscription_count()):
@@ -96,5 +101,10 @@ class NodeRig:
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.ctx)
         self.proc.terminate()
-        self.proc.wait(10)
+        try:
+            self.proc.wait(30)
+        except subprocess.TimeoutExpired:  # a node still working off a backlog: the figures are taken already
+            print("the node did not stop within 30 s of SIGTERM: killed", file=sys.stderr)
+            self.proc.kill()
+            self.proc.wait(10)
         return False

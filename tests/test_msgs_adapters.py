@@ -15,6 +15,7 @@ from msgs_adapters.fields import (
     bearing_from_pose,
     df_from_vector3stamped,
     df_record,
+    df_scan,
     diagnostics_values,
     estimate_from_pose,
     fix_from_navsatfix,
@@ -193,3 +194,61 @@ def test_diagnostics_round_trip():
     for m in flavours(msg, "diagnostic_msgs/msg/DiagnosticArray"):
         d = diagnostics_values(m)["aoa_localizer: localizer"]
         assert d == {"bearings_used": "12", "ess": "3.5", "level": "1", "message": "waiting"}
+
+
+@pytest.mark.parametrize("types", [RCLPY, ROSBAGS], ids=["rclpy", "rosbags"])
+def test_a_scan_is_one_record_per_point_at_its_stamp_live_and_from_a_bag(types):
+    """Issue 69: a receiver's channels read at one stamp as one sensor_msgs/PointCloud2 (docs/interface.md)."""
+    msg = build.df_scan(types, 1000.25, [10.0, 200.5, 359.0], [80.0, 20.0, 55.0], [433.92e6, 446e6, 0.0])
+    back = via_bag(msg, "sensor_msgs/msg/PointCloud2") if types is RCLPY else TS.deserialize_cdr(
+        TS.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"), "sensor_msgs/msg/PointCloud2")
+    for m in (msg, back):
+        got = df_scan(m)
+        assert [tuple(r)[:4] for r in got] == [(1000.25, 10.0, 80.0, 433.92e6), (1000.25, 200.5, 20.0, 446e6),
+                                               (1000.25, 359.0, 55.0, 0.0)]
+        assert all(math.isnan(r.sigma_deg) for r in got)
+    only = df_scan(build.df_scan(types, 5.0, [1.0, 2.0], sigma_deg=[0.5, 3.0]))  # the optional fields left out
+    assert [(r.azimuth_deg, r.frequency_hz, r.sigma_deg) for r in only] == [(1.0, 0.0, 0.5), (2.0, 0.0, 3.0)]
+    assert all(math.isnan(r.quality) for r in only) and df_scan(build.df_scan(types, 5.0, [])) == []
+
+
+def _cloud(fields, data, width, height=1, point_step=12, row_step=None, bigendian=False):
+    T = ROSBAGS
+    return T.PointCloud2(header=build.header(T, 7.5, "df"), height=height, width=width,
+                         fields=[T.PointField(name=n, offset=o, datatype=d, count=c) for n, o, d, c in fields],
+                         is_bigendian=bigendian, point_step=point_step,
+                         row_step=width * point_step if row_step is None else row_step,
+                         data=np.frombuffer(data, np.uint8).copy(), is_dense=True)
+
+
+def test_a_scan_is_read_by_field_name_type_offset_and_byte_order_and_a_bad_layout_is_refused():
+    """Another receiver's cloud: float32 fields in its own order, big-endian, rows of two points padded to 32
+    bytes, an extra field; each bad layout is a ValueError (the node counts it as an adapter error)."""
+    rows = [[(7.0, 300.0, 1.5), (5.0, 45.0, 2.5)], [(9.0, 90.0, 0.5), (8.0, 180.0, 1.0)]]  # quality, azimuth, x
+    data = b"".join(b"".join(np.array(p, ">f4").tobytes() for p in row) + bytes(8) for row in rows)
+    fields = [("quality", 0, 7, 1), ("azimuth_deg", 4, 7, 1), ("x", 8, 7, 1)]
+    got = df_scan(_cloud(fields, data, 2, height=2, row_step=32, bigendian=True))
+    assert [(r.stamp, r.azimuth_deg, r.quality) for r in got] == [(7.5, 300.0, 7.0), (7.5, 45.0, 5.0),
+                                                                   (7.5, 90.0, 9.0), (7.5, 180.0, 8.0)]
+    good = np.array([1.0, 2.0, 3.0], "<f4").tobytes()
+    bad = {"no azimuth": _cloud([("quality", 0, 7, 1)], good, 1),
+           "short data": _cloud([("azimuth_deg", 0, 7, 1)], good, 2),
+           "field past its point": _cloud([("azimuth_deg", 10, 7, 1)], good, 1),
+           "unknown type": _cloud([("azimuth_deg", 0, 42, 1)], good, 1),
+           "a field of two": _cloud([("azimuth_deg", 0, 7, 2)], good, 1),
+           "no step": _cloud([("azimuth_deg", 0, 7, 1)], good, 1, point_step=0),
+           "a million points": _cloud([("azimuth_deg", 0, 7, 1)], good, 1_000_000)}
+    for why, msg in bad.items():
+        with pytest.raises(ValueError):
+            df_scan(msg)
+            pytest.fail(why)
+
+
+def test_the_simulated_vehicle_publishes_each_stations_readings_of_one_stamp_as_one_scan():
+    from aoa_localizer.ros.sim_vehicle import scans
+
+    events = [(0.0, "", "fix", "f0"), (0.1, "", "bearing", "a"), (0.1, "", "bearing", "b"), (0.1, "car2", "bearing",
+              "c"), (0.2, "", "bearing", "d"), (0.2, "", "fix", "f1"), (0.2, "", "bearing", "e")]
+    assert list(scans(iter(events))) == [(0.0, "", "fix", "f0"), (0.1, "", "scan", ["a", "b"]),
+                                         (0.1, "car2", "scan", ["c"]), (0.2, "", "scan", ["d"]),
+                                         (0.2, "", "fix", "f1"), (0.2, "", "scan", ["e"])]

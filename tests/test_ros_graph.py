@@ -1193,6 +1193,17 @@ def test_a_tak_server_that_is_down_makes_the_diagnostics_warn_and_the_log_say_it
     assert "TAK: " in open(node_p.log_path).read() and "not sent" in open(node_p.log_path).read()
 
 
+def test_a_vehicle_publishing_scans_is_localised_on_every_channel(domain):
+    """Issue 69: `bearing_encoding:=scan` makes the vehicle publish each stamp's readings of its two transmitters as
+    one PointCloud2 on df/scan (and nothing on df/bearing); the node, on its defaults, localises both."""
+    res = launch(["--scenario", "seed", "--speedup", 80, "--seed", 1, "--domain-id", domain, "--vehicle-param",
+                  "emitters=[433.92e6,1200,800,446e6,400,1100]", "--vehicle-param", "bearing_encoding=scan"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    for channel in ("f433920000", "f446000000"):
+        line = next(x for x in res.stdout.splitlines() if x.startswith(f"channel {channel}:"))
+        assert float(re.search(r"error against its truth ([0-9.]+) m", line).group(1)) < 10.0, line
+
+
 def test_the_launcher_reports_every_transmitter_against_its_own_truth(domain):
     """Issue 53, items 2 and 5: `--vehicle-param emitters=[433.92e6,...]` (numbers YAML 1.1 reads as text, as
     `simulate --emitters` takes them) plays two transmitters; the vehicle publishes each one's truth on

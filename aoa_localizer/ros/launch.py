@@ -227,7 +227,7 @@ def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dic
         params["seed"] = args.seed
     # The node must read what the vehicle publishes: its bearing encoding and its array's mounting go to the node too.
     vehicle = parse_params(args.vehicle_param, "--vehicle-param")
-    if vehicle.get("bearing_encoding"):
+    if vehicle.get("bearing_encoding") in ("df_record", "pose"):  # scans come on df/scan, whatever df/bearing's
         params["bearing_encoding"] = vehicle["bearing_encoding"]
     if vehicle.get("mount_offset_deg"):
         params.update(receiver_settings(float(yaml.safe_load(vehicle["mount_offset_deg"]))))
@@ -577,7 +577,7 @@ def refusal(args) -> str | None:
         if problem:
             return problem
     encoding = vehicle_names.get("bearing_encoding")
-    if encoding and node_names.get("bearing_encoding", encoding) != encoding:
+    if encoding in ("df_record", "pose") and node_names.get("bearing_encoding", encoding) != encoding:
         return (f"the vehicle publishes bearing_encoding {encoding} but -p gives the node "
                 f"{node_names['bearing_encoding']}: the node would receive nothing")
     if args.bag and (args.vehicle_param or args.duration or args.data_seed):

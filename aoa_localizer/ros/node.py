@@ -44,6 +44,7 @@ from aoa_localizer.ros.vehicle_path import VehiclePath
 from msgs_adapters import build
 from msgs_adapters.fields import (
     df_record,
+    df_scan,
     fix_from_navsatfix,
     heading_from_imu,
 )
@@ -52,6 +53,7 @@ NODE_NAME = "aoa_localizer"
 DATUM_PARAMS = frozenset({"datum_lat", "datum_lon", "datum_alt"})  # the only parameters that move the map frame
 INPUT_TYPES = {"df_record": "geometry_msgs/msg/Vector3Stamped", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped"}
 FIX_TYPE = "sensor_msgs/msg/NavSatFix"
+SCAN_TYPE = "sensor_msgs/msg/PointCloud2"
 ENGINE_LOGGER = "aoa_localizer"  # the engine's logger (engine/localizer.py); its modules' are children
 _UNNAMED = "_NODE_NAME_UNKNOWN_"  # rmw's name for a node whose endpoints were discovered before its name
 DRAIN_MAX = 100  # DF records handled per executor callback beyond the first (then timers and services get a turn)
@@ -239,7 +241,12 @@ class LocalizerNode(Node):
             bearing_sub = self.create_subscription(bearing_type, prefix + "df/bearing", on_bearing, sensor,
                                                    event_callbacks=lost("bearings_lost"))
             on_bearing.subscription, on_bearing.first = bearing_sub, (fix_sub, on_fix)
-            self.subs += [(fix_sub, FIX_TYPE), (bearing_sub, INPUT_TYPES[self.cfg.bearing_encoding])]
+            on_scan = self._draining(lambda msg, info, station=name: self.on_scan(msg, station, info))
+            scan_sub = self.create_subscription(T.PointCloud2, prefix + "df/scan", on_scan, sensor,
+                                                event_callbacks=lost("bearings_lost"))
+            on_scan.subscription, on_scan.first = scan_sub, (fix_sub, on_fix)
+            self.subs += [(fix_sub, FIX_TYPE), (bearing_sub, INPUT_TYPES[self.cfg.bearing_encoding]),
+                          (scan_sub, SCAN_TYPE)]
             if self.cfg.bearing_reference == "vehicle" and self.cfg.heading_source == "imu":
                 self.create_subscription(T.Imu, prefix + "heading/imu",
                                          lambda msg, station=name: self.on_heading(msg, station), sensor)
@@ -414,6 +421,31 @@ class LocalizerNode(Node):
             self._feed_bearing(station, r)
         else:
             self.fix_wait.bearing(station, r, time.monotonic())
+        self._publish_made()
+        mon.timed(t0)
+
+    def on_scan(self, msg, station: str = "", info=None):
+        """A scan (df/scan): its records, one per channel at one stamp, each as a DF record on df/bearing, for the
+        cost of one message."""
+        t0 = time.perf_counter()
+        mon = self.monitor
+        mon.arrived(info)
+        mon.counts["scans_received"] += 1
+        try:
+            records = df_scan(msg)
+        except (AttributeError, TypeError, ValueError, IndexError, KeyError):
+            mon.counts["adapter_errors"] += 1
+            return
+        mon.counts["bearings_received"] += len(records)
+        mon.health.reading(self._now())
+        fixed = station in self.fixed_positions
+        now = time.monotonic()
+        for r in records:
+            mon.df_stamp(station, r.stamp, r.frequency_hz)
+            if fixed:
+                self._feed_bearing(station, r)
+            else:
+                self.fix_wait.bearing(station, r, now)
         self._publish_made()
         mon.timed(t0)
 

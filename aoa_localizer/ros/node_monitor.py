@@ -48,8 +48,8 @@ class NodeMonitor:
     def __init__(self, now: float, stale_after_s: float, period_s: Callable[[], float]):
         self.period_s = period_s
         self.health = NodeHealth(now, stale_after_s)
-        self.counts = dict.fromkeys(("fixes_received", "bearings_received", "adapter_errors", "fixes_lost",
-                                     "bearings_lost"), 0)
+        self.counts = dict.fromkeys(("fixes_received", "bearings_received", "scans_received", "adapter_errors",
+                                     "fixes_lost", "bearings_lost"), 0)
         self.lost_reported = 0  # fixes_lost + bearings_lost at the last diagnostics
         self.df_gaps: OrderedDict[tuple[str, float], StampGaps] = OrderedDict()  # per station and frequency
         self.fix_gaps: OrderedDict[tuple[str, float], StampGaps] = OrderedDict()  # per station

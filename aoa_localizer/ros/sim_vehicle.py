@@ -18,6 +18,7 @@ import dataclasses
 import math
 import sys
 import time
+from collections.abc import Iterable, Iterator
 from typing import Any
 
 import numpy as np
@@ -91,8 +92,9 @@ SETTINGS = [
     ParameterSpec("duration_s", 0.0, Spec("stop after this much simulated time (0: the whole scenario)", float,
                                           low=0.0)),
     ParameterSpec("bearing_encoding", "df_record", Spec("df_record (Vector3Stamped) or pose "
-                                                        "(PoseWithCovarianceStamped)", str,
-                                                        choices=("df_record", "pose"))),
+                                                        "(PoseWithCovarianceStamped) on df/bearing, or scan: the "
+                                                        "readings of one stamp as one PointCloud2 on df/scan", str,
+                                                        choices=("df_record", "pose", "scan"))),
     ParameterSpec("wait_for_subscribers", 1, Spec("play once gps/fix and df/bearing each have this many "
                                                   "subscribers", int, low=0)),
     ParameterSpec("start_timeout_s", 10.0, Spec("play anyway after waiting this long for subscribers (s)", float,
@@ -173,13 +175,15 @@ class SimVehicle(Node):
         latched = QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
         )
-        bearing_type = self.T.Vector3Stamped if self.encoding == "df_record" else self.T.PoseWithCovarianceStamped
+        bearing_type, bearing_topic = {"df_record": (self.T.Vector3Stamped, "df/bearing"),
+                                       "pose": (self.T.PoseWithCovarianceStamped, "df/bearing"),
+                                       "scan": (self.T.PointCloud2, "df/scan")}[self.encoding]
         self.pubs = {}
         for name in self.stations:
             prefix = f"{name}/" if name else ""
             # a deep history: a reliable reader that fell behind gets what it missed again
             self.pubs[name] = (self.create_publisher(self.T.NavSatFix, prefix + "gps/fix", HISTORY_DEPTH),
-                               self.create_publisher(bearing_type, prefix + "df/bearing", HISTORY_DEPTH))
+                               self.create_publisher(bearing_type, prefix + bearing_topic, HISTORY_DEPTH))
         self.pub_truth = self.create_publisher(self.T.PointStamped, "sim/truth", latched)
         self.channel_truths = {channel: self.create_publisher(self.T.PointStamped, f"sim/{channel}/truth", latched)
                                for channel in self.truths}
@@ -313,6 +317,8 @@ class SimVehicle(Node):
                 f"{end:.0f} s simulated at speed-up {self.speedup:g}"
             )
         t_wall0, next_log = time.monotonic(), 0.0
+        if self.encoding == "scan":
+            events = scans(events)
         for t, station, kind, row in events:
             if t > end or self.stop.requested:
                 break
@@ -327,6 +333,10 @@ class SimVehicle(Node):
                 pub_fix.publish(build.navsatfix(T, base + t, row[1], row[2], row[3]))
             elif self.encoding == "df_record":
                 pub_bearing.publish(build.df_record(T, base + t, *row[1:4]))
+            elif self.encoding == "scan":
+                rows = np.asarray(row, float)
+                freq = rows[:, 3] if rows.shape[1] > 3 else None
+                pub_bearing.publish(build.df_scan(T, base + t, rows[:, 1], rows[:, 2], freq))
             else:
                 yaw = math.radians(90.0 - row[1])
                 pub_bearing.publish(build.pose_bearing(T, base + t, yaw, self.sigma_of.get(t, self.sigma_rad) ** 2))
@@ -335,6 +345,22 @@ class SimVehicle(Node):
                 next_log += 30.0
         self.serve(0.5)  # let the last messages leave
         self.get_logger().info("scenario played")
+
+
+def scans(events: Iterable[tuple]) -> Iterator[tuple]:
+    """The events with each run of one station's bearings at one stamp as one ('scan', rows) event: what a receiver
+    reading all its channels at once publishes."""
+    held: list = []
+    for ev in events:
+        if held and (ev[2] != "bearing" or (ev[0], ev[1]) != (held[0][0], held[0][1])):
+            yield held[0][0], held[0][1], "scan", [h[3] for h in held]
+            held = []
+        if ev[2] == "bearing":
+            held.append(ev)
+        else:
+            yield ev
+    if held:
+        yield held[0][0], held[0][1], "scan", [h[3] for h in held]
 
 
 def usage() -> str:
