@@ -6,6 +6,7 @@ Each storage file is read by rosbags on its own (bag_files); a damaged MCAP file
 """
 from __future__ import annotations
 
+import itertools
 import logging
 import re
 import zlib
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import (
     Qos,
@@ -30,17 +32,25 @@ from . import build
 from .bag_files import BadPayload, BagFiles, BagFilesError, TopicInfo, describe_topics
 from .db3_salvage import read_db3_salvaged
 from .decompress import oversized_chunks
-from .fields import bearing_from_pose, df_from_vector3stamped, fix_from_navsatfix, heading_from_imu, stamp_seconds
+from .fields import (
+    bearing_from_pose,
+    df_from_vector3stamped,
+    df_scan,
+    fix_from_navsatfix,
+    heading_from_imu,
+    stamp_seconds,
+)
 from .mcap_salvage import RawMessage, Salvage, read_salvaged
 
 log = logging.getLogger("aoa_localizer.bag")
 
 TOPICS = {"fix": "/gps/fix", "bearing": "/df/bearing", "truth": "/sim/truth", "datum": "/sim/datum",
-          "heading": "/heading/imu"}
+          "heading": "/heading/imu", "scan": "/df/scan"}
 # One transmitter's truth among several (a channel's, as the node names them: /sim/f446000000/truth)
 CHANNEL_TRUTH = re.compile(r"^/sim/(?P<channel>[A-Za-z][A-Za-z0-9_]*)/truth$")
 _TYPES = {"fix": "sensor_msgs/msg/NavSatFix", "bearing": "geometry_msgs/msg/Vector3Stamped",
-          "truth": "geometry_msgs/msg/PointStamped", "datum": "sensor_msgs/msg/NavSatFix"}
+          "truth": "geometry_msgs/msg/PointStamped", "datum": "sensor_msgs/msg/NavSatFix",
+          "scan": "sensor_msgs/msg/PointCloud2"}
 
 
 SEAL_EVERY_S = 1.0  # an MCAP chunk is closed (with its CRC) and flushed this often: a crash loses at most this much
@@ -66,7 +76,7 @@ def _qos(reliable: bool, latched: bool) -> Qos:
 _ACCEPTED = {"fix": ("sensor_msgs/msg/NavSatFix",),
              "bearing": ("geometry_msgs/msg/Vector3Stamped", "geometry_msgs/msg/PoseWithCovarianceStamped"),
              "truth": ("geometry_msgs/msg/PointStamped",), "datum": ("sensor_msgs/msg/NavSatFix",),
-             "heading": ("sensor_msgs/msg/Imu",)}
+             "heading": ("sensor_msgs/msg/Imu",), "scan": ("sensor_msgs/msg/PointCloud2",)}
 _POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 
 
@@ -90,11 +100,12 @@ class BagEvent:
     channel: str = ""  # a truth's channel (CHANNEL_TRUTH; "": the bag's one /sim/truth)
 
 
-def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None, stations=None):
+def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None, stations=None, scans: bool = False):
     """Write fixes (stamp, lat, lon, alt rows), DF records (stamp, azimuth, quality[, frequency] rows) and, for
     simulated runs, the truth (ENU in `map`: one (east, north) on /sim/truth, or {channel: (east, north)}, each
     transmitter's on /sim/CHANNEL/truth) and the datum (/sim/datum) as a rosbag2 MCAP bag.
-    `stations` ({NAME: (fixes, bearings)}) adds each station's on /NAME/gps/fix and /NAME/df/bearing."""
+    `stations` ({NAME: (fixes, bearings)}) adds each station's on /NAME/gps/fix and /NAME/df/bearing; `scans`
+    writes each station's records of one stamp as one scan on /df/scan (/NAME/df/scan) instead."""
     ts = typestore()
     T = build.rosbags_types(ts)
     sources = {"": (fixes, bearings), **(stations or {})}
@@ -103,8 +114,14 @@ def write_bag(path: Path | str, fixes, bearings, truth_enu=None, datum=None, sta
         prefix = f"/{name}" if name else ""
         messages += [(f[0], prefix + TOPICS["fix"], "fix", build.navsatfix(T, f[0], f[1], f[2], f[3]))
                      for f in its_fixes]
-        messages += [(b[0], prefix + TOPICS["bearing"], "bearing", build.df_record(T, b[0], b[1], b[2], *b[3:4]))
-                     for b in its_bearings]
+        if scans:
+            for stamp, rows in itertools.groupby(its_bearings, key=lambda b: b[0]):
+                r = np.array([list(b[:4]) + [0.0] * (4 - len(b[:4])) for b in rows], float)
+                messages.append((stamp, prefix + TOPICS["scan"], "scan", build.df_scan(T, stamp, r[:, 1], r[:, 2],
+                                                                                        r[:, 3])))
+        else:
+            messages += [(b[0], prefix + TOPICS["bearing"], "bearing",
+                          build.df_record(T, b[0], b[1], b[2], *b[3:4])) for b in its_bearings]
     t0 = min(m[0] for m in messages) if messages else 0.0
     truths = truth_enu if isinstance(truth_enu, dict) else {} if truth_enu is None else {"": truth_enu}
     for channel, (east, north) in truths.items():
@@ -165,23 +182,37 @@ def _convert(kind: str, msg):
     return (stamp_seconds(msg.header), msg.point.x, msg.point.y)
 
 
+def _scan_events(decoded, msg: RawMessage, station: str) -> Iterator[BagEvent]:
+    """A scan's readings as DF-record events; a cloud that holds none is 'foreign', named with why."""
+    try:
+        records = df_scan(decoded)
+    except (AttributeError, TypeError, ValueError, IndexError, KeyError) as exc:
+        yield BagEvent("foreign", msg.log_time, (msg.topic, f"{msg.msgtype}: {exc}"), station)
+        return
+    for r in records:
+        yield BagEvent("bearing", msg.log_time, r, station)
+
+
 class BagTopicsError(BagError):
     """A valid bag without the topics the engine needs: the message lists what it has and what it needs."""
 
 
 def stations_in(topic_names) -> dict[str, dict[str, str]]:
-    """The stations a bag's topic names show: NAME for each pair `/NAME/gps/fix`, `/NAME/df/bearing` (the node's
-    `stations` layout; with `/NAME/heading/imu` when present), as {NAME: {kind: topic}}. NAME is the namespace's
+    """The stations a bag's topic names show: NAME for each pair `/NAME/gps/fix`, `/NAME/df/bearing` or
+    `/NAME/df/scan` (the node's `stations` layout; with each of them and `/NAME/heading/imu` present), as
+    {NAME: {kind: topic}}. NAME is the namespace's
     last part, or the whole namespace where two end alike (`/team1/car` and `/team2/car`: one was dropped)."""
     names = set(topic_names)
     pairs: list[tuple[str, dict[str, str]]] = []
     for topic in sorted(names):
         prefix, _, tail = topic.rpartition("/gps/fix")
-        if tail or not prefix.rpartition("/")[2] or f"{prefix}/df/bearing" not in names:
+        readings = {f"{prefix}/df/bearing", f"{prefix}/df/scan"} & names
+        if tail or not prefix.rpartition("/")[2] or not readings:
             continue
         its = {"fix": topic, "bearing": f"{prefix}/df/bearing"}
-        if f"{prefix}/heading/imu" in names:
-            its["heading"] = f"{prefix}/heading/imu"
+        for kind, name in (("scan", "df/scan"), ("heading", "heading/imu")):
+            if f"{prefix}/{name}" in names:
+                its[kind] = f"{prefix}/{name}"
         pairs.append((prefix, its))
     last = [prefix.rpartition("/")[2] for prefix, _ in pairs]
     return {(name if last.count(name) == 1 else prefix.strip("/")): its
@@ -192,7 +223,7 @@ def found_stations(path, inventory, topics: dict[str, str]) -> dict[str, dict[st
     """The stations the bag's topic names show when it lacks `topics`' fix or bearing topic (a bag of several
     stations read without --station), said in a warning; None otherwise."""
     names = {t.name for t in inventory}
-    if {topics["fix"], topics["bearing"]} <= names:
+    if topics["fix"] in names and {topics["bearing"], topics["scan"]} & names:
         return None
     found = stations_in(names) or None
     if found:
@@ -203,7 +234,8 @@ def found_stations(path, inventory, topics: dict[str, str]) -> dict[str, dict[st
 
 def _needs(topics: dict[str, str]) -> str:
     return (f"{topics['fix']} ({' or '.join(_ACCEPTED['fix'])}) and "
-            f"{topics['bearing']} ({' or '.join(_ACCEPTED['bearing'])})")
+            f"{topics['bearing']} ({' or '.join(_ACCEPTED['bearing'])}) or {topics.get('scan', TOPICS['scan'])} "
+            f"({_ACCEPTED['scan'][0]})")
 
 
 def read_bag(path: Path | str, topics: dict[str, str] | None = None,
@@ -227,12 +259,14 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None,
             by_topic.update((name, ("truth", "")) for name in channel_of)
             needed = [topics]
             if stations:
-                by_topic = {t: (k, "") for k, t in topics.items() if k not in ("fix", "bearing", "heading")}
+                by_topic = {t: (k, "") for k, t in topics.items()
+                            if k not in ("fix", "bearing", "heading", "scan")}
                 by_topic.update({t: (k, name) for name, its in stations.items() for k, t in its.items()})
                 by_topic.update((name, ("truth", "")) for name in channel_of)
                 needed = list(stations.values())
+            names = {t.name for t in inventory}
             for need in needed:
-                if not {need["fix"], need["bearing"]} <= {t.name for t in inventory}:
+                if need["fix"] not in names or not {need["bearing"], need.get("scan", "")} & names:
                     raise BagTopicsError(f"{path}: no usable fix and bearing topics; it has "
                                          f"{describe_topics(inventory)}; the engine needs {_needs(need)} (choose "
                                          "others with --fix-topic and --bearing-topic, or --station)")
@@ -250,7 +284,11 @@ def read_bag(path: Path | str, topics: dict[str, str] | None = None,
                                              f"({type(exc).__name__}: {exc})")
                         reader.lost += 1
                         continue
-                    yield BagEvent(kind, msg.log_time, _convert(kind, decoded), station, channel_of.get(msg.topic, ""))
+                    if kind == "scan":  # a receiver's readings of one instant: each one a DF record
+                        yield from _scan_events(decoded, msg, station)
+                    else:
+                        yield BagEvent(kind, msg.log_time, _convert(kind, decoded), station,
+                                       channel_of.get(msg.topic, ""))
                 count += 1
     except BagFilesError as exc:
         raise BagError(str(exc)) from exc

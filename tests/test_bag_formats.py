@@ -207,3 +207,33 @@ def test_each_storage_file_is_opened_once_and_closed_with_the_bag(tmp_path, data
         RawReader(files).topics()  # no messages asked for: the open files wait for the bag's close
         assert len(opened) == 2 and all(r.stack is not None for r in opened)
     assert all(r.stack is None for r in opened)
+
+
+def test_a_bag_of_scans_reads_as_the_same_records_one_message_each(tmp_path, data):
+    """Issue 69: a receiver's readings of one stamp recorded as one scan on /df/scan (a bridge's `--scan`) are the
+    same DF records, in the same order, as a bag of one message each; a bag with scans and no /df/bearing is read,
+    and a cloud that holds no readings is named, not fed."""
+    two = [row for b in data.bearings for row in ((*b[:3], 433.92e6), (b[0], (b[1] + 10.0) % 360, b[2], 446e6))]
+    write_bag(tmp_path / "records", data.fixes, two)
+    write_bag(tmp_path / "scans", data.fixes, two, scans=True)
+
+    def events(bag):
+        return [(e.kind, e.log_time_ns, repr(tuple(e.record))) for e in read_bag(bag)]  # NaN sigmas alike
+
+    assert events(tmp_path / "scans") == events(tmp_path / "records")
+    assert sum(1 for e in events(tmp_path / "records") if e[0] == "bearing") == 2 * len(data.bearings)
+    loc = Localizer(LocalizerConfig(seed=1))
+    run_bag(tmp_path / "scans", {}, loc, lambda est: None)
+    assert {"f433920000", "f446000000"} <= {c.id for c in loc.channels.all()}
+
+    ts = typestore()
+    T = build.rosbags_types(ts)
+    bad = T.PointCloud2(header=build.header(T, 5.0, "df"), height=1, width=3, fields=[], is_bigendian=False,
+                        point_step=8, row_step=24, data=build.np.zeros(24, build.np.uint8), is_dense=True)
+    with Writer(tmp_path / "bad", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        fix = writer.add_connection(TOPICS["fix"], _TYPES["fix"], typestore=ts)
+        scan = writer.add_connection(TOPICS["scan"], "sensor_msgs/msg/PointCloud2", typestore=ts)
+        writer.write(fix, 1, ts.serialize_cdr(build.navsatfix(T, 5.0, 44.0, 7.0, 0.0), _TYPES["fix"]))
+        writer.write(scan, 2, ts.serialize_cdr(bad, "sensor_msgs/msg/PointCloud2"))
+    foreign = [e.record for e in read_bag(tmp_path / "bad") if e.kind == "foreign"]
+    assert foreign == [("/df/scan", "sensor_msgs/msg/PointCloud2: a DF scan needs an azimuth_deg field")]

@@ -229,3 +229,54 @@ def test_a_hostile_server_neither_kills_the_bridge_nor_holds_its_sigterm(spawn, 
     assert "Traceback" not in log, log
     if path != "/trickle_headers":  # its one poll was still under way, 60 s allowed: stopped mid-poll
         assert log.count("cannot read") == 1 and "poll_failed" in log, log
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_with_scan_the_vfos_of_one_acquisition_go_out_as_one_scan(spawn, domain):
+    """Issue 69: `--scan` publishes the lines of one acquisition (two VFOs at one timestamp here) as one
+    PointCloud2 on df/scan, each point the record df/bearing would carry, and nothing on df/bearing."""
+    import signal
+
+    from msgs_adapters import build
+    from msgs_adapters.fields import df_scan
+
+    polls = [0]
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 - the http.server API
+            k = polls[0]
+            polls[0] += 1
+            stamp = 1795000000100 + 100 * k  # a new acquisition each poll
+            body = "\n".join(kraken_line(stamp, f"{10.0 + k:.1f}", conf, freq, 39.1, 117.2, 90.0)
+                             for conf, freq in (("10.0", 433920000), ("1.0", 446000000))).encode() + b"\n"
+            self.send_response(200)
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    T = build.rclpy_types()
+    scans, records = [], []
+    try:
+        with client(domain) as (node, executor):
+            node.create_subscription(T.PointCloud2, "df/scan", scans.append, 100)
+            node.create_subscription(T.Vector3Stamped, "df/bearing", records.append, 100)
+            bridge = spawn(["aoa_localizer.kraken_bridge", "--url",
+                            f"http://127.0.0.1:{httpd.server_address[1]}/DOA_value.html", "--scan"], domain)
+            assert spin_until(executor, lambda: len(scans) >= 3, 60), open(bridge.log_path).read()
+            bridge.send_signal(signal.SIGTERM)
+            assert bridge.wait(15) == 0
+    finally:
+        httpd.shutdown()
+    assert not records and "scans" in open(bridge.log_path).read()
+    for msg in scans:
+        got = df_scan(msg)
+        assert [r.frequency_hz for r in got] == [433920000.0, 446000000.0]
+        assert got[0].stamp == got[1].stamp and got[0].azimuth_deg == got[1].azimuth_deg  # heading 90 + DoA
+        assert (got[0].quality, got[1].quality) == (100.0, 40.0)  # --conf-high and --conf-low's qualities
+    assert len({df_scan(m)[0].stamp for m in scans}) == len(scans)  # one scan an acquisition

@@ -77,7 +77,8 @@ class BagRun:
         self.datum = None  # (lat, lon, alt) of that map
         self.damage: str | None = None
         self.messages = 0
-        self.foreign: dict[str, int] = {}  # "topic (type)": messages of a type the topic should not carry
+        # "topic (type)": messages of a type the topic should not carry, or scans that hold no readings
+        self.foreign: dict[str, int] = {}
 
 
 def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay", stations=None) -> BagRun:

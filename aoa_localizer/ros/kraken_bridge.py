@@ -4,7 +4,9 @@
 
 Each new line (one per VFO) becomes a DF record on `df/bearing` (geometry_msgs/Vector3Stamped): the stamp at the
 middle of the acquisition interval, `vector.x` the azimuth, `vector.y` a quality from the confidence (40 at
-`--conf-low` dB, 100 at `--conf-high`), `vector.z` the VFO frequency (Hz). With `--gps`, the line's position goes
+`--conf-low` dB, 100 at `--conf-high`), `vector.z` the VFO frequency (Hz). With `--scan`, the lines of one
+acquisition (all VFOs) go out as one scan on `df/scan` (sensor_msgs/PointCloud2, fields azimuth_deg, quality,
+frequency_hz) instead: one message per acquisition, whatever the number of VFOs. With `--gps`, the line's position goes
 out on `gps/fix` too (NavSatFix, skipped while the receiver has no fix).
 
 Azimuths: the Kraken App line gives the DoA clockwise from the array's zero, not turned by any heading.
@@ -25,11 +27,13 @@ does), with the counts; 2 for bad options.
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import time
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import rclpy
 from rclpy.node import Node
 
@@ -53,6 +57,9 @@ def parse_args(argv) -> argparse.Namespace:
     parser.add_argument("--url", required=True, help="the Kraken App page, e.g. http://192.168.1.10:8081/DOA_value.html")
     parser.add_argument("--rate", type=float, default=10.0, help="polls per second (default 10)")
     parser.add_argument("--gps", action="store_true", help="also publish the lines' positions on gps/fix")
+    parser.add_argument("--scan", action="store_true",
+                        help="publish the VFO lines of one acquisition as one scan on df/scan (PointCloud2), not a "
+                             "df/bearing record each")
     parser.add_argument("--azimuth", choices=("true", "relative"), default="true",
                         help="true: add the line's heading (default); relative: the array-relative DoA")
     parser.add_argument("--conf-low", type=float, default=1.0, help="confidence (dB) mapped to quality 40 (default 1)")
@@ -87,6 +94,8 @@ class KrakenBridge(Node):
         self.args = args
         self.T = build.rclpy_types()
         self.pub_df = self.create_publisher(self.T.Vector3Stamped, "df/bearing", 100)
+        self.pub_scan = self.create_publisher(self.T.PointCloud2, "df/scan", 100) if args.scan else None
+        self.scan: list[tuple] = []  # with --scan, this poll's readings: (stamp, frame, azimuth, quality, Hz)
         self.pub_fix = self.create_publisher(self.T.NavSatFix, "gps/fix", 100) if args.gps else None
         self.filter = LineFilter()
         self.counts: Counter = Counter()
@@ -137,6 +146,7 @@ class KrakenBridge(Node):
                 continue
             if self.filter.fresh(r):
                 self.publish(r)
+        self._publish_scans()
         self._say_skipped()
 
     def _say_skipped(self):
@@ -162,9 +172,24 @@ class KrakenBridge(Node):
         if self.pub_fix is not None and r.has_gps and r.stamp > self.last_fix_stamp:
             self.last_fix_stamp = r.stamp
             self.pub_fix.publish(build.navsatfix(self.T, r.stamp, r.lat, r.lon, 0.0, frame_id="gps"))
-        self.pub_df.publish(build.df_record(self.T, r.stamp, float(wrap_360(azimuth)), quality, r.frequency_hz,
-                                            frame_id=r.station or "df_antenna"))
+        frame = r.station or "df_antenna"
+        if self.pub_scan is not None:
+            self.scan.append((r.stamp, frame, float(wrap_360(azimuth)), quality, r.frequency_hz))
+        else:
+            self.pub_df.publish(build.df_record(self.T, r.stamp, float(wrap_360(azimuth)), quality, r.frequency_hz,
+                                                frame_id=frame))
         self.counts["published"] += 1
+
+    def _publish_scans(self):
+        """With --scan, the poll's readings as one scan per acquisition (stamp and receiver)."""
+        if self.pub_scan is None or not self.scan:
+            return
+        for (stamp, frame), rows in itertools.groupby(self.scan, key=lambda x: x[:2]):
+            values = np.array([x[2:] for x in rows], float)
+            self.pub_scan.publish(build.df_scan(self.T, stamp, values[:, 0], values[:, 1], values[:, 2],
+                                                frame_id=frame))
+            self.counts["scans"] += 1
+        self.scan = []
 
     def run(self, stop: Stop):
         self.stop = stop

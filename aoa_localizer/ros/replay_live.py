@@ -44,17 +44,18 @@ def _remaps(items) -> dict[str, str] | str:
 
 def played_topics(args, inventory) -> list:
     """The topics live replay publishes: --topics, every topic with --all-topics, else the inputs (fix, bearing,
-    IMU heading, and the simulated truth and datum), so that a bag's recorded node outputs never reach a running
+    IMU heading, scans, and the simulated truth and datum), so that a bag's recorded node outputs never reach a running
     node's graph."""
     if args.topics:
         chosen = set(args.topics)
     elif args.all_topics:
         chosen = {t.name for t in inventory}
     else:
-        chosen = {args.fix_topic, args.bearing_topic, args.heading_topic, TOPICS["truth"], TOPICS["datum"]}
+        chosen = {args.fix_topic, args.bearing_topic, args.heading_topic, TOPICS["scan"], TOPICS["truth"],
+                  TOPICS["datum"]}
         chosen |= {topic for _, topics in args.station or [] for topic in topics.values()}
         if not args.station:  # a bag of several stations: their inputs, as its topic names show them
-            wanted = {"fix": args.fix_topic, "bearing": args.bearing_topic}
+            wanted = {"fix": args.fix_topic, "bearing": args.bearing_topic, "scan": TOPICS["scan"]}
             found = found_stations(args.bag, inventory, wanted) or {}
             chosen |= {topic for topics in found.values() for topic in topics.values()}
     return [t for t in inventory if t.name in chosen]

@@ -127,7 +127,7 @@ def _told(loc: Localizer, run, written: int, output: str) -> int:
     for line in summary(loc, run.truths, run.datum):
         print(line, file=sys.stderr)
     if run.foreign:
-        print("messages of a type their topic should not carry, skipped: "
+        print("messages of a type their topic should not carry (or scans without readings), skipped: "
               + ", ".join(f"{k} {v}" for k, v in sorted(run.foreign.items())), file=sys.stderr)
     print(f"{written} estimates written to {output}", file=sys.stderr)
     if run.damage:
