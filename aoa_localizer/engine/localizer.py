@@ -399,9 +399,11 @@ class Localizer:
         check it was due, and one owed move made, for the channel owing the most, so the points that follow carry
         none. Returns the estimates the results made (each also goes to `on_estimate`)."""
         live = list(self.channels.live.values())
-        done = [c for c in live if c.track.apply_job() and c.track.estimating]
+        ready = self._scheduler.owners_done()
+        done = [c for c in live if c.track in ready and c.track.apply_job() and c.track.estimating]
         made = [est for est in (self._estimates.publish(c) for c in done) if est is not None]
-        self._scheduler.move_one(c.track.debtor for c in live)
+        owing = self._scheduler.owing()
+        self._scheduler.move_one(c.track.debtor for c in live if c.track.filter in owing)
         return made
 
     @_one_at_a_time

@@ -144,6 +144,11 @@ class Scheduler:
         del self._jobs[owner]
         return job
 
+    def owners_done(self) -> set:
+        """The owners whose job has finished: what idle() applies (looking at every channel's track instead cost a
+        node with 250 channels a fifth of its time)."""
+        return {owner for owner, job in self._jobs.items() if job.future.done()}
+
     # -- the moves owed ------------------------------------------------------------------------------
     def defer_moves(self, f: ParticleFilter) -> None:
         """A new filter: its resamplings' sweeps are owed, not made in its step (a bounded step)."""
@@ -224,6 +229,10 @@ class Scheduler:
             return False
         f.rejuvenate(1, proposal)
         return True
+
+    def owing(self) -> set:
+        """The filters that owe moves now."""
+        return {f for f, d in self._debts.items() if int(d)}
 
     def owed(self, f: ParticleFilter | None) -> int:
         """Moves `f` owes."""
