@@ -148,6 +148,9 @@ def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> di
         "latency_p99_ms_whole_run": float(last["pose_latency_p99_ms_since_start"])
         if "pose_latency_p99_ms_since_start" in last else None,
         "periods_with_p99_over_20ms": sum(v > 20.0 for v in p99),
+        "periods_saying_overload": sum("overload" in p for p in periods),
+        "periods_saying_messages_lost": sum("messages_lost" in p for p in periods),
+        "overload_said_first": next((p["overload"] for p in periods if "overload" in p), None),
         "p99_ms_by_period": [round(v, 1) for v in p99],
         "rss_mb_at_60s": warm[0] if warm else None, "rss_mb_at_end": warm[-1] if warm else None,
         "with_worker_rss_mb_at_60s": warm_tree[0] if warm_tree else None,

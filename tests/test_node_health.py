@@ -112,3 +112,30 @@ def test_stamp_gaps_count_random_losses_of_a_regular_stream():
             gaps.add(float(t))
         truly = 4000 - len(kept)
         assert abs(gaps.missing - truly) < 0.05 * truly, (share, gaps.missing, truly)
+
+
+def test_messages_the_middleware_never_delivered_are_counted_from_their_numbers_and_said_as_overload():
+    """Issue 69: with 250 channels as single records, 28 % of them were overwritten in the node's full input queue
+    and /diagnostics said nothing (the middleware reports no such loss). Their publication numbers show it."""
+    import time
+    from types import SimpleNamespace
+
+    from aoa_localizer.ros.node_monitor import NodeMonitor, SequenceGaps
+
+    mon = NodeMonitor(time.monotonic(), 1e9, lambda: 1e9)
+    loc = SimpleNamespace(rejected=Counter())
+    for seq in range(1, 21):
+        mon.arrived({"received_timestamp": 1, "publication_sequence_number": seq}, "/gps/fix")
+    assert mon._overload(loc) is None  # every message taken: nothing said
+    for seq in [s for s in range(1, 101) if s % 4]:  # a quarter of the DF records lost
+        mon.arrived({"received_timestamp": 1, "publication_sequence_number": seq}, "/df/bearing")
+    words = mon._overload(loc)
+    assert words.startswith("24 input messages (24.2 % of the period's) never reached it"), words  # 4, 8 .. 96 of 99
+    assert "input_queue_depth" in words and mon._missing() >= 24
+    gaps = SequenceGaps()
+    for seq in (1, 2, 5, 3, 9):  # a number that steps back: two publishers' numbers interleave
+        gaps.add(seq)
+    assert gaps.missing == 2 and gaps.several
+    none = SequenceGaps()
+    none.add(None)  # a middleware that does not number its messages
+    assert none.missing == 0 and none.last is None

@@ -383,7 +383,7 @@ class LocalizerNode(Node):
     def on_fix(self, msg, station: str = "", info=None):
         t0 = time.perf_counter()
         mon = self.monitor
-        mon.arrived(info)
+        mon.arrived(info, f"{station}/gps/fix")
         mon.counts["fixes_received"] += 1
         try:
             r = fix_from_navsatfix(msg)
@@ -408,7 +408,7 @@ class LocalizerNode(Node):
     def on_bearing(self, msg, station: str = "", info=None):
         t0 = time.perf_counter()
         mon = self.monitor
-        mon.arrived(info)
+        mon.arrived(info, f"{station}/df/bearing")
         mon.counts["bearings_received"] += 1
         mon.health.reading(self._now())
         try:
@@ -429,7 +429,7 @@ class LocalizerNode(Node):
         cost of one message."""
         t0 = time.perf_counter()
         mon = self.monitor
-        mon.arrived(info)
+        mon.arrived(info, f"{station}/df/scan")
         mon.counts["scans_received"] += 1
         try:
             records = df_scan(msg)

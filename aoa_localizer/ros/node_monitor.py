@@ -41,6 +41,28 @@ def _gaps(streams: OrderedDict, station: str, frequency_hz: float = math.nan) ->
     return gaps
 
 
+class SequenceGaps:
+    """Messages an input's publisher numbered that the node never took: lost on the network, or overwritten in a
+    full subscription queue, which the middleware does not report. Read from the gaps in the middleware's
+    publication sequence numbers; where they step back (several publishers on the topic, or one that restarted) they
+    say nothing more, and counting stops."""
+
+    def __init__(self):
+        self.last: int | None = None
+        self.missing = 0
+        self.several = False
+
+    def add(self, seq) -> None:
+        if not isinstance(seq, int) or self.several:
+            return
+        if self.last is not None:
+            if seq <= self.last:
+                self.several = True
+                return
+            self.missing += seq - self.last - 1
+        self.last = seq
+
+
 class NodeMonitor:
     """The node's counts, timings and input health over a diagnostics period, and the /diagnostics it makes of them
     and of the engine. `period_s()` reads diagnostics_period_s (a parameter that may change)."""
@@ -62,6 +84,9 @@ class NodeMonitor:
         self.period_start = time.perf_counter()
         self.overload = Overload()
         self.arrival_ns = time.time_ns()
+        self.sequences: dict[str, SequenceGaps] = {}  # each input subscription's publication numbers
+        self.taken = 0  # input messages taken since the start
+        self.seen_missing = (0, 0)  # (taken, sequence-missing) at the last diagnostics
         self.latency_ms: list[float] = []  # from a message's arrival to the publication of each pose it made
         self.latency_since_start = LatencyHistogram()
 
@@ -74,11 +99,17 @@ class NodeMonitor:
 
         return SubscriptionEventCallbacks(message_lost=on_lost)
 
-    def arrived(self, info) -> None:
+    def arrived(self, info, stream: str = "") -> None:
         """When the message being handled reached this process (the middleware's receive time, else now): the
-        start of the latency of any pose it produces."""
+        start of the latency of any pose it produces; and its publication number on input `stream`."""
         received = info.get("received_timestamp", 0) if isinstance(info, dict) else 0
         self.arrival_ns = received if received > 0 else time.time_ns()
+        self.taken += 1
+        if isinstance(info, dict):
+            gaps = self.sequences.get(stream)
+            if gaps is None:
+                gaps = self.sequences[stream] = SequenceGaps()
+            gaps.add(info.get("publication_sequence_number"))
 
     def fix_stamp(self, station: str, stamp: float) -> None:
         if math.isfinite(stamp):
@@ -165,6 +196,7 @@ class NodeMonitor:
                           callbacks_in_period=len(self.callback_s))
         values.update(load_pct=f"{100 * self._load():.0f}", period_s=f"{time.perf_counter() - self.period_start:.3f}",
                       rejected_while_overloaded=sum(self.overload.rejected.values()),
+                      input_messages_missed=sum(g.missing for g in self.sequences.values()),
                       parameter_changes=self.parameter_changes, restarts=self.restarts)
         w = self.posterior_work
         if w.made or w.deferred:  # the grids listened to: their cost is named, not blamed on the filter
@@ -218,16 +250,27 @@ class NodeMonitor:
         wall = time.perf_counter() - self.period_start
         load = self._load()
         cause = None
-        if wall > _STALL_PERIODS * period:
+        missed = sum(g.missing for g in self.sequences.values())
+        new_taken, new_missed = self.taken - self.seen_missing[0], missed - self.seen_missing[1]
+        self.seen_missing = (self.taken, missed)
+        if new_missed > 0:
+            share = 100.0 * new_missed / (new_taken + new_missed)
+            cause = (f"{new_missed} input messages ({share:.1f} % of the period's) never reached it: its input queue "
+                     "(input_queue_depth) overflowed or the network dropped them (a receiver's channels as one scan on "
+                     "df/scan cost one message)")
+        elif wall > _STALL_PERIODS * period:
             cause = f"the node was held up: this diagnostics period lasted {wall:.1f} s ({period:g} s configured)"
         elif load > _MAX_LOAD:
             cause = f"the node worked {100 * load:.0f} % of the last period"
         return self.overload.judge(cause, loc.rejected, self._missing())
 
     def _missing(self) -> int:
-        """Inputs that never arrived, as far as anything can tell: the middleware's lost counts and stamp gaps."""
+        """Inputs that never arrived, as far as anything can tell: the middleware's lost counts, and the stamp gaps
+        or the publication numbers' gaps."""
+        stamps = sum(g.missing for g in self.df_gaps.values()) + sum(g.missing for g in self.fix_gaps.values())
+        # the stamps' gaps and the publication numbers' see the same losses: the larger count, not both
         return (self.counts["fixes_lost"] + self.counts["bearings_lost"]
-                + sum(g.missing for g in self.df_gaps.values()) + sum(g.missing for g in self.fix_gaps.values()))
+                + max(stamps, sum(g.missing for g in self.sequences.values())))
 
     @staticmethod
     def _robustness_values(loc: Localizer) -> dict:
