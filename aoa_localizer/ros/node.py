@@ -222,8 +222,8 @@ class LocalizerNode(Node):
         self.crowded_said: list[str] = []  # input topics with more than one source, a twin of this node: as last logged
 
     def _init_inputs(self):
-        """Each station's gps/fix and df/bearing (and heading/imu for a vehicle-relative array with an IMU), with
-        the input QoS parameters (sensor data: reliable and best-effort publishers both connect)."""
+        """Each station's gps/fix, df/bearing and df/scan (and heading/imu for a vehicle-relative array with an IMU),
+        with the input QoS parameters (sensor data: reliable and best-effort publishers both connect)."""
         T = self.types
         reliable = self.get_parameter("input_reliability").value == "reliable"
         sensor = QoSProfile(depth=self.get_parameter("input_queue_depth").value, history=HistoryPolicy.KEEP_LAST,

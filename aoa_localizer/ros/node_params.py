@@ -3,11 +3,11 @@ the README's tables can be written without ROS."""
 from aoa_localizer.core.spec import ParameterSpec, Spec
 
 NODE_PARAMS = [
-    ParameterSpec("input_queue_depth", 200, Spec("subscription queue depth for gps/fix and df/bearing", int,
+    ParameterSpec("input_queue_depth", 200, Spec("subscription queue depth for gps/fix, df/bearing and df/scan", int,
                                                  low=1, high=100_000, read_only=True)),
     ParameterSpec("input_reliability", "best_effort", Spec(
-        "QoS reliability of the gps/fix and df/bearing subscriptions: `best_effort` (sensor data: reliable and "
-        "best-effort publishers both connect, a message can be lost under load) or `reliable` (lost packets are "
+        "QoS reliability of the gps/fix, df/bearing and df/scan subscriptions: `best_effort` (sensor data: reliable "
+        "and best-effort publishers both connect, a message can be lost under load) or `reliable` (lost packets are "
         "resent, but only reliable publishers connect, and a publisher's KEEP_LAST history still drops under load)",
         str, choices=("best_effort", "reliable"), read_only=True)),
     ParameterSpec("map_frame", "map", Spec("frame_id of emitter/pose, emitter/particles, emitter/markers and "
@@ -27,8 +27,9 @@ NODE_PARAMS = [
     ParameterSpec("stale_after_s", 5.0, Spec("/diagnostics warns when no DF reading or no valid GPS fix arrived for "
                                              "this long (s)", float, low=0.0, low_open=True, high=86_400.0)),
     ParameterSpec("stations", [], Spec(
-        "DF stations whose inputs are fused: each NAME subscribes NAME/gps/fix, NAME/df/bearing (and NAME/heading/imu) "
-        "and publishes NAME/vehicle/path; empty: one station on gps/fix and df/bearing", list, items=str,
+        "DF stations whose inputs are fused: each NAME subscribes NAME/gps/fix, NAME/df/bearing, NAME/df/scan (and "
+        "NAME/heading/imu) and publishes NAME/vehicle/path; empty: one station on gps/fix, df/bearing and df/scan",
+        list, items=str,
         read_only=True)),
     ParameterSpec("fixed_stations", [], Spec(
         "the stations (of `stations`) that do not move: their position is `<NAME>.position` if set, else their "
