@@ -385,3 +385,19 @@ def test_stations_that_disagree_are_said_in_azimuth_degrees():
     said = stations_disagree(biased)
     assert said is not None and "disagree by 12.0 deg" in said and "car2 +11.5 deg" in said
     assert stations_disagree(replace(biased, site_bias=np.radians([0.5, -2.0]))) is None  # within 3 deg
+
+
+def test_a_place_holding_two_transmitters_readings_widens_its_own_ellipse():
+    """A place's covariance is scaled by its own readings' scatter about it when that exceeds its quality bands'
+    scale: one transmitter's readings at their place scatter as the bands say (1); two transmitters' read as one
+    place scatter several times wider, and a place that claimed the bands' precision was outside its ellipse."""
+    from aoa_localizer.engine.inference.co_channel import _own_dispersion
+
+    rng = np.random.default_rng(3)
+    one = readings(np.zeros(400, int), rng)
+    w, scale = np.ones(400), np.ones(400)
+    assert _own_dispersion(one, PLACES[0], w, scale) == pytest.approx(1.0, abs=0.15)
+    both = readings(np.repeat([0, 1], 200), rng)
+    middle = PLACES[:2].mean(axis=0)
+    assert _own_dispersion(both, middle, w, scale) > 20.0
+    assert _own_dispersion(one, PLACES[0], np.zeros(400), scale) == 1.0  # no readings: nothing to say

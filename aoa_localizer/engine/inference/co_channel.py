@@ -334,11 +334,22 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
     resp, loglik = _responsibilities(log_e, share, bins, in_turns)
     loglik += _bias_prior(r, bias)
     inlier = resp * np.exp(log_in - log_e)
-    out = [Place(x[j].copy(), _covariance(shifted, x[j], inlier[:, j], scale), float(resp[:, j].mean()))
-           for j in range(k)]
+    out = [Place(x[j].copy(), _covariance(shifted, x[j], inlier[:, j], scale) * _own_dispersion(
+        shifted, x[j], inlier[:, j], scale), float(resp[:, j].mean())) for j in range(k)]
     params = 2 * k + (k - 1) + 1 + len(np.unique(band))  # places, shares, the wild share, the scales
     shift = offset + (bias[r.site] if r.site is not None else np.zeros(len(r)))
     return Fit(k, in_turns, out, scale, shift, loglik, -2.0 * loglik + params * math.log(len(r)), resp, offset)
+
+
+def _own_dispersion(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray) -> float:
+    """How much wider than its quality bands' scale a place's own readings scatter about it (their weighted mean
+    squared residual in scaled sigmas, at least 1): a place that holds another transmitter's readings too, or whose
+    readings the bands' scale understates, widens its own ellipse rather than claim the bands' precision."""
+    resid, _ = _jacobian(r, x)
+    total = float(w.sum())
+    if total <= 2.0:
+        return 1.0
+    return max(1.0, float(w @ (resid / (scale * r.sigma)) ** 2) / total)
 
 
 def _biased(r: Readings, bias: np.ndarray) -> Readings:
