@@ -157,6 +157,7 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
                            offsets)
             if fit is not None and min(p.share for p in fit.places) >= MIN_SHARE:
                 fits.append(fit)
+    fits += _births(r, bins, fits, max_k, need, one.scale)
     allowed = [f for f in fits if f.k <= max_k]
     # Errors that repeat along the drive make a stretch of road read as a second place in turns: the evidence is
     # weighed as the one place's residuals say it is worth (a quasi-likelihood's dispersion; 1 for independent ones)
@@ -251,6 +252,29 @@ def _first_scale(r: Readings, x: np.ndarray, offset: float) -> np.ndarray:
     """The sigmas' scale the residuals at place x suggest (their median absolute value, robustly), every reading's."""
     resid, _ = _jacobian(_turned(r, offset), x)
     return np.full(len(r), float(np.clip(np.median(np.abs(resid) / r.sigma) / 0.6745, 1.0, _SCALE_RANGE[1])))
+
+
+def _births(r: Readings, bins: np.ndarray, fits: list[Fit], max_k: int, need: float, scale: np.ndarray) -> list[Fit]:
+    """Fits with one more transmitter, each started from the likeliest fit in turns so far and the place where the
+    readings it leaves over meet (with half a transmitter's share): a transmitter that no start reached, its
+    crossing drowned among the others' (five on the air read as four, p = 1.00). Each is kept while it is likelier
+    (BIC) than the fit it grew from, up to the limit."""
+    born: list[Fit] = []
+    turns = [f for f in fits if f.in_turns and f.k <= max_k]
+    top = min(turns, key=lambda f: f.bic) if turns else None
+    while top is not None and top.k < max_k:
+        unexplained = _unexplained(r, top)
+        if unexplained.sum() < _UNEXPLAINED_MIN:
+            break
+        where = [m.mean for m in _wild_crossings(r, top, unexplained) if m.inliers >= need / 2]
+        if not where:
+            break
+        fit = _best_fit(r, bins, [p.mean for p in top.places] + [where[0]], True, scale, top.offset)
+        if min(p.share for p in fit.places) < MIN_SHARE or fit.bic >= top.bic:
+            break
+        born.append(fit)
+        top = fit
+    return born
 
 
 def _left_over(r: Readings, fit: Fit, need: float) -> bool:
