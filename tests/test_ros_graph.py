@@ -1164,9 +1164,12 @@ def test_the_node_sends_each_estimate_to_tak_as_cursor_on_target(spawn, domain):
     # of the fix's east-north covariance (counted here over draws, not by the node's formula)
     same = [f for f in fixes if abs(f.latitude - lat) < 2e-7 and abs(f.longitude - lon) < 2e-7]
     assert same, (lat, lon, [(f.latitude, f.longitude) for f in fixes[-3:]])
-    c = np.array(same[-1].position_covariance, float).reshape(3, 3)[:2, :2]
-    draws = np.random.default_rng(0).multivariate_normal([0.0, 0.0], c, 200_000)
-    assert np.mean(np.hypot(*draws.T) <= ce) == pytest.approx(0.9, abs=0.01)
+    held = []  # several fixes may share the point to 1e-7 deg: the event's is one of them
+    for f in same:
+        c = np.array(f.position_covariance, float).reshape(3, 3)[:2, :2]
+        draws = np.random.default_rng(0).multivariate_normal([0.0, 0.0], c, 200_000)
+        held.append(float(np.mean(np.hypot(*draws.T) <= ce)))
+    assert any(abs(h - 0.9) <= 0.01 for h in held), held
     assert diag["cot_failed"] == "0"
     refused = subprocess.run([sys.executable, "-m", "aoa_localizer.node", "--ros-args", "-p", "cot_url:=http://x:1"],
                              env=ros_env(domain), cwd=ROOT, capture_output=True, text=True, timeout=60)

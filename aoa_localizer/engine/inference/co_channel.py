@@ -157,17 +157,18 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
                            offsets)
             if fit is not None and min(p.share for p in fit.places) >= MIN_SHARE:
                 fits.append(fit)
-    fits += _births(r, bins, fits, max_k, need, one.scale)
     allowed = [f for f in fits if f.k <= max_k]
     # Errors that repeat along the drive make a stretch of road read as a second place in turns: the evidence is
     # weighed as the one place's residuals say it is worth (a quasi-likelihood's dispersion; 1 for independent ones)
     dispersion = _dependence(r, one, bins) if len(allowed) > 1 else 1.0
-    by_count: dict[int, float] = {}
-    for f, w in zip(allowed, _bic_weights([_tempered_bic(f, dispersion) for f in allowed]), strict=True):
-        n = f.k if f.in_turns else 1
-        by_count[n] = by_count.get(n, 0.0) + float(w)
-    by_count = dict(sorted(by_count.items()))
+    by_count = _by_count(allowed, dispersion)
     count = max(by_count, key=lambda n: (by_count[n], -n))  # a tie goes to fewer transmitters
+    born = _births(r, bins, allowed, max_k, need, one.scale) if 2 <= count < max_k else []
+    if born:  # where several are on the air, one that no start reached
+        fits += born
+        allowed += born
+        by_count = _by_count(allowed, dispersion)
+        count = max(by_count, key=lambda n: (by_count[n], -n))
     best = min((f for f in allowed if (f.k if f.in_turns else 1) == count), key=lambda f: f.bic)
     order = sorted(range(best.k), key=lambda j: -best.places[j].share)
     places = [best.places[j] for j in order]
@@ -254,11 +255,22 @@ def _first_scale(r: Readings, x: np.ndarray, offset: float) -> np.ndarray:
     return np.full(len(r), float(np.clip(np.median(np.abs(resid) / r.sigma) / 0.6745, 1.0, _SCALE_RANGE[1])))
 
 
+def _by_count(fits: list[Fit], dispersion: float) -> dict[int, float]:
+    """Each count's posterior probability: its fits' BIC weights (tempered by `dispersion`) summed, an interleaved
+    fit counting one transmitter."""
+    by_count: dict[int, float] = {}
+    for f, w in zip(fits, _bic_weights([_tempered_bic(f, dispersion) for f in fits]), strict=True):
+        n = f.k if f.in_turns else 1
+        by_count[n] = by_count.get(n, 0.0) + float(w)
+    return dict(sorted(by_count.items()))
+
+
 def _births(r: Readings, bins: np.ndarray, fits: list[Fit], max_k: int, need: float, scale: np.ndarray) -> list[Fit]:
     """Fits with one more transmitter, each started from the likeliest fit in turns so far and the place where the
     readings it leaves over meet (with half a transmitter's share): a transmitter that no start reached, its
     crossing drowned among the others' (five on the air read as four, p = 1.00). Each is kept while it is likelier
-    (BIC) than the fit it grew from, up to the limit."""
+    (BIC) than the fit it grew from, up to the limit. Asked only where the count already says several: a lone
+    transmitter's biased or wild readings grow no fits (and cost no time)."""
     born: list[Fit] = []
     turns = [f for f in fits if f.in_turns and f.k <= max_k]
     top = min(turns, key=lambda f: f.bic) if turns else None
