@@ -406,39 +406,31 @@ class LocalizerNode(Node):
         self.loc.add_heading(r.stamp, r.yaw_rad, station=station, variance_rad2=r.variance_rad2)
 
     def on_bearing(self, msg, station: str = "", info=None):
-        t0 = time.perf_counter()
-        mon = self.monitor
-        mon.arrived(info, f"{station}/df/bearing")
-        mon.counts["bearings_received"] += 1
-        mon.health.reading(self._now())
-        try:
-            r = df_record(msg, self.cfg.bearing_encoding)
-        except (AttributeError, TypeError, ValueError):
-            mon.counts["adapter_errors"] += 1
-            return
-        mon.df_stamp(station, r.stamp, r.frequency_hz)
-        if station in self.fixed_positions:  # placed by its position: no fix to wait for
-            self._feed_bearing(station, r)
-        else:
-            self.fix_wait.bearing(station, r, time.monotonic())
-        self._publish_made()
-        mon.timed(t0)
+        self.monitor.counts["bearings_received"] += 1  # one that cannot be read was received all the same
+        self._on_df(msg, station, info, "df/bearing", lambda m: [df_record(m, self.cfg.bearing_encoding)])
 
     def on_scan(self, msg, station: str = "", info=None):
         """A scan (df/scan): its records, one per channel at one stamp, each as a DF record on df/bearing, for the
         cost of one message."""
+        self.monitor.counts["scans_received"] += 1
+        self._on_df(msg, station, info, "df/scan", df_scan, count_records=True)
+
+    def _on_df(self, msg, station: str, info, topic: str, records_of: Callable[[Any], list],
+               count_records: bool = False):
+        """A DF message's records, each stamped in the monitor and handed on (at once for a fixed station, else
+        when its fix has come); one that cannot be read is an adapter error."""
         t0 = time.perf_counter()
         mon = self.monitor
-        mon.arrived(info, f"{station}/df/scan")
-        mon.counts["scans_received"] += 1
+        mon.arrived(info, f"{station}/{topic}")
+        mon.health.reading(self._now())
         try:
-            records = df_scan(msg)
+            records = records_of(msg)
         except (AttributeError, TypeError, ValueError, IndexError, KeyError):
             mon.counts["adapter_errors"] += 1
             return
-        mon.counts["bearings_received"] += len(records)
-        mon.health.reading(self._now())
-        fixed = station in self.fixed_positions
+        if count_records:
+            mon.counts["bearings_received"] += len(records)
+        fixed = station in self.fixed_positions  # placed by its position: no fix to wait for
         now = time.monotonic()
         for r in records:
             mon.df_stamp(station, r.stamp, r.frequency_hz)
