@@ -209,6 +209,7 @@ def test_each_storage_file_is_opened_once_and_closed_with_the_bag(tmp_path, data
     assert all(r.stack is None for r in opened)
 
 
+@pytest.mark.slow
 def test_a_bag_of_scans_reads_as_the_same_records_one_message_each(tmp_path, data):
     """Issue 69: a receiver's readings of one stamp recorded as one scan on /df/scan (a bridge's `--scan`) are the
     same DF records, in the same order, as a bag of one message each; a bag with scans and no /df/bearing is read,
