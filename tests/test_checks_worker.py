@@ -362,3 +362,27 @@ def test_a_checks_modes_are_scored_on_the_filters_own_posterior():
     best = t.modes[0]
     assert best.log_post == pytest.approx(float(log_posterior(best.mean, t.points(), t.robust())), abs=1e-6)
     loc.close()
+
+
+@pytest.mark.slow
+def test_a_count_that_finishes_after_the_last_point_is_published_between_inputs():
+    """A live node's data end with no finish: a transmitter count still under way at the last point is work
+    (`working`, what the launcher waits for before its verdict), and idle() adopts it when it ends and publishes the
+    estimate it changes, rather than holding it for a point that may never come."""
+    from dataclasses import replace
+
+    from aoa_localizer.simulation.scenarios import SCENARIOS
+
+    data = simulate(replace(SCENARIOS["seed"], co_channel=((600.0, 1300.0),), co_shares=(0.5, 0.5)), 1)
+    loc = Localizer(LocalizerConfig(seed=1, scheduling="realtime"))
+    for event in data.inputs():  # faster than the worker counts: a bag replayed at full speed
+        loc.feed(event)
+    made = []
+    for _ in range(50):
+        loc.catch_up()
+        made += loc.idle()
+        if not loc.track_status().working:
+            break
+    assert not loc.track_status().working
+    assert made and loc.estimate is made[-1] and loc.estimate.transmitter_count == 2
+    loc.close()

@@ -395,12 +395,20 @@ class Localizer:
     @_one_at_a_time
     def idle(self) -> list[Estimate]:
         """Between inputs (`scheduling: realtime`; the node calls it every few ms): the worker's finished results
-        applied now rather than at each channel's next point, so a channel whose data paused still gets the start or
-        check it was due, and one owed move made, for the channel owing the most, so the points that follow carry
-        none. Returns the estimates the results made (each also goes to `on_estimate`)."""
+        applied now rather than at each channel's next point, so a channel whose data paused still gets the start,
+        check, transmitter count or site-part fit it was due, and one owed move made, for the channel owing the most,
+        so the points that follow carry none. Returns the estimates the results made (each also goes to
+        `on_estimate`)."""
         live = list(self.channels.live.values())
         ready = self._scheduler.owners_done()
-        done = [c for c in live if c.track in ready and c.track.apply_job() and c.track.estimating]
+        done = []
+        for c in live if ready else ():
+            t = c.track
+            if any(place in ready for place in t.places):
+                applied = t in ready and t.apply_job()
+                # its count and site-part fit, after a start: begun now, rather than at a point that may never come
+                if (t.between_points() or applied) and t.estimating:
+                    done.append(c)
         made = [est for est in (self._estimates.publish(c) for c in done) if est is not None]
         owing = self._scheduler.owing()
         self._scheduler.move_one(c.track.debtor for c in live if c.track.filter in owing)
@@ -420,9 +428,10 @@ class Localizer:
 
     @_one_at_a_time
     def wait_for_worker(self) -> None:
-        """Wait until the check worker has finished the live channels' jobs (`scheduling: realtime`; nothing
-        otherwise); their results are applied at each channel's next point, or by idle() or catch_up()."""
-        self._scheduler.wait(c.track for c in self.channels.live.values())
+        """Wait until the check worker has finished the live channels' jobs, counts and site-part fits included
+        (`scheduling: realtime`; nothing otherwise); their results are applied at each channel's next point, or by
+        idle()."""
+        self._scheduler.wait(place for c in self.channels.live.values() for place in c.track.places)
 
     def close(self):
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""

@@ -375,7 +375,7 @@ class Monitor:
     def settle(self, at_least_s: float, at_most_s: float) -> bool:
         """Spin until the node has worked through what it received: two /diagnostics in a row with the same counts
         (fixes and bearings received and used) and the same newest estimate, no search or check of its own still
-        under way (`jobs_running`), after `at_least_s`; False when
+        under way (`jobs_running`: a search, check, count or site-part fit), after `at_least_s`; False when
         `at_most_s` passed first (a busy machine's node still working, or a node that says nothing)."""
         start = time.monotonic()
         seen, last, same = self.diagnostics_seen, None, 0

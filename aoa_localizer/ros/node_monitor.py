@@ -185,7 +185,7 @@ class NodeMonitor:
         values.update(status=loc.status, algorithm=loc.config.algorithm,
                       bearings_used=sum(t.bearings_used for t in tracks),
                       points_used=sum(t.points_used for t in tracks),
-                      jobs_running=sum(t.working for t in tracks),  # searches and checks whose result is to come
+                      jobs_running=sum(t.working for t in tracks),  # searches, checks, counts, fits: results to come
                       unknown_quality=loc.unknown_quality, other_band=loc.other_band,
                       bearings_rejected=sum(v for k, v in loc.rejected.items() if k not in FIX_REASONS),
                       fixes_rejected=sum(v for k, v in loc.rejected.items() if k in FIX_REASONS))

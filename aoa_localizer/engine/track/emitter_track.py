@@ -79,7 +79,7 @@ class EmitterTrack(Held):
         opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
-        for place in (self, self.counting, self.site_fitting):
+        for place in self.places:
             self.scheduler.point_came(place)
         applied = self.apply_job()  # a job's findings first: they may change the noise the point is made with
         self.heard.append(readings)
@@ -437,6 +437,15 @@ class EmitterTrack(Held):
             return
         self.scheduler.start(self.counting, job, CHECK_BUDGET_US, None, [])
         self._adopt_count(self.scheduler.finished(self.counting))  # a count small enough to finish in its first turn
+
+    def between_points(self) -> bool:
+        """Between points (Localizer.idle, for a track one of whose jobs finished): a transmitter count or site-part
+        fit that finished is adopted now, not at the next point, which may never come, and one now due (a filter
+        just started) is begun. True when one was adopted (the estimate it changes is to be published)."""
+        counted, spread = self.counted, self.site_spread
+        self._count()
+        self.fit_site_part()
+        return self.counted is not counted or self.site_spread is not spread
 
     def _adopt_count(self, done: PendingJob | None):
         """A finished count adopted (a failed one leaves the last)."""

@@ -75,6 +75,11 @@ class Held:
         self.site_points = 0
 
     @property
+    def places(self) -> tuple[object, ...]:
+        """The track's keys among the scheduler's jobs: its start search or check, its count, its site-part fit."""
+        return self, self.counting, self.site_fitting
+
+    @property
     def job(self) -> PendingJob | None:
         """The start search or global check running for this track: the scheduler holds it."""
         return self.scheduler.job(self)
@@ -88,8 +93,9 @@ class Held:
     def summary(self) -> TrackStatus:
         """The track as programs read it (Localizer.track_status)."""
         sup = self.supervisor
+        working = any(self.scheduler.job(place) is not None for place in self.places)
         return TrackStatus(self.state, self.status, sup.alarm, sup.health.share, self.points_used, self.bearings_used,
-                           self.last_update_s, self.job is not None)
+                           self.last_update_s, working)
 
     def snapshot(self) -> Snapshot:
         """What a start search or global check needs, copied: it may run in the worker while the track goes on."""

@@ -60,7 +60,8 @@ class TrackStatus:
     """A track as programs read it (the node's /diagnostics): its state, its status (`text`: its words), whether
     the cloud no longer explains the newest points (the estimate is being checked), the share of recent points it
     explains only as outliers, the points and bearings its estimate uses, what its latest point cost (s), and
-    whether a start search or global check is under way (`working`: its result is still to come)."""
+    whether a start search, global check, transmitter count or site-part fit is under way (`working`: its result is
+    still to come)."""
 
     state: TrackState
     status: Status
