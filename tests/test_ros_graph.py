@@ -938,9 +938,10 @@ def test_hostile_records_and_parameters_cost_only_themselves_through_the_graph(s
         _publish_drive(node, executor, emitter, seconds=40.0, start_east=400.0, t0=1021.0)
         assert spin_until(executor, lambda: "pose" in got and diag.get("rejected.bad_frequency") == "1"
                           and diag.get("rejected.bearing_stamp_jump") == "1", 15), json.dumps(diag)
-        spin_until(executor, lambda: False, 1.5)
-        used, received = int(diag["bearings_used"]), int(diag["bearings_received"])
-        assert used >= received - 10, json.dumps(diag)  # the two hostile records and the last open points
+        # every record but the two hostile ones and the last open points used, once the node has drained its queue
+        # and the records parked for their fixes (a busy machine's node takes seconds more)
+        assert spin_until(executor, lambda: int(diag["bearings_used"]) >= int(diag["bearings_received"]) - 10
+                          and diag.get("df_waiting_for_fix") == "0", 30), json.dumps(diag)
         assert not any(k in diag for k in ("rejected.gps_gap", "events.df_clock_jump")), json.dumps(diag)
         _, east, north, _ = estimate_from_pose(got["pose"])
         assert math.hypot(east - emitter[0], north - emitter[1]) < 15.0
