@@ -41,6 +41,9 @@ def rclpy_types() -> SimpleNamespace:
         PoseWithCovariance,
         PoseWithCovarianceStamped,
         Quaternion,
+        Twist,
+        TwistWithCovariance,
+        TwistWithCovarianceStamped,
         Vector3,
         Vector3Stamped,
     )
@@ -53,7 +56,7 @@ def rclpy_types() -> SimpleNamespace:
         Time, Header, NavSatFix, NavSatStatus, Vector3Stamped, Vector3, PointStamped, Point, Pose, PoseArray,
         PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, ColorRGBA, Marker, MarkerArray,
         DiagnosticArray, DiagnosticStatus, KeyValue, Path, PoseStamped, Imu, String, OccupancyGrid, MapMetaData,
-        PointCloud2, PointField)})
+        PointCloud2, PointField, Twist, TwistWithCovariance, TwistWithCovarianceStamped)})
 
 
 def header(T, stamp: float, frame_id: str):
@@ -129,6 +132,17 @@ def emitter_pose(T, est, frame_id: str = "map"):
     return T.PoseWithCovarianceStamped(
         header=header(T, est.stamp, frame_id), pose=T.PoseWithCovariance(pose=pose, covariance=cov)
     )
+
+
+def emitter_velocity(T, est, frame_id: str = "map"):
+    """emitter/velocity: linear x east, y north (m/s) over both motion models (a standing transmitter's is zero), the
+    2x2 covariance in the x/y block; z and the angular part are not estimated (UNESTIMATED_VARIANCE)."""
+    cov = np.zeros(36)
+    cov[[14, 21, 28, 35]] = UNESTIMATED_VARIANCE
+    cov[[0, 1, 6, 7]] = np.asarray(est.velocity_cov, float).reshape(4)
+    linear = T.Vector3(x=float(est.velocity[0]), y=float(est.velocity[1]), z=0.0)
+    return T.TwistWithCovarianceStamped(header=header(T, est.stamp, frame_id), twist=T.TwistWithCovariance(
+        twist=T.Twist(linear=linear, angular=T.Vector3()), covariance=cov))
 
 
 def emitter_fix(T, est, alt: float, frame_id: str = "emitter"):

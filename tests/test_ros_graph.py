@@ -268,7 +268,8 @@ def _publish_drive(node, executor, emitter, seconds=60.0, speed=20.0, df_hz=10.0
 
 
 def test_an_outside_client_gets_pose_fix_posterior_and_goal(spawn, domain):
-    """emitter/pose and emitter/fix near the truth; emitter/posterior with the estimate in its most probable cells;
+    """emitter/pose and emitter/fix near the truth; emitter/velocity, a standing transmitter's (about zero, in the
+    map frame, stamped as the pose); emitter/posterior with the estimate in its most probable cells;
     emitter/next_goal within goal_radius_m of the vehicle's last place (1200, 0), its arrow from there."""
     node_p = spawn(["aoa_localizer.node", "--ros-args", "-p", "seed:=1", "-p", "goal_radius_m:=300.0"], domain)
     emitter = (600.0, 400.0)
@@ -277,6 +278,8 @@ def test_an_outside_client_gets_pose_fix_posterior_and_goal(spawn, domain):
         latched = QoSProfile(depth=1, durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(T.PoseWithCovarianceStamped, "emitter/pose", lambda m: got.update(pose=m), latched)
         node.create_subscription(T.NavSatFix, "emitter/fix", lambda m: got.update(fix=m), 10)
+        node.create_subscription(T.TwistWithCovarianceStamped, "emitter/velocity",
+                                 lambda m: got.update(velocity=m), latched)
         node.create_subscription(T.OccupancyGrid, "emitter/posterior", lambda m: got.update(grid=m), 1)
         node.create_subscription(T.PoseStamped, "emitter/next_goal", lambda m: got.update(goal=m), 1)
         node.create_subscription(T.Marker, "emitter/next_goal_marker", lambda m: got.update(arrow=m), 1)
@@ -301,6 +304,11 @@ def test_an_outside_client_gets_pose_fix_posterior_and_goal(spawn, domain):
         e, n = LocalFrame(*DATUM).to_enu(got["fix"].latitude, got["fix"].longitude)
         assert math.hypot(e - emitter[0], n - emitter[1]) < 15.0
         assert got["fix"].position_covariance_type == 1
+        assert spin_until(executor, lambda: "velocity" in got, 5)
+        velocity = got["velocity"]
+        assert velocity.header.frame_id == "map" and velocity.header.stamp == got["pose"].header.stamp
+        assert math.hypot(velocity.twist.twist.linear.x, velocity.twist.twist.linear.y) < 1.0  # it stands
+        assert velocity.twist.covariance[0] >= 0.0 and velocity.twist.covariance[35] == 1e9
         got.pop("goal", None)
         assert spin_until(executor, lambda: "goal" in got and "arrow" in got, 5)  # refreshed once a second
         goal, arrow = got["goal"].pose.position, got["arrow"].points

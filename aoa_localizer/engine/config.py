@@ -328,6 +328,18 @@ class LocalizerConfig(GroupAccess):
         low_open=True,
         high=1e4,
     )
+    # Moving transmitters (issue 68, engine/inference/motion.py)
+    motion_model: str = choice(
+        "auto",
+        ("auto", "static"),
+        "`auto`: beside each channel's filter a static and a moving model weigh its points, and where motion is "
+        "probable the estimate follows the moving transmitter (`motion`, `motion_probability`, `velocity`); "
+        "`static`: every transmitter stands (no watch)",
+    )
+    max_transmitter_speed_mps: float = param(
+        30.0, "the moving model's top speed scale (m/s): its prior on a transmitter's speed is log-uniform from "
+        "0.3 m/s up to this (a walker 1-2, a car 10-20, a drone 5-15)", low=0.0, low_open=True, high=1000.0,
+    )
     # Each algorithm's settings group, (name, settings) in GROUPS order, read as `cfg.<name>` (filters/registry.py)
     groups: tuple[tuple[str, Any], ...] = field(default_factory=default_groups)
 

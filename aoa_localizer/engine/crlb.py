@@ -101,3 +101,39 @@ def circular_error(cov, p: float = 0.9) -> float:
         return float(top * np.sum(_WEIGHTS * np.exp(-0.5 * z1 * z1) * erf(inner)) / np.sqrt(2.0 * np.pi)) - p
 
     return float(brentq(held, 0.0, 10.0 * np.sqrt(l1 + l2)))
+
+
+def ou_transition(dt: float, speed: float, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    """(F, Q) of a state [east, north, v_east, v_north] over dt when the velocity is an Ornstein-Uhlenbeck process
+    (stationary sd `speed` per axis, correlation time `tau`) and the place its integral: the exact discretisation."""
+    a = np.exp(-dt / tau)
+    b = tau * (1.0 - a)
+    s2 = speed * speed
+    qvv = s2 * (1.0 - a * a)
+    qxv = s2 * tau * (1.0 - a) ** 2
+    qxx = s2 * tau * tau * (2.0 * dt / tau - 3.0 + 4.0 * a - a * a)
+    eye = np.eye(2)
+    f = np.block([[eye, b * eye], [np.zeros((2, 2)), a * eye]])
+    q = np.block([[qxx * eye, qxv * eye], [qxv * eye, qvv * eye]])
+    return f, q
+
+
+def pcrb_moving(truth, sensors, sigmas, stamps, speed: float, tau: float, prior_sd_m: float = 1000.0) -> np.ndarray:
+    """The posterior Cramer-Rao bound (Tichavsky, Muravchik and Nehorai 1998, the recursive information form) of a
+    moving transmitter's place after each reading: `truth` (K, 2) its place at each reading's stamp, the readings'
+    antennas, sigmas (rad) and stamps, the motion an OU velocity (ou_transition); the measurement's information
+    taken at the true state. Returns the bound's RMSE (m) of the place after each reading."""
+    truth, sensors = np.asarray(truth, float), np.asarray(sensors, float)
+    sigmas, stamps = np.asarray(sigmas, float), np.asarray(stamps, float)
+    info = np.diag([prior_sd_m ** -2, prior_sd_m ** -2, speed ** -2, speed ** -2])
+    out = np.empty(len(stamps))
+    for k in range(len(stamps)):
+        if k:
+            f, q = ou_transition(max(0.0, stamps[k] - stamps[k - 1]), speed, tau)
+            info = np.linalg.inv(q + f @ np.linalg.solve(info, f.T))
+        d = truth[k] - sensors[k]
+        r2 = float(d @ d)
+        h = np.array([-d[1] / r2, d[0] / r2, 0.0, 0.0])
+        info = info + np.outer(h, h) / sigmas[k] ** 2
+        out[k] = float(np.sqrt(np.trace(np.linalg.inv(info)[:2, :2])))
+    return out

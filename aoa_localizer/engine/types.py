@@ -142,6 +142,13 @@ class Estimate:
     transmitter_count: int = 1
     count_probability: float = float("nan")
     transmitters: list = field(default_factory=list)
+    # Whether the transmitter moves (issue 68): the model the estimate is from (`static` or `moving`), the
+    # probability of motion (NaN: not watched yet), and for a moving one its velocity (east, north m/s) and its
+    # 2x2 covariance; the place and `cov` are then where it is now
+    motion: str = "static"
+    motion_probability: float = float("nan")
+    velocity: np.ndarray | None = None
+    velocity_cov: np.ndarray | None = field(repr=False, default=None)
 
     def at_transmitter(self, t: Transmitter) -> Estimate:
         """This estimate moved to one of its channel's transmitters (its place and ellipse; no transmitters or
@@ -172,6 +179,12 @@ class Estimate:
             "transmitter_count": self.transmitter_count,
             "count_probability": round(self.count_probability, 4) if math.isfinite(self.count_probability) else None,
             "transmitters": [t.to_json_dict() for t in self.transmitters],
+            "motion": self.motion,
+            "motion_probability": (round(self.motion_probability, 4) if math.isfinite(self.motion_probability)
+                                   else None),
+            **({"velocity": [round(float(v), 4) for v in self.velocity],
+                "velocity_cov": [[float(v) for v in row] for row in self.velocity_cov]}
+               if self.velocity is not None and self.velocity_cov is not None else {}),
             **({"hpd": {f"{100 * lvl:.0f}": [[[round(float(a), 8), round(float(b), 8)] for a, b in ring]
                                             for ring in rings] for lvl, rings in self.regions.items()}}
                if self.regions else {}),

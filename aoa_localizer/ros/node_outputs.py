@@ -56,9 +56,9 @@ class NodeOutputs:
         self.transmitter_pubs: dict[tuple[str, int], Any] = {}  # (channel, k): its k-th transmitter's pose
 
     def _channel_publishers(self, prefix: str) -> SimpleNamespace:
-        """pose (latched), fix, particles and markers under `prefix` (emitter/ or emitter/<channel>/). A frequency
-        channel's publishers go without rclpy's default QoS-event handlers: each is a waitable the executor walks
-        at every message, and 50 channels' 200 of them took most of the node's time."""
+        """pose and velocity (latched), fix, particles and markers under `prefix` (emitter/ or emitter/<channel>/). A
+        frequency channel's publishers go without rclpy's default QoS-event handlers: each is a waitable the executor
+        walks at every message, and 50 channels' 200 of them took most of the node's time."""
         T = self.types
         events = PublisherEventCallbacks(use_default_callbacks=prefix == "emitter/")
 
@@ -66,6 +66,7 @@ class NodeOutputs:
             return self.node.create_publisher(kind, prefix + topic, qos, event_callbacks=events)
 
         return SimpleNamespace(pose=make(T.PoseWithCovarianceStamped, "pose", LATCHED),
+                               velocity=make(T.TwistWithCovarianceStamped, "velocity", LATCHED),
                                fix=make(T.NavSatFix, "fix", LATCHED), particles=make(T.PoseArray, "particles", 10),
                                markers=make(T.MarkerArray, "markers", 10),
                                posterior=make(T.OccupancyGrid, "posterior", 1),
@@ -86,6 +87,8 @@ class NodeOutputs:
         """The estimate on one set of publishers (a channel's, or emitter/ for the primary channel)."""
         T, frame = self.types, self.map_frame
         pubs.pose.publish(build.emitter_pose(T, est, frame))
+        if est.velocity is not None and est.velocity_cov is not None:
+            pubs.velocity.publish(build.emitter_velocity(T, est, frame))
         pubs.fix.publish(build.emitter_fix(T, est, loc.datum_frame().alt0, self.emitter_frame))
         # The cloud and the markers cost about 1 ms to build: only for someone listening.
         if pubs.particles.get_subscription_count():

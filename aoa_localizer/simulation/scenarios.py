@@ -71,6 +71,11 @@ class Scenario:
     # squared-exponential correlation over `site_field_m`) added to every reading that is not wild.
     site_field_deg: float = 0.0
     site_field_m: float = 300.0
+    # A transmitter that moves (issue 68): it stands at `emitter` until `emitter_start_s`, then follows these
+    # waypoints (ENU m) at `emitter_speed` (m/s) and stands at the last. Empty: it stands.
+    emitter_path: tuple[tuple[float, float], ...] = ()
+    emitter_speed: float = 0.0
+    emitter_start_s: float = 0.0
 
 
 SCENARIOS = {
@@ -145,6 +150,35 @@ def geometry_cells() -> dict[str, Scenario]:
     }
 
 
+_RING = tuple((1000.0 + 900.0 * math.cos(a), 1000.0 + 900.0 * math.sin(a)) for a in np.linspace(0.0, 4.0 * math.pi, 61))
+
+
+def _laps(path: tuple[tuple[float, float], ...], times: int) -> tuple[tuple[float, float], ...]:
+    return tuple(path[1:]) * times
+
+
+def moving_cells() -> dict[str, Scenario]:
+    """Transmitters that move, watched from a DF vehicle driving twice around them on a 900 m ring at 10 m/s
+    (it turns all the time: the range of a mover is observable), 2 deg noise at 2 Hz, not told the noise: a walker
+    at 1.4 m/s, a car at 15 m/s on a block of roads, a drone at 10 m/s on straight legs with sharp turns, and a
+    transmitter that stands, walks 300 m and stands again."""
+    base = replace(SCENARIOS["seed"], name="moving", emitter=(1000.0, 1000.0), track=_RING, points=0,
+                   quality=(80.0, 80.0), sigma_rad=math.radians(2.0), df_rate_hz=2.0)
+    walk = ((1000.0, 1000.0), (1150.0, 1000.0), (1150.0, 1200.0), (900.0, 1250.0), (850.0, 1050.0),
+            (1000.0, 1000.0))
+    block = ((1000.0, 1000.0), (1300.0, 1000.0), (1300.0, 1300.0), (800.0, 1300.0), (800.0, 1000.0),
+             (1000.0, 1000.0))
+    legs = ((1000.0, 1000.0), (1400.0, 1100.0), (1000.0, 1300.0), (700.0, 900.0), (1200.0, 700.0),
+            (1000.0, 1000.0))
+    return {
+        "walker": replace(base, name="walker", emitter_path=_laps(walk, 2), emitter_speed=1.4),
+        "car": replace(base, name="car", emitter_path=_laps(block, 9), emitter_speed=15.0),
+        "drone": replace(base, name="drone", emitter_path=_laps(legs, 5), emitter_speed=10.0),
+        "stand_walk_stand": replace(base, name="stand_walk_stand", emitter_path=((1300.0, 1000.0),),
+                                    emitter_speed=1.4, emitter_start_s=300.0),
+    }
+
+
 @dataclass
 class ScenarioData:
     """One simulated run: public inputs plus the truth."""
@@ -160,6 +194,13 @@ class ScenarioData:
     # Which transmitter each bearing came from (0: the emitter, k: co_channel[k - 1]); every transmitter's place
     source: np.ndarray | None = None
     transmitters_enu: np.ndarray | None = None
+
+    def emitter_at(self, t) -> np.ndarray:
+        """The emitter's ENU place at times t (a moving one's on its path; else where it stands, its last)."""
+        path = emitter_trajectory(self.scenario)
+        if path is None:
+            return np.broadcast_to(self.emitter_enu, np.shape(t) + (2,)).copy()
+        return path.at(t)
 
     @property
     def frame(self) -> LocalFrame:
@@ -216,6 +257,23 @@ class Trajectory:
         x = np.interp(s, self.cum, self.v[:, 0])
         y = np.interp(s, self.cum, self.v[:, 1])
         return np.stack([x, y], axis=-1)
+
+
+def emitter_trajectory(sc: Scenario) -> Trajectory | None:
+    """A moving transmitter's trajectory (None: it stands): from `emitter` along `emitter_path`, standing
+    `emitter_start_s` first. A path that cannot be driven is refused with the reason."""
+    if not sc.emitter_path:
+        return None
+    path = np.array([sc.emitter, *sc.emitter_path], float)
+    if not np.isfinite(path).all():
+        raise ValueError("the transmitter's path has a coordinate that is not a finite number")
+    if not (math.isfinite(sc.emitter_speed) and sc.emitter_speed > 0.0):
+        raise ValueError(f"the transmitter's speed must be a positive number of m/s, not {sc.emitter_speed!r}")
+    if not (math.isfinite(sc.emitter_start_s) and sc.emitter_start_s >= 0.0):
+        raise ValueError(f"the transmitter's start must be a time >= 0 s, not {sc.emitter_start_s!r}")
+    if not np.hypot(*np.diff(path, axis=0).T).sum() > 0.0:
+        raise ValueError("the transmitter's path has no length: every waypoint is where it starts")
+    return Trajectory(path, sc.emitter_speed, (0.0,), sc.emitter_start_s)
 
 
 def _sigma_of_quality(q, sigma_q_deg):
@@ -327,6 +385,12 @@ def df_records(sc: Scenario, frame: LocalFrame, rng: np.random.Generator, t_df: 
         emitter = np.array(sc.moved_to, float)
         late = t_df >= sc.moved_at_s
         az_true = np.where(late, _azimuths(frame, sensor, s_lat, s_lon, emitter), az_true)
+    path = emitter_trajectory(sc)
+    if path is not None:
+        places = path.at(t_df)
+        p_lat, p_lon, _ = frame.to_geodetic(places[:, 0], places[:, 1])
+        az_true = np.asarray(vincenty.vdist(s_lat, s_lon, p_lat, p_lon)[1], float)
+        emitter = places[-1]
     az = az_true + np.degrees(sigma * rng.standard_normal(t_df.size))
     wild = rng.random(t_df.size) < sc.wild_share
     az = np.where(wild, rng.uniform(0, 360, t_df.size), az)

@@ -12,6 +12,11 @@ bursts of 5-30 s (`--interleaved`: reading by reading, as a reflection's ghost c
 `--co-shares`); it prints the count of transmitters and each one's error, and exits 0 when the count is right
 and each is inside 3 times its 95 % ellipse (interleaved: when the count is one).
 
+`--moving walker|car|drone|stand_walk_stand` runs a transmitter that moves instead (simulation.scenarios.moving_cells:
+the vehicle drives twice round a 900 m ring about it); it prints the estimate's motion, the velocity and the error
+against where the transmitter is at the estimate's stamp, beside the posterior Cramer-Rao bound there; exit 0 when
+the error is inside 3 times the 95 % ellipse.
+
 `--mount-offset-deg DEG` records the azimuths from the vehicle's forward axis, as an array mounted with its zero DEG
 clockwise from that axis measures them, and sets the localizer to read them so (bearing_reference vehicle,
 heading_source track, mount_offset_deg DEG); a -p for one of those wins, e.g. -p mount_offset_deg=0 shows what a
@@ -30,13 +35,13 @@ from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.config import LocalizerConfig
-from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse
+from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse, pcrb_moving
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
 from aoa_localizer.simulation.evaluation import feed_fleet, run, scenario_config
 from aoa_localizer.simulation.fleet import FLEETS, simulate_fleet
-from aoa_localizer.simulation.scenarios import SCENARIOS, mounted, receiver_settings, simulate
+from aoa_localizer.simulation.scenarios import SCENARIOS, mounted, moving_cells, receiver_settings, simulate
 
 
 def emitter_value(text: str) -> tuple[float, tuple[float, float]]:
@@ -112,10 +117,15 @@ def main(argv=None) -> int:
     parser.add_argument("--site-field", type=site_field_value, metavar="SD_DEG[,STRETCH_M]",
                         help="a site error the readings share along the road (multipath off the same buildings): a "
                         "smooth field over the antenna's place, sd SD_DEG, correlated over STRETCH_M (default 300)")
+    parser.add_argument("--moving", choices=sorted(moving_cells()),
+                        help="a transmitter that moves (a walker, a car on a block of roads, a drone, one that stands, "
+                        "walks 300 m and stands), the vehicle on a ring about it; instead of --scenario")
     parser.add_argument("--write-bag", metavar="DIR", help="also write the simulated run as a rosbag2 MCAP bag")
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
+    if args.moving:
+        return run_moving(parser, args)
     if args.scenario in FLEETS or args.emitters:
         if args.co_channel or args.site_field:
             parser.error("--co-channel and --site-field are for one vehicle and one frequency (not with --emitters or "
@@ -168,6 +178,45 @@ def main(argv=None) -> int:
         return co_channel_verdict(data, est, args.interleaved)
     ok = s["error"] <= 5 * s["crlb"] + 1.0 and math.isfinite(s["error"])
     return 0 if ok else 1
+
+
+def run_moving(parser: argparse.ArgumentParser, args) -> int:
+    """A moving cell through the engine: the last estimate's motion and velocity, its error against the
+    transmitter's place at its stamp, and the posterior Cramer-Rao bound there; 0 when inside 3 times its ellipse."""
+    if args.scenario != "seed" or args.emitters or args.co_channel or args.site_field or args.mount_offset_deg:
+        parser.error("--moving is a scenario of its own (not with --scenario, --emitters, --co-channel, --site-field "
+                     "or --mount-offset-deg)")
+    sc = moving_cells()[args.moving]
+    data = simulate(sc, args.data_seed)
+    try:
+        cfg = config_from_args(args, LocalizerConfig())
+        cfg = scenario_config(data, cfg if cfg.seed is not None else cfg.with_changes(seed=10000 + args.data_seed))
+    except ConfigError as exc:
+        print(f"simulate: {exc}", file=sys.stderr)
+        return 2
+    if args.write_bag:
+        from msgs_adapters.bag import write_bag
+
+        write_bag(args.write_bag, data.fixes, data.bearings, data.emitter_enu, data.scenario.datum)
+        print(f"bag written to {args.write_bag}")
+    estimates = [e for e in Localizer(cfg).run(data.inputs()) if e is not None]
+    print(f"transmitter {args.moving}: {sc.emitter_speed:g} m/s from E {sc.emitter[0]:.0f} N {sc.emitter[1]:.0f}, "
+          f"{len(data.fixes)} fixes, {len(data.bearings)} DF readings")
+    if not estimates:
+        print("no estimate")
+        return 1
+    est = estimates[-1]
+    stamps = data.bearings[:, 0]
+    bound = pcrb_moving(data.emitter_at(stamps), data.sensor_enu, data.sigma, stamps, max(sc.emitter_speed, 0.5),
+                        120.0)[max(0, int(np.searchsorted(stamps, est.stamp, side="right")) - 1)]
+    error = np.array(LocalFrame(*sc.datum).to_enu(est.lat, est.lon)) - data.emitter_at(np.array([est.stamp]))[0]
+    a, b, _ = ellipse_axes(est.cov)
+    velocity = "" if est.velocity is None else f", velocity E {est.velocity[0]:+.1f} N {est.velocity[1]:+.1f} m/s"
+    print(f"estimate at {est.stamp:.0f} s: {est.motion} (p moving {est.motion_probability:.2f}){velocity}, "
+          f"95% ellipse semi-axes {a:.1f} m x {b:.1f} m")
+    print(f"error {float(np.hypot(*error)):.1f} m to where the transmitter is then; posterior Cramer-Rao bound "
+          f"{bound:.1f} m; state: {est.state}" + "".join(f"; {w}" for w in est.warnings))
+    return 0 if inside_ellipse(error, est.cov, 9 * ELLIPSE_95) else 1
 
 
 def co_channel_verdict(data, est, interleaved: bool) -> int:

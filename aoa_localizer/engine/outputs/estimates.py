@@ -10,12 +10,14 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
 from aoa_localizer.engine.channels import Channel, Channels, Closed
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, ground_to_map
+from aoa_localizer.engine.inference.motion import SURE_MOVING_P, UNSURE_P, Motion, mixture
 from aoa_localizer.engine.ingest.intake import Intake
 from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
@@ -42,6 +44,25 @@ def noise_summary(channel: Channel, cfg: LocalizerConfig) -> dict:
     """A channel's self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier
     rates."""
     return channel.track.calibration.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
+
+
+def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, cov: np.ndarray, state: EstimateState,
+                warnings: list[str]) -> tuple[np.ndarray, np.ndarray, EstimateState, list[str], dict[str, Any]]:
+    """A standing transmitter's estimate with what the motion watch says (`motion`; `said`: what the estimate may
+    follow, motion.py): the probability of motion, the velocity over both models (a standing one's is zero), and
+    where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking`."""
+    moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
+    if said is None:
+        return mean, cov, state, warnings, moves
+    p, v = said.p_moving, said.velocity
+    moves.update(velocity=p * v, velocity_cov=p * said.velocity_cov + p * (1.0 - p) * np.outer(v, v))
+    if p < UNSURE_P:
+        return mean, cov, state, warnings, moves
+    mean, cov = mixture(p, mean, cov, said.mean, said.cov)
+    warnings = warnings + [f"the transmitter may be moving (p = {p:.2f}): the place is between where it stood and "
+                           "where a mover would be now"]
+    moves["motion"] = "undecided"
+    return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
 
 
 class Estimates:
@@ -81,20 +102,20 @@ class Estimates:
     def publish(self, channel: Channel, end_of_data: bool = False) -> Estimate | None:
         """The channel's new estimate, kept and handed to `on_estimate`; None (counted) when its covariance is not
         positive definite. A survey-like channel's is the survey model's while it has a fix (_live_survey)."""
+        track = channel.track
+        count = track.count_transmitters(final=end_of_data)  # several transmitters taking turns are no mover
+        if track.moving:
+            return self._publish_moving(channel, end_of_data)
         if not end_of_data and self.cfg.end_of_data_model == "survey":
             live = self._live_survey(channel)
             if live is not None:
                 return live
-        track = channel.track
         mean, cov = track.estimate()
         if not positive_definite(cov):
             self.reject(Reason.COVARIANCE_DEGENERATE)
             return None
         frame = self.intake.datum_frame()
-        lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
-        from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         cloud = track.cloud
-        count = track.count_transmitters(final=end_of_data)
         modes, state, warnings = track.assess(np.asarray(mean), np.asarray(cov), others_share(count, np.asarray(mean)))
         transmitters: list[Transmitter] = []
         if count is not None:
@@ -111,6 +132,10 @@ class Estimates:
                 t_lat, t_lon, _ = frame.to_geodetic(place.mean[0], place.mean[1])
                 transmitters.append(Transmitter(float(place.mean[0]), float(place.mean[1]), float(t_lat),
                                                 float(t_lon), place.cov.copy(), place.share, place_state))
+        mean, cov, state, warnings, moves = with_motion(track.motion, track.motion_said, np.asarray(mean, float),
+                                                        np.asarray(cov, float), state, warnings)
+        lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
+        from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
                             lon=float(lon), cov=np.array(cov), ground_cov=from_map @ np.asarray(cov) @ from_map.T,
                             bearings_used=track.bearings_used,
@@ -121,7 +146,41 @@ class Estimates:
                             channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
                             end_of_data=end_of_data, transmitter_count=count.count if count is not None else 1,
                             count_probability=count.probability if count is not None else float("nan"),
-                            transmitters=transmitters)
+                            transmitters=transmitters, **moves)
+        return self._announce(channel, estimate)
+
+    def _publish_moving(self, channel: Channel, end_of_data: bool) -> Estimate | None:
+        """A moving transmitter's estimate: where the motion watch's moving model has it now, its velocity, and
+        `poorly_determined` while its range is not observed (the observer has not turned across its line of sight)."""
+        track = channel.track
+        motion, watch = track.motion_said, track.watch
+        assert motion is not None and watch is not None
+        if not positive_definite(motion.cov):
+            self.reject(Reason.COVARIANCE_DEGENERATE)
+            return None
+        frame = self.intake.datum_frame()
+        east, north = (float(v) for v in motion.mean)
+        lat, lon, _ = frame.to_geodetic(east, north)
+        from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(east, north)))
+        speed = float(np.hypot(*motion.velocity))
+        heading = math.degrees(math.atan2(motion.velocity[0], motion.velocity[1])) % 360.0
+        warnings = [f"the transmitter moves (p = {motion.p_moving:.2f}): {speed:.1f} m/s towards {heading:03.0f} "
+                    "deg; the place is where it is now"]
+        state = EstimateState.TRACKING if motion.p_moving >= SURE_MOVING_P else EstimateState.POORLY_DETERMINED
+        if not motion.range_observed:
+            state = EstimateState.POORLY_DETERMINED
+            warnings.append("a moving transmitter's range is not observed from bearings until the observer turns "
+                            "across its line of sight: the ellipse is long along it")
+        places = watch.place
+        estimate = Estimate(stamp=track.last_stamp, east=east, north=north, lat=float(lat), lon=float(lon),
+                            cov=np.array(motion.cov), ground_cov=from_map @ motion.cov @ from_map.T,
+                            bearings_used=track.bearings_used, points_used=track.points_used,
+                            ess=float(places.shape[0]), algorithm=self.cfg.algorithm, particles=places.copy(),
+                            weights=watch.weights.copy(), modes=[(east, north, 1.0)],
+                            noise=noise_summary(channel, self.cfg) if self.cfg.calibrate_noise else None,
+                            channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
+                            end_of_data=end_of_data, motion="moving", motion_probability=motion.p_moving,
+                            velocity=motion.velocity.copy(), velocity_cov=motion.velocity_cov.copy())
         return self._announce(channel, estimate)
 
     def finish(self) -> Estimate | None:

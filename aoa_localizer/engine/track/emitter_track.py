@@ -36,6 +36,7 @@ from aoa_localizer.engine.inference.co_channel import (
     count_job,
 )
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
+from aoa_localizer.engine.inference.motion import Motion, MotionWatch
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
@@ -87,6 +88,7 @@ class EmitterTrack(Held):
         self.heard_held += len(readings)
         while self.heard_held > HEARD_READINGS and len(self.heard) > 1:
             self.heard_held -= len(self.heard.popleft())
+        self.motion = self._watch_motion(readings) or self.motion  # against the cloud as it stood before the point
         point, kept = self.calibration.make(readings)
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
@@ -107,7 +109,20 @@ class EmitterTrack(Held):
         self.scheduler.take_turn(self.site_fitting)
         self.fit_site_part()
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
-        return took
+        return took or self.moving
+
+    def _watch_motion(self, readings: list[Reading]) -> Motion | None:
+        """A point's readings read by the motion watch (motion.py), begun on the first, against the estimate the
+        filter would publish before the point (its place and honest covariance; motion is judged once a filter
+        runs: a provisional sample's spread is no standing transmitter's posterior); None with `motion_model:
+        static`."""
+        if self.cfg.motion_model == "static" or not readings:
+            return None
+        if self.watch is None:
+            self.watch = MotionWatch(readings[0], self.cfg.max_transmitter_speed_mps, self.rng.spawn(1)[0],
+                                     self.cfg.gps_sigma_m)
+        f = self.filter
+        return self.watch.step(readings, None if f is None else (f.x, f.weights, self.estimate()[1]))
 
     def _update(self, entry: WindowEntry, owed_before: bool = False) -> bool:
         """The running filter's update with one point (and the moves it owes the scheduler), then the supervisor's

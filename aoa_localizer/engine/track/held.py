@@ -14,6 +14,7 @@ from aoa_localizer.engine.inference.checks import Snapshot
 from aoa_localizer.engine.inference.co_channel import Count
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, radio_reach
+from aoa_localizer.engine.inference.motion import MOVING_P, Motion, MotionWatch
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.point_batch import points_of, rows_of
 from aoa_localizer.engine.inference.safety import ModeProposal
@@ -57,6 +58,9 @@ class Held:
         self.last_update_s = float("nan")
         self.last_stamp = float("nan")  # stamp of the newest observation point
         self.last_kept = np.zeros(0, bool)  # which readings the newest point kept (the report's trace)
+        # Whether the transmitter moves (motion.py): the watch, begun with the filter, and what it last said
+        self.watch: MotionWatch | None = None
+        self.motion: Motion | None = None
         # Every point's readings as heard (the transmitter count's: the window drops points when the emitter moved,
         # which is what transmitters taking turns look like), their number, and the last count with the readings
         # it was made from
@@ -78,6 +82,21 @@ class Held:
     def places(self) -> tuple[object, ...]:
         """The track's keys among the scheduler's jobs: its start search or check, its count, its site-part fit."""
         return self, self.counting, self.site_fitting
+
+    @property
+    def moving(self) -> bool:
+        """The motion watch finds the transmitter moving (p >= MOVING_P) and the estimate follows it."""
+        said = self.motion_said
+        return said is not None and said.p_moving >= MOVING_P
+
+    @property
+    def motion_said(self) -> Motion | None:
+        """What the motion watch says, for the estimate to follow; None before it says anything, or while the
+        transmitter count finds several on the frequency (transmitters taking turns look like one that jumps, and
+        the count is the model made for them)."""
+        if self.counted is not None and self.counted.count >= 2:
+            return None
+        return self.motion
 
     @property
     def job(self) -> PendingJob | None:
