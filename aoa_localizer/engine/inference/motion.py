@@ -75,14 +75,23 @@ def _moments(x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def median_bearing(readings: list[Reading]) -> Reading:
     """A point's readings as one: the median bearing (about the first, so wrapping cannot split it), its sigma
     the median's (1.25 sigma over root n), at the readings' mean time and antenna place."""
-    if len(readings) == 1:
+    n = len(readings)
+    if n == 1:
         return readings[0]
-    theta = np.array([r.theta for r in readings])
-    turn = float(np.median((theta - theta[0] + np.pi) % (2.0 * np.pi) - np.pi))
-    sigma = float(np.sqrt(np.mean(np.square([r.sigma for r in readings]))))
-    return Reading(float(np.mean([r.stamp for r in readings])), theta[0] + turn, math.nan,
-                   1.2533 * sigma / math.sqrt(len(readings)), float(np.mean([r.east for r in readings])),
-                   float(np.mean([r.north for r in readings])), float(np.mean([r.gps_sigma for r in readings])))
+    first = readings[0].theta
+    turns = sorted((r.theta - first + math.pi) % (2.0 * math.pi) - math.pi for r in readings)
+    turn = turns[n // 2] if n % 2 else 0.5 * (turns[n // 2 - 1] + turns[n // 2])
+    sigma = math.sqrt(sum(r.sigma * r.sigma for r in readings) / n)
+    return Reading(sum(r.stamp for r in readings) / n, first + turn, math.nan, 1.2533 * sigma / math.sqrt(n),
+                   sum(r.east for r in readings) / n, sum(r.north for r in readings) / n,
+                   sum(r.gps_sigma for r in readings) / n)
+
+
+def systematic(weights: np.ndarray, size: int, rng: np.random.Generator) -> np.ndarray:
+    """`size` indices drawn by systematic resampling of `weights` (normalised, finite)."""
+    edges = np.cumsum(weights)
+    edges[-1] = 1.0
+    return np.minimum(np.searchsorted(edges, (rng.random() + np.arange(size)) / size), weights.size - 1)
 
 
 def bearing_likelihood(place: np.ndarray, r: Reading, log_noise: np.ndarray, log_wild: np.ndarray,
@@ -100,9 +109,9 @@ def bearing_likelihood(place: np.ndarray, r: Reading, log_noise: np.ndarray, log
 
 class MotionWatch:
     """The moving cloud, begun on the first reading's line of bearing, and the probability of motion:
-    `step(readings, static)` reads one point's readings against it and against the static model `static` (the
-    channel filter's mean and covariance before the point; None while it has none: then only the moving cloud
-    learns) and returns the Motion they make."""
+    `step(readings, static)` reads one point's readings against it and against the standing model `static` (the
+    channel filter's places, weights and published covariance before the point; None while it has none: then only
+    the moving cloud learns) and returns the Motion they make."""
 
     def __init__(self, first: Reading, max_speed: float, rng: np.random.Generator, gps_sigma_m: float = 0.0,
                  n: int = 1000):
@@ -137,7 +146,7 @@ class MotionWatch:
         lik_m = bearing_likelihood(self.place, r, self.log_noise, self.log_wild, self.gps_sigma_m)
         if places is not None and static is not None and self._comparable(static[2]):
             # the static places read with the moving cloud's noise and wild shares (one likelihood for both)
-            lend = self.rng.choice(self.n, places.shape[0], p=self.weights)
+            lend = self.rng.permutation(systematic(self.weights, places.shape[0], self.rng))
             evidence_s = float(bearing_likelihood(places, r, self.log_noise[lend], self.log_wild[lend],
                                                   self.gps_sigma_m).mean())
             evidence_m = float(self.weights @ lik_m)
@@ -166,8 +175,9 @@ class MotionWatch:
         total = weights.sum()
         if places.shape[0] == 0 or not (total > 0.0 and math.isfinite(total) and np.isfinite(cov).all()):
             return None
-        pick = self.rng.choice(places.shape[0], STATIC_SAMPLE, p=weights / total)
-        root = np.linalg.cholesky(0.5 * (cov + cov.T) + 1e-6 * np.eye(2))
+        pick = systematic(weights / total, STATIC_SAMPLE, self.rng)
+        values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))  # a square root that a rounding cannot refuse
+        root = vectors * np.sqrt(np.clip(values, 0.0, None))
         return places[pick] + KERNEL * self.rng.standard_normal((STATIC_SAMPLE, 2)) @ root.T
 
     def motion(self) -> Motion:
@@ -216,9 +226,7 @@ class MotionWatch:
         self.weights = w / total
         if 1.0 / float(self.weights @ self.weights) >= 0.5 * self.n:
             return
-        edges = np.cumsum(self.weights)
-        edges[-1] = 1.0
-        keep = np.minimum(np.searchsorted(edges, (self.rng.random() + np.arange(self.n)) / self.n), self.n - 1)
+        keep = systematic(self.weights, self.n, self.rng)
         self.place, self.velocity = self.place[keep], self.velocity[keep]
         self.log_speed, self.log_noise, self.log_wild = self.log_speed[keep], self.log_noise[keep], self.log_wild[keep]
         self.weights = np.full(self.n, 1.0 / self.n)
