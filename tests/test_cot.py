@@ -44,6 +44,20 @@ def test_an_estimate_is_a_cot_event_with_its_point_ellipse_and_state(estimate):
     assert proto.cotEvent.uid == "aoa_localizer.f433920000" and proto.cotEvent.lat == pytest.approx(39.1072166)
 
 
+def test_a_moving_transmitter_carries_its_course_and_speed_as_a_cot_track(estimate):
+    from dataclasses import replace
+
+    assert ET.fromstring(estimate_event(estimate, 60.0)).find("detail/track") is None  # standing: no track
+    moving = replace(estimate, motion="moving", motion_probability=0.97, velocity=np.array([-3.0, 4.0]),
+                     velocity_cov=np.eye(2))
+    track = ET.fromstring(estimate_event(moving, 60.0)).find("detail/track")
+    assert float(track.get("speed")) == pytest.approx(5.0)
+    assert float(track.get("course")) == pytest.approx(323.1, abs=0.05)  # west of north: atan2(-3, 4)
+    proto = takproto.parse_proto(takproto.xml2proto(estimate_event(moving, 60.0).decode()))
+    assert proto.cotEvent.detail.track.speed == pytest.approx(5.0)
+    assert proto.cotEvent.detail.track.course == pytest.approx(323.1, abs=0.05)  # as written, to 0.1 deg
+
+
 def test_udp_and_tcp_listeners_receive_the_event_and_a_dead_server_is_counted_not_raised(estimate, tmp_path):
     payload = estimate_event(estimate, 60.0)
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

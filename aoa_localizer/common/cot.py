@@ -41,7 +41,8 @@ def _pytak():
 def estimate_event(est, stale_s: float, name: str = "") -> bytes:
     """One estimate as a CoT event (XML bytes): uid `aoa_localizer.<channel or name>`, its point to 1e-7 deg, `ce`
     its CE90 (m; `le` and `hae` unknown), a shape with the 95 % ellipse (semi-axes m, angle deg clockwise from north),
-    the state and warnings in the remarks, stale `stale_s` from now."""
+    a moving transmitter's course and speed as a track, the state and warnings in the remarks, stale `stale_s` from
+    now."""
     pytak = _pytak()
     ident = xml_text(name or est.channel)
     major, minor, azimuth = ellipse_axes(est.cov if est.ground_cov is None else est.ground_cov)
@@ -49,6 +50,10 @@ def estimate_event(est, stale_s: float, name: str = "") -> bytes:
     ET.SubElement(shape, "ellipse", major=f"{major:.1f}", minor=f"{minor:.1f}", angle=f"{azimuth:.1f}")
     frequency = "" if math.isnan(est.frequency_hz) else f" ({est.frequency_hz / 1e6:.3f} MHz)"
     detail = pytak.cot_detail(shape)
+    if est.motion == "moving" and est.velocity is not None:  # CoT's track: course deg clockwise from north, m/s
+        east, north = (float(v) for v in est.velocity)
+        ET.SubElement(detail, "track", course=f"{math.degrees(math.atan2(east, north)) % 360.0:.1f}",
+                      speed=f"{math.hypot(east, north):.2f}")
     pytak.add_remarks(detail, [f"aoa_localizer {ident}{frequency}: {est.state};",
                                f"95 % ellipse {major:.0f} x {minor:.0f} m ({ELLIPSE_95:.2f} sigma^2);",
                                f"{est.bearings_used} bearings.", *map(xml_text, est.warnings)])
