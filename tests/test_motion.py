@@ -182,3 +182,25 @@ def test_simulate_refuses_a_moving_run_mixed_with_another_scenario_and_a_bad_spe
     assert res.returncode == 2 and "max_transmitter_speed_mps" in res.stderr
     res = cli(main, "--moving", "skater")
     assert res.returncode == 2 and "invalid choice" in res.stderr
+
+
+def test_a_moving_transmitters_path_is_a_line_in_the_kml_and_geojson():
+    from aoa_localizer.engine.geodesy import LocalFrame
+    from aoa_localizer.reporting import export
+    from aoa_localizer.simulation.scenarios import DATUM
+
+    frame = LocalFrame(*DATUM)
+
+    def at(stamp, east, north, motion):
+        lat, lon, _ = frame.to_geodetic(east, north)
+        return Estimate(stamp, east, north, float(lat), float(lon), np.eye(2), 10, 2, 100.0, "afsa", motion=motion)
+
+    ests = [at(1.0, 0.0, 0.0, "static"), at(2.0, 10.0, 0.0, "moving"), at(3.0, 20.0, 5.0, "moving"),
+            at(4.0, 30.0, 9.0, "moving")]
+    paths = export.moving_paths(ests)
+    assert list(paths) == ["default"] and np.allclose(paths["default"], [[10, 0], [20, 5], [30, 9]])
+    lines = [f for f in export.geojson(frame, ests[-1:], {}, paths)["features"] if f["properties"]["name"] ==
+             "transmitter path"]
+    assert len(lines) == 1 and len(lines[0]["geometry"]["coordinates"]) == 3
+    assert "<name>transmitter path</name>" in export.kml(frame, ests[-1:], {}, paths)
+    assert export.moving_paths(ests[:2]) == {}  # one moving estimate is no path

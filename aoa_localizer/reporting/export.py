@@ -54,6 +54,20 @@ def track_name(station: str) -> str:
     return f"vehicle track {station}" if station else "vehicle track"
 
 
+def moving_paths(estimates: list[Estimate]) -> dict[str, np.ndarray]:
+    """Each channel's path as a moving transmitter (its `moving` estimates' places in time order, ENU rows east,
+    north), where it has two or more."""
+    paths: dict[str, list[tuple[float, float]]] = {}
+    for est in estimates:
+        if est.motion == "moving":
+            paths.setdefault(est.channel, []).append((est.east, est.north))
+    return {channel: np.array(rows) for channel, rows in paths.items() if len(rows) >= 2}
+
+
+def path_name(channel: str) -> str:
+    return "transmitter path" if channel == "default" else f"transmitter path {channel}"
+
+
 def _lonlat(frame: LocalFrame, enu: np.ndarray) -> list[list[float]]:
     lat, lon, _ = frame.to_geodetic(enu[:, 0], enu[:, 1])
     return [[float(x), float(y)] for x, y in zip(np.atleast_1d(lon), np.atleast_1d(lat), strict=False)]
@@ -77,9 +91,11 @@ def region_rings(est: Estimate) -> list[tuple[str, list[list[list[float]]]]]:
     return out
 
 
-def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray]) -> dict:
+def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray],
+            paths: dict[str, np.ndarray] | None = None) -> dict:
     """A FeatureCollection: per emitter its estimate (Point), 95 % ellipse (Polygon) and, where it has them, its
-    highest-density regions (MultiPolygon); per station its track (LineString, ENU rows east, north)."""
+    highest-density regions (MultiPolygon) and its path as a moving transmitter (`paths`: LineString); per station
+    its track (LineString, ENU rows east, north)."""
     features = []
     for est in estimates:
         for name, rings in region_rings(est):
@@ -103,10 +119,14 @@ def geojson(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.n
                     "properties": {"name": track_name(station)},
                 }
             )
+    for channel, path in (paths or {}).items():
+        features.append({"type": "Feature", "geometry": {"type": "LineString", "coordinates": _lonlat(frame, path)},
+                         "properties": {"name": path_name(channel), "channel": channel}})
     return {"type": "FeatureCollection", "features": features}
 
 
-def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray]) -> str:
+def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarray],
+        paths: dict[str, np.ndarray] | None = None) -> str:
     """A KML document with the same placemarks (opens in Google Earth and GIS tools)."""
     ET.register_namespace("", KML_NS)
     q = lambda tag: f"{{{KML_NS}}}{tag}"  # noqa: E731
@@ -139,9 +159,9 @@ def kml(frame: LocalFrame, estimates: list[Estimate], tracks: dict[str, np.ndarr
             for r in rings:
                 boundary = ET.SubElement(ET.SubElement(multi, q("Polygon")), q("outerBoundaryIs"))
                 ET.SubElement(ET.SubElement(boundary, q("LinearRing")), q("coordinates")).text = coords(r)
-    for station, track_enu in tracks.items():
-        if len(track_enu) >= 2:
-            line = ET.SubElement(placemark(track_name(station), None), q("LineString"))
-            ET.SubElement(line, q("coordinates")).text = coords(_lonlat(frame, track_enu))
+    lines = [(track_name(station), enu) for station, enu in tracks.items() if len(enu) >= 2]
+    for name, enu in lines + [(path_name(channel), path) for channel, path in (paths or {}).items()]:
+        line = ET.SubElement(placemark(name, None), q("LineString"))
+        ET.SubElement(line, q("coordinates")).text = coords(_lonlat(frame, enu))
     ET.indent(root)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -107,6 +107,7 @@ def estimates_from_jsonl(path: Path, frame_of) -> list[Estimate]:
                     algorithm=str(d.get("algorithm", "?")),
                     channel=str(d.get("channel", "default")),
                     frequency_hz=float(d.get("frequency_hz") or float("nan")),
+                    motion=str(d.get("motion", "static")),
                 )
             )
         except (ValueError, KeyError, TypeError) as exc:
@@ -285,9 +286,11 @@ def make_report(args) -> int:
 
 def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], run):
     """map.png, error.png (with the truth), emitter.kml, emitter.geojson and summary.md in args.out. Every emitter
-    (channel) is drawn and exported; the error plot and the summary's figures are the last estimate's channel's."""
+    (channel) is drawn and exported, a moving one's path as a line; the error plot and the summary's figures are the
+    last estimate's channel's."""
     frame, est = loc.datum_frame(), estimates[-1]
     finals = list({e.channel: e for e in estimates}.values())  # each channel's last estimate
+    paths = export.moving_paths(estimates)  # a moving transmitter's path, per channel
     estimates = [e for e in estimates if e.channel == est.channel]
     truths = {}  # each channel's truth (bag_run.truth_of), in the engine's map
     for e in finals:
@@ -310,8 +313,8 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
         plots.error_figure(args.out / "error.png", t, err, bounds, major)
         bound = crlb_rmse(truth, readings[kept][:, 1:3], readings[kept][:, 4]) if kept.any() else float("inf")
     enu = {name: rows[:, 1:3] for name, rows in tracks.items()}
-    (args.out / "emitter.kml").write_text(export.kml(frame, finals, enu))
-    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, finals, enu), indent=1))
+    (args.out / "emitter.kml").write_text(export.kml(frame, finals, enu, paths))
+    (args.out / "emitter.geojson").write_text(json.dumps(export.geojson(frame, finals, enu, paths), indent=1))
     print(f"report: {write_cot_files(args.out, finals)}", file=sys.stderr)
     cot = [f"emitter_{name}.cot" for name in file_names(e.channel for e in finals).values()]
     write_summary(args.out / "summary.md", args.input, loc, trace, est, truth, bound, run.damage, others, truths,
