@@ -42,7 +42,7 @@ from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.ros.node_params import NODE_PARAMS
 from aoa_localizer.ros.sim_vehicle import VEHICLE_SPECS
 from aoa_localizer.simulation.fleet import FLEETS
-from aoa_localizer.simulation.scenarios import SCENARIOS, receiver_settings
+from aoa_localizer.simulation.scenarios import SCENARIOS, moving_cells, receiver_settings
 from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
 from msgs_adapters.bag_files import BagFiles, BagFilesError
 
@@ -215,7 +215,7 @@ def node_parameters(args, found: dict[str, dict[str, str]] | None = None) -> dic
     params: dict = {"input_reliability": "reliable", "input_queue_depth": 2000}  # the sources' own history's depth
     if args.scenario:
         fleet = FLEETS.get(args.scenario)
-        sc = fleet.first if fleet else SCENARIOS[args.scenario]
+        sc = fleet.first if fleet else {**SCENARIOS, **moving_cells()}[args.scenario]
         if not args.bag:
             params.update(datum_lat=sc.datum[0], datum_lon=sc.datum[1], datum_alt=sc.datum[2])
         params.update(sc.filter_overrides)
@@ -504,7 +504,7 @@ def verdict(state: dict, max_ellipse: float) -> tuple[bool, str, dict]:
 def parse_args(argv) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.launch", description=__doc__,
                                      formatter_class=HelpFormatter)
-    parser.add_argument("--scenario", choices=sorted(SCENARIOS) + sorted(FLEETS),
+    parser.add_argument("--scenario", choices=sorted(SCENARIOS) + sorted(FLEETS) + sorted(moving_cells()),
                         help="public scenario to simulate (docs/benchmarks.md, Scenarios; unset: seed); with --bag, "
                         "the scenario whose receiver settings the node gets (unset: the node's defaults)")
     parser.add_argument("--speedup", type=finite_number(0.0), default=10.0, metavar="X",

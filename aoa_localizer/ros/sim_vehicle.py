@@ -33,7 +33,14 @@ from aoa_localizer.ros.declare import declare, refuse_unknown
 from aoa_localizer.ros.ros_main import Stop, run_node
 from aoa_localizer.simulation.fleet import FLEETS, Fleet, simulate_fleet
 from aoa_localizer.simulation.goal_drive import GoalDrive
-from aoa_localizer.simulation.scenarios import SCENARIOS, Trajectory, mounted, simulate
+from aoa_localizer.simulation.scenarios import (
+    SCENARIOS,
+    Trajectory,
+    emitter_trajectory,
+    mounted,
+    moving_cells,
+    simulate,
+)
 from msgs_adapters import build
 
 HISTORY_DEPTH = 2000  # messages a publisher keeps for a reliable reader's resend: seconds of a fast play
@@ -80,8 +87,9 @@ OVERRIDES = [
 
 # The vehicle's own settings besides the scenario overrides.
 SETTINGS = [
-    ParameterSpec("scenario", "seed", Spec("public scenario (`pair`: two stations)", str,
-                                           choices=tuple(SCENARIOS) + tuple(FLEETS))),
+    ParameterSpec("scenario", "seed", Spec("public scenario (`pair`: two stations), or a transmitter that moves "
+                                           "(walker, car, drone, stand_walk_stand: sim/truth follows it)", str,
+                                           choices=tuple(SCENARIOS) + tuple(FLEETS) + tuple(moving_cells()))),
     ParameterSpec("drive", "track", Spec("`track`: the scenario's track; `goal`: its track until the localizer "
                                          "publishes emitter/next_goal, then towards the newest goal (a stop-and-go "
                                          "single-vehicle scenario)", str, choices=("track", "goal"))),
@@ -107,7 +115,7 @@ VEHICLE_SPECS = {p.name: p for p in SETTINGS + OVERRIDES}
 
 def scenario_from(name: str, o: dict):
     """The named scenario with the set overrides applied."""
-    sc = SCENARIOS[name]
+    sc = SCENARIOS[name] if name in SCENARIOS else moving_cells()[name]
     changes: dict[str, Any] = {}
 
     def given(key: str, default: float) -> float:
@@ -171,6 +179,7 @@ class SimVehicle(Node):
         self.sigma_of: dict[float, float] = {}  # each bearing's noise by its stamp, for the pose encoding
         self.goal_end_s = 0.0
         self.truths: dict[str, np.ndarray] = {}  # with several transmitters, each one's by its channel
+        self.path: Trajectory | None = None  # a moving transmitter's (sim/truth follows it at each fix)
         self.stations = self._goal_drive(overrides) if s["drive"] == "goal" else self._simulate(overrides)
         latched = QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -268,6 +277,9 @@ class SimVehicle(Node):
             d = simulate(mounted(scenario_from(self.scenario_name, overrides), mount), self.data_seed)
             self.events = [(row[0], "", kind, row) for kind, row in d.events()]
             self.datum, self.emitter, self.counts = d.scenario.datum, d.emitter_enu, (len(d.fixes), len(d.bearings))
+            self.path = emitter_trajectory(d.scenario)  # a moving transmitter's: sim/truth follows it
+            if self.path is not None:
+                self.emitter = self.path.at(np.array([0.0]))[0]
             self.sigma_of = dict(zip(d.bearings[:, 0].tolist(), d.sigma.tolist(), strict=False))
             return [""]
         given = sorted(k for k, v in overrides.items() if v is not None)
@@ -293,7 +305,6 @@ class SimVehicle(Node):
     def play(self, stop: Stop):
         """Publish the run; returns when it is played, the duration is reached or `stop` is requested."""
         self.stop = stop
-        T = self.T
         deadline = time.monotonic() + self.start_timeout_s
         every = [pub for pair in self.pubs.values() for pub in pair]
         while (
@@ -328,23 +339,33 @@ class SimVehicle(Node):
                 delay = 1.0 / self.max_rate_hz
             if delay > 0:
                 self.serve(delay)
-            pub_fix, pub_bearing = self.pubs[station]
-            if kind == "fix":
-                pub_fix.publish(build.navsatfix(T, base + t, row[1], row[2], row[3]))
-            elif self.encoding == "df_record":
-                pub_bearing.publish(build.df_record(T, base + t, *row[1:4]))
-            elif self.encoding == "scan":
-                rows = np.asarray(row, float)
-                freq = rows[:, 3] if rows.shape[1] > 3 else None
-                pub_bearing.publish(build.df_scan(T, base + t, rows[:, 1], rows[:, 2], freq))
-            else:
-                yaw = math.radians(90.0 - row[1])
-                pub_bearing.publish(build.pose_bearing(T, base + t, yaw, self.sigma_of.get(t, self.sigma_rad) ** 2))
+            self._publish(t, station, kind, row, base)
             if t >= next_log:
                 self.get_logger().info(f"t = {t:.0f} s")
                 next_log += 30.0
         self.serve(0.5)  # let the last messages leave
         self.get_logger().info("scenario played")
+
+
+    def _publish(self, t: float, station: str, kind: str, row, base: float) -> None:
+        """One event of the run at `base + t`: a fix (and a moving transmitter's truth there), or a DF message in
+        the encoding set."""
+        T = self.T
+        pub_fix, pub_bearing = self.pubs[station]
+        if kind == "fix":
+            pub_fix.publish(build.navsatfix(T, base + t, row[1], row[2], row[3]))
+            if self.path is not None:  # a moving transmitter's truth, where it is at each fix
+                self.emitter = self.path.at(np.array([t]))[0]
+                self._publish_truths(base + t)
+        elif self.encoding == "df_record":
+            pub_bearing.publish(build.df_record(T, base + t, *row[1:4]))
+        elif self.encoding == "scan":
+            rows = np.asarray(row, float)
+            freq = rows[:, 3] if rows.shape[1] > 3 else None
+            pub_bearing.publish(build.df_scan(T, base + t, rows[:, 1], rows[:, 2], freq))
+        else:
+            yaw = math.radians(90.0 - row[1])
+            pub_bearing.publish(build.pose_bearing(T, base + t, yaw, self.sigma_of.get(t, self.sigma_rad) ** 2))
 
 
 def scans(events: Iterable[tuple]) -> Iterator[tuple]:

@@ -34,6 +34,7 @@ SHRINK = 0.98  # Liu-West kernel shrinkage: the resampled noise and wild shares 
 MOVING_P = 0.8  # from this probability of motion on, the estimate is the moving model's
 SURE_MOVING_P = 0.95  # and from this on it may be `tracking` (below, `poorly_determined`)
 UNSURE_P = 0.3  # from this on (below MOVING_P), the estimate is the two models' mixture, never `tracking`
+MOTION_YIELDS_TO_COUNT = 0.99  # a transmitter count of several this sure outranks the watch (Held.motion_said)
 PRIOR_MOVING = 0.1  # the probability of motion before any reading: most transmitters DF crews hunt stand
 UNOBSERVED_RATIO = 6.0  # a moving ellipse this much longer along the line of sight than across: range not observed
 COMPARABLE = 2.0  # the standing model is weighed once its ellipse is at most this many times the moving one's

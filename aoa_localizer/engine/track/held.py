@@ -14,7 +14,7 @@ from aoa_localizer.engine.inference.checks import Snapshot
 from aoa_localizer.engine.inference.co_channel import Count
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, radio_reach
-from aoa_localizer.engine.inference.motion import MOVING_P, Motion, MotionWatch
+from aoa_localizer.engine.inference.motion import MOTION_YIELDS_TO_COUNT, MOVING_P, Motion, MotionWatch
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.point_batch import points_of, rows_of
 from aoa_localizer.engine.inference.safety import ModeProposal
@@ -92,9 +92,11 @@ class Held:
     @property
     def motion_said(self) -> Motion | None:
         """What the motion watch says, for the estimate to follow; None before it says anything, or while the
-        transmitter count finds several on the frequency (transmitters taking turns look like one that jumps, and
-        the count is the model made for them)."""
-        if self.counted is not None and self.counted.count >= 2:
+        transmitter count is all but sure of several on the frequency (transmitters taking turns look like one that
+        jumps, and the count is the model made for them; a walker's drift has been counted as two at p = 0.90, so
+        only a count of p >= MOTION_YIELDS_TO_COUNT outranks the watch)."""
+        if (self.counted is not None and self.counted.count >= 2
+                and self.counted.probability >= MOTION_YIELDS_TO_COUNT):
             return None
         return self.motion
 
