@@ -204,3 +204,24 @@ def test_a_moving_transmitters_path_is_a_line_in_the_kml_and_geojson():
     assert len(lines) == 1 and len(lines[0]["geometry"]["coordinates"]) == 3
     assert "<name>transmitter path</name>" in export.kml(frame, ests[-1:], {}, paths)
     assert export.moving_paths(ests[:2]) == {}  # one moving estimate is no path
+
+
+@pytest.mark.slow
+def test_a_watch_that_fails_costs_the_motion_not_the_point(monkeypatch, caplog):
+    """A failing watch (here: every step raises) is counted `internal_error` and logged; the filter's estimate goes
+    on as without the watch."""
+    from aoa_localizer import Localizer
+    from aoa_localizer.engine.inference import motion
+
+    def failing(self, readings, static):
+        raise np.linalg.LinAlgError("Matrix is not positive definite")
+
+    monkeypatch.setattr(motion.MotionWatch, "step", failing)
+    data = simulate("seed", 1)
+    loc = Localizer(LocalizerConfig(seed=1))
+    ests = [e for e in loc.run(data.inputs()) if e is not None]
+    loc_free = [e for e in Localizer(LocalizerConfig(seed=1, motion_model="static")).run(data.inputs()) if e]
+    assert ests and math.isnan(ests[-1].motion_probability) and ests[-1].motion == "static"
+    assert loc.rejected["internal_error"] == loc.channels.default.track.points_seen  # one per point: each step
+    assert (ests[-1].east, ests[-1].north) == (loc_free[-1].east, loc_free[-1].north)
+    assert any("motion watch failed" in r.getMessage() for r in caplog.records)

@@ -115,14 +115,21 @@ class EmitterTrack(Held):
         """A point's readings read by the motion watch (motion.py), begun on the first, against the estimate the
         filter would publish before the point (its place and honest covariance; motion is judged once a filter
         runs: a provisional sample's spread is no standing transmitter's posterior); None with `motion_model:
-        static`."""
+        static`, or when the watch failed (counted `internal_error`)."""
         if self.cfg.motion_model == "static" or not readings:
             return None
         if self.watch is None:
             self.watch = MotionWatch(readings[0], self.cfg.max_transmitter_speed_mps, self.rng.spawn(1)[0],
                                      self.cfg.gps_sigma_m)
         f = self.filter
-        return self.watch.step(readings, None if f is None else (f.x, f.weights, self.estimate()[1]))
+        try:
+            return self.watch.step(readings, None if f is None else (f.x, f.weights, self.estimate()[1]))
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError, MemoryError):
+            # a failed watch costs the motion, never the point: it begins again at the next one
+            log.exception("motion watch failed; it begins again")
+            self.reject(Reason.INTERNAL_ERROR, 1)
+            self.watch = None
+            return None
 
     def _update(self, entry: WindowEntry, owed_before: bool = False) -> bool:
         """The running filter's update with one point (and the moves it owes the scheduler), then the supervisor's
