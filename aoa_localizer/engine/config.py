@@ -334,7 +334,7 @@ class LocalizerConfig(GroupAccess):
         ("auto", "static"),
         "`auto`: beside each channel's filter a static and a moving model weigh its points, and where motion is "
         "probable the estimate follows the moving transmitter (`motion`, `motion_probability`, `velocity`); "
-        "`static`: every transmitter stands (no watch)",
+        "`static`: every transmitter stands (no watch; nor without `global_safety`)",
     )
     max_transmitter_speed_mps: float = param(
         30.0, "the moving model's top speed scale (m/s): its prior on a transmitter's speed is log-uniform from "

@@ -5,11 +5,15 @@ mixing made by sampling): the static one is the channel's own particle filter (i
 point: a standing transmitter's posterior, kept by the engine's moves, searches and re-starts), the moving one a
 cloud of its own here (a velocity that wanders about zero as an Ornstein-Uhlenbeck process, its speed scale a
 per-particle parameter with a log-uniform prior up to `max_speed`, so the cloud learns whether a walker or a car is
-followed). Both read the point's readings as the receiver gave them (their median, robust to a wild one), through
-one likelihood: each moving particle's noise scale (log-uniform over NOISE_SCALES times the readings' sigma) and
-wild share, learned by the cloud and lent to the static model, so neither model wins by its noise alone. Each
-model's predictive likelihood of a point weighs it; a Markov switch between them (a mean stay of SWITCH_S) lets a
-transmitter start or stop moving at any time. The moving cloud begins on the first reading's line of bearing.
+followed). Both read a point's readings as the receiver gave them (their median, robust to a wild one: what the
+channel's calibration learns from a mover misread as standing, offsets and a wider noise, would blur the mover;
+fed the calibrated points, a walker's ellipse held it a quarter of the time), through one likelihood: each moving
+particle's noise scale (log-uniform over NOISE_SCALES times the readings' sigma) and wild share, learned by the
+cloud and lent to the static model, so neither model wins by its noise alone. Where the standing model misfits
+raw readings it explains once corrected (a mount offset it learned, a twin mode), the estimate stays the filter's
+unless the filter doubts itself (Held.standing_doubted). Each model's predictive
+likelihood of a point weighs it; a Markov switch between them (a mean stay of SWITCH_S) lets a transmitter start or
+stop moving at any time. The moving cloud begins on the first point's line of bearing.
 
 The static answer stays the channel's filter's: this watch says how probable motion is and, where it is probable,
 where the moving transmitter is now, how fast it goes, and whether its range is observed at all.
@@ -21,25 +25,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aoa_localizer.engine.types import Reading
+from aoa_localizer.engine.types import ObservationPoint, Reading
 
 SWITCH_S = 1800.0  # mean time a transmitter keeps standing or moving (the models' switching rate)
 VELOCITY_TAU_S = 120.0  # a moving transmitter's velocity decorrelates over this (a walker turns, a car takes roads)
 MIN_SPEED = 0.3  # the speed-scale prior's low end (m/s): below this a transmitter is as good as standing
 SPEED_DRIFT = 0.1  # a moving particle's log speed scale takes a random step of this sd at each resampling
-NOISE_SCALES = (0.5, 8.0)  # the prior's range of the receiver's noise over the reading's own sigma (log-uniform)
+NOISE_SCALES = (0.5, 8.0)  # the prior's range of the receiver's noise over the point's own sigma (log-uniform)
 WILD_SHARES = (0.01, 0.5)  # the prior's range of the share of wild points (uniform in bearing; log-uniform)
 RANGE_M = (20.0, 10_000.0)  # the start's range prior: log-uniform over these (m)
 SHRINK = 0.98  # Liu-West kernel shrinkage: the resampled noise and wild shares keep their spread, gain diversity
 MOVING_P = 0.8  # from this probability of motion on, the estimate is the moving model's
 SURE_MOVING_P = 0.95  # and from this on it may be `tracking` (below, `poorly_determined`)
 UNSURE_P = 0.3  # from this on (below MOVING_P), the estimate is the two models' mixture, never `tracking`
+DOUBT_POINTS = 30  # the estimate may follow the watch while the filter doubted itself within this many points,
+SURE_MOTION_P = 0.99  # or after this many points in a row with the probability of motion at least this
 MOTION_YIELDS_TO_COUNT = 0.99  # a transmitter count of several this sure outranks the watch (Held.motion_said)
 PRIOR_MOVING = 0.1  # the probability of motion before any reading: most transmitters DF crews hunt stand
 UNOBSERVED_RATIO = 6.0  # a moving ellipse this much longer along the line of sight than across: range not observed
 COMPARABLE = 2.0  # the standing model is weighed once its ellipse is at most this many times the moving one's
 STATIC_SAMPLE = 1000  # places drawn from the static model's posterior to take its likelihood over
-KERNEL = 0.3  # each drawn place moved by a Gaussian kernel of this times the standing estimate's sd
+KERNEL = 0.3  # each drawn standing place moved by a Gaussian kernel of this times the bearing's width at its range
 
 # The standing model as the watch reads it: the filter's places (N, 2), their weights, and its published covariance
 Standing = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -73,19 +79,19 @@ def _moments(x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, (d * w[:, None]).T @ d
 
 
-def median_bearing(readings: list[Reading]) -> Reading:
-    """A point's readings as one: the median bearing (about the first, so wrapping cannot split it), its sigma
-    the median's (1.25 sigma over root n), at the readings' mean time and antenna place."""
+def median_bearing(readings: list[Reading]) -> ObservationPoint:
+    """A point's readings as the watch reads them: the median bearing as the receiver gave it (about the first, so
+    wrapping cannot split it; robust to a wild one), its sigma the median's (1.25 times the readings' own over root
+    n), at their mean time and antenna place."""
     n = len(readings)
-    if n == 1:
-        return readings[0]
     first = readings[0].theta
     turns = sorted((r.theta - first + math.pi) % (2.0 * math.pi) - math.pi for r in readings)
     turn = turns[n // 2] if n % 2 else 0.5 * (turns[n // 2 - 1] + turns[n // 2])
     sigma = math.sqrt(sum(r.sigma * r.sigma for r in readings) / n)
-    return Reading(sum(r.stamp for r in readings) / n, first + turn, math.nan, 1.2533 * sigma / math.sqrt(n),
-                   sum(r.east for r in readings) / n, sum(r.north for r in readings) / n,
-                   sum(r.gps_sigma for r in readings) / n)
+    return ObservationPoint(sum(r.stamp for r in readings) / n, sum(r.east for r in readings) / n,
+                            sum(r.north for r in readings) / n, first + turn,
+                            (1.2533 if n > 2 else 1.0) * sigma / math.sqrt(n), n,
+                            sum(r.gps_sigma for r in readings) / n)
 
 
 def systematic(weights: np.ndarray, size: int, rng: np.random.Generator) -> np.ndarray:
@@ -95,7 +101,7 @@ def systematic(weights: np.ndarray, size: int, rng: np.random.Generator) -> np.n
     return np.minimum(np.searchsorted(edges, (rng.random() + np.arange(size)) / size), weights.size - 1)
 
 
-def bearing_likelihood(place: np.ndarray, r: Reading, log_noise: np.ndarray, log_wild: np.ndarray,
+def bearing_likelihood(place: np.ndarray, r: ObservationPoint, log_noise: np.ndarray, log_wild: np.ndarray,
                        gps_sigma_m: float = 0.0) -> np.ndarray:
     """Each place's likelihood of the bearing: Gaussian in the wrapped residual at its noise scale (and the
     antenna's GPS error seen from the place: configured and the reading's own), with its wild share (uniform in
@@ -109,12 +115,12 @@ def bearing_likelihood(place: np.ndarray, r: Reading, log_noise: np.ndarray, log
 
 
 class MotionWatch:
-    """The moving cloud, begun on the first reading's line of bearing, and the probability of motion:
-    `step(readings, static)` reads one point's readings against it and against the standing model `static` (the
-    channel filter's places, weights and published covariance before the point; None while it has none: then only
-    the moving cloud learns) and returns the Motion they make."""
+    """The moving cloud, begun on the first point's line of bearing, and the probability of motion: `step(point,
+    static)` reads one observation point against it and against the standing model `static` (the channel filter's
+    places, weights and published covariance before the point; None while it has none: then only the moving cloud
+    learns) and returns the Motion they make."""
 
-    def __init__(self, first: Reading, max_speed: float, rng: np.random.Generator, gps_sigma_m: float = 0.0,
+    def __init__(self, first: ObservationPoint, max_speed: float, rng: np.random.Generator, gps_sigma_m: float = 0.0,
                  n: int = 1000):
         self.rng, self.n, self.max_speed, self.gps_sigma_m = rng, n, max_speed, gps_sigma_m
         self.stamp = first.stamp
@@ -132,15 +138,14 @@ class MotionWatch:
     def _log_uniform(self, bounds: tuple[float, float]) -> np.ndarray:
         return self.rng.uniform(math.log(bounds[0]), math.log(bounds[1]), self.n)
 
-    def step(self, readings: list[Reading], static: Standing | None) -> Motion:
+    def step(self, r: ObservationPoint, static: Standing | None) -> Motion:
         """One point: the models mixed by the switch, the moving cloud moved on to the point's time, and both
         weighed by the point's bearing."""
-        r = median_bearing(readings)
         dt = max(0.0, r.stamp - self.stamp)
         self.stamp, self.antenna = r.stamp, np.array([r.east, r.north])
         switch = -math.expm1(-dt / SWITCH_S)
         prior_moving = self.p_moving * (1.0 - switch) + (1.0 - self.p_moving) * switch
-        places = self._sample(static)
+        places = self._sample(static, r)
         if places is not None:
             self._mix(switch, prior_moving, places)
         self._predict(dt)
@@ -165,21 +170,20 @@ class MotionWatch:
         _, cov = _moments(self.place, self.weights)
         return float(np.trace(static_cov)) <= COMPARABLE ** 2 * float(np.trace(cov))
 
-    def _sample(self, static: Standing | None) -> np.ndarray | None:
+    def _sample(self, static: Standing | None, r: ObservationPoint) -> np.ndarray | None:
         """STATIC_SAMPLE places from the standing model's posterior: its cloud resampled by weight, each moved by a
-        kernel of KERNEL times its published covariance (a cloud just resampled may be a few copies of one place, and
-        a Gaussian of its published ellipse, widened for what the filter has not learned, is no predictive
-        density); None without one."""
+        local kernel, KERNEL times the bearing's width at its range (a cloud just resampled may be a few copies of
+        one place; a kernel of the whole ellipse would smear the modes of a cloud that has two into one wide
+        blur, which predicts so loosely that motion wins); None without one."""
         if static is None:
             return None
-        places, weights, cov = (np.asarray(a, float) for a in static)
+        places, weights = np.asarray(static[0], float), np.asarray(static[1], float)
         total = weights.sum()
-        if places.shape[0] == 0 or not (total > 0.0 and math.isfinite(total) and np.isfinite(cov).all()):
+        if places.shape[0] == 0 or not (total > 0.0 and math.isfinite(total)):
             return None
-        pick = systematic(weights / total, STATIC_SAMPLE, self.rng)
-        values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))  # a square root that a rounding cannot refuse
-        root = vectors * np.sqrt(np.clip(values, 0.0, None))
-        return places[pick] + KERNEL * self.rng.standard_normal((STATIC_SAMPLE, 2)) @ root.T
+        picked = places[systematic(weights / total, STATIC_SAMPLE, self.rng)]
+        width = KERNEL * max(r.sigma, 1e-6) * np.hypot(picked[:, 0] - r.east, picked[:, 1] - r.north)
+        return picked + width[:, None] * self.rng.standard_normal((STATIC_SAMPLE, 2))
 
     def motion(self) -> Motion:
         """The moving model's place, velocity and whether the range is observed; the probability of motion."""

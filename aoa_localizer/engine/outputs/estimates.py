@@ -47,11 +47,19 @@ def noise_summary(channel: Channel, cfg: LocalizerConfig) -> dict:
 
 
 def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, cov: np.ndarray, state: EstimateState,
-                warnings: list[str]) -> tuple[np.ndarray, np.ndarray, EstimateState, list[str], dict[str, Any]]:
+                warnings: list[str], unheeded: bool = False
+                ) -> tuple[np.ndarray, np.ndarray, EstimateState, list[str], dict[str, Any]]:
     """A standing transmitter's estimate with what the motion watch says (`motion`; `said`: what the estimate may
     follow, motion.py): the probability of motion, the velocity over both models (a standing one's is zero), and
-    where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking`."""
+    where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking`; a watch sure of
+    motion that the estimate does not follow (`unheeded`: the bearings are turned by what the channel learned) is
+    said, and the estimate is not `tracking`."""
     moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
+    if said is None and unheeded and motion is not None:
+        warnings = warnings + [f"the bearings look like a moving transmitter's (p = {motion.p_moving:.2f}), but the "
+                               "channel has learned to turn them (a bearing offset, or the vehicle's course): the "
+                               "place is the standing filter's; check the offset it learned"]
+        return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
     if said is None:
         return mean, cov, state, warnings, moves
     p, v = said.p_moving, said.velocity
@@ -133,7 +141,8 @@ class Estimates:
                 transmitters.append(Transmitter(float(place.mean[0]), float(place.mean[1]), float(t_lat),
                                                 float(t_lon), place.cov.copy(), place.share, place_state))
         mean, cov, state, warnings, moves = with_motion(track.motion, track.motion_said, np.asarray(mean, float),
-                                                        np.asarray(cov, float), state, warnings)
+                                                        np.asarray(cov, float), state, warnings,
+                                                        track.motion_unheeded)
         lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
         from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),

@@ -36,7 +36,7 @@ from aoa_localizer.engine.inference.co_channel import (
     count_job,
 )
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
-from aoa_localizer.engine.inference.motion import Motion, MotionWatch
+from aoa_localizer.engine.inference.motion import SURE_MOTION_P, Motion, MotionWatch, median_bearing
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
@@ -49,7 +49,7 @@ from aoa_localizer.engine.track.held import COUNT_EVERY_MAX, HEARD_READINGS, Hel
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
 from aoa_localizer.engine.track.state import Phase, Status, WindowEntry
 from aoa_localizer.engine.track.supervisor import CheckVerdict, Moved, Supervisor, Watch
-from aoa_localizer.engine.types import Reading
+from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters.base import ParticleFilter
 
 log = logging.getLogger("aoa_localizer")
@@ -88,8 +88,8 @@ class EmitterTrack(Held):
         self.heard_held += len(readings)
         while self.heard_held > HEARD_READINGS and len(self.heard) > 1:
             self.heard_held -= len(self.heard.popleft())
-        self.motion = self._watch_motion(readings) or self.motion  # against the cloud as it stood before the point
         point, kept = self.calibration.make(readings)
+        self.motion = self._watch_motion(median_bearing(readings)) or self.motion  # the cloud before the point
         self.last_stamp, self.last_kept = point.stamp, kept
         entry = WindowEntry(readings, point, int((~kept).sum()))
         if entry.gated:
@@ -108,22 +108,27 @@ class EmitterTrack(Held):
         self._count()
         self.scheduler.take_turn(self.site_fitting)
         self.fit_site_part()
+        self.doubts.append(self.filter is None or self.supervisor.alarm)
+        sure = self.motion is not None and self.motion.p_moving >= SURE_MOTION_P
+        self.sure_run = self.sure_run + 1 if sure else 0
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took or self.moving
 
-    def _watch_motion(self, readings: list[Reading]) -> Motion | None:
-        """A point's readings read by the motion watch (motion.py), begun on the first, against the estimate the
-        filter would publish before the point (its place and honest covariance; motion is judged once a filter
-        runs: a provisional sample's spread is no standing transmitter's posterior); None with `motion_model:
-        static`, or when the watch failed (counted `internal_error`)."""
-        if self.cfg.motion_model == "static" or not readings:
+    def _watch_motion(self, point: ObservationPoint) -> Motion | None:
+        """A point's readings (as one, as the receiver gave them: median_bearing) read by the motion watch
+        (motion.py), begun on the first, against the filter's cloud and the covariance it would publish before the
+        point (motion is judged once a filter runs: a provisional sample's
+        spread is no standing transmitter's posterior); None with `motion_model: static` or without `global_safety`
+        (the filters alone), or when the watch failed (counted `internal_error`)."""
+        if self.cfg.motion_model == "static" or not self.cfg.global_safety:  # the filters alone: no watch either
             return None
-        if self.watch is None:
-            self.watch = MotionWatch(readings[0], self.cfg.max_transmitter_speed_mps, self.rng.spawn(1)[0],
+        if self.watch is None:  # the first point is the moving cloud's prior: its line of bearing
+            self.watch = MotionWatch(point, self.cfg.max_transmitter_speed_mps, self.rng.spawn(1)[0],
                                      self.cfg.gps_sigma_m)
+            return None
         f = self.filter
         try:
-            return self.watch.step(readings, None if f is None else (f.x, f.weights, self.estimate()[1]))
+            return self.watch.step(point, None if f is None else (f.x, f.weights, self.estimate()[1]))
         except (ArithmeticError, ValueError, np.linalg.LinAlgError, MemoryError):
             # a failed watch costs the motion, never the point: it begins again at the next one
             log.exception("motion watch failed; it begins again")

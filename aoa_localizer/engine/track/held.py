@@ -14,7 +14,13 @@ from aoa_localizer.engine.inference.checks import Snapshot
 from aoa_localizer.engine.inference.co_channel import Count
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, radio_reach
-from aoa_localizer.engine.inference.motion import MOTION_YIELDS_TO_COUNT, MOVING_P, Motion, MotionWatch
+from aoa_localizer.engine.inference.motion import (
+    DOUBT_POINTS,
+    MOTION_YIELDS_TO_COUNT,
+    MOVING_P,
+    Motion,
+    MotionWatch,
+)
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.point_batch import points_of, rows_of
 from aoa_localizer.engine.inference.safety import ModeProposal
@@ -61,6 +67,8 @@ class Held:
         # Whether the transmitter moves (motion.py): the watch, begun with the filter, and what it last said
         self.watch: MotionWatch | None = None
         self.motion: Motion | None = None
+        self.doubts: deque[bool] = deque(maxlen=DOUBT_POINTS)  # per recent point: the filter in alarm, or none
+        self.sure_run = 0  # points in a row the watch has been all but sure of motion
         # Every point's readings as heard (the transmitter count's: the window drops points when the emitter moved,
         # which is what transmitters taking turns look like), their number, and the last count with the readings
         # it was made from
@@ -90,13 +98,35 @@ class Held:
         return said is not None and said.p_moving >= MOVING_P
 
     @property
+    def standing_doubted(self) -> bool:
+        """The standing filter itself has doubted its place within the last DOUBT_POINTS points (in alarm, or no
+        filter: re-starting), or the watch has been all but sure of motion (p >= SURE_MOTION_P) for as many points
+        in a row: only then may the estimate leave the filter for the watch. A misfit the filter absorbs (an offset
+        it learns, a twin mode) read as motion cost the static cases more than a mover gains; a filter that widens
+        its noise to explain a walker does not doubt itself, and the run of sure points says what it does not."""
+        return any(self.doubts) or self.sure_run >= DOUBT_POINTS
+
+    @property
+    def motion_unheeded(self) -> bool:
+        """The watch has been all but sure of motion for DOUBT_POINTS points in a row, and the estimate keeps the
+        filter's only because the channel learned to turn its bearings (motion_said): said in a warning."""
+        c = self.calibration
+        return self.sure_run >= DOUBT_POINTS and bool(c.offset or c.course) and self.motion_said is None
+
+    @property
     def motion_said(self) -> Motion | None:
-        """What the motion watch says, for the estimate to follow; None before it says anything, or while the
-        transmitter count is all but sure of several on the frequency (transmitters taking turns look like one that
-        jumps, and the count is the model made for them; a walker's drift has been counted as two at p = 0.90, so
-        only a count of p >= MOTION_YIELDS_TO_COUNT outranks the watch)."""
+        """What the motion watch says, for the estimate to follow; None before it says anything, while the standing
+        filter has no doubt (standing_doubted), while the channel has learned to turn its bearings (an offset, the
+        vehicle's course), or while the transmitter count is all but sure of several on the
+        frequency (transmitters taking turns look like one that jumps, and the count is the model made for them; a
+        walker's drift has been counted as two at p = 0.90, so only a count of p >= MOTION_YIELDS_TO_COUNT outranks
+        the watch)."""
         if (self.counted is not None and self.counted.count >= 2
-                and self.counted.probability >= MOTION_YIELDS_TO_COUNT):
+                and self.counted.probability >= MOTION_YIELDS_TO_COUNT) or not self.standing_doubted:
+            return None
+        if self.calibration.offset or self.calibration.course:
+            # the watch reads the bearings as given: where the filter learned to turn them, a standing transmitter
+            # misread by the turn looks like a mover (a mount offset left at 0 read as 8 m/s)
             return None
         return self.motion
 
