@@ -159,16 +159,21 @@ def test_a_simulated_krakensdr_drive_is_bridged_localised_and_recorded(server, s
         deadline = time.monotonic() + 60
         while served.sent < 2 * n_lines + 2 and time.monotonic() < deadline:
             spin_until(executor, lambda: False, 0.2)
-        spin_until(executor, lambda: False, 2.0)
-        assert "pose" in got and "datum" in got, open(bridge.log_path).read()
+        assert spin_until(executor, lambda: "pose" in got and "datum" in got, 15), open(bridge.log_path).read()
+
+        def error() -> float:
+            _, east, north, _ = estimate_from_pose(got["pose"])
+            d = got["datum"]
+            e, n = LocalFrame(d.latitude, d.longitude, d.altitude).to_enu(*truth)
+            return math.hypot(east - e, north - n)
+
+        # the node works through what the bridge sent (on a busy machine, seconds after the last line)
+        spin_until(executor, lambda: error() < 10.0, 30)
         bridge.send_signal(signal.SIGINT)
         assert bridge.wait(15) == 0
     log = open(bridge.log_path).read()
     assert "Traceback" not in log and "malformed 1" in log and "backwards 1" in log, log
-    _, east, north, _ = estimate_from_pose(got["pose"])
-    d = got["datum"]
-    e, n = LocalFrame(d.latitude, d.longitude, d.altitude).to_enu(*truth)
-    assert math.hypot(east - e, north - n) < 10.0  # a few metres with 2 Hz readings; 10 m is generous
+    assert error() < 10.0  # a few metres with 2 Hz readings; 10 m is generous
     assert "recorded" in log
     out = tmp_path / "drive.jsonl"
     res = subprocess.run([sys.executable, "-m", "aoa_localizer.replay", str(bag), "--offline", "--output", str(out),
@@ -176,6 +181,8 @@ def test_a_simulated_krakensdr_drive_is_bridged_localised_and_recorded(server, s
     assert res.returncode == 0, res.stderr
     last = json.loads(out.read_text().splitlines()[-1])
     assert last["channel"] == "f433920000"
+    d = got["datum"]
+    e, n = LocalFrame(d.latitude, d.longitude, d.altitude).to_enu(*truth)
     ours = LocalFrame(d.latitude, d.longitude, d.altitude).to_enu(last["lat"], last["lon"])
     assert math.hypot(ours[0] - e, ours[1] - n) < 10.0
 
