@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoa_localizer.engine.types import ObservationPoint, Reading
+from aoa_localizer.filters.resampling import systematic
 
 SWITCH_S = 1800.0  # mean time a transmitter keeps standing or moving (the models' switching rate)
 VELOCITY_TAU_S = 120.0  # a moving transmitter's velocity decorrelates over this (a walker turns, a car takes roads)
@@ -94,13 +95,6 @@ def median_bearing(readings: list[Reading]) -> ObservationPoint:
                             sum(r.gps_sigma for r in readings) / n)
 
 
-def systematic(weights: np.ndarray, size: int, rng: np.random.Generator) -> np.ndarray:
-    """`size` indices drawn by systematic resampling of `weights` (normalised, finite)."""
-    edges = np.cumsum(weights)
-    edges[-1] = 1.0
-    return np.minimum(np.searchsorted(edges, (rng.random() + np.arange(size)) / size), weights.size - 1)
-
-
 def bearing_likelihood(place: np.ndarray, r: ObservationPoint, log_noise: np.ndarray, log_wild: np.ndarray,
                        gps_sigma_m: float = 0.0) -> np.ndarray:
     """Each place's likelihood of the bearing: Gaussian in the wrapped residual at its noise scale (and the
@@ -152,7 +146,7 @@ class MotionWatch:
         lik_m = bearing_likelihood(self.place, r, self.log_noise, self.log_wild, self.gps_sigma_m)
         if places is not None and static is not None and self._comparable(static[2]):
             # the static places read with the moving cloud's noise and wild shares (one likelihood for both)
-            lend = self.rng.permutation(systematic(self.weights, places.shape[0], self.rng))
+            lend = self.rng.permutation(systematic(self.weights, self.rng, places.shape[0]))
             evidence_s = float(bearing_likelihood(places, r, self.log_noise[lend], self.log_wild[lend],
                                                   self.gps_sigma_m).mean())
             evidence_m = float(self.weights @ lik_m)
@@ -181,7 +175,7 @@ class MotionWatch:
         total = weights.sum()
         if places.shape[0] == 0 or not (total > 0.0 and math.isfinite(total)):
             return None
-        picked = places[systematic(weights / total, STATIC_SAMPLE, self.rng)]
+        picked = places[systematic(weights / total, self.rng, STATIC_SAMPLE)]
         width = KERNEL * max(r.sigma, 1e-6) * np.hypot(picked[:, 0] - r.east, picked[:, 1] - r.north)
         return picked + width[:, None] * self.rng.standard_normal((STATIC_SAMPLE, 2))
 
@@ -231,7 +225,7 @@ class MotionWatch:
         self.weights = w / total
         if 1.0 / float(self.weights @ self.weights) >= 0.5 * self.n:
             return
-        keep = systematic(self.weights, self.n, self.rng)
+        keep = systematic(self.weights, self.rng)
         self.place, self.velocity = self.place[keep], self.velocity[keep]
         self.log_speed, self.log_noise, self.log_wild = self.log_speed[keep], self.log_noise[keep], self.log_wild[keep]
         self.weights = np.full(self.n, 1.0 / self.n)
