@@ -209,6 +209,9 @@ def test_the_simulated_vehicle_plays_co_channel_transmitters_into_the_node(tmp_p
     assert "2 transmitters on its frequency" in res.stdout, res.stdout + res.stderr
     assert res.stdout.count("m from the nearest truth") == 2, res.stdout
     result = json.loads((tmp_path / "r.json").read_text())
+    # two transmitters taking turns are a finding: the node's /diagnostics stays OK from start to end
+    assert result["diagnostics_worst"] == {"level": 0, "message": ""}, result["diagnostics_worst"]
+    assert "diagnostics: OK throughout" in res.stdout
     entry = result["channels"]["default"]
     assert entry["transmitter_count"] == 2 and entry["count_probability"] > 0.99
     poses = result["transmitter_poses"]  # each on emitter/transmitter_<k>/pose, where the summary puts it
@@ -415,3 +418,26 @@ def test_a_transmitter_no_start_reaches_is_born_where_the_readings_left_over_mee
     assert count is not None and count.count == 5 and count.probability > 0.99
     for truth in five:
         assert min(np.hypot(*(t.mean - truth)) for t in count.transmitters) < 20.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("data_seed", [0, 4])
+def test_transmitters_taking_turns_are_counted_before_anything_is_called_moving_or_suspect(data_seed):
+    """Co-channel II: two fixed transmitters taking turns look, before the count, like one that jumps (a mover at
+    28 m/s, `tracking`) and like a model that does not fit (`suspect`, "45 % of the bearings look wild"). Each asks
+    for a count; until one answers the estimate is `poorly_determined`, saying so, and never `moving` or `suspect`."""
+    from dataclasses import replace
+
+    from aoa_localizer.engine.config import LocalizerConfig
+    from aoa_localizer.engine.localizer import Localizer
+    from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
+
+    data = simulate(replace(SCENARIOS["seed"], co_channel=((600.0, 1300.0),)), data_seed)
+    loc = Localizer(LocalizerConfig(seed=1))
+    estimates = list(loc.run(data.inputs()))
+    assert [e.motion for e in estimates if e.motion == "moving"] == []
+    assert [e.warnings for e in estimates if e.state == "suspect"] == []
+    assert any("the transmitters on it are being counted" in w for e in estimates for w in e.warnings)
+    final = estimates[-1]
+    assert final.state == "tracking" and final.transmitter_count == 2 and final.count_probability > 0.99
+    assert min(math.hypot(final.east - x, final.north - y) for x, y in [(1200.0, 800.0), (600.0, 1300.0)]) < 25.0

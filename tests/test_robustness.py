@@ -356,15 +356,24 @@ def test_em_runs_merge_only_where_one_reached_an_earlier_one():
 
 
 @pytest.mark.slow
-def test_a_tracking_estimates_findings_leave_diagnostics_ok_and_a_poor_one_warns():
+def test_diagnostics_say_the_nodes_health_ok_whatever_the_estimates_state_and_warn_only_on_a_misfit():
     """What a user meets II: two transmitters found on a frequency is a finding, not a fault: /diagnostics says it
-    in its message at level OK while the estimate is tracking; the same estimate made poorly_determined is WARN."""
+    in its message at level OK, whether the estimate is tracking or poorly_determined (a turn of the other
+    transmitter, a wide ellipse); a suspect estimate (the model does not fit) is WARN with its words; before any
+    input the node waits at OK, and an input silent for stale_after_s is WARN."""
     import time
     from dataclasses import replace
 
     from aoa_localizer.engine.types import EstimateState
     from aoa_localizer.ros.node_monitor import NodeMonitor
     from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
+
+    waiting = Localizer(LocalizerConfig(seed=1))
+    level, message, _ = NodeMonitor(time.monotonic(), 1e9, lambda: 1.0).diagnostics(waiting, time.monotonic(), {}, {})
+    assert (level, message) == (0, "waiting for a GPS fix")
+    stale = NodeMonitor(time.monotonic() - 100.0, 5.0, lambda: 1.0)  # started 100 s ago, stale after 5 s
+    level, message, values = stale.diagnostics(waiting, time.monotonic(), {}, {})
+    assert level == 1 and "no valid GPS fix since the start" in message and "gps_stale" in values
 
     data = simulate(replace(SCENARIOS["seed"], co_channel=((300.0, 1200.0),)), 0)
     loc = Localizer(LocalizerConfig(seed=1))
@@ -376,4 +385,7 @@ def test_a_tracking_estimates_findings_leave_diagnostics_ok_and_a_poor_one_warns
     assert level == 0 and "2 transmitters on this frequency" in message
     loc._estimates.newest = replace(loc.estimate, state=EstimateState.POORLY_DETERMINED)
     level, message, _ = monitor.diagnostics(loc, time.monotonic(), {}, {})
-    assert level == 1 and "2 transmitters on this frequency" in message
+    assert level == 0 and "2 transmitters on this frequency" in message
+    loc._estimates.newest = replace(loc.estimate, state=EstimateState.SUSPECT, warnings=["a misfit"])
+    level, message, values = monitor.diagnostics(loc, time.monotonic(), {}, {})
+    assert level == 1 and "a misfit" in message and values["warning_0"] == "a misfit"

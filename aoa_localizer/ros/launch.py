@@ -47,6 +47,7 @@ from msgs_adapters.bag import TOPICS, BagError, RawReader, found_stations
 from msgs_adapters.bag_files import BagFiles, BagFilesError
 
 CONVERGE_SCALE = 3.0  # the truth must lie inside the 95 % ellipse scaled by this
+DIAG_LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}  # diagnostic_msgs/DiagnosticStatus levels
 # After the source ends the node is judged once its counts stand still over two /diagnostics, or after this long
 SETTLED_COUNTS = ("fixes_received", "bearings_received", "bearings_used", "points_used")
 SETTLE_MAX_S = 30.0
@@ -278,6 +279,8 @@ class Monitor:
         self.transmitter_poses: dict[str, Any] = {}  # topic: the latest pose of a co-channel transmitter
         self.node.create_subscription(T.String, "emitter/channels", self._on_channels, latched)
         self.diagnostics_seen = 0
+        # the worst level the node's own status reached during the run, and what it said then (a good run stays OK)
+        self.worst_diag: tuple[int, str] = (0, "")
         self.crowded = ""  # the node's first input_publishers warning: another source on its inputs
         self.fix = None
         self.recorder = None
@@ -367,7 +370,10 @@ class Monitor:
         from msgs_adapters.fields import diagnostics_values
 
         self.diag, self.diagnostics_seen = msg, self.diagnostics_seen + 1
-        crowded = diagnostics_values(msg).get("aoa_localizer: localizer", {}).get("input_publishers")
+        own = diagnostics_values(msg).get("aoa_localizer: localizer", {})
+        if "level" in own and int(own["level"]) > self.worst_diag[0]:
+            self.worst_diag = (int(own["level"]), own.get("message", ""))
+        crowded = own.get("input_publishers")
         if crowded and not self.crowded:  # another graph that discovery had not shown when the domain was chosen
             self.crowded = crowded
             print(f"launch: another source publishes on the node's inputs: {crowded}", file=sys.stderr, flush=True)
@@ -680,12 +686,16 @@ class Run:
             ok, why = False, (f"another source published on the node's inputs during the run ({monitor.crowded}); "
                               "run again in a free domain (leave out --domain-id)")
         print_result(ok, why, figures)
+        level, said = monitor.worst_diag
+        print("diagnostics: OK throughout" if level == 0 else
+              f"diagnostics: reached {DIAG_LEVELS.get(level, level)} during the run ({said})")
         for line in monitor.channel_lines():  # the verdict is the primary channel's; every channel is reported
             print(line)
         if args.result:
             poses = {topic: None if pose is None else [pose.pose.pose.position.x, pose.pose.pose.position.y]
                      for topic, pose in monitor.transmitter_poses.items()}
             args.result.write_text(json.dumps({"converged": ok, "reason": why, **figures,
+                                               "diagnostics_worst": {"level": level, "message": said},
                                                "channels": monitor.summary, "transmitter_poses": poses}, indent=1))
         return 0 if ok else 1
 

@@ -141,10 +141,11 @@ class NodeMonitor:
 
     # -- /diagnostics ---------------------------------------------------------------------------------
     def diagnostics(self, loc: Localizer, now: float, held: dict, wrong: dict[str, list[str]]) -> tuple[int, str, dict]:
-        """(level, message, values) of the localizer's state: WARN before the first estimate, while a global check
-        runs, while the estimate is not `tracking` and while any input or node warning holds (its words join the
-        message; a tracking estimate's own warnings are findings: in the message, OK); ERROR while the filter keeps
-        restarting.
+        """(level, message, values) of the node's health: OK while it works as designed, whatever the estimate's
+        state (waiting for a fix, collecting, checking, `poorly_determined`, `tracking`: the message and `state`
+        say which, and an estimate's own warnings join the message); WARN while the estimate is `suspect` (the model
+        does not fit the bearings) or any input or node warning holds (its words join the message); ERROR while the
+        filter keeps restarting.
         `held`: parameters waiting for the rest of their group; `wrong`: what is wrong with the inputs' publishers,
         by diagnostics key (Node._publisher_problems)."""
         values = self._state_values(loc)
@@ -160,20 +161,19 @@ class NodeMonitor:
         error = self.health.restart_error()
         if error:
             warnings.append(("restarting", *error))
-        values.update({key: value for key, value, _ in warnings})
-        checking = loc.track_status().alarm  # the cloud no longer explains the newest points
         est = loc.estimate
-        # A tracking estimate's own warnings are findings (two transmitters on the frequency, an offset learned and
-        # taken off): said in the message, OK; an estimate that is not tracking makes them WARN
+        # An estimate's own warnings are findings (two transmitters on the frequency, an offset learned and taken
+        # off, a wide ellipse) said in the message at OK; a suspect estimate's say why it is WARN
         findings: list[tuple[str, str, str]] = []
         if est is not None:
             values["state"] = est.state
             said = [(f"warning_{i}", text, text) for i, text in enumerate(est.warnings)]
-            if est.state == EstimateState.TRACKING:
-                findings = said
-            else:
+            if est.state == EstimateState.SUSPECT:
                 warnings += said
-        level = 2 if error else 1 if est is None or checking or warnings or est.state != EstimateState.TRACKING else 0
+            else:
+                findings = said
+        values.update({key: value for key, value, _ in warnings})
+        level = 2 if error else 1 if warnings else 0
         return level, "; ".join([loc.status] + [words for _, _, words in warnings + findings]), values
 
     def _state_values(self, loc: Localizer) -> dict[str, Any]:
@@ -297,8 +297,8 @@ class NodeMonitor:
 
     @staticmethod
     def channel_diagnostics(loc: Localizer, diag_name: str) -> list[tuple[str, int, str, dict]]:
-        """One status per frequency channel: WARN before its first estimate or while its check runs, OK tracking
-        or retired."""
+        """One status per frequency channel: WARN while its estimate is `suspect`, else OK (retired, before its
+        first estimate, checking, `poorly_determined` or `tracking`: the message says which)."""
         out = []
         for channel in loc.channels.all():
             if channel.id == DEFAULT:
@@ -310,7 +310,7 @@ class NodeMonitor:
             if est is not None:
                 values.update(east=f"{est.east:.2f}", north=f"{est.north:.2f}", lat=f"{est.lat:.7f}",
                               lon=f"{est.lon:.7f}", ellipse95_major_m=f"{ellipse_axes(est.cov)[0]:.2f}")
-            level = 0 if channel.retired else 1 if est is None or track.alarm else 0
+            level = 1 if not channel.retired and est is not None and est.state == EstimateState.SUSPECT else 0
             message = f"retired (silent for channel_timeout_s); {track.text}" if channel.retired else track.text
             out.append((f"{diag_name} channel {channel.id}", level, message, values))
         return out

@@ -36,7 +36,7 @@ from aoa_localizer.engine.inference.co_channel import (
     count_job,
 )
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
-from aoa_localizer.engine.inference.motion import SURE_MOTION_P, Motion, MotionWatch, median_bearing
+from aoa_localizer.engine.inference.motion import MOVING_P, SURE_MOTION_P, Motion, MotionWatch, median_bearing
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
@@ -47,6 +47,7 @@ from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET
 from aoa_localizer.engine.track.calibrator import Recalibration
 from aoa_localizer.engine.track.held import COUNT_EVERY_MAX, HEARD_READINGS, Held
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
+from aoa_localizer.engine.track.report import looks_wild
 from aoa_localizer.engine.track.state import Phase, Status, WindowEntry
 from aoa_localizer.engine.track.supervisor import CheckVerdict, Moved, Supervisor, Watch
 from aoa_localizer.engine.types import ObservationPoint, Reading
@@ -104,13 +105,18 @@ class EmitterTrack(Held):
         self.scheduler.take_turn(self)
         if self.apply_job():  # one that finished now is applied now, as at a point
             took = self.estimating
+        self.doubts.append(self.filter is None or self.supervisor.alarm)
+        sure = self.motion is not None and self.motion.p_moving >= SURE_MOTION_P
+        self.sure_run = self.sure_run + 1 if sure else 0
+        moving = self.motion is not None and self.motion.p_moving >= MOVING_P and self.standing_doubted
+        if moving or self.supervisor.alarm or looks_wild(self.calibration):
+            self.count_asked = self.heard_readings if self.count_asked is None else self.count_asked
+        else:
+            self.count_asked = None
         self.scheduler.take_turn(self.counting)
         self._count()
         self.scheduler.take_turn(self.site_fitting)
         self.fit_site_part()
-        self.doubts.append(self.filter is None or self.supervisor.alarm)
-        sure = self.motion is not None and self.motion.p_moving >= SURE_MOTION_P
-        self.sure_run = self.sure_run + 1 if sure else 0
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
         return took or self.moving
 
@@ -440,8 +446,9 @@ class EmitterTrack(Held):
         self._adopt_count(self.scheduler.finished(self.counting, wait=final))
         cfg, c = self.cfg, self.calibration
         grown = self.heard_readings > self.counted_readings
-        due = grown and (final or self.heard_readings >= min(COUNT_GROWTH * self.counted_readings,
-                                                              self.counted_readings + self.count_every))
+        asked = self.count_asked is not None and self.counted_readings < self.count_asked
+        due = grown and (final or asked or self.heard_readings >= min(COUNT_GROWTH * self.counted_readings,
+                                                                       self.counted_readings + self.count_every))
         if (cfg.max_emitters_per_channel < 2 or c.course or self.heard_readings < MIN_READINGS or not due
                 or not self.estimating or self.scheduler.job(self.counting) is not None):
             return
@@ -460,7 +467,7 @@ class EmitterTrack(Held):
                       tuple(str(n) for n in names) if names.size >= 2 else ())
         self.counted_readings = self.heard_readings
         if final:
-            self.counted = job()
+            self.counted, self.counted_upto = job(), self.counted_readings
             return
         self.scheduler.start(self.counting, job, CHECK_BUDGET_US, None, [])
         self._adopt_count(self.scheduler.finished(self.counting))  # a count small enough to finish in its first turn
@@ -480,7 +487,7 @@ class EmitterTrack(Held):
             ok, count = self.scheduler.value(done, "a transmitter count")
             if ok:
                 self.count_every = count_every(self.count_every, self.counted, count)
-                self.counted = count
+                self.counted, self.counted_upto = count, self.counted_readings
                 self._offset_taken_back(count)
 
     def _offset_taken_back(self, count: Count | None):

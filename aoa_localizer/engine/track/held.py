@@ -77,6 +77,11 @@ class Held:
         self.heard_readings = 0  # readings heard since the start
         self.counted: Count | None = None
         self.counted_readings = 0  # readings heard when the count under way (or the last) began
+        self.counted_upto = 0  # readings heard when the count adopted (self.counted) began
+        # Readings heard when the bearings began to look like more than one fixed transmitter's (motion the estimate
+        # would follow, many wild bearings, a filter in alarm; None: they do not). Transmitters taking turns look
+        # like each, so a count is asked for then, and none of them is said until a count begun since answered
+        self.count_asked: int | None = None
         self.count_every = HEARD_READINGS  # readings between counts past the doubling ones: longer while they agree
         self.counting = JobPlace()
         # The site part's fit (site_part.py), made beside the points as a count is: the covariance it adds, the
@@ -124,11 +129,24 @@ class Held:
         if (self.counted is not None and self.counted.count >= 2
                 and self.counted.probability >= MOTION_YIELDS_TO_COUNT) or not self.standing_doubted:
             return None
+        if self.count_pending:
+            return None
         if self.calibration.offset or self.calibration.course:
             # the watch reads the bearings as given: where the filter learned to turn them, a standing transmitter
             # misread by the turn looks like a mover (a mount offset left at 0 read as 8 m/s)
             return None
         return self.motion
+
+    @property
+    def counts_possible(self) -> bool:
+        """The channel's transmitters are counted (max_emitters_per_channel above 1, bearings not turned by the
+        vehicle's course)."""
+        return self.cfg.max_emitters_per_channel >= 2 and not self.calibration.course
+
+    @property
+    def count_pending(self) -> bool:
+        """A count was asked for (count_asked) and none begun since has answered."""
+        return self.counts_possible and self.count_asked is not None and self.counted_upto < self.count_asked
 
     @property
     def job(self) -> PendingJob | None:
@@ -258,6 +276,6 @@ class Held:
         modes = mode_masses(self.cloud, self.modes)
         history = self.model.history.data if self.filter is not None else None
         state, warnings = assess(mean, cov, modes, self.supervisor.health, self.calibration, self.status, history,
-                                 others_share)
+                                 others_share, self.count_pending)
         return modes, state, warnings
 

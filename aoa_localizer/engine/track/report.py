@@ -106,29 +106,55 @@ def _inside(cluster: tuple[np.ndarray, np.ndarray, float], place: np.ndarray) ->
         return math.inf
 
 
-def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor, c: Calibrator, status: Status,
-           history: np.ndarray | None, others_share: float = 0.0) -> tuple[EstimateState, list[str]]:
-    """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings (the
-    supervisor's `health` in alarm, the calibration `c` finding many wild or offset bearings, beyond the
-    `others_share` of them that other transmitters on the frequency explain), `poorly_determined` when the posterior
-    is proper but wide or multi-modal, or only a provisional sample (no filter `history`: the track's `status` says
-    why), or in alarm while other transmitters on the frequency take turns with the one it follows, else
-    `tracking`."""
+def wild_share(c: Calibrator) -> float:
+    """The share of the bearings the calibration reads as wild."""
+    return max(c.outlier_prob if c.grid is None else 0.0, c.noise.reading_outlier_prob if c.noise.fits else 0.0)
+
+
+def looks_wild(c: Calibrator, others_share: float = 0.0) -> bool:
+    """More of the bearings look wild than the model allows, beyond the `others_share` that other transmitters on
+    the frequency explain."""
+    return wild_share(c) - others_share > _SUSPECT_WILD_SHARE
+
+
+def _misfits(health: HealthMonitor, c: Calibrator, others_share: float, counting: bool
+             ) -> tuple[list[str], str | None]:
+    """What says the model does not fit (the supervisor's `health` in alarm, many wild bearings beyond the
+    `others_share` other transmitters explain), and the one finding that keeps the estimate `poorly_determined`
+    instead: another transmitter's turn, or a count asked for by these under way (`counting`)."""
     warnings, keyed = [], None
-    if health.alarm_since is not None and others_share > 0.0:
-        # the newest bearings are another transmitter's turn: the model fits, which one the track follows is open
-        keyed = (f"the estimate does not explain the newest bearings ({sum(health.flags)} of the last "
-                 f"{len(health.flags)} points disagree): another transmitter on this frequency has its turn (see "
-                 "the count), and the track may move to it")
-    elif health.alarm_since is not None:
-        warnings.append(f"the estimate no longer explains the newest bearings ({sum(health.flags)} of the "
-                        f"last {len(health.flags)} points disagree): multipath, an emitter that moved, or a "
-                        "bearing reference or offset set wrong (bearing_reference, mount_offset_deg, "
-                        "magnetic_declination_deg)")
-    wild = max(c.outlier_prob if c.grid is None else 0.0, c.noise.reading_outlier_prob if c.noise.fits else 0.0)
-    if wild - others_share > _SUSPECT_WILD_SHARE:
-        warnings.append(f"{100 * wild:.0f} % of the bearings look wild: a bearing offset or reference set wrong "
-                        "(bearing_reference, mount_offset_deg, magnetic_declination_deg), or heavy multipath")
+    if health.alarm_since is not None:
+        disagree = f"({sum(health.flags)} of the last {len(health.flags)} points disagree)"
+        if counting:
+            keyed = (f"the estimate does not explain the newest bearings {disagree}: another transmitter on this "
+                     "frequency, multipath or an emitter that moved; the transmitters on it are being counted")
+        elif others_share > 0.0:
+            # the newest bearings are another transmitter's turn: the model fits, which one the track follows is open
+            keyed = (f"the estimate does not explain the newest bearings {disagree}: another transmitter on this "
+                     "frequency has its turn (see the count), and the track may move to it")
+        else:
+            warnings.append(f"the estimate no longer explains the newest bearings {disagree}: multipath, an emitter "
+                            "that moved, or a bearing reference or offset set wrong (bearing_reference, "
+                            "mount_offset_deg, magnetic_declination_deg)")
+    if looks_wild(c, others_share):
+        wild = f"{100 * wild_share(c):.0f} % of the bearings look wild"
+        if counting:
+            keyed = keyed or (f"{wild}: another transmitter on this frequency, or a model that does not fit; the "
+                              "transmitters on it are being counted")
+        else:
+            warnings.append(f"{wild}: a bearing offset or reference set wrong (bearing_reference, mount_offset_deg, "
+                            "magnetic_declination_deg), or heavy multipath")
+    return warnings, keyed
+
+
+def assess(mean: np.ndarray, cov: np.ndarray, modes: list, health: HealthMonitor, c: Calibrator, status: Status,
+           history: np.ndarray | None, others_share: float = 0.0, counting: bool = False
+           ) -> tuple[EstimateState, list[str]]:
+    """The estimate's state and the warnings behind it: `suspect` when the model does not fit the bearings
+    (_misfits; the calibration `c` turning them by an offset or the course), `poorly_determined` when the posterior
+    is proper but wide or multi-modal, or only a provisional sample (no filter `history`: the track's `status` says
+    why), or when a misfit is another transmitter's turn or is being counted (`counting`), else `tracking`."""
+    warnings, keyed = _misfits(health, c, others_share, counting)
     if c.course:
         warnings.append("the bearings turn with the vehicle: they look measured from its forward axis, not from north; "
                         f"learned, and each is turned by the vehicle's course: {c.offset_advice()}")
