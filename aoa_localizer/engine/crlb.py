@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
+
+from aoa_localizer.engine.distributions import chi2_ppf, norm_ppf
 
 # Scale of the 95 % error ellipse for 2 degrees of freedom: x^T P^-1 x <= 5.991.
-ELLIPSE_95 = float(chi2.ppf(0.95, df=2))
-ELLIPSE_50 = float(chi2.ppf(0.5, df=2))
+ELLIPSE_95 = float(chi2_ppf(0.95, 2))
+ELLIPSE_50 = float(chi2_ppf(0.5, 2))
 
 
 def fisher_information(emitter, sensors, sigmas) -> np.ndarray:
@@ -90,9 +91,7 @@ def circular_error(cov, p: float = 0.9) -> float:
     if l1 <= 0.0:
         return 0.0
     if l2 <= 1e-12 * l1:  # a line: its two-sided quantile
-        from scipy.stats import norm
-
-        return float(norm.ppf(0.5 + p / 2.0) * np.sqrt(l1))
+        return float(norm_ppf(0.5 + p / 2.0) * np.sqrt(l1))
 
     def held(r: float) -> float:
         top = r / np.sqrt(l1)

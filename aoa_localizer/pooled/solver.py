@@ -16,9 +16,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import stats
 
 from aoa_localizer.engine.crlb import ellipse_axes
+from aoa_localizer.engine.distributions import chi2_sf
 from aoa_localizer.engine.geodesy import LocalFrame, centroid, wrap_pi
 from aoa_localizer.engine.survey.survey_log import SurveyCount, SurveyTransmitter
 from aoa_localizer.engine.types import EstimateState
@@ -244,7 +244,7 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
     # the stations not named as off: do they meet within their spread? (a named one is the wild share's)
     z2 = (resid / expected) ** 2
     z2 = z2[z2 <= _OFF_Z**2]
-    fit_p = float(stats.chi2.sf(float(z2.sum()), z2.size - 2)) if z2.size > 2 else 1.0
+    fit_p = float(chi2_sf(float(z2.sum()), z2.size - 2)) if z2.size > 2 else 1.0
     if fit_p < _FIT_P:
         state = EstimateState.POORLY_DETERMINED
         warnings.append(f"the bearings do not meet within their expected spread (chi-square p = {fit_p:.2g}): one "

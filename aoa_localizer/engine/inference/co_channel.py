@@ -26,6 +26,8 @@ from aoa_localizer.engine.geodesy import wrap_pi
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes, radio_reach
 from aoa_localizer.engine.scheduling.slices import COUNT_EM, metered
 
+TURNS_SPAN = 0.8  # the share of a transmitter's readings (the middle, in time) whose span is compared ...
+TURNS_OVERLAP = 0.25  # ... and the overlap of two such spans, of the shorter, that says they are heard in turns
 MIN_READINGS = 30  # a channel's transmitters are counted from this many readings on ...
 COUNT_GROWTH = 2.0  # ... and again once they grew by this factor (a count costs 0.01-1 s)
 BIN_S = 2.0  # readings within one such bin of time are taken as one transmitter's (in turns)
@@ -97,6 +99,9 @@ class Count:
     offset: float = 0.0  # rad, the receiver's offset that fit took off (the calibration's, or none)
     site_bias: np.ndarray = field(default_factory=lambda: np.zeros(0))  # rad, each site's fitted bias (sites only)
     site_names: tuple[str, ...] = ()  # the sites' names where the caller gave them (its stations)
+    # the transmitters are heard in turns over the readings' span, as transmitters sharing a frequency are; False
+    # where each holds a stretch of time of its own, as the places one moving transmitter passes through do
+    in_turns: bool = True
 
 
 @dataclass(frozen=True)
@@ -178,7 +183,22 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
     beyond = min(fits, key=lambda f: f.bic)
     more = (beyond.k > max_k and beyond.in_turns) or (count == max_k and _left_over(r, best, need))
     return Count(count, by_count[count], transmitters, ghosts, by_count, more, assigned, places, best.offset,
-                 _site_bias(r, best))
+                 _site_bias(r, best), in_turns=count < 2 or _heard_in_turns(r.stamp, assigned, count))
+
+
+def _heard_in_turns(stamp: np.ndarray, assigned: np.ndarray, k: int) -> bool:
+    """Whether `k` transmitters (each reading's `assigned`) are heard in turns: some two whose middle
+    TURNS_SPAN of readings in time overlap by over TURNS_OVERLAP of the shorter span. Places one after another
+    (a mover's) overlap only where a wild reading or an ambiguous crossing falls; readings without times: True."""
+    lo, hi = (1.0 - TURNS_SPAN) / 2.0, (1.0 + TURNS_SPAN) / 2.0
+    spans = [np.quantile(stamp[assigned == j], [lo, hi]) for j in range(k) if (assigned == j).sum() >= 2]
+    if len(spans) < 2 or not np.ptp(stamp) > 0.0:
+        return True
+    for (a0, a1), (b0, b1) in itertools.combinations(spans, 2):
+        shorter = min(a1 - a0, b1 - b0)
+        if min(a1, b1) - max(a0, b0) > TURNS_OVERLAP * max(shorter, 0.0):
+            return True
+    return False
 
 
 def count_job(r: Readings, first: np.ndarray, max_k: int, offset: float, site_names: tuple[str, ...] = ()

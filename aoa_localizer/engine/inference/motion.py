@@ -21,7 +21,7 @@ where the moving transmitter is now, how fast it goes, and whether its range is 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -48,8 +48,9 @@ COMPARABLE = 2.0  # the standing model is weighed once its ellipse is at most th
 STATIC_SAMPLE = 1000  # places drawn from the static model's posterior to take its likelihood over
 KERNEL = 0.3  # each drawn standing place moved by a Gaussian kernel of this times the bearing's width at its range
 
-# The standing model as the watch reads it: the filter's places (N, 2), their weights, and its published covariance
-Standing = tuple[np.ndarray, np.ndarray, np.ndarray]
+# The standing model as the watch reads it: the filter's places (N, 2), their weights, its published covariance and
+# the bearing offset (ENU rad) its filter takes off the bearings
+Standing = tuple[np.ndarray, np.ndarray, np.ndarray, float]
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,10 @@ class MotionWatch:
         if places is not None and static is not None and self._comparable(static[2]):
             # the static places read with the moving cloud's noise and wild shares (one likelihood for both)
             lend = self.rng.permutation(systematic(self.weights, self.rng, places.shape[0]))
-            evidence_s = float(bearing_likelihood(places, r, self.log_noise[lend], self.log_wild[lend],
+            # the standing model reads the bearing turned by the offset its filter learned; the moving one as given:
+            # a standing transmitter with an offset and a mover whose drift was read as one are told apart
+            turned = replace(r, theta=r.theta - static[3]) if static[3] else r
+            evidence_s = float(bearing_likelihood(places, turned, self.log_noise[lend], self.log_wild[lend],
                                                   self.gps_sigma_m).mean())
             evidence_m = float(self.weights @ lik_m)
             total = (1.0 - prior_moving) * evidence_s + prior_moving * evidence_m

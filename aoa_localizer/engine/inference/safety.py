@@ -16,8 +16,8 @@ from typing import Protocol
 
 import numpy as np
 from scipy.special import gammaln
-from scipy.stats import binom
 
+from aoa_localizer.engine.distributions import binom_sf
 from aoa_localizer.engine.inference.global_search import Mode, Points
 from aoa_localizer.filters import moves
 from aoa_localizer.filters.resampling import systematic
@@ -49,7 +49,7 @@ class HealthMonitor:
 
     def _threshold(self, outlier_prob: float) -> int:
         k = np.arange(self.window + 1)
-        tail = binom.sf(k - 1, self.window, min(outlier_prob, 0.99))
+        tail = binom_sf(k - 1, self.window, min(outlier_prob, 0.99))
         return int(max(3, k[np.argmax(tail < self.p_value)] if (tail < self.p_value).any() else self.window + 1))
 
     def push(self, flagged: bool, index: int, outlier_prob: float) -> bool:

@@ -11,9 +11,8 @@ import functools
 import math
 from collections import deque
 
-from scipy.stats import chi2
-
 from aoa_localizer.engine.config import LocalizerConfig
+from aoa_localizer.engine.distributions import chi2_cdf, chi2_ppf
 from aoa_localizer.engine.geodesy import Skew, turn, wrap_pi
 from aoa_localizer.engine.ingest.gps_track import GpsTrack
 
@@ -22,7 +21,7 @@ _WIDEN = (1, 2, 4)  # multiples of heading_window_s tried in turn for a course g
 _JITTER_SAMPLES = 256  # recent fixes the GPS jitter is measured over (minutes at 1 Hz: it changes slowly)
 _JITTER_SAMPLES_MIN = 4  # fixes' jitter samples before any course is trusted
 _JITTER_KEEP = 0.9  # the share of the smallest samples the jitter is measured from
-_TRIMMED_MEAN = float(chi2.cdf(chi2.ppf(_JITTER_KEEP, 1), 3)) / _JITTER_KEEP  # E[X | X < its 90 % point], X chi2(1)
+_TRIMMED_MEAN = float(chi2_cdf(chi2_ppf(_JITTER_KEEP, 1), 3)) / _JITTER_KEEP  # E[X | X < its 90 % point], X chi2(1)
 _JITTER_FLOOR_M = 0.02  # the least jitter a window's fit is tested against (RTK's centimetres)
 # The velocity error that the fixes' jitter does not show: their slow errors (multipath, atmosphere) drift, which
 # a velocity from positions takes for motion; a receiver's own velocity is seldom better than this (m/s).
@@ -33,7 +32,7 @@ _DRIFT_MPS = 0.1
 def _chi2_quantile(p: float, dof: float) -> float:
     """chi2.ppf, cached: every fix's jitter bound and every window's lack-of-fit test ask again for the same few
     hundred values."""
-    return float(chi2.ppf(p, dof))
+    return float(chi2_ppf(p, dof))
 
 
 class _Samples:

@@ -20,8 +20,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import stats
 
+from aoa_localizer.engine.distributions import chi2_cdf, chi2_ppf, chi2_sf, norm_ppf, norm_sf
 from aoa_localizer.engine.geodesy import LocalFrame, unturn, wrap_pi
 from aoa_localizer.engine.inference.co_channel import COUNT_GROWTH
 from aoa_localizer.engine.inference.triangulation import least_squares_crossing
@@ -36,7 +36,7 @@ SITE_PLACES = 4  # ... and the site part is judged from this many such stops on 
 SITE_P = 1e-3  # the stops' centres scattered more than their readings allow at this level: a site part ...
 SITE_CLIP = 9.0  # ... each stop's squared standardised residual counted up to this (three sigmas) ...
 SITE_RATIO = 2.0  # ... and the typical stop's at least this many times what independent readings give
-_PAIR_Q25 = float(stats.norm.ppf(0.625))  # the lower quartile of |a standard normal's draw|
+_PAIR_Q25 = float(norm_ppf(0.625))  # the lower quartile of |a standard normal's draw|
 _MEDIAN_VAR = math.pi / 2  # a median's variance over the mean's (its large-sample value; 1.35 for three readings)
 _WILD_SIGMAS = 4.0  # a reading this many of its sigmas from its stop's median is wild (a point's gate)
 
@@ -169,13 +169,13 @@ def _scattered(z2: np.ndarray) -> bool:
     hundred), beyond what chi-square(1) draws give at SITE_P (normal approximation to the clipped sum, from its
     exact moments), and their median at least SITE_RATIO times chi-square(1)'s: the typical stop scatters, so the
     filter's ellipse, which takes the readings as independent, would be too small by more than sqrt(SITE_RATIO)."""
-    c, f1 = SITE_CLIP, float(stats.chi2.sf(SITE_CLIP, 1))
+    c, f1 = SITE_CLIP, float(chi2_sf(SITE_CLIP, 1))
     # x f_1(x) = f_3(x) and x^2 f_1(x) = 3 f_5(x) for chi-square densities: the clipped draw's moments in closed form
-    mean = float(stats.chi2.cdf(c, 3)) + c * f1
-    var = 3.0 * float(stats.chi2.cdf(c, 5)) + c * c * f1 - mean * mean
+    mean = float(chi2_cdf(c, 3)) + c * f1
+    var = 3.0 * float(chi2_cdf(c, 5)) + c * c * f1 - mean * mean
     clipped = float(np.minimum(z2, c).sum())
-    beyond = float(stats.norm.sf((clipped - z2.size * mean) / math.sqrt(z2.size * var))) < SITE_P
-    return beyond and float(np.median(z2)) >= SITE_RATIO * float(stats.chi2.ppf(0.5, 1))
+    beyond = float(norm_sf((clipped - z2.size * mean) / math.sqrt(z2.size * var))) < SITE_P
+    return beyond and float(np.median(z2)) >= SITE_RATIO * float(chi2_ppf(0.5, 1))
 
 
 def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:

@@ -45,7 +45,7 @@ from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
 from aoa_localizer.engine.track.calibrator import Recalibration
-from aoa_localizer.engine.track.held import COUNT_EVERY_MAX, HEARD_READINGS, Held
+from aoa_localizer.engine.track.held import ASK_GROWTH, COUNT_EVERY_MAX, HEARD_READINGS, Held
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
 from aoa_localizer.engine.track.report import looks_wild
 from aoa_localizer.engine.track.state import Phase, Status, WindowEntry
@@ -109,10 +109,10 @@ class EmitterTrack(Held):
         sure = self.motion is not None and self.motion.p_moving >= SURE_MOTION_P
         self.sure_run = self.sure_run + 1 if sure else 0
         moving = self.motion is not None and self.motion.p_moving >= MOVING_P and self.standing_doubted
-        if moving or self.supervisor.alarm or looks_wild(self.calibration):
-            self.count_asked = self.heard_readings if self.count_asked is None else self.count_asked
-        else:
-            self.count_asked = None
+        misfit = moving or self.supervisor.alarm or looks_wild(self.calibration)
+        if misfit and not self.misfit and self.heard_readings >= ASK_GROWTH * self.counted_readings:
+            self.count_asked = self.heard_readings  # asked again only once the readings grew since the last count
+        self.misfit = misfit
         self.scheduler.take_turn(self.counting)
         self._count()
         self.scheduler.take_turn(self.site_fitting)
@@ -125,16 +125,26 @@ class EmitterTrack(Held):
         (motion.py), begun on the first, against the filter's cloud and the covariance it would publish before the
         point (motion is judged once a filter runs: a provisional sample's
         spread is no standing transmitter's posterior); None with `motion_model: static` or without `global_safety`
-        (the filters alone), or when the watch failed (counted `internal_error`)."""
+        (the filters alone), while the bearings are turned by the vehicle's course, or when the watch failed
+        (counted `internal_error`); a watch begun before the calibration's offset changed begins again."""
         if self.cfg.motion_model == "static" or not self.cfg.global_safety:  # the filters alone: no watch either
             return None
+        if self.calibration.course:
+            # bearings the channel turns by the vehicle's course: every turn of the vehicle would read as a move
+            self.watch, self.sure_run, self.motion = None, 0, None
+            return None
+        if self.watch is not None and self.watched_offset != self.calibration.offset:
+            # the standing model the watch weighed is not the one now: its history was read with another offset
+            self.watch, self.sure_run, self.motion = None, 0, None
         if self.watch is None:  # the first point is the moving cloud's prior: its line of bearing
             self.watch = MotionWatch(point, self.cfg.max_transmitter_speed_mps, self.rng.spawn(1)[0],
                                      self.cfg.gps_sigma_m)
+            self.watched_offset = self.calibration.offset
             return None
         f = self.filter
         try:
-            return self.watch.step(point, None if f is None else (f.x, f.weights, self.estimate()[1]))
+            standing = None if f is None else (f.x, f.weights, self.estimate()[1], self.calibration.offset)
+            return self.watch.step(point, standing)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError, MemoryError):
             # a failed watch costs the motion, never the point: it begins again at the next one
             log.exception("motion watch failed; it begins again")

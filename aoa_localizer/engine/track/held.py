@@ -38,6 +38,7 @@ HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter coun
 # turns costs about a second: every HEARD_READINGS it was 3 times the rest of a channel's work); one that changes
 # brings them back to every HEARD_READINGS
 COUNT_EVERY_MAX = 8 * HEARD_READINGS
+ASK_GROWTH = 1.25  # a misfit asks for a count again once the readings grew by this factor since the last count began
 
 
 class Held:
@@ -66,6 +67,7 @@ class Held:
         self.last_kept = np.zeros(0, bool)  # which readings the newest point kept (the report's trace)
         # Whether the transmitter moves (motion.py): the watch, begun with the filter, and what it last said
         self.watch: MotionWatch | None = None
+        self.watched_offset = 0.0  # the bearing offset (rad) the calibration took off when the watch began
         self.motion: Motion | None = None
         self.doubts: deque[bool] = deque(maxlen=DOUBT_POINTS)  # per recent point: the filter in alarm, or none
         self.sure_run = 0  # points in a row the watch has been all but sure of motion
@@ -78,10 +80,12 @@ class Held:
         self.counted: Count | None = None
         self.counted_readings = 0  # readings heard when the count under way (or the last) began
         self.counted_upto = 0  # readings heard when the count adopted (self.counted) began
-        # Readings heard when the bearings began to look like more than one fixed transmitter's (motion the estimate
-        # would follow, many wild bearings, a filter in alarm; None: they do not). Transmitters taking turns look
-        # like each, so a count is asked for then, and none of them is said until a count begun since answered
+        # Readings heard when the bearings last began to look like more than one fixed transmitter's (`misfit`:
+        # motion the estimate would follow, many wild bearings, a filter in alarm; None: never). Transmitters taking
+        # turns look like each, so a count is asked for then, and none of them is said until a count begun since
+        # answered
         self.count_asked: int | None = None
+        self.misfit = False
         self.count_every = HEARD_READINGS  # readings between counts past the doubling ones: longer while they agree
         self.counting = JobPlace()
         # The site part's fit (site_part.py), made beside the points as a count is: the covariance it adds, the
@@ -114,26 +118,25 @@ class Held:
     @property
     def motion_unheeded(self) -> bool:
         """The watch has been all but sure of motion for DOUBT_POINTS points in a row, and the estimate keeps the
-        filter's only because the channel learned to turn its bearings (motion_said): said in a warning."""
-        c = self.calibration
-        return self.sure_run >= DOUBT_POINTS and bool(c.offset or c.course) and self.motion_said is None
+        filter's only because the channel learned a bearing offset (motion_said): said in a warning."""
+        return self.sure_run >= DOUBT_POINTS and bool(self.calibration.offset) and self.motion_said is None
 
     @property
     def motion_said(self) -> Motion | None:
         """What the motion watch says, for the estimate to follow; None before it says anything, while the standing
-        filter has no doubt (standing_doubted), while the channel has learned to turn its bearings (an offset, the
-        vehicle's course), or while the transmitter count is all but sure of several on the
-        frequency (transmitters taking turns look like one that jumps, and the count is the model made for them; a
-        walker's drift has been counted as two at p = 0.90, so only a count of p >= MOTION_YIELDS_TO_COUNT outranks
-        the watch)."""
-        if (self.counted is not None and self.counted.count >= 2
+        filter has no doubt (standing_doubted), while a count asked for is under way (count_pending), while the
+        count is all but sure of several heard in turns (transmitters taking turns look like one that jumps, and
+        the count is the model made for them; a walker's drift has been counted as two at p = 0.90, so only a
+        count of p >= MOTION_YIELDS_TO_COUNT outranks the watch, and places heard one after another are a mover's
+        path), or while the channel has learned a bearing offset (motion_unheeded says so)."""
+        if (self.counted is not None and self.counted.count >= 2 and self.counted.in_turns
                 and self.counted.probability >= MOTION_YIELDS_TO_COUNT) or not self.standing_doubted:
             return None
         if self.count_pending:
             return None
-        if self.calibration.offset or self.calibration.course:
-            # the watch reads the bearings as given: where the filter learned to turn them, a standing transmitter
-            # misread by the turn looks like a mover (a mount offset left at 0 read as 8 m/s)
+        if self.calibration.offset:
+            # weighed against the standing model with the offset, a mover still won where the bearings were the
+            # vehicle's (read as north) before their course was learned: 1.1-1.3 km off, `moving`
             return None
         return self.motion
 
