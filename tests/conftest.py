@@ -27,20 +27,12 @@ _domains = itertools.count(random.Random(os.getpid()).randrange(_SHARE))
 
 
 def pytest_xdist_auto_num_workers(config):
-    """`-n auto`: a worker per core, and at least four when the ROS tests run. Those run one at a time on one worker,
-    their processes mostly waiting on the clock of a drive played at 40x, so three more share the CPU-bound rest
-    beside them (a whole run on 2 cores: 4 min, against 6 with two); the fast tier keeps one per core (its workers'
-    start-up would cost more than they save)."""
+    """`-n auto`: a worker per core, and at least four when the ROS tests run: their processes mostly wait on the
+    clock of a drive played at 40x, so more workers than cores keep the cores busy (each worker's ROS tests in its
+    own share of the domains); the fast tier keeps one per core (its workers' start-up would cost more than they
+    save)."""
     cores = os.cpu_count() or 1
     return cores if "not ros" in (config.getoption("markexpr") or "") else max(cores, 4)
-
-
-def pytest_collection_modifyitems(items):
-    """The ROS tests form one xdist group: they run one at a time, as their real-time processes were timed to,
-    on one worker, beside the rest of the suite on the others."""
-    for item in items:
-        if item.get_closest_marker("ros"):
-            item.add_marker(pytest.mark.xdist_group("ros"))
 
 
 
