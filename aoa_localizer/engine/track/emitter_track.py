@@ -45,7 +45,7 @@ from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
 from aoa_localizer.engine.track.calibrator import Recalibration
-from aoa_localizer.engine.track.held import ASK_GROWTH, COUNT_EVERY_MAX, HEARD_READINGS, Held
+from aoa_localizer.engine.track.held import COUNT_EVERY_MAX, HEARD_READINGS, Held
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
 from aoa_localizer.engine.track.report import looks_wild
 from aoa_localizer.engine.track.state import Phase, Status, WindowEntry
@@ -110,8 +110,8 @@ class EmitterTrack(Held):
         self.sure_run = self.sure_run + 1 if sure else 0
         moving = self.motion is not None and self.motion.p_moving >= MOVING_P and self.standing_doubted
         misfit = moving or self.supervisor.alarm or looks_wild(self.calibration)
-        if misfit and not self.misfit and self.heard_readings >= ASK_GROWTH * self.counted_readings:
-            self.count_asked = self.heard_readings  # asked again only once the readings grew since the last count
+        if misfit and not self.misfit and not self.count_pending:
+            self.count_asked = self.heard_readings  # one ask at a time: a misfit that comes and goes asks once answered
         self.misfit = misfit
         self.scheduler.take_turn(self.counting)
         self._count()

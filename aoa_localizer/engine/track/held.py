@@ -38,7 +38,6 @@ HEARD_READINGS = 5000  # the newest readings (whole points) the transmitter coun
 # turns costs about a second: every HEARD_READINGS it was 3 times the rest of a channel's work); one that changes
 # brings them back to every HEARD_READINGS
 COUNT_EVERY_MAX = 8 * HEARD_READINGS
-ASK_GROWTH = 1.25  # a misfit asks for a count again once the readings grew by this factor since the last count began
 
 
 class Held:
