@@ -52,13 +52,13 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
     """A standing transmitter's estimate with what the motion watch says (`motion`; `said`: what the estimate may
     follow, motion.py): the probability of motion, the velocity over both models (a standing one's is zero), and
     where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking`; a watch sure of
-    motion that the estimate does not follow (`unheeded`: the channel learned a bearing offset) is
+    motion that the estimate does not follow (`unheeded`: Held.motion_unheeded) is
     said, and the estimate is not `tracking`."""
     moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
     if said is None and unheeded and motion is not None:
         warnings = warnings + [f"the bearings look like a moving transmitter's (p = {motion.p_moving:.2f}), but the "
-                               "channel has learned a bearing offset: the "
-                               "place is the standing filter's; check the offset it learned"]
+                               "estimate keeps the standing filter's place (a bearing offset learned, a transmitter "
+                               "count under way, or motion not yet sure for long enough)"]
         return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
     if said is None:
         return mean, cov, state, warnings, moves

@@ -116,9 +116,17 @@ class Held:
 
     @property
     def motion_unheeded(self) -> bool:
-        """The watch has been all but sure of motion for DOUBT_POINTS points in a row, and the estimate keeps the
-        filter's only because the channel learned a bearing offset (motion_said): said in a warning."""
-        return self.sure_run >= DOUBT_POINTS and bool(self.calibration.offset) and self.motion_said is None
+        """The watch finds motion probable (p >= MOVING_P) and the estimate keeps the filter's place (motion_said)
+        for a reason other than a count of transmitters heard in turns: said in a warning, never `tracking`."""
+        m = self.motion
+        return (m is not None and m.p_moving >= MOVING_P and self.motion_said is None
+                and not self.count_explains_motion)
+
+    @property
+    def count_explains_motion(self) -> bool:
+        """The count is all but sure of several transmitters heard in turns, which look like one that jumps."""
+        c = self.counted
+        return c is not None and c.count >= 2 and c.in_turns and c.probability >= MOTION_YIELDS_TO_COUNT
 
     @property
     def motion_said(self) -> Motion | None:
@@ -128,8 +136,7 @@ class Held:
         the count is the model made for them; a walker's drift has been counted as two at p = 0.90, so only a
         count of p >= MOTION_YIELDS_TO_COUNT outranks the watch, and places heard one after another are a mover's
         path), or while the channel has learned a bearing offset (motion_unheeded says so)."""
-        if (self.counted is not None and self.counted.count >= 2 and self.counted.in_turns
-                and self.counted.probability >= MOTION_YIELDS_TO_COUNT) or not self.standing_doubted:
+        if self.count_explains_motion or not self.standing_doubted:
             return None
         if self.count_pending:
             return None
