@@ -57,8 +57,8 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
     moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
     if said is None and unheeded and motion is not None:
         warnings = warnings + [f"the bearings look like a moving transmitter's (p = {motion.p_moving:.2f}), but the "
-                               "estimate keeps the standing filter's place (a bearing offset learned, a transmitter "
-                               "count under way, or motion not yet sure for long enough)"]
+                               "channel has learned a bearing offset: the place is the standing filter's; check the "
+                               "offset it learned"]
         return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
     if said is None:
         return mean, cov, state, warnings, moves

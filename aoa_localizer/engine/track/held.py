@@ -116,11 +116,11 @@ class Held:
 
     @property
     def motion_unheeded(self) -> bool:
-        """The watch finds motion probable (p >= MOVING_P) and the estimate keeps the filter's place (motion_said)
-        for a reason other than a count of transmitters heard in turns: said in a warning, never `tracking`."""
-        m = self.motion
-        return (m is not None and m.p_moving >= MOVING_P and self.motion_said is None
-                and not self.count_explains_motion)
+        """The watch has been all but sure of motion for DOUBT_POINTS points in a row, and the estimate keeps the
+        filter's only because the channel learned a bearing offset (motion_said): said in a warning. (Not for every
+        probable motion the estimate does not follow: a standing transmitter circled by the vehicle, one reading a
+        point, reads as p = 0.997 to the watch.)"""
+        return self.sure_run >= DOUBT_POINTS and bool(self.calibration.offset) and self.motion_said is None
 
     @property
     def count_explains_motion(self) -> bool:
