@@ -246,6 +246,8 @@ def test_a_sure_watch_the_estimate_does_not_follow_is_said_and_the_estimate_is_n
     out = with_motion(sure, None, mean, cov, EstimateState.TRACKING, [], unheeded=True)
     assert out[2] == EstimateState.POORLY_DETERMINED and out[0] is mean and out[1] is cov
     assert len(out[3]) == 1 and "look like a moving transmitter's (p = 1.00)" in out[3][0]
-    assert out[4] == {"motion_probability": 0.999}
+    assert out[4]["motion_probability"] == 0.999 and np.array_equal(out[4]["velocity"], [0.0, 0.0])
+    # the place stands; the velocity's spread is the watch's second moment about zero, times p
+    np.testing.assert_allclose(out[4]["velocity_cov"], 0.999 * (np.eye(2) + np.outer([1.0, 0.0], [1.0, 0.0])))
     quiet = with_motion(sure, None, mean, cov, EstimateState.TRACKING, [])
     assert quiet[2] == EstimateState.TRACKING and quiet[3] == []

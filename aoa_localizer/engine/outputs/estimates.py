@@ -51,10 +51,16 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
                 ) -> tuple[np.ndarray, np.ndarray, EstimateState, list[str], dict[str, Any]]:
     """A standing transmitter's estimate with what the motion watch says (`motion`; `said`: what the estimate may
     follow, motion.py): the probability of motion, the velocity over both models (a standing one's is zero), and
-    where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking`; a watch sure of
+    where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking` (an estimate
+    that does not follow the watch stands: velocity zero, its covariance the watch's second moment times p); a watch
+    sure of
     motion that the estimate does not follow (`unheeded`: Held.motion_unheeded) is
     said, and the estimate is not `tracking`."""
     moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
+    if said is None and motion is not None:
+        # the estimate stands: no velocity, spread by what the watch makes of a motion it may have
+        p, v = motion.p_moving, motion.velocity
+        moves.update(velocity=np.zeros(2), velocity_cov=p * (motion.velocity_cov + np.outer(v, v)))
     if said is None and unheeded and motion is not None:
         warnings = warnings + [f"the bearings look like a moving transmitter's (p = {motion.p_moving:.2f}), but the "
                                "channel has learned a bearing offset: the place is the standing filter's; check the "
