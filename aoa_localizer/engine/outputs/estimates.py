@@ -53,9 +53,8 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
     follow, motion.py): the probability of motion, the velocity over both models (a standing one's is zero), and
     where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking` (an estimate
     that does not follow the watch stands: velocity zero, its covariance the watch's second moment times p); a watch
-    sure of
-    motion that the estimate does not follow (`unheeded`: Held.motion_unheeded) is
-    said, and the estimate is not `tracking`."""
+    sure of motion that the estimate does not follow (`unheeded`: Held.motion_unheeded) is said, and the estimate is
+    not `tracking`."""
     moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
     if said is None and motion is not None:
         # the estimate stands: no velocity, spread by what the watch makes of a motion it may have

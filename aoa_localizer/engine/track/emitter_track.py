@@ -129,13 +129,12 @@ class EmitterTrack(Held):
         (counted `internal_error`); a watch begun before the calibration's offset changed begins again."""
         if self.cfg.motion_model == "static" or not self.cfg.global_safety:  # the filters alone: no watch either
             return None
+        # bearings turned by the vehicle's course (every turn of the vehicle would read as a move), or an offset
+        # other than the one the watch's history was weighed with: what the watch said no longer holds
+        if self.calibration.course or (self.watch is not None and self.watched_offset != self.calibration.offset):
+            self.watch, self.sure_run, self.motion = None, 0, None
         if self.calibration.course:
-            # bearings the channel turns by the vehicle's course: every turn of the vehicle would read as a move
-            self.watch, self.sure_run, self.motion = None, 0, None
             return None
-        if self.watch is not None and self.watched_offset != self.calibration.offset:
-            # the standing model the watch weighed is not the one now: its history was read with another offset
-            self.watch, self.sure_run, self.motion = None, 0, None
         if self.watch is None:  # the first point is the moving cloud's prior: its line of bearing
             self.watch = MotionWatch(point, self.cfg.max_transmitter_speed_mps, self.rng.spawn(1)[0],
                                      self.cfg.gps_sigma_m)
