@@ -9,6 +9,7 @@ import pytest
 import takproto
 from tak_listener import PytakListener
 
+from aoa_localizer.common import cot
 from aoa_localizer.common.cot import QUEUE_MAX, CotSender, estimate_event, parse_cot_url, write_cot_files
 from aoa_localizer.engine.types import Estimate
 
@@ -65,7 +66,7 @@ def test_udp_and_tcp_listeners_receive_the_event_and_a_dead_server_is_counted_no
     rx.settimeout(5)
     udp = CotSender(f"udp://127.0.0.1:{rx.getsockname()[1]}")
     udp.send(payload)
-    assert rx.recv(65536) == payload and udp.flush() and udp.sent == 1
+    assert rx.recv(65536) == payload and udp.flush() and udp.sent == 1 and not udp.failing
     server = socket.create_server(("127.0.0.1", 0))
     port = server.getsockname()[1]
     tcp = CotSender(f"tcp://127.0.0.1:{port}")
@@ -79,11 +80,31 @@ def test_udp_and_tcp_listeners_receive_the_event_and_a_dead_server_is_counted_no
     dead.send(payload)
     assert dead.flush() and dead.failed == 1 and "ConnectionRefused" in dead.last_error
     dead.send(payload)
-    assert dead.flush() and dead.failed == 2  # within RETRY_S: not tried again, counted
+    assert dead.flush() and dead.failed == 2 and dead.failing  # within RETRY_S: not tried again, counted
     for sender in (udp, tcp, dead):
         sender.close()
     assert write_cot_files(tmp_path, [estimate]) == "1 .cot file for TAK"
     assert (tmp_path / "emitter_f433920000.cot").read_bytes().startswith(b"<?xml")
+
+
+def test_a_tak_server_down_is_failing_until_an_event_is_sent_again(estimate, monkeypatch):
+    """A down server was one /diagnostics period's warning (the count grew once, then no estimate was due): the
+    sender says it is failing from the first failure until a send succeeds."""
+    monkeypatch.setattr(cot, "RETRY_S", 0.0)
+    payload = estimate_event(estimate, 60.0)
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    server.close()
+    sender = CotSender(f"tcp://127.0.0.1:{port}")
+    sender.send(payload)
+    assert sender.flush() and sender.failing and sender.failed == 1
+    server = socket.create_server(("127.0.0.1", port))  # the server is back
+    sender.send(payload)
+    conn, _ = server.accept()
+    assert sender.flush() and not sender.failing and sender.sent == 1 and sender.failed == 1
+    conn.close()
+    server.close()
+    sender.close()
 
 
 @pytest.mark.parametrize("bad", ["http://host:80", "udp://", "tcp+ro://host:8087", "udp://127.0.0.1:99999",

@@ -121,6 +121,7 @@ class CotSender:
         self.url = url
         self.sent = self.failed = self.dropped = 0
         self.last_error = ""
+        self.failing = False  # the last try failed: stays so until an event is sent
         self._sock: socket.socket | None = None
         self._retry_at = 0.0  # monotonic s: no try before (RETRY_S after a failure)
         self._queue: deque[bytes] = deque()
@@ -170,6 +171,7 @@ class CotSender:
     def _send_now(self, payload: bytes) -> None:
         if time.monotonic() < self._retry_at:
             self.failed += 1
+            self.failing = True
             return
         try:
             if self._sock is None:
@@ -180,11 +182,13 @@ class CotSender:
                 self._sock.sendto(payload, (self.host, self.port))
         except Exception as exc:  # noqa: BLE001 - whatever the network says, the localizer goes on
             self.failed += 1
+            self.failing = True
             self.last_error = f"{type(exc).__name__}: {exc}"
             self._retry_at = time.monotonic() + RETRY_S
             self._close_socket()
             return
         self.sent += 1
+        self.failing = False
 
     def _connect(self) -> socket.socket:
         if self.tcp:

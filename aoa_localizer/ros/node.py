@@ -481,11 +481,12 @@ class LocalizerNode(Node):
         return level, message, values
 
     def _cot_health(self, level: int, message: str) -> tuple[int, str]:
-        """WARN, with the words in the message, for a period in which CoT events failed or were dropped; the log
-        says so when such periods begin (a TAK server down or never reading was once only a count)."""
+        """WARN, with the words in the message, while CoT events fail (until one is sent) and for a period in which
+        events failed or were dropped; the log says so when such a run of periods begins (a TAK server that is down
+        stays a warning while no estimate is due, not one period's)."""
         assert self.cot is not None
         unsent = self.cot.failed + self.cot.dropped
-        failing, self.cot_unsent = unsent > self.cot_unsent, unsent
+        failing, self.cot_unsent = self.cot.failing or unsent > self.cot_unsent, unsent
         if not failing:
             self.cot_failing = False
             return level, message
