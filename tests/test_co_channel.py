@@ -441,3 +441,24 @@ def test_transmitters_taking_turns_are_counted_before_anything_is_called_moving_
     final = estimates[-1]
     assert final.state == "tracking" and final.transmitter_count == 2 and final.count_probability > 0.99
     assert min(math.hypot(final.east - x, final.north - y) for x, y in [(1200.0, 800.0), (600.0, 1300.0)]) < 25.0
+
+
+@pytest.mark.slow
+def test_each_of_five_in_turns_is_placed_at_its_own_readings_not_on_a_ridge():
+    """Co-channel II, five at limit 5 (tracking places outside their ellipse): EM left the transmitter at (1200, 500)
+    302 m off with a tight ellipse, on a ridge where most of its readings fit and the rest passed for wild. Each
+    place is refitted from the likeliest place of its own readings, and every transmitter has a place near it."""
+    from dataclasses import replace
+
+    from aoa_localizer.engine.inference.co_channel import count_job
+    from aoa_localizer.simulation.scenarios import robustness_cells, simulate
+
+    sc = replace(robustness_cells()["wild0"], co_shares=(0.2,) * 5,
+                 co_channel=((1500.0, 800.0), (1200.0, 1450.0), (200.0, 800.0), (1200.0, 500.0)))
+    d = simulate(sc, 0)
+    b = d.bearings
+    r = Readings(b[:, 0], d.sensor_enu[:, 0], d.sensor_enu[:, 1], np.pi / 2 - np.radians(b[:, 1]), d.sigma, b[:, 2])
+    count = count_job(r, d.transmitters_enu[0], 5, 0.0)
+    assert count is not None and count.count == 5
+    for truth in d.transmitters_enu:
+        assert min(np.hypot(*(t.mean - truth)) for t in count.transmitters) < 20.0, truth
