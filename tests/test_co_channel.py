@@ -462,3 +462,26 @@ def test_each_of_five_in_turns_is_placed_at_its_own_readings_not_on_a_ridge():
     assert count is not None and count.count == 5
     for truth in d.transmitters_enu:
         assert min(np.hypot(*(t.mean - truth)) for t in count.transmitters) < 20.0, truth
+
+
+def test_a_place_its_own_readings_disown_is_marked_and_not_sure():
+    """Co-channel II, tracking places outside their ellipse: a place whose own readings meet outside its 99 %
+    ellipse (chi-square 9.21) is marked with where they meet, and report.co_channel gives it `poorly_determined`
+    with a warning; one whose readings meet inside it stays `tracking`."""
+    from aoa_localizer.engine.inference.co_channel import Count, Fit, Place, _checked
+    from aoa_localizer.engine.track.report import co_channel
+    from aoa_localizer.engine.types import EstimateState
+
+    cov = np.diag([100.0, 100.0])  # 10 m each way
+    places = [Place(np.array([0.0, 0.0]), cov, 0.5), Place(np.array([1000.0, 0.0]), cov, 0.5)]
+    fit = Fit(2, True, places, np.ones(4), np.zeros(4), 0.0, 0.0, np.zeros((4, 2)))
+    # 50 m off: d2 = 25; 20 m off: d2 = 4
+    checked = _checked(fit, [np.array([50.0, 0.0]), np.array([1020.0, 0.0])])
+    assert checked.places[0].own_elsewhere is not None and checked.places[0].own_elsewhere[0] == 50.0
+    assert checked.places[1].own_elsewhere is None
+    assert _checked(fit, [None, None]).places[0].own_elsewhere is None  # too few readings to say
+    count = Count(2, 1.0, checked.places, [], {2: 1.0}, False, np.zeros(4, int))
+    antennas = np.array([[500.0, -800.0], [500.0, 800.0], [-500.0, 0.0]])
+    states, warnings = co_channel(count, antennas, 3)
+    assert [s for _, s in states] == [EstimateState.POORLY_DETERMINED, EstimateState.TRACKING]
+    assert any("the place E 0 N 0 is not where its own readings meet (E 50 N 0)" in w for w in warnings), warnings
