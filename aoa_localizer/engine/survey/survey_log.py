@@ -38,6 +38,8 @@ SITE_CLIP = 9.0  # ... each stop's squared standardised residual counted up to t
 SITE_RATIO = 2.0  # ... and the typical stop's at least this many times what independent readings give
 _PAIR_Q25 = float(norm_ppf(0.625))  # the lower quartile of |a standard normal's draw|
 _MEDIAN_VAR = math.pi / 2  # a median's variance over the mean's (its large-sample value; 1.35 for three readings)
+_CROSSING_ROUNDS = 5  # the stops' crossing refitted this often, without ...
+_CROSSING_TRIM = 0.25  # ... the stops beyond SITE_CLIP, the worst this share of them at most
 _WILD_SIGMAS = 4.0  # a reading this many of its sigmas from its stop's median is wild (a point's gate)
 
 
@@ -153,29 +155,54 @@ def site_part_shown(rows: list[tuple]) -> bool | None:
         xy.append((p[0][2], p[0][3]))
     if len(xy) < SITE_PLACES:
         return None
-    xy_a, centre = np.array(xy), np.array(centres)
-    point = least_squares_crossing(xy_a, centre)
-    if point is not None:  # again, each line weighted by its range's inverse square (an angle's error grows with it)
-        point = least_squares_crossing(xy_a, centre, 1.0 / np.maximum(np.sum((xy_a - point) ** 2, axis=1), 1e-6))
+    z2 = _stop_residuals(np.array(xy), np.array(centres), np.array(var))
+    return None if z2 is None else _scattered(*z2)
+
+
+def _stop_residuals(xy: np.ndarray, centre: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The stops' squared standardised residuals (their centres' angles about their crossing over their
+    variances): at the crossing of every stop, each line weighted by its range's inverse square (an angle's error
+    grows with it), and at the crossing refitted without the worst stops beyond SITE_CLIP (up to _CROSSING_TRIM of
+    them: the few stops a reflection took over pull the plain crossing and make every other stop look scattered).
+    None where the lines are parallel."""
+    def z2_at(point: np.ndarray) -> np.ndarray:
+        return wrap_pi(centre - np.arctan2(point[1] - xy[:, 1], point[0] - xy[:, 0])) ** 2 / var
+
+    point = least_squares_crossing(xy, centre)
     if point is None:
         return None
-    resid = wrap_pi(centre - np.arctan2(point[1] - xy_a[:, 1], point[0] - xy_a[:, 0]))
-    return _scattered(resid**2 / np.array(var))
+    point = least_squares_crossing(xy, centre, 1.0 / np.maximum(np.sum((xy - point) ** 2, axis=1), 1e-6))
+    if point is None:
+        return None
+    plain = trimmed = z2_at(point)
+    for _ in range(_CROSSING_ROUNDS):
+        worst = np.argsort(-trimmed)[:int(_CROSSING_TRIM * len(trimmed))]
+        kept = np.ones(len(xy), bool)
+        kept[worst[trimmed[worst] > SITE_CLIP]] = False
+        if kept.all():
+            break
+        again = least_squares_crossing(xy, centre, kept / np.maximum(np.sum((xy - point) ** 2, axis=1), 1e-6))
+        if again is None:
+            break
+        point, trimmed = again, z2_at(again)
+    return plain, trimmed
 
 
-def _scattered(z2: np.ndarray) -> bool:
+def _scattered(z2: np.ndarray, typical: np.ndarray | None = None) -> bool:
     """Whether stops' squared standardised residuals `z2` show a site part that matters: their sum, each clipped at
     SITE_CLIP (a stop that a reflection or wild readings took over counts as one badly off stop, not as a
     hundred), beyond what chi-square(1) draws give at SITE_P (normal approximation to the clipped sum, from its
-    exact moments), and their median at least SITE_RATIO times chi-square(1)'s: the typical stop scatters, so the
-    filter's ellipse, which takes the readings as independent, would be too small by more than sqrt(SITE_RATIO)."""
+    exact moments), and the median of `typical` (the same stops' at a crossing the worst do not pull; default
+    `z2`) at least SITE_RATIO times chi-square(1)'s: the typical stop scatters, so the filter's ellipse, which takes
+    the readings as independent, would be too small by more than sqrt(SITE_RATIO)."""
     c, f1 = SITE_CLIP, float(chi2_sf(SITE_CLIP, 1))
     # x f_1(x) = f_3(x) and x^2 f_1(x) = 3 f_5(x) for chi-square densities: the clipped draw's moments in closed form
     mean = float(chi2_cdf(c, 3)) + c * f1
     var = 3.0 * float(chi2_cdf(c, 5)) + c * c * f1 - mean * mean
     clipped = float(np.minimum(z2, c).sum())
     beyond = float(norm_sf((clipped - z2.size * mean) / math.sqrt(z2.size * var))) < SITE_P
-    return beyond and float(np.median(z2)) >= SITE_RATIO * float(chi2_ppf(0.5, 1))
+    typical = z2 if typical is None else typical
+    return beyond and float(np.median(typical)) >= SITE_RATIO * float(chi2_ppf(0.5, 1))
 
 
 def counted(count: SurveyCount | None, frame: LocalFrame) -> dict:
