@@ -44,8 +44,6 @@ _UNEXPLAINED_MIN = 6  # readings off the one place, from which a second start is
 _WILD_MADS = 2.5  # a reading this many robust sigmas off the one place is another transmitter's, or wild
 _STARTS_OUTLIER_PROB = 0.2  # the modes the count starts from are sought under at least this wild share
 _START_APART_M = 30.0  # starts nearer than this to an earlier one are the same start
-_OWN_MIN_READINGS = 10  # a place's own readings, at least, for where they meet alone
-_OWN_ELSEWHERE_D2 = 9.21  # chi-square(2) 99 %: a place's own readings meeting further off disown it
 # One place that explains the readings without widening their sigmas more than this, whose wild readings do not
 # meet anywhere with another transmitter's share, is one transmitter (the other fits are skipped: a single
 # emitter's count costs one fit and one search of its wild readings); a wider one may be two read as one wide noise
@@ -55,15 +53,12 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 @dataclass(frozen=True)
 class Place:
-    """One transmitter (or ghost) of a fit: its place (east, north, m), Laplace covariance (m^2), the share of the
-    readings it explains, and where its own readings meet when not at it."""
+    """One transmitter (or ghost) of a fit: its place (east, north, m), Laplace covariance (m^2) and the share of
+    the readings it explains."""
 
     mean: np.ndarray
     cov: np.ndarray
     share: float
-    # where the readings this place holds meet on their own (their robust posterior's best mode), when that lies
-    # outside its 99 % ellipse: the place is held where it is by readings it shares with another (None: it agrees)
-    own_elsewhere: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -180,8 +175,6 @@ def count_transmitters(r: Readings, first: np.ndarray, starts: Callable[[float],
         by_count = _by_count(allowed, dispersion)
         count = max(by_count, key=lambda n: (by_count[n], -n))
     best = min((f for f in allowed if (f.k if f.in_turns else 1) == count), key=lambda f: f.bic)
-    if best.k >= 2 and best.in_turns:  # transmitters' places (an interleaved fit's others are a ghost's)
-        best = _checked(*_polished(r, bins, best))
     order = sorted(range(best.k), key=lambda j: -best.places[j].share)
     places = [best.places[j] for j in order]
     transmitters = places if count >= 2 else []
@@ -314,46 +307,6 @@ def _births(r: Readings, bins: np.ndarray, fits: list[Fit], max_k: int, need: fl
         born.append(fit)
         top = fit
     return born
-
-
-def _own_modes(r: Readings, fit: Fit) -> list[np.ndarray | None]:
-    """Where each place's own readings (those it is the likeliest place of) meet alone: their robust posterior's
-    best mode, with the fit's shift and scale (None under ten readings)."""
-    assigned = np.argmax(fit.resp, axis=1)
-    rows = np.column_stack([r.east, r.north, _turned(r, fit.shift).theta, fit.scale * r.sigma, np.zeros(len(r))])
-    out: list[np.ndarray | None] = []
-    for j in range(fit.k):
-        mine = assigned == j
-        modes = find_modes(Points.of(rows[mine]), Robust(_STARTS_OUTLIER_PROB), by_density=True) if (
-            mine.sum() >= _OWN_MIN_READINGS) else []
-        out.append(modes[0].mean if modes else None)
-    return out
-
-
-def _polished(r: Readings, bins: np.ndarray, fit: Fit) -> tuple[Fit, list[np.ndarray | None]]:
-    """`fit` redone from the places its places' own readings meet at (_own_modes), kept where likelier, with the
-    own modes of the fit kept: EM's local steps can leave a place on a ridge tens to hundreds of metres off its
-    transmitter, held there by readings it shares with another place, with a tight ellipse (five on the air)."""
-    own = _own_modes(r, fit)
-    starts = [m if m is not None else p.mean for m, p in zip(own, fit.places, strict=True)]
-    if all(np.hypot(*(a - p.mean)) <= _START_APART_M for a, p in zip(starts, fit.places, strict=True)):
-        return fit, own
-    again = _best_fit(r, bins, starts, fit.in_turns, fit.scale, fit.offset)
-    return (again, _own_modes(r, again)) if again.loglik > fit.loglik else (fit, own)
-
-
-def _checked(fit: Fit, own: list[np.ndarray | None]) -> Fit:
-    """`fit` with each place whose own readings meet outside its 99 % ellipse marked (Place.own_elsewhere): EM
-    found no likelier fit, yet the place is not where its readings put it, so it is not sure."""
-    places = []
-    for p, m in zip(fit.places, own, strict=True):
-        d = m - p.mean if m is not None else np.zeros(2)
-        try:
-            far = m is not None and float(d @ np.linalg.solve(p.cov, d)) > _OWN_ELSEWHERE_D2
-        except np.linalg.LinAlgError:
-            far = False
-        places.append(replace(p, own_elsewhere=np.array(m, float)) if far else p)
-    return replace(fit, places=places)
 
 
 def _left_over(r: Readings, fit: Fit, need: float) -> bool:

@@ -244,17 +244,13 @@ def co_channel(count: Count, antennas: np.ndarray | None, max_k: int,
         size, reach = ellipse_and_reach(place.mean, place.cov, antennas[:, 0], antennas[:, 1])
         # more on the air than allowed: a place may hold another's readings too, so none is sure
         sure = (count.probability >= COUNT_SURE and size <= MAX_ELLIPSE_RANGE_SHARE * reach
-                and not count.more_than_allowed and place.own_elsewhere is None)
+                and not count.more_than_allowed)
         out.append((place, EstimateState.TRACKING if sure else EstimateState.POORLY_DETERMINED))
     if count.count >= 2:
         places = ", ".join(f"{name(p.mean)} ({100 * p.share:.0f} %)" for p in count.transmitters)
         warnings.append(f"{count.count} transmitters on this frequency (p = {count.probability:.2f}), taking turns: "
                         f"{places}; each is in `transmitters`, this estimate is {estimate_is} (a reflection heard "
                         "alone while the direct path was blocked looks the same)")
-    for place in count.transmitters:
-        if place.own_elsewhere is not None:
-            warnings.append(f"the place {name(place.mean)} is not where its own readings meet "
-                            f"({name(place.own_elsewhere)}): it shares readings with another place, and is not sure")
     for ghost in count.ghosts:
         where = f"a second place, {name(ghost.mean)}, explains {100 * ghost.share:.0f} %"
         if count.probabilities.get(2, 0.0) >= 1.0 - COUNT_SURE:  # the turns and the interleaving fit alike
