@@ -170,8 +170,7 @@ class CotSender:
 
     def _send_now(self, payload: bytes) -> None:
         if time.monotonic() < self._retry_at:
-            self.failed += 1
-            self.failing = True
+            self._failed()
             return
         try:
             if self._sock is None:
@@ -181,14 +180,18 @@ class CotSender:
             else:
                 self._sock.sendto(payload, (self.host, self.port))
         except Exception as exc:  # noqa: BLE001 - whatever the network says, the localizer goes on
-            self.failed += 1
-            self.failing = True
+            self._failed()
             self.last_error = f"{type(exc).__name__}: {exc}"
             self._retry_at = time.monotonic() + RETRY_S
             self._close_socket()
             return
         self.sent += 1
         self.failing = False
+
+    def _failed(self) -> None:
+        """An event not sent (tried and failed, or within RETRY_S of a failure): counted, and failing until one is."""
+        self.failed += 1
+        self.failing = True
 
     def _connect(self) -> socket.socket:
         if self.tcp:

@@ -165,7 +165,7 @@ class LocalizerNode(Node):
         self.cot = self._cot_sender()  # raises ConfigError: the caller refuses to start
         self.cot_sent_at: dict[str, float] = {}  # each channel's last CoT event (monotonic s)
         self.cot_unsent = 0  # CoT events failed or dropped, as of the last /diagnostics
-        self.cot_failing = False  # the last period had some: said in the log once per run of failing periods
+        self.cot_warned = False  # the last period warned of CoT: said in the log once per run of such periods
         self._init_inputs()
         self.pub_diag = self.create_publisher(self.types.DiagnosticArray, "/diagnostics", 10)
         self.diag_name = f"{self.get_fully_qualified_name().lstrip('/')}: localizer"  # like diagnostic_updater
@@ -488,13 +488,13 @@ class LocalizerNode(Node):
         unsent = self.cot.failed + self.cot.dropped
         failing, self.cot_unsent = self.cot.failing or unsent > self.cot_unsent, unsent
         if not failing:
-            self.cot_failing = False
+            self.cot_warned = False
             return level, message
         words = (f"TAK: {self.cot.failed} CoT events not sent, {self.cot.dropped} dropped, to {self.cot.url} "
                  f"({self.cot.last_error or 'the sender fell behind'})")
-        if not self.cot_failing:
+        if not self.cot_warned:
             self.get_logger().warning(words)
-        self.cot_failing = True
+        self.cot_warned = True
         return max(level, 1), (f"{message}; {words}" if message else words)
 
     def _publisher_problems(self) -> dict[str, list[str]]:

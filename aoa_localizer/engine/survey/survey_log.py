@@ -168,10 +168,12 @@ def _stop_residuals(xy: np.ndarray, centre: np.ndarray, var: np.ndarray) -> tupl
     def z2_at(point: np.ndarray) -> np.ndarray:
         return wrap_pi(centre - np.arctan2(point[1] - xy[:, 1], point[0] - xy[:, 0])) ** 2 / var
 
+    def by_range(point: np.ndarray, kept: np.ndarray) -> np.ndarray | None:
+        return least_squares_crossing(xy, centre, kept / np.maximum(np.sum((xy - point) ** 2, axis=1), 1e-6))
+
+    kept = np.ones(len(xy), bool)
     point = least_squares_crossing(xy, centre)
-    if point is None:
-        return None
-    point = least_squares_crossing(xy, centre, 1.0 / np.maximum(np.sum((xy - point) ** 2, axis=1), 1e-6))
+    point = by_range(point, kept) if point is not None else None
     if point is None:
         return None
     plain = trimmed = z2_at(point)
@@ -179,9 +181,7 @@ def _stop_residuals(xy: np.ndarray, centre: np.ndarray, var: np.ndarray) -> tupl
         worst = np.argsort(-trimmed)[:int(_CROSSING_TRIM * len(trimmed))]
         kept = np.ones(len(xy), bool)
         kept[worst[trimmed[worst] > SITE_CLIP]] = False
-        if kept.all():
-            break
-        again = least_squares_crossing(xy, centre, kept / np.maximum(np.sum((xy - point) ** 2, axis=1), 1e-6))
+        again = by_range(point, kept) if not kept.all() else None
         if again is None:
             break
         point, trimmed = again, z2_at(again)
