@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Protocol
 
 import numpy as np
 from scipy.special import gammaln
@@ -20,6 +19,7 @@ from scipy.special import gammaln
 from aoa_localizer.engine.distributions import binom_sf
 from aoa_localizer.engine.inference.global_search import Mode, Points
 from aoa_localizer.filters import moves
+from aoa_localizer.filters.moves import Proposal
 from aoa_localizer.filters.resampling import systematic
 
 _T_DOF = 3.0  # heavy tails: the ratio posterior / proposal stays bounded in the mode's tails
@@ -116,13 +116,6 @@ class ModeProposal:
                           for w, m, c, ld in zip(self.weights, self.means, self.chols, self.logdets, strict=False)])
         return np.logaddexp.reduce(parts, axis=0)
 
-
-class Proposal(Protocol):
-    """An importance proposal: draws, and their exact log density."""
-
-    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray: ...
-
-    def logpdf(self, x: np.ndarray) -> np.ndarray: ...
 
 
 def weighted_sample(log_target, proposal: Proposal, n: int, rng: np.random.Generator

@@ -21,7 +21,6 @@ from weakref import WeakKeyDictionary
 
 import numpy as np
 
-from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.slices import (
     SWEEP_BUDGET_US,
@@ -34,6 +33,7 @@ from aoa_localizer.engine.scheduling.slices import (
 from aoa_localizer.engine.scheduling.worker import CheckWorker
 from aoa_localizer.engine.types import Reading
 from aoa_localizer.filters.base import ParticleFilter
+from aoa_localizer.filters.moves import Proposal
 from aoa_localizer.filters.resample_move import ResampleMove
 
 log = logging.getLogger("aoa_localizer")
@@ -218,7 +218,7 @@ class Scheduler:
             made, debt.sweeps, debt.order = debt.sweeps, 0, None  # a sweep made in parts is made whole
             f.move(made)
 
-    def pay_modes(self, f: ParticleFilter | None, proposal: ModeProposal | None) -> bool:
+    def pay_modes(self, f: ParticleFilter | None, proposal: Proposal | None) -> bool:
         """The move on the last check's modes (`proposal`: the track's, made from them), if `f` owes one; True when
         it was made (an MH move: made late, it keeps the posterior)."""
         debt = self.debt(f)
@@ -238,7 +238,7 @@ class Scheduler:
         """Moves `f` owes."""
         return int(self.debt(f))
 
-    def move_one(self, debtors: Iterable[tuple[ParticleFilter | None, ModeProposal | None]]) -> bool:
+    def move_one(self, debtors: Iterable[tuple[ParticleFilter | None, Proposal | None]]) -> bool:
         """Between points (`realtime`): one owed move, for the filter owing the most (the modes' move, with its
         track's proposal, before the sweeps); False when none was owed (or it failed: counted), and always under
         `reproducible`, whose moves follow its points alone."""
