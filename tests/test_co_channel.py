@@ -407,6 +407,27 @@ def test_a_place_holding_two_transmitters_readings_widens_its_own_ellipse():
     assert _own_dispersion(one, PLACES[0], np.zeros(400), scale) == 1.0  # no readings: nothing to say
 
 
+def test_a_place_whose_errors_repeat_along_the_drive_widens_its_ellipse_and_independent_ones_keep_it():
+    """The sandwich of a place's bins' scores with their autocovariances: a site error shared over 300 m of road
+    widens the one place's ellipse several times (at the truth, its scale what its readings scatter); independent
+    errors keep it as it is (their excess within its chance spread), and nothing narrows it."""
+    from aoa_localizer.engine.inference.co_channel import _covariance, _jacobian, _widened_by_scores
+
+    def widening(r: Readings) -> tuple[float, float]:
+        bins = np.unique(np.floor((r.stamp - r.stamp.min()) / 2.0), return_inverse=True)[1]
+        w = np.ones(len(r))
+        scale = np.full(len(r), math.sqrt(np.mean((_jacobian(r, PLACES[0])[0] / r.sigma) ** 2)))
+        plain = _covariance(r, PLACES[0], w, scale)
+        wide = _widened_by_scores(plain, r, PLACES[0], w, scale, bins)
+        return math.sqrt(np.linalg.det(wide) / np.linalg.det(plain)), float(np.linalg.eigvalsh(wide - plain).min())
+
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        ratio, least = widening(readings(np.zeros(400, int), rng))
+        assert ratio == pytest.approx(1.0) and least > -1e-9, ratio
+    assert np.median([widening(field_readings(rng, 400, 3.0, 300.0))[0] for _ in range(5)]) > 2.0
+
+
 def test_a_transmitter_no_start_reaches_is_born_where_the_readings_left_over_meet():
     """Co-channel II, five at limit 5 (count 4 at p = 1.00 in 6 of 20 runs): five in turns, limit 5, the starts
     offer two places and the one place's wild readings two more; the readings the best four leave over meet at the

@@ -53,8 +53,8 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 @dataclass(frozen=True)
 class Place:
-    """One transmitter (or ghost) of a fit: its place (east, north, m), Laplace covariance (m^2) and the share of
-    the readings it explains."""
+    """One transmitter (or ghost) of a fit: its place (east, north, m), covariance (m^2: Laplace, widened by
+    _widened_by_scores) and the share of the readings it explains."""
 
     mean: np.ndarray
     cov: np.ndarray
@@ -390,8 +390,9 @@ def _best_fit(r: Readings, bins: np.ndarray, places: list[np.ndarray], in_turns:
     resp, loglik = _responsibilities(log_e, share, bins, in_turns)
     loglik += _bias_prior(r, bias)
     inlier = resp * np.exp(log_in - log_e)
-    out = [Place(x[j].copy(), _covariance(shifted, x[j], inlier[:, j], scale) * _own_dispersion(
-        shifted, x[j], inlier[:, j], scale), float(resp[:, j].mean())) for j in range(k)]
+    out = [Place(x[j].copy(), _widened_by_scores(
+        _covariance(shifted, x[j], inlier[:, j], scale) * _own_dispersion(shifted, x[j], inlier[:, j], scale),
+        shifted, x[j], inlier[:, j], scale, bins), float(resp[:, j].mean())) for j in range(k)]
     params = 2 * k + (k - 1) + 1 + len(np.unique(band))  # places, shares, the wild share, the scales
     shift = offset + (bias[r.site] if r.site is not None else np.zeros(len(r)))
     return Fit(k, in_turns, out, scale, shift, loglik, -2.0 * loglik + params * math.log(len(r)), resp, offset)
@@ -406,6 +407,41 @@ def _own_dispersion(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray
     if total <= 2.0:
         return 1.0
     return max(1.0, float(w @ (resid / (scale * r.sigma)) ** 2) / total)
+
+
+def _widened_by_scores(cov: np.ndarray, r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray,
+                       bins: np.ndarray) -> np.ndarray:
+    """A place's covariance widened where its own readings' scores vary more than it says, along the drive: the
+    sandwich cov M cov, its meat the place's score sums per time bin with their autocovariances to lag L (Bartlett
+    weights, as _dependence's), so errors a stretch of its bins repeat (a stretch of road's site error, bursts of
+    another transmitter held by it) count as what they are worth. Kept in each direction where it exceeds `cov`
+    beyond its chance spread (as _dependence keeps its factor), never narrower: for independent errors the meat
+    is at most the information. Sites (a survey's stations) weigh their biases in _covariance already."""
+    if r.site is not None or not np.all(np.isfinite(cov)):
+        return cov
+    resid, jac = _jacobian(r, x)
+    score = (w * resid / (scale * r.sigma) ** 2)[:, None] * jac  # each reading's part of the log-likelihood's gradient
+    nbins = int(bins.max()) + 1
+    heard = np.bincount(bins, w, minlength=nbins) > 0.5  # the place's own bins, in time order
+    sums = np.column_stack([np.bincount(bins, score[:, i], minlength=nbins) for i in (0, 1)])[heard]
+    n = sums.shape[0]
+    if n < 8:
+        return cov
+    lags = int(math.ceil(n ** (1.0 / 3.0)))
+    meat: np.ndarray = sums.T @ sums
+    for lag in range(1, min(lags, n - 1) + 1):
+        cross = sums[lag:].T @ sums[:-lag]
+        meat = meat + (1.0 - lag / (lags + 1)) * (cross + cross.T)
+    sandwich = cov @ meat @ cov
+    try:
+        root = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        return cov
+    inv_root = np.linalg.inv(root)
+    excess, turn = np.linalg.eigh(inv_root @ sandwich @ inv_root.T)  # the sandwich in cov's own units
+    spread = math.sqrt(2.0 * (2 * lags + 1) / n)  # an excess's chance spread for independent errors, roughly
+    grown = root @ turn @ np.diag(np.where(excess > 1.0 + 3.0 * spread, excess, 1.0)) @ turn.T @ root.T
+    return 0.5 * (grown + grown.T)
 
 
 def _biased(r: Readings, bias: np.ndarray) -> Readings:
