@@ -8,6 +8,7 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer.common.words import clock_hint_sentence, robustness_lines
 from aoa_localizer.engine.ingest.input_guard import StreamClock, Verdict
 from aoa_localizer.simulation.evaluation import run
 from aoa_localizer.simulation.scenarios import simulate
@@ -220,11 +221,11 @@ def test_stamps_that_a_clock_offset_explains_are_pointed_out(late_s):
     loc.finish()
     hint = track_of(loc).supervisor.clock_hint
     if late_s == 0.0:
-        assert hint is None and loc.clock_hint_sentence() is None
+        assert hint is None and clock_hint_sentence(loc) is None
     else:
         assert hint is not None and abs(hint.shift_s + late_s) <= 0.5 and hint.gain >= 10
-        assert "try df_time_offset_s = " in loc.clock_hint_sentence()
-        assert any("DF stamps shifted" in line for line in loc.robustness_lines())
+        assert "try df_time_offset_s = " in clock_hint_sentence(loc)
+        assert any("DF stamps shifted" in line for line in robustness_lines(loc))
 
 
 def test_stamp_gaps_count_a_hole_in_a_regular_stream_and_nothing_else():

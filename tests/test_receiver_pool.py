@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from aoa_localizer.common.words import robustness_lines
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.noise import N_BANDS, NoiseModel
 from aoa_localizer.engine.inference.receiver import NoiseGrid
@@ -56,4 +57,4 @@ def test_a_new_channel_starts_from_the_receivers_pool_once():
     assert second.pooled is not None and second.pooled.scale == pytest.approx(3.0)
     first.track.calibration.noise = _fitted({4: 9.0})  # later calibrations do not move a prior already taken
     assert second.noise_prior() is grid
-    assert any(line.startswith("the receiver over its channels: 9.00x") for line in loc.robustness_lines())
+    assert any(line.startswith("the receiver over its channels: 9.00x") for line in robustness_lines(loc))

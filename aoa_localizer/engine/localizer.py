@@ -20,7 +20,7 @@ import numpy as np
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.inference.noise import sentence as noise_sentence
+from aoa_localizer.engine.inference.clock_check import ClockHint
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.ingest.gps_track import GpsTrack
 from aoa_localizer.engine.ingest.intake import Intake, as_float
@@ -30,7 +30,6 @@ from aoa_localizer.engine.outputs.next_goal import NextGoal, next_goal
 from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid, posterior_grid
 from aoa_localizer.engine.rejections import Rejections
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
-from aoa_localizer.engine.survey.survey_log import survey_sentence
 from aoa_localizer.engine.survey.survey_solver import SurveySolver, pooled_solver
 from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
@@ -193,14 +192,9 @@ class Localizer:
         data, reading and point outlier rates."""
         return noise_summary(channel or self._estimates.latest, self._cfg)
 
-    def clock_hint_sentence(self) -> str | None:
-        """Words for a DF clock offset the bearings point to (from the last global check), or None."""
-        hint = self._estimates.latest.track.supervisor.clock_hint
-        if hint is None:
-            return None
-        return (f"the bearings fit the track far better with the DF stamps shifted by {hint.shift_s:+.2f} s "
-                f"(log-likelihood +{hint.gain:.0f}): a receiver delay or clock offset? try df_time_offset_s = "
-                f"{self._cfg.df_time_offset_s + hint.shift_s:.2f}")
+    def clock_hint(self) -> ClockHint | None:
+        """The DF clock offset the bearings point to, from the latest estimate's last global check (None: none)."""
+        return self._estimates.latest.track.supervisor.clock_hint
 
     def receiver_noise(self) -> PooledNoise | None:
         """The receiver's noise pooled over the channels that calibrated theirs (receiver_pool.py), when more than
@@ -208,31 +202,6 @@ class Localizer:
         if sum(not math.isnan(c.frequency_hz) for c in self.channels.all()) < 2 or not self._cfg.calibrate_noise:
             return None
         return self.channels.pooled_noise()
-
-    def robustness_lines(self) -> list[str]:
-        """Human lines on what the robustness layer saw: the receiver's noise, alternative hypotheses, events."""
-        lines = []
-        est = self.estimate
-        if est is not None and est.algorithm == "survey" and est.noise:
-            lines.append(survey_sentence(est.noise))
-        elif self._cfg.calibrate_noise:
-            line = noise_sentence(self.noise_summary())
-            if est is not None and est.transmitters:  # the channel's calibration reads the others' bearings as wild
-                line += " (among them the other transmitters' on the frequency: see the count)"
-            lines.append(line)
-        pooled = self.receiver_noise()
-        if pooled is not None:
-            lines.append(f"the receiver over its channels: {pooled.sentence()}")
-        if est is not None and len(est.modes) > 1:
-            lines.append("alternative hypotheses: " + "; ".join(
-                f"E {e:.1f} N {n:.1f} ({100 * m:.0f} %)" for e, n, m in est.modes))
-        hint = self.clock_hint_sentence()
-        if hint:
-            lines.append(hint)
-        events = {k: v for k, v in self.events.items() if k != "alarm_points"}
-        if events:
-            lines.append("robustness events: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
-        return lines
 
     def posterior_grid(self, channel: Channel | None = None) -> PosteriorGrid | None:
         """The posterior of `channel`'s track (None: the latest estimate's channel) on a map grid around its

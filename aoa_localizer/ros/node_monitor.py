@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from rclpy.event_handler import SubscriptionEventCallbacks
 
+from aoa_localizer.common.words import clock_hint_sentence
 from aoa_localizer.engine.channels import DEFAULT
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.inference.noise import sentence as noise_sentence
@@ -237,7 +238,7 @@ class NodeMonitor:
                         "last period (network, or input_queue_depth too small for the load)",
                         "input messages are being lost"))
         self.lost_reported = lost
-        clock = loc.clock_hint_sentence()
+        clock = clock_hint_sentence(loc)
         if clock:
             out.append(("clock_offset", clock, "the DF stamps look offset from the GPS clock"))
         return out

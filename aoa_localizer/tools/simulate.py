@@ -32,6 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, seed_value, setup_logging
+from aoa_localizer.common.words import robustness_lines
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.config import LocalizerConfig
@@ -172,7 +173,7 @@ def main(argv=None) -> int:
     print(f"{est.bearings_used} readings in {est.points_used} observation points; median step "
           f"{1e3 * float(np.median(res.step_s)):.3f} ms; inputs not used: "
           f"{', '.join(f'{k} {v}' for k, v in sorted(loc.rejected.items())) or 'none'}")
-    for line in loc.robustness_lines():
+    for line in robustness_lines(loc):
         print(line)
     if args.co_channel:
         return co_channel_verdict(data, est, args.interleaved)
