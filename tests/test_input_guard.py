@@ -8,8 +8,8 @@ import pytest
 from conftest import track_of
 
 from aoa_localizer import Localizer, LocalizerConfig
-from aoa_localizer.common.words import clock_hint_sentence, robustness_lines
 from aoa_localizer.engine.ingest.input_guard import StreamClock, Verdict
+from aoa_localizer.reporting.words import clock_hint_sentence, robustness_lines
 from aoa_localizer.simulation.evaluation import run
 from aoa_localizer.simulation.scenarios import simulate
 from msgs_adapters.fields import stamp_seconds

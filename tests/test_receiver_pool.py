@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from aoa_localizer.common.words import robustness_lines
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.inference.noise import N_BANDS, NoiseModel
 from aoa_localizer.engine.inference.receiver import NoiseGrid
 from aoa_localizer.engine.inference.receiver_pool import CHANNEL_SPREAD_LOG_SD, pooled_noise
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.reporting.words import robustness_lines
 
 
 def _fitted(k_by_band: dict[int, float], readings: float = 50.0) -> NoiseModel:

@@ -7,7 +7,6 @@ import sys
 
 from tqdm import tqdm
 
-from aoa_localizer.common.words import robustness_lines
 from aoa_localizer.engine.channels import DEFAULT
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -32,7 +31,7 @@ def summary(loc: Localizer, truths: dict[str, tuple], datum) -> list[str]:
                      "channels (a bag with several writes each one's on /sim/CHANNEL/truth)")
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(loc.rejected.items())) or "none"
     lines.append(f"inputs not used: {rejected}")
-    return lines + robustness_lines(loc)
+    return lines
 
 
 def _estimate_lines(loc: Localizer, est, truth, datum) -> list[str]:

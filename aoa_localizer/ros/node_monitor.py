@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 from rclpy.event_handler import SubscriptionEventCallbacks
 
-from aoa_localizer.common.words import clock_hint_sentence
 from aoa_localizer.engine.channels import DEFAULT
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.inference.noise import sentence as noise_sentence
@@ -19,6 +18,7 @@ from aoa_localizer.engine.ingest.input_guard import StampGaps
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.rejections import FIX_REASONS
 from aoa_localizer.engine.types import EstimateState
+from aoa_localizer.reporting.words import clock_hint_sentence
 from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
 from aoa_localizer.ros.node_outputs import PosteriorWork
 

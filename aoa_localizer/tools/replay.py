@@ -38,6 +38,7 @@ from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.reporting.words import robustness_lines
 from msgs_adapters.bag import BagError
 
 
@@ -124,7 +125,7 @@ def _told(loc: Localizer, run, written: int, output: str) -> int:
     """The run's summary on stderr, and the exit code: 1 for a damaged bag, 3 without an estimate."""
     if run.damage:
         print(f"replay: {run.damage}", file=sys.stderr)
-    for line in summary(loc, run.truths, run.datum):
+    for line in summary(loc, run.truths, run.datum) + robustness_lines(loc):
         print(line, file=sys.stderr)
     if run.foreign:
         print("messages of a type their topic should not carry (or scans without readings), skipped: "

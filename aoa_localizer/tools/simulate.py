@@ -32,7 +32,6 @@ from dataclasses import replace
 import numpy as np
 
 from aoa_localizer.common.cli import HelpFormatter, add_engine_args, config_from_args, seed_value, setup_logging
-from aoa_localizer.common.words import robustness_lines
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.config import LocalizerConfig
@@ -40,6 +39,7 @@ from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse, 
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.reporting.words import robustness_lines
 from aoa_localizer.simulation.evaluation import feed_fleet, run, scenario_config
 from aoa_localizer.simulation.fleet import FLEETS, simulate_fleet
 from aoa_localizer.simulation.scenarios import SCENARIOS, mounted, moving_cells, receiver_settings, simulate
