@@ -1108,6 +1108,30 @@ def test_another_graph_joining_during_the_run_makes_it_not_converged(domain):
     assert "result: another source published on the node's inputs during the run" in out
 
 
+def test_the_launcher_names_another_source_once_discovery_names_it(capsys):
+    """The node first sees a late graph's publisher before its name (rmw's unnamed node): the launcher says so, and
+    says it again once the name arrives, so the run's verdict names it (a busy machine's discovery lagged past the
+    first /diagnostics: CI49); a warning that does not change is said once, and at most CROWDED_LINES in all."""
+    from types import SimpleNamespace as NS
+
+    from aoa_localizer.ros.launch import CROWDED_LINES, Monitor
+
+    def diagnostics(publishers: str):
+        kv = [NS(key="input_publishers", value=publishers)]
+        return NS(status=[NS(name="aoa_localizer: localizer", values=kv, level=1, message="WARN")])
+
+    monitor = NS(diag=None, diagnostics_seen=0, worst_diag=(0, ""), crowded="", crowded_said=0)
+    unnamed = "/gps/fix has 2 publishers (/sim_vehicle, a node not named yet (01b2c3d4))"
+    named = "/gps/fix has 2 publishers (/late_graph, /sim_vehicle)"
+    for text in (unnamed, unnamed, named, named):
+        Monitor._on_diagnostics(monitor, diagnostics(text))
+    err = capsys.readouterr().err
+    assert err.count("another source publishes on the node's inputs") == 2 and monitor.crowded == named
+    for k in range(10):
+        Monitor._on_diagnostics(monitor, diagnostics(f"/gps/fix has 2 publishers (/other_{k}, /sim_vehicle)"))
+    assert capsys.readouterr().err.count("another source") == CROWDED_LINES - 2
+
+
 def test_two_sources_on_one_input_topic_are_named_in_the_diagnostics(spawn, domain):
     """Issue 53, item 1: the node says when one of its inputs has more than one publisher (another graph in its
     domain, or two receivers on one station's topic): WARN, `input_publishers` naming both."""

@@ -54,6 +54,7 @@ SETTLE_MAX_S = 30.0
 # A domain is another graph's when someone publishes on a topic ending so; the launcher picks this many at most
 RUN_TOPICS = ("gps/fix", "df/bearing", "sim/truth", "emitter/pose")
 DOMAIN_TRIES = 5
+CROWDED_LINES = 3  # times the launcher says who else publishes on the node's inputs, as discovery names them
 _UNNAMED = "_NODE_NAME_UNKNOWN_"  # rmw's name for a node whose endpoints came before its name
 
 
@@ -281,7 +282,8 @@ class Monitor:
         self.diagnostics_seen = 0
         # the worst level the node's own status reached during the run, and what it said then (a good run stays OK)
         self.worst_diag: tuple[int, str] = (0, "")
-        self.crowded = ""  # the node's first input_publishers warning: another source on its inputs
+        self.crowded = ""  # the node's input_publishers warning, as last said: another source on its inputs
+        self.crowded_said = 0  # how many times (a source first seen unnamed is said again once discovery names it)
         self.fix = None
         self.recorder = None
         if record is not None:
@@ -374,8 +376,9 @@ class Monitor:
         if "level" in own and int(own["level"]) > self.worst_diag[0]:
             self.worst_diag = (int(own["level"]), own.get("message", ""))
         crowded = own.get("input_publishers")
-        if crowded and not self.crowded:  # another graph that discovery had not shown when the domain was chosen
-            self.crowded = crowded
+        # another graph that discovery had not shown when the domain was chosen; said again as its names arrive
+        if crowded and crowded != self.crowded and self.crowded_said < CROWDED_LINES:
+            self.crowded, self.crowded_said = crowded, self.crowded_said + 1
             print(f"launch: another source publishes on the node's inputs: {crowded}", file=sys.stderr, flush=True)
 
     def settle(self, at_least_s: float, at_most_s: float) -> bool:
