@@ -117,7 +117,6 @@ class ModeProposal:
         return np.logaddexp.reduce(parts, axis=0)
 
 
-
 def weighted_sample(log_target, proposal: Proposal, n: int, rng: np.random.Generator
                     ) -> tuple[np.ndarray, np.ndarray]:
     """n draws from q and their log weights pi / q (unnormalised; -inf where pi is not finite): a weighted sample of
