@@ -236,12 +236,18 @@ def _dependence(r: Readings, fit: Fit, bins: np.ndarray) -> float:
     n = sums.size
     if plain <= 0.0 or n < 8:
         return 1.0
-    lags = int(math.ceil(n ** (1.0 / 3.0)))
-    long_run = float(sums @ sums) + 2.0 * sum((1.0 - lag / (lags + 1)) * float(sums[lag:] @ sums[:-lag])
-                                              for lag in range(1, min(lags, n - 1) + 1))
+    weighted, spread = _bartlett(n)
+    long_run = float(sums @ sums) + 2.0 * sum(w * float(sums[lag:] @ sums[:-lag]) for lag, w in weighted)
     factor = long_run / plain
-    spread = math.sqrt(2.0 * (2 * lags + 1) / n)  # the ratio's chance spread for independent errors, roughly
     return factor if factor > 1.0 + 3.0 * spread else 1.0
+
+
+def _bartlett(n: int) -> tuple[list[tuple[int, float]], float]:
+    """Newey and West's lags for a series of n bins' sums: each lag up to n^(1/3) (at most n - 1) with its Bartlett
+    weight, and the chance spread of a long-run variance over the plain one for independent terms, roughly."""
+    lags = int(math.ceil(n ** (1.0 / 3.0)))
+    return ([(lag, 1.0 - lag / (lags + 1)) for lag in range(1, min(lags, n - 1) + 1)],
+            math.sqrt(2.0 * (2 * lags + 1) / n))
 
 
 def _site_bias(r: Readings, fit: Fit) -> np.ndarray:
@@ -412,8 +418,8 @@ def _own_dispersion(r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray
 def _widened_by_scores(cov: np.ndarray, r: Readings, x: np.ndarray, w: np.ndarray, scale: np.ndarray,
                        bins: np.ndarray) -> np.ndarray:
     """A place's covariance widened where its own readings' scores vary more than it says, along the drive: the
-    sandwich cov M cov, its meat the place's score sums per time bin with their autocovariances to lag L (Bartlett
-    weights, as _dependence's), so errors a stretch of its bins repeat (a stretch of road's site error, bursts of
+    sandwich cov M cov, its meat the place's score sums per time bin with their autocovariances (_bartlett, as
+    _dependence's), so errors a stretch of its bins repeat (a stretch of road's site error, bursts of
     another transmitter held by it) count as what they are worth. Kept in each direction where it exceeds `cov`
     beyond its chance spread (as _dependence keeps its factor), never narrower: for independent errors the meat
     is at most the information. Sites (a survey's stations) weigh their biases in _covariance already."""
@@ -427,11 +433,11 @@ def _widened_by_scores(cov: np.ndarray, r: Readings, x: np.ndarray, w: np.ndarra
     n = sums.shape[0]
     if n < 8:
         return cov
-    lags = int(math.ceil(n ** (1.0 / 3.0)))
+    weighted, spread = _bartlett(n)
     meat: np.ndarray = sums.T @ sums
-    for lag in range(1, min(lags, n - 1) + 1):
+    for lag, bartlett in weighted:
         cross = sums[lag:].T @ sums[:-lag]
-        meat = meat + (1.0 - lag / (lags + 1)) * (cross + cross.T)
+        meat = meat + bartlett * (cross + cross.T)
     sandwich = cov @ meat @ cov
     try:
         root = np.linalg.cholesky(cov)
@@ -439,7 +445,6 @@ def _widened_by_scores(cov: np.ndarray, r: Readings, x: np.ndarray, w: np.ndarra
         return cov
     inv_root = np.linalg.inv(root)
     excess, turn = np.linalg.eigh(inv_root @ sandwich @ inv_root.T)  # the sandwich in cov's own units
-    spread = math.sqrt(2.0 * (2 * lags + 1) / n)  # an excess's chance spread for independent errors, roughly
     grown = root @ turn @ np.diag(np.where(excess > 1.0 + 3.0 * spread, excess, 1.0)) @ turn.T @ root.T
     return 0.5 * (grown + grown.T)
 
