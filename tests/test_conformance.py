@@ -2,13 +2,17 @@
 and in its paper variant on a paper's benchmark model it runs, stays finite, repeats with a seed, publishes a
 positive-definite covariance, and (on the emitter) finds the emitter."""
 import dataclasses
+import importlib
+import pkgutil
 
 import numpy as np
 import pytest
 
+import aoa_localizer.filters
 from aoa_localizer import LocalizerConfig
 from aoa_localizer.engine.inference.emitter_model import EmitterModel
 from aoa_localizer.filters import REGISTRY, make_filter
+from aoa_localizer.filters.registry import FILTER_MODULES, _registry
 from aoa_localizer.filters.resample_move import ResampleMove
 from aoa_localizer.models import benchmarks as B
 from aoa_localizer.simulation.evaluation import run, run_model
@@ -44,6 +48,24 @@ def test_the_paper_variant_runs_on_a_papers_model_finitely_and_repeatably(algori
         return
     b = run_model(model, algorithm, 20, 30, 4, 5, **changes)
     assert np.all(np.isfinite(a[1])) and np.array_equal(a[1], b[1])
+
+
+def test_every_filter_module_that_defines_algorithms_is_listed_and_they_are_all_registered():
+    """Registration is a list, not an import's side effect: a module defining ALGORITHMS but left off the list
+    would be an algorithm no user can choose."""
+    defining = {name for _, name, _ in pkgutil.iter_modules(aoa_localizer.filters.__path__)
+                if hasattr(importlib.import_module(f"aoa_localizer.filters.{name}"), "ALGORITHMS")}
+    assert defining == {m.__name__.rsplit(".", 1)[1] for m in FILTER_MODULES}
+    assert list(REGISTRY) == [a.name for m in FILTER_MODULES for a in m.ALGORITHMS]
+    assert list(REGISTRY)[:2] == ["afsa", "agapf"]  # the documented order: the settings groups follow it
+
+
+def test_a_registry_refuses_a_name_listed_twice_and_a_group_with_two_settings_classes():
+    sir = REGISTRY["sir"]
+    with pytest.raises(TypeError, match="listed twice"):
+        _registry((sir, sir))
+    with pytest.raises(TypeError, match="settings group sir"):
+        _registry((sir, dataclasses.replace(sir, name="other", settings=int)))
 
 
 @pytest.mark.slow

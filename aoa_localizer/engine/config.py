@@ -13,7 +13,8 @@ from typing import Any
 
 from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec, choice, param, unknown_names
 from aoa_localizer.filters import REGISTRY
-from aoa_localizer.filters.registry import GroupAccess, default_groups, groups
+from aoa_localizer.filters.algorithm import GroupAccess
+from aoa_localizer.filters.registry import default_groups, groups
 
 # sqrt(3.801e-4 rad^2), the AFSA paper's bearing noise, in degrees.
 PAPER_BEARING_SIGMA_DEG = math.degrees(math.sqrt(3.801e-4))

@@ -1,9 +1,7 @@
 """The particle filters, by the `algorithm` name users choose them with, each in two variants: `mcmc` (the
 default: ResampleMove sweeping with the paper's operator as moves that keep the posterior of all kept points, for
-the emitter) and `paper` (as printed, for the papers' own models). Every module here is imported, so a filter
-module's `register` call is all it takes to add an algorithm (registry.py)."""
-import importlib
-import pkgutil
+the emitter) and `paper` (as printed, for the papers' own models). registry.py names the filter modules, each
+of which defines its `ALGORITHMS`."""
 from typing import Any, cast
 
 import numpy as np
@@ -12,9 +10,6 @@ from aoa_localizer.filters.base import FilterSettings, ParticleFilter
 from aoa_localizer.filters.registry import REGISTRY
 from aoa_localizer.filters.resample_move import MoveKernel, ResampleMove
 from aoa_localizer.models.base import CAPABILITY_WORDS, StateSpaceModel
-
-for _module in pkgutil.iter_modules(__path__):
-    importlib.import_module(f"{__name__}.{_module.name}")
 
 
 class ModelMismatch(TypeError):

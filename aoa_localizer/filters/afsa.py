@@ -27,8 +27,8 @@ import numpy as np
 
 from aoa_localizer.core.spec import choice, param
 from aoa_localizer.filters import moves
+from aoa_localizer.filters.algorithm import Algorithm
 from aoa_localizer.filters.base import ParticleFilter
-from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import MoveKernel
 from aoa_localizer.models.base import StaticPosterior
 
@@ -149,4 +149,4 @@ class AfsaMoves(MoveKernel):
         return x, target, prey + swarm, 2 * n
 
 
-register("afsa", "AFSA-PF", "afsa", AfsaConfig, paper=AfsaFilter, mcmc=AfsaMoves)
+ALGORITHMS = (Algorithm("afsa", "AFSA-PF", "afsa", AfsaConfig, AfsaFilter, AfsaMoves),)

@@ -28,9 +28,9 @@ import numpy as np
 
 from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
+from aoa_localizer.filters.algorithm import Algorithm
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.moves import RW_SCALE
-from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import MoveKernel
 
 
@@ -147,4 +147,4 @@ class AgaPfMoves(MoveKernel):
         return x, target, crossed + mutated, 2 * f.n
 
 
-register("agapf", "adaptive genetic", "agapf", AgapfConfig, paper=AgaPfFilter, mcmc=AgaPfMoves)
+ALGORITHMS = (Algorithm("agapf", "adaptive genetic", "agapf", AgapfConfig, AgaPfFilter, AgaPfMoves),)

@@ -11,13 +11,13 @@ The robustness layer's moves (log_target, rejuvenate, reweight, replace_cloud) n
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
 
 from aoa_localizer.filters import moves
-from aoa_localizer.filters.registry import GroupAccess, default_groups
+from aoa_localizer.filters.algorithm import GroupAccess
 from aoa_localizer.filters.resampling import SCHEMES
 from aoa_localizer.models.base import StateSpaceModel, StaticPosterior
 
@@ -27,16 +27,16 @@ class FilterSettings(GroupAccess):
     """What a filter reads of the configuration: the skeleton's settings and the algorithms' settings groups (a
     filter reads only its own, as `self.cfg.<group>`), so a benchmark model needs no emitter settings."""
 
+    groups: tuple[tuple[str, Any], ...]
     num_particles: int = 100
     resampling: str = "systematic"
     ess_threshold: float = 0.5
     move_sweeps: int = 3
-    groups: tuple[tuple[str, Any], ...] = field(default_factory=default_groups)
 
     @classmethod
     def of(cls, cfg: Any) -> FilterSettings:
         """The settings filters read from a LocalizerConfig (any object with these fields)."""
-        return cls(cfg.num_particles, cfg.resampling, cfg.ess_threshold, cfg.move_sweeps, cfg.groups)
+        return cls(cfg.groups, cfg.num_particles, cfg.resampling, cfg.ess_threshold, cfg.move_sweeps)
 
 
 @dataclass(frozen=True)

@@ -22,8 +22,8 @@ import numpy as np
 
 from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
+from aoa_localizer.filters.algorithm import Algorithm
 from aoa_localizer.filters.base import ParticleFilter
-from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import MoveKernel
 from aoa_localizer.filters.resampling import systematic
 
@@ -104,4 +104,4 @@ class EspfMoves(MoveKernel):
         return x, target, crossed + walked, 2 * f.n
 
 
-register("espf", "evolution sampling", "espf", EspfConfig, paper=EspfFilter, mcmc=EspfMoves)
+ALGORITHMS = (Algorithm("espf", "evolution sampling", "espf", EspfConfig, EspfFilter, EspfMoves),)

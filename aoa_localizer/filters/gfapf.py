@@ -27,8 +27,8 @@ import numpy as np
 
 from aoa_localizer.core.spec import choice, param, variant_choice
 from aoa_localizer.filters import moves
+from aoa_localizer.filters.algorithm import Algorithm
 from aoa_localizer.filters.base import ParticleFilter
-from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import MoveKernel
 
 NOISE_SCALE = 0.5  # the proposal's spread around the gravitation move, in standard deviations of the cloud
@@ -113,4 +113,4 @@ class GfapfMoves(MoveKernel):
         return x, target, accepted, f.n
 
 
-register("gfapf", "gravitation field", "gfapf", GfapfConfig, paper=GfapfFilter, mcmc=GfapfMoves)
+ALGORITHMS = (Algorithm("gfapf", "gravitation field", "gfapf", GfapfConfig, GfapfFilter, GfapfMoves),)

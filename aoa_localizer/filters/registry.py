@@ -1,56 +1,37 @@
-"""The algorithms by the name users choose them with. A filter module registers its algorithm where it defines it
-(`register`); every list of algorithms, settings groups and variants elsewhere is read from here."""
+"""The algorithms by the name users choose them with: each filter module defines its `ALGORITHMS` and this list
+names the modules, in the order the docs and the settings groups follow; every list of algorithms, settings groups
+and variants elsewhere is read from here."""
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
+from aoa_localizer.filters import afsa, agapf, espf, gfapf, sir, upf
+from aoa_localizer.filters.algorithm import Algorithm
 
-@dataclass(frozen=True)
-class Algorithm:
-    """One `algorithm` value: how the docs call it, its settings group (a frozen dataclass of `param()` fields whose
-    `variant` picks the variant; two algorithms may share a group), its `paper` filter class and its `mcmc` move
-    kernel (a MoveKernel class: the variant is a ResampleMove sweeping with it). Both are typed `type`: the filter
-    modules import this one, so it names none of their classes."""
-
-    name: str
-    label: str
-    group: str
-    settings: type
-    paper: type
-    mcmc: type
+FILTER_MODULES = (afsa, agapf, espf, gfapf, sir, upf)
 
 
-REGISTRY: dict[str, Algorithm] = {}
+def _registry(algorithms: tuple[Algorithm, ...]) -> dict[str, Algorithm]:
+    """The algorithms by name; a name listed twice, or a group with two settings classes, is a programming error."""
+    registry: dict[str, Algorithm] = {}
+    for a in algorithms:
+        if a.name in registry:
+            raise TypeError(f"algorithm {a.name} is listed twice")
+        for other in registry.values():
+            if other.group == a.group and other.settings is not a.settings:
+                raise TypeError(f"settings group {a.group} is {other.settings.__name__}, not {a.settings.__name__}")
+        registry[a.name] = a
+    return registry
 
 
-def register(name: str, label: str, group: str, settings: type, paper: type, mcmc: type) -> None:
-    """Make `name` an `algorithm` value; a group registered twice must hold the same settings class."""
-    for other in REGISTRY.values():
-        if other.group == group and other.settings is not settings:
-            raise TypeError(f"settings group {group} is {other.settings.__name__}, not {settings.__name__}")
-    REGISTRY[name] = Algorithm(name, label, group, settings, paper, mcmc)
+REGISTRY: dict[str, Algorithm] = _registry(tuple(a for module in FILTER_MODULES for a in module.ALGORITHMS))
 
 
 def groups() -> dict[str, type]:
-    """Each settings group by name, in the order the algorithms were registered."""
+    """Each settings group by name, in the order the algorithms are listed."""
     return {a.group: a.settings for a in REGISTRY.values()}
 
 
 def default_groups() -> tuple[tuple[str, Any], ...]:
     """Every group at its defaults: the `groups` of a configuration that sets none."""
     return tuple((name, cls()) for name, cls in groups().items())
-
-
-class GroupAccess:
-    """Reads a settings group as an attribute (`cfg.afsa`) from a dataclass's `groups` field of (name, settings)."""
-
-    groups: tuple[tuple[str, Any], ...]
-
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith("__") or name == "groups":  # pickle and copy probe before `groups` exists
-            raise AttributeError(name)
-        for group, settings in self.groups:
-            if group == name:
-                return settings
-        raise AttributeError(f"{type(self).__name__} has no {name}")

@@ -4,9 +4,9 @@ from dataclasses import dataclass
 
 from aoa_localizer.core.spec import variant_choice
 from aoa_localizer.filters import moves
+from aoa_localizer.filters.algorithm import Algorithm
 from aoa_localizer.filters.base import ParticleFilter
 from aoa_localizer.filters.moves import RW_SCALE
-from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import MoveKernel
 
 
@@ -35,4 +35,4 @@ class SirMoves(MoveKernel):
         return x, target, accepted, f.n
 
 
-register("sir", "bootstrap", "sir", SirConfig, paper=SirFilter, mcmc=SirMoves)
+ALGORITHMS = (Algorithm("sir", "bootstrap", "sir", SirConfig, SirFilter, SirMoves),)

@@ -25,10 +25,10 @@ import numpy as np
 
 from aoa_localizer.core.spec import variant_choice
 from aoa_localizer.filters import moves
+from aoa_localizer.filters.algorithm import Algorithm
 from aoa_localizer.filters.base import ParticleFilter, ReplacesResampling
 from aoa_localizer.filters.de import DeConfig, evolve
 from aoa_localizer.filters.moves import RW_SCALE
-from aoa_localizer.filters.registry import register
 from aoa_localizer.filters.resample_move import MoveKernel
 from aoa_localizer.filters.ukf import BatchedUKF, gauss_logpdf
 from aoa_localizer.models.base import TransitionDensity, UnscentedForm
@@ -173,6 +173,8 @@ class PfDeMoves(MoveKernel):
         return x, target, accepted, f.n
 
 
-register("upfde", "UKF proposal + differential evolution", "de", DeConfig, paper=UpfDeFilter, mcmc=UpfDeMoves)
-register("upf", "unscented PF", "upf", UpfConfig, paper=UpfFilter, mcmc=UpfMoves)
-register("pfde", "PF + differential evolution", "de", DeConfig, paper=PfDeFilter, mcmc=PfDeMoves)
+ALGORITHMS = (
+    Algorithm("upfde", "UKF proposal + differential evolution", "de", DeConfig, UpfDeFilter, UpfDeMoves),
+    Algorithm("upf", "unscented PF", "upf", UpfConfig, UpfFilter, UpfMoves),
+    Algorithm("pfde", "PF + differential evolution", "de", DeConfig, PfDeFilter, PfDeMoves),
+)
