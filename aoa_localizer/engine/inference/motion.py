@@ -13,7 +13,10 @@ cloud and lent to the static model, so neither model wins by its noise alone. Wh
 raw readings it explains once corrected (a mount offset it learned, a twin mode), the estimate stays the filter's
 unless the filter doubts itself (Held.standing_doubted). Each model's predictive
 likelihood of a point weighs it; a Markov switch between them (a mean stay of SWITCH_S) lets a transmitter start or
-stop moving at any time. The moving cloud begins on the first point's line of bearing.
+stop moving at any time, and a third kind, standing and never moving (NEVER_MOVES of the standing ones at first),
+lets a transmitter that has stood for long be trusted to stand: the chance it has just begun to move falls as the
+standing evidence grows, and one seen to move is of the kind that may move again. The moving cloud begins on the
+first point's line of bearing.
 
 The static answer stays the channel's filter's: this watch says how probable motion is and, where it is probable,
 where the moving transmitter is now, how fast it goes, and whether its range is observed at all.
@@ -28,7 +31,7 @@ import numpy as np
 from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters.resampling import systematic
 
-SWITCH_S = 1800.0  # mean time a transmitter keeps standing or moving (the models' switching rate)
+SWITCH_S = 1800.0  # mean time a transmitter that moves at all keeps standing or moving (the switching rate)
 VELOCITY_TAU_S = 120.0  # a moving transmitter's velocity decorrelates over this (a walker turns, a car takes roads)
 MIN_SPEED = 0.3  # the speed-scale prior's low end (m/s): below this a transmitter is as good as standing
 SPEED_DRIFT = 0.1  # a moving particle's log speed scale takes a random step of this sd at each resampling
@@ -43,6 +46,7 @@ DOUBT_POINTS = 30  # the estimate may follow the watch while the filter doubted 
 SURE_MOTION_P = 0.99  # or after this many points in a row with the probability of motion at least this
 MOTION_YIELDS_TO_COUNT = 0.99  # a transmitter count of several this sure outranks the watch (Held.motion_said)
 PRIOR_MOVING = 0.1  # the probability of motion before any reading: most transmitters DF crews hunt stand
+NEVER_MOVES = 0.8  # of those standing when first heard, the share that never moves (a fixed installation)
 UNOBSERVED_RATIO = 6.0  # a moving ellipse this much longer along the line of sight than across: range not observed
 COMPARABLE = 2.0  # the standing model is weighed once its ellipse is at most this many times the moving one's
 STATIC_SAMPLE = 1000  # places drawn from the static model's posterior to take its likelihood over
@@ -109,6 +113,26 @@ def bearing_likelihood(place: np.ndarray, r: ObservationPoint, log_noise: np.nda
     return (1.0 - wild) * np.exp(-0.5 * (residual / s) ** 2) / (math.sqrt(2.0 * math.pi) * s) + wild / (2.0 * math.pi)
 
 
+def switched(p_moving: float, p_never: float, dt: float) -> tuple[float, float]:
+    """The Markov switch over dt of a transmitter of one of two kinds: one that never moves (probability p_never)
+    and one that stands and moves in turn, a mean SWITCH_S each way (p_moving that it moves now). Returns the
+    probability of motion after the switch and the share of it that has just started moving."""
+    switch = -math.expm1(-dt / SWITCH_S)
+    standing = max(0.0, 1.0 - p_never - p_moving)
+    prior_moving = p_moving * (1.0 - switch) + standing * switch
+    return prior_moving, standing * switch / max(prior_moving, 1e-12)
+
+
+def weighed(p_moving: float, p_never: float, evidence_s: float, evidence_m: float) -> tuple[float, float]:
+    """Bayes' rule over the two models' predictive likelihoods of a point: the new probabilities of motion and of
+    a transmitter that never moves (both standing kinds read the point by the standing model); unchanged where
+    the evidence is no number."""
+    total = (1.0 - p_moving) * evidence_s + p_moving * evidence_m
+    if not (total > 0.0 and math.isfinite(total)):
+        return p_moving, p_never
+    return float(np.clip(p_moving * evidence_m / total, 1e-9, 1.0 - 1e-9)), p_never * evidence_s / total
+
+
 class MotionWatch:
     """The moving cloud, begun on the first point's line of bearing, and the probability of motion: `step(point,
     static)` reads one observation point against it and against the standing model `static` (the channel filter's
@@ -121,6 +145,7 @@ class MotionWatch:
         self.stamp = first.stamp
         self.antenna = np.array([first.east, first.north])
         self.p_moving = PRIOR_MOVING
+        self.p_never = NEVER_MOVES * (1.0 - PRIOR_MOVING)  # standing, of the kind that never moves
         distance = np.exp(self._log_uniform(RANGE_M))
         ray = first.theta + 3.0 * first.sigma * rng.standard_normal(n)
         self.place = np.column_stack([first.east + distance * np.cos(ray), first.north + distance * np.sin(ray)])
@@ -138,11 +163,10 @@ class MotionWatch:
         weighed by the point's bearing."""
         dt = max(0.0, r.stamp - self.stamp)
         self.stamp, self.antenna = r.stamp, np.array([r.east, r.north])
-        switch = -math.expm1(-dt / SWITCH_S)
-        prior_moving = self.p_moving * (1.0 - switch) + (1.0 - self.p_moving) * switch
+        prior_moving, came = switched(self.p_moving, self.p_never, dt)
         places = self._sample(static, r)
         if places is not None:
-            self._mix(switch, prior_moving, places)
+            self._mix(came, places)
         self._predict(dt)
         lik_m = bearing_likelihood(self.place, r, self.log_noise, self.log_wild, self.gps_sigma_m)
         if places is not None and static is not None and self._comparable(static[2]):
@@ -154,9 +178,7 @@ class MotionWatch:
             evidence_s = float(bearing_likelihood(places, turned, self.log_noise[lend], self.log_wild[lend],
                                                   self.gps_sigma_m).mean())
             evidence_m = float(self.weights @ lik_m)
-            total = (1.0 - prior_moving) * evidence_s + prior_moving * evidence_m
-            if total > 0.0 and math.isfinite(total):
-                self.p_moving = float(np.clip(prior_moving * evidence_m / total, 1e-9, 1.0 - 1e-9))
+            self.p_moving, self.p_never = weighed(prior_moving, self.p_never, evidence_s, evidence_m)
         self._reweigh(lik_m)
         return self.motion()
 
@@ -199,11 +221,11 @@ class MotionWatch:
         along = vectors[:, 1] @ sight / max(1e-9, float(np.hypot(*sight)))
         return not (values[1] / values[0] > UNOBSERVED_RATIO ** 2 and abs(along) > 0.9)
 
-    def _mix(self, switch: float, prior_moving: float, static: np.ndarray) -> None:
+    def _mix(self, came_share: float, static: np.ndarray) -> None:
         """The IMM's interaction into the moving model by sampling: a share of its particles are standing ones
         that start moving now (a place from the static cloud, a velocity from their speed scale). The static model
         is the channel's filter, which keeps its own."""
-        came = np.flatnonzero(self.rng.random(self.n) < switch * (1.0 - self.p_moving) / max(prior_moving, 1e-12))
+        came = np.flatnonzero(self.rng.random(self.n) < came_share)
         if came.size:
             self.place[came] = static[self.rng.integers(0, static.shape[0], came.size)]
             self.velocity[came] = np.exp(self.log_speed[came])[:, None] * self.rng.standard_normal((came.size, 2))
