@@ -47,14 +47,16 @@ def noise_summary(channel: Channel, cfg: LocalizerConfig) -> dict:
 
 
 def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, cov: np.ndarray, state: EstimateState,
-                warnings: list[str], unheeded: bool = False
+                warnings: list[str], unheeded: bool = False, explained: bool = False
                 ) -> tuple[np.ndarray, np.ndarray, EstimateState, list[str], dict[str, Any]]:
     """A standing transmitter's estimate with what the motion watch says (`motion`; `said`: what the estimate may
     follow, motion.py): the probability of motion, the velocity over both models (a standing one's is zero), and
     where neither model is sure (UNSURE_P) the place of their mixture, `undecided`, never `tracking` (an estimate
     that does not follow the watch stands: velocity zero, its covariance the watch's second moment times p); a watch
     sure of motion that the estimate does not follow (`unheeded`: Held.motion_unheeded) is said, and the estimate is
-    not `tracking`."""
+    not `tracking`; nor is one that keeps the standing place while motion is as probable as UNSURE_P (the watch not
+    yet sure for long enough to be followed: a transmitter that has begun to walk away), unless the count
+    `explained` the motion as transmitters taking turns."""
     moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
     if said is None and motion is not None:
         # the estimate stands: no velocity, spread by what the watch makes of a motion it may have
@@ -64,6 +66,10 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
         warnings = warnings + [f"the bearings look like a moving transmitter's (p = {motion.p_moving:.2f}), but the "
                                "channel has learned a bearing offset: the place is the standing filter's; check the "
                                "offset it learned"]
+        return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
+    if said is None and motion is not None and motion.p_moving >= UNSURE_P and not explained:
+        warnings = warnings + [f"the transmitter may be moving (p = {motion.p_moving:.2f}): the place is where it "
+                               "stood, until the motion is sure"]
         return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
     if said is None:
         return mean, cov, state, warnings, moves
@@ -147,7 +153,7 @@ class Estimates:
                                                 float(t_lon), place.cov.copy(), place.share, place_state))
         mean, cov, state, warnings, moves = with_motion(track.motion, track.motion_said, np.asarray(mean, float),
                                                         np.asarray(cov, float), state, warnings,
-                                                        track.motion_unheeded)
+                                                        track.motion_unheeded, track.count_explains_motion)
         lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
         from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
         estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
