@@ -117,9 +117,8 @@ class Held:
     @property
     def motion_unheeded(self) -> bool:
         """The watch has been all but sure of motion for DOUBT_POINTS points in a row, and the estimate keeps the
-        filter's only because the channel learned a bearing offset (motion_said): said in a warning. (Not for every
-        probable motion the estimate does not follow: a standing transmitter circled by the vehicle, one reading a
-        point, reads as p = 0.997 to the watch.)"""
+        filter's only because the channel learned a bearing offset (motion_said): said in a warning. (A probable
+        motion not yet sure for as long has a warning of its own: outputs.estimates.with_motion.)"""
         return self.sure_run >= DOUBT_POINTS and bool(self.calibration.offset) and self.motion_said is None
 
     @property
