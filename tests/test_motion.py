@@ -179,6 +179,33 @@ def test_the_json_line_carries_the_motion():
     assert "velocity" not in Estimate(0.0, 1.0, 2.0, 39.0, 117.0, np.eye(2), 10, 2, 100.0, "afsa").to_json_dict()
 
 
+def test_a_moving_transmitters_path_is_drawn_on_the_map_with_its_ellipses_over_time():
+    import matplotlib.pyplot as plt
+
+    from aoa_localizer.reporting.plots import PATH_ELLIPSES, draw_paths
+
+    def at(stamp, east, north, channel="default"):
+        return Estimate(stamp, east, north, 0.0, 0.0, 4.0 * np.eye(2), 10, 2, 100.0, "afsa", motion="moving",
+                        channel=channel)
+
+    walk = [at(float(t), 10.0 * t, 2.0 * t) for t in range(20)][::-1]  # out of order: drawn in time order
+    other = [at(1.0, -50.0, 0.0, "f1"), at(2.0, -60.0, 5.0, "f1")]
+    fig, ax = plt.subplots()
+    drawn = draw_paths(ax, walk + other)
+    lines = ax.get_lines()
+    assert len(drawn) == 2 and np.allclose(drawn[0], [[10.0 * t, 2.0 * t] for t in range(20)])
+    assert np.allclose(lines[0].get_xydata(), drawn[0])  # the path, then its ellipses
+    rings = lines[1:1 + PATH_ELLIPSES]
+    centres = np.array([r.get_xydata().mean(axis=0) for r in rings])
+    assert np.allclose(centres[0], [0.0, 0.0], atol=0.1) and np.allclose(centres[-1], [190.0, 38.0], atol=0.1)
+    assert np.all(np.diff(centres[:, 0]) > 0)  # spread along the path
+    radius = np.hypot(*(rings[0].get_xydata() - centres[0]).T)
+    assert np.allclose(radius, 2.0 * math.sqrt(5.991), rtol=0.02)  # the 95 % ellipse of a 2 m sigma
+    assert len(lines) == 1 + PATH_ELLIPSES + 1 + 2  # the other channel: its path and both ellipses
+    assert draw_paths(ax, []) == []
+    plt.close(fig)
+
+
 @pytest.mark.slow
 def test_the_localizer_follows_a_walker_and_leaves_a_standing_transmitter_as_it_was():
     """End to end with the defaults (Localizer.run): one lap of the ring around a walker ends sure of motion; where

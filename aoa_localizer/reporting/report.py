@@ -291,7 +291,7 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     frame, est = loc.datum_frame(), estimates[-1]
     finals = list({e.channel: e for e in estimates}.values())  # each channel's last estimate
     paths = export.moving_paths(estimates)  # a moving transmitter's path, per channel
-    estimates = [e for e in estimates if e.channel == est.channel]
+    all_estimates, estimates = estimates, [e for e in estimates if e.channel == est.channel]
     truths = {}  # each channel's truth (bag_run.truth_of), in the engine's map
     for e in finals:
         of = truth_of(run.truths, e.channel, len(finals))
@@ -306,7 +306,7 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     others = [e for e in finals if e.channel != est.channel]
     posterior = loc.posterior_grid() if loc.estimate is est else None  # the run's own estimate, not a file's
     plots.map_figure(args.out / "map.png", frame, tracks, readings[:, :5], kept, est, truth, others=others,
-                     posterior=posterior)
+                     posterior=posterior, moving=[e for e in all_estimates if e.motion == "moving"])
     bound = None
     if truth is not None:
         t, err, bounds, major = error_series(estimates, readings[kept][:, :5], truth)
