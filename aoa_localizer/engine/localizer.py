@@ -54,7 +54,7 @@ class Observer(Protocol):
 
 def _one_at_a_time(method):
     """A Localizer call made whole before another thread's starts (its state is one stream's: two threads feeding
-    it at once broke its generators' and arrays' invariants, counted as internal_error)."""
+    it at once broke its random generators' and arrays' invariants, counted as internal_error)."""
     @functools.wraps(method)
     def serialised(self, *args, **kwargs):
         with self._lock:
@@ -407,7 +407,7 @@ class Localizer:
         self._scheduler.close()
 
     def __reduce_ex__(self, protocol):
-        """A Localizer holds a worker process, locks and generators mid-run: it is neither pickled nor copied
+        """A Localizer holds a worker process, locks and random generators mid-run: it is neither pickled nor copied
         (docs/interface.md, "Python API")."""
         raise TypeError("a Localizer cannot be pickled or copied (it holds a worker process and locks): make a new "
                         "one with the same config and seed and feed it the same inputs")

@@ -43,8 +43,8 @@ COUNT_EM = Cost(238.0, 0.20)
 # noise scales; 0.005-0.010 us an element on this machine, 2026-11-27)
 SURVEY_GRID = Cost(150.0, 0.02)
 # What a job's stretch costs besides its kernel's model: the Python around it (a Gauss-Newton step's solve, an EM
-# step's sums). Chosen so a turn's time per metered microsecond, and when a start comes, are about what the
-# generator pieces' were (docs/benchmarks.md, "Jobs in turns")
+# step's sums), chosen so a turn's time per metered microsecond, and when a start comes, are what was measured
+# (docs/benchmarks.md, "Jobs in turns")
 STRETCH_US = 20.0
 # A call's turns: the stretch that reaches its budget is the turn's last, and may overrun it by its own cost. A
 # global check shares its call with the filter's step and the sweeps it makes; a start search comes before there
