@@ -25,10 +25,12 @@ def test_a_signal_while_the_program_loads_ends_it_with_its_code(tmp_path, sig, i
 
 
 def test_after_loading_the_handlers_are_what_they_were(tmp_path):
-    """Once loaded, the program's main runs under the process's own handlers (Python's KeyboardInterrupt here)."""
+    """Once loaded, the program's main runs under the process's own handlers (Python's KeyboardInterrupt here). The
+    child starts with SIGINT at its default, as at a terminal: a suite run as a background job starts its children
+    with SIGINT ignored, which Python keeps, and then "what they were" is ignored."""
     (tmp_path / "slow_module.py").write_text(
         "import signal\ndef main():\n    return 0 if signal.getsignal(signal.SIGINT) is signal.default_int_handler "
         "else 3\n")
     res = subprocess.run([sys.executable, "-c", RUN.format(path=str(tmp_path))], capture_output=True, text=True,
-                         timeout=15)
+                         timeout=15, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert res.returncode == 0, res.stderr
