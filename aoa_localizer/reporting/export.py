@@ -54,14 +54,20 @@ def track_name(station: str) -> str:
     return f"vehicle track {station}" if station else "vehicle track"
 
 
+def moving_by_channel(estimates: list[Estimate]) -> dict[str, list[Estimate]]:
+    """Each channel's `moving` estimates in time order: its path as a moving transmitter."""
+    by_channel: dict[str, list[Estimate]] = {}
+    for est in sorted(estimates, key=lambda e: e.stamp):
+        if est.motion == "moving":
+            by_channel.setdefault(est.channel, []).append(est)
+    return by_channel
+
+
 def moving_paths(estimates: list[Estimate]) -> dict[str, np.ndarray]:
     """Each channel's path as a moving transmitter (its `moving` estimates' places in time order, ENU rows east,
     north), where it has two or more."""
-    paths: dict[str, list[tuple[float, float]]] = {}
-    for est in estimates:
-        if est.motion == "moving":
-            paths.setdefault(est.channel, []).append((est.east, est.north))
-    return {channel: np.array(rows) for channel, rows in paths.items() if len(rows) >= 2}
+    return {channel: np.array([(e.east, e.north) for e in ests])
+            for channel, ests in moving_by_channel(estimates).items() if len(ests) >= 2}
 
 
 def path_name(channel: str) -> str:

@@ -13,6 +13,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar  # noqa: E402
 
 from aoa_localizer.engine.crlb import ellipse_axes, ellipse_points  # noqa: E402
+from aoa_localizer.reporting.export import moving_by_channel  # noqa: E402
 from msgs_adapters.build import channel_colour  # noqa: E402
 
 PATH_ELLIPSES = 8  # a moving transmitter's path on the map carries this many of its 95 % ellipses
@@ -46,13 +47,13 @@ def _rays(readings: np.ndarray, target, keep_all: bool, t_range, colour) -> Line
 
 
 def map_figure(path, frame, tracks: dict[str, np.ndarray], readings: np.ndarray, kept: np.ndarray, est,
-               truth=None, title_extra: str = "", others=(), posterior=None, moving=()):
+               truth=None, title_extra: str = "", others=(), posterior=None, history=()):
     """map.png: each station's track (rows stamp, east, north), bearing rays (used: blue, fading with age; gated
     out as wild: red dashed), particles, estimate with its 95 % ellipse, the posterior's 95 % region (`posterior`,
     a PosteriorGrid, as emitter/posterior shows it), the other emitters' (channels') estimates and ellipses in
-    their colours, a moving transmitter's path (`moving`: the estimates published `moving`) with its ellipses over
-    time, truth if known; metres at the datum, scale bar. The zoom on the estimate and the legend sit in their own
-    panels beside the map, so neither hides any of the track."""
+    their colours, a moving transmitter's path (through the `moving` estimates of `history`, the run's estimates)
+    with its ellipses over time, truth if known; metres at the datum, scale bar. The zoom on the estimate and the
+    legend sit in their own panels beside the map, so neither hides any of the track."""
     fig = plt.figure(figsize=(12, 8), dpi=110)
     grid = fig.add_gridspec(2, 2, width_ratios=(3, 1.15), height_ratios=(1, 1.1))
     ax = fig.add_subplot(grid[:, 0])
@@ -65,7 +66,7 @@ def map_figure(path, frame, tracks: dict[str, np.ndarray], readings: np.ndarray,
         ring_o = ellipse_points((other.east, other.north), other.cov)
         ax.plot(ring_o[:, 0], ring_o[:, 1], color=colour, lw=1.2, zorder=4)
         ax.plot(other.east, other.north, "x", color=colour, ms=9, mew=2, zorder=5, label=f"emitter {other.channel}")
-    path_points = draw_paths(ax, moving)
+    path_points = draw_paths(ax, history)
     ring = ellipse_points(target, est.cov)
     if est.particles is not None:
         ax.scatter(est.particles[:, 0], est.particles[:, 1], s=4, color="0.45", alpha=0.6, label="particles", zorder=3)
@@ -114,15 +115,12 @@ def map_figure(path, frame, tracks: dict[str, np.ndarray], readings: np.ndarray,
     plt.close(fig)
 
 
-def draw_paths(ax, moving, ellipses: int = PATH_ELLIPSES) -> list[np.ndarray]:
-    """Each channel's path as a moving transmitter: a line through its `moving` estimates' places in time order
-    and the 95 % ellipses of `ellipses` of them spread evenly over the path (the first and the last among them);
-    returns the places drawn, one array per channel."""
-    by_channel: dict[str, list] = {}
-    for e in sorted(moving, key=lambda e: e.stamp):
-        by_channel.setdefault(e.channel, []).append(e)
+def draw_paths(ax, estimates, ellipses: int = PATH_ELLIPSES) -> list[np.ndarray]:
+    """Each channel's path as a moving transmitter (export.moving_by_channel): a line through its `moving`
+    estimates' places in time order and the 95 % ellipses of `ellipses` of them spread evenly over the path (the
+    first and the last among them); returns the places drawn, one array per channel."""
     drawn = []
-    for n, (channel, ests) in enumerate(by_channel.items()):
+    for n, (channel, ests) in enumerate(moving_by_channel(estimates).items()):
         colour = channel_colour(channel) or (0.8, 0.35, 0.0)  # the default channel in dark orange
         places = np.array([(e.east, e.north) for e in ests])
         ax.plot(places[:, 0], places[:, 1], "-", color=colour, lw=1.6, zorder=4,

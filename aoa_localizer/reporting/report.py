@@ -306,7 +306,7 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     others = [e for e in finals if e.channel != est.channel]
     posterior = loc.posterior_grid() if loc.estimate is est else None  # the run's own estimate, not a file's
     plots.map_figure(args.out / "map.png", frame, tracks, readings[:, :5], kept, est, truth, others=others,
-                     posterior=posterior, moving=[e for e in all_estimates if e.motion == "moving"])
+                     posterior=posterior, history=all_estimates)
     bound = None
     if truth is not None:
         t, err, bounds, major = error_series(estimates, readings[kept][:, :5], truth)

@@ -62,17 +62,17 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
         # the estimate stands: no velocity, spread by what the watch makes of a motion it may have
         p, v = motion.p_moving, motion.velocity
         moves.update(velocity=np.zeros(2), velocity_cov=p * (motion.velocity_cov + np.outer(v, v)))
-    if said is None and unheeded and motion is not None:
-        warnings = warnings + [f"the bearings look like a moving transmitter's (p = {motion.p_moving:.2f}), but the "
-                               "channel has learned a bearing offset: the place is the standing filter's; check the "
-                               "offset it learned"]
-        return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
-    if said is None and motion is not None and motion.p_moving >= UNSURE_P and not explained:
-        warnings = warnings + [f"the transmitter may be moving (p = {motion.p_moving:.2f}): the place is where it "
-                               "stood, until the motion is sure"]
-        return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
     if said is None:
-        return mean, cov, state, warnings, moves
+        held = None
+        if unheeded and motion is not None:
+            held = (f"the bearings look like a moving transmitter's (p = {motion.p_moving:.2f}), but the channel has "
+                    "learned a bearing offset: the place is the standing filter's; check the offset it learned")
+        elif motion is not None and motion.p_moving >= UNSURE_P and not explained:
+            held = (f"the transmitter may be moving (p = {motion.p_moving:.2f}): the place is where it stood, until "
+                    "the motion is sure")
+        if held is None:
+            return mean, cov, state, warnings, moves
+        return mean, cov, _not_tracking(state), warnings + [held], moves
     p, v = said.p_moving, said.velocity
     moves.update(velocity=p * v, velocity_cov=p * said.velocity_cov + p * (1.0 - p) * np.outer(v, v))
     if p < UNSURE_P:
@@ -81,7 +81,12 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
     warnings = warnings + [f"the transmitter may be moving (p = {p:.2f}): the place is between where it stood and "
                            "where a mover would be now"]
     moves["motion"] = "undecided"
-    return mean, cov, EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state, warnings, moves
+    return mean, cov, _not_tracking(state), warnings, moves
+
+
+def _not_tracking(state: EstimateState) -> EstimateState:
+    """`tracking` made `poorly_determined`; any other state as it is."""
+    return EstimateState.POORLY_DETERMINED if state == EstimateState.TRACKING else state
 
 
 class Estimates:
