@@ -256,6 +256,18 @@ def median_range(xy: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.median(np.hypot(x[None, :] - xy[:, :1], y[None, :] - xy[:, 1:]), axis=0)
 
 
+def rebinned(src: Box, p: np.ndarray, out: Box) -> np.ndarray:
+    """The mass of cells `p` on `src` moved to the cells of the wider box `out` that hold their centres."""
+    x, y, _ = src.cells()
+    gx, gy = np.meshgrid(x, y)
+    ox, oy, _ = out.cells()
+    half_x, half_y = out.hx / CELLS, out.hy / CELLS
+    edges_x = np.concatenate([ox - half_x, [ox[-1] + half_x]])
+    edges_y = np.concatenate([oy - half_y, [oy[-1] + half_y]])
+    mass, _, _ = np.histogram2d(gy.ravel(), gx.ravel(), bins=(edges_y, edges_x), weights=p)
+    return mass.ravel()
+
+
 def displaced(src: Box, p: np.ndarray, out: Box, xy: np.ndarray, shares: np.ndarray, weights: np.ndarray,
               cap_m: float, scale: float, floor_m: float) -> np.ndarray:
     """The truth's posterior on `out` (C,) when the bearings point at an apparent place (posterior `p` on `src`)

@@ -65,15 +65,24 @@ def hpd_rings(box: Box, p: np.ndarray, mass: float) -> list[np.ndarray]:
     return [np.asarray(ring, float) for ring in lines if len(ring) >= 4]
 
 
-def summarise(box: Box, p: np.ndarray, point: np.ndarray | None = None) -> Region:
-    """The region of cells `p` on `box`, about `point` (None: the cells' own mode)."""
+def moment(box: Box, p: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """The second moment (2, 2) of cells `p` on `box` about `point`, each cell's mass spread over its area."""
+    x, y, _ = box.cells()
+    gx, gy = np.meshgrid(x, y)
+    d = np.column_stack([gx.ravel(), gy.ravel()]) - point
+    spread = np.diag([(2 * box.hx / CELLS) ** 2 / 12, (2 * box.hy / CELLS) ** 2 / 12])
+    return (d * p[:, None]).T @ d + spread * float(p.sum())
+
+
+def summarise(box: Box, p: np.ndarray, point: np.ndarray | None = None, cov: np.ndarray | None = None) -> Region:
+    """The region of cells `p` on `box`, about `point` (None: the cells' own mode), with the covariance `cov`
+    where it was found more finely than these cells hold it (None: their moment about the point)."""
     x, y, _ = box.cells()
     gx, gy = np.meshgrid(x, y)
     xy = np.column_stack([gx.ravel(), gy.ravel()])
     point = mode(box, p) if point is None else point
+    cov = moment(box, p, point) if cov is None else cov
     d = xy - point
-    cov = (d * p[:, None]).T @ d
-    cov += np.diag([(2 * box.hx / CELLS) ** 2 / 12, (2 * box.hy / CELLS) ** 2 / 12])  # mass spread within a cell
     try:
         d2 = np.einsum("ci,ij,cj->c", d, np.linalg.inv(cov), d)
         held = {lvl: float(p[d2 <= chi2].sum()) for lvl, chi2 in zip(LEVELS, (ELLIPSE_50, ELLIPSE_95), strict=True)}

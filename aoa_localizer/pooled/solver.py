@@ -32,12 +32,13 @@ from aoa_localizer.pooled.grid import (
     median_range,
     mixture,
     prior_scale,
+    rebinned,
     refined_mode,
     widened,
     zoom,
 )
 from aoa_localizer.pooled.noise_family import NoiseGrid, expected_error, logsumexp, noise_grid, quantile_of
-from aoa_localizer.pooled.region import LEVELS, Region, summarise
+from aoa_localizer.pooled.region import LEVELS, Region, mode, moment, summarise
 from aoa_localizer.pooled.stations import Station, SurveyReading, make_stations, pooled_scatter, station_variance
 from aoa_localizer.pooled.transmitters import count_id
 
@@ -51,6 +52,7 @@ _RANGE_CAP = 2.0  # a truth's range counts up to this many times the crossing's 
 # emitter. It is applied in that regime and fades outside it: half at this station error ...
 PLACE_LIKE_SCALE_DEG = 4.0
 PLACE_LIKE_STATIONS = 6  # ... and in proportion beyond this many stations of one emitter
+_NEGLIGIBLE = 1e-3  # a share of the hypotheses' posterior too small to change a region
 REPEATED_READINGS = 3  # a group whose median station has this many readings measures their scatter apart
 
 __all__ = ["EmitterFix", "PooledResult", "ReceiverCalibration", "SurveyReading", "locate_pooled"]
@@ -190,29 +192,47 @@ def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
     at a place beside it (scattering by the transmitter, an observer's belief), which no crossing shows. Its size
     is the receiver class's prior, in shares of the truth's range (so a truth beyond the crossing is displaced
     further), times the share of the stations that the emitter's most frequent receiver holds (stations of
-    different receivers are independent instruments: a receiver with a single station shares nothing)."""
+    different receivers are independent instruments: a receiver with a single station shares nothing). It applies
+    to each station-error hypothesis in proportion to how coarse that hypothesis is (`coarse_share`), so the
+    posterior is the mixture of the fine hypotheses' own region and the coarse ones' displaced region."""
     e, region = geom.emitter, solved.regions[geom.emitter]
     most = Counter(geom.receivers).most_common(1)[0][1]
     if most < 2 or noise.repeated or not np.any(noise.shared_place > 0):
         return region  # a station that repeats its readings is an instrument's, not an observer's stop
-    rng_m = float(median_range(geom.xy, region.point[:1], region.point[1:])[0])
-    shares = noise.shared_place * most / len(geom.receivers) * place_like_weight(
-        math.degrees(expected_error(noise, np.exp(solved.log_w))), len(geom.xy))
-    cap = _RANGE_CAP * rng_m
+    coarse = coarse_share(np.degrees(noise.tau))
+    w = np.exp(solved.log_w)
+    share_coarse = float(w @ coarse)
+    if share_coarse < _NEGLIGIBLE:
+        return region
     src = solved.boxes[e]
+    lj = log_joint(geom, src, solved.shifts[e], solved.extra[e], noise)
+    with np.errstate(divide="ignore"):
+        log_coarse, log_fine = np.log(coarse), np.log1p(-coarse)
+    rng_m = float(median_range(geom.xy, region.point[:1], region.point[1:])[0])
+    # an emitter ringed by many stations (a network) is where it was not fitted: smaller in proportion
+    shares = noise.shared_place * most / len(geom.receivers) * min(1.0, PLACE_LIKE_STATIONS / len(geom.xy))
+    cap = _RANGE_CAP * rng_m
     out = widened(src, 3.0 * float(shares.max()) * cap)
-    p = mixture(log_joint(geom, src, solved.shifts[e], solved.extra[e], noise), solved.log_z[e], solved.log_w)
     floor = 0.5 * min(src.hx, src.hy) / CELLS  # a share of 0 still moves the mass onto the wider grid
-    return summarise(out, displaced(src, p, out, geom.xy, shares, noise.shared_weight, cap, geom.prior_scale, floor))
+    p_coarse = mixture(lj, solved.log_z[e], solved.log_w + log_coarse)
+    q = displaced(src, p_coarse, out, geom.xy, shares, noise.shared_weight, cap, geom.prior_scale, floor)
+    if share_coarse > 1.0 - _NEGLIGIBLE:
+        return summarise(out, q)
+    fine_w = solved.log_w + log_fine
+    p_fine = mixture(lj, solved.log_z[e], fine_w)
+    # the point is the mode of the part holding most of the mass: the whole mixture's mode would follow a spike of
+    # a few per cent (the fine hypotheses' crossing is far narrower than the coarse ones' displaced region)
+    point = mode(out, q) if share_coarse >= 0.5 else refined_mode(
+        geom, src, p_fine, solved.shifts[e], solved.extra[e], noise, fine_w, solved.log_z[e])
+    cov = (1.0 - share_coarse) * moment(src, p_fine, point) + share_coarse * moment(out, q, point)
+    return summarise(out, (1.0 - share_coarse) * rebinned(src, p_fine, out) + share_coarse * q, point, cov)
 
 
-def place_like_weight(scale_deg: float, stations: int) -> float:
-    """How much of the class's place-like error a receiver of this learned station error (deg) gets at an emitter
-    heard from this many stations: all of it for a coarse receiver (a person with a Yagi) and a handful of stations,
-    where it was fitted; little for bearings that agree to a degree or an emitter ringed by many stations (an
-    instrument, a network), where nothing suggests it and it would be the whole ellipse."""
-    coarse = 1.0 / (1.0 + (PLACE_LIKE_SCALE_DEG / max(scale_deg, 1e-9)) ** 6)
-    return coarse * min(1.0, PLACE_LIKE_STATIONS / stations)
+def coarse_share(scale_deg: np.ndarray) -> np.ndarray:
+    """The chance that a receiver of this station error (deg) is as coarse as the observers the place-like error
+    was fitted to (a person with a Yagi): near 1 from about 7 deg, a half at 4 deg, near 0 below 2 deg, where
+    bearings that agree to a degree suggest an instrument and nothing suggests the error."""
+    return 1.0 / (1.0 + (PLACE_LIKE_SCALE_DEG / np.maximum(scale_deg, 1e-9)) ** 6)
 
 
 def _noise_summary(noise: NoiseGrid, log_w: np.ndarray, receivers: list[str], emitters: int) -> dict:
