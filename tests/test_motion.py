@@ -303,7 +303,8 @@ def test_a_watch_that_fails_costs_the_motion_not_the_point(monkeypatch, caplog):
 def test_a_sure_watch_the_estimate_does_not_follow_is_said_and_the_estimate_is_not_tracking():
     """Where the channel learned a bearing offset the estimate keeps the filter's place (Held.motion_said); a watch
     sure of motion is then said in a warning and the estimate is never `tracking`; so is a probable motion the
-    estimate does not follow yet; what the count explains, or an improbable motion, leaves it as it was."""
+    estimate does not follow yet; both keep the place, and their ellipse holds where the mover would be; what the
+    count explains, or an improbable motion, leaves it as it was."""
     from aoa_localizer.engine.inference.motion import Motion
     from aoa_localizer.engine.outputs.estimates import with_motion
     from aoa_localizer.engine.types import EstimateState
@@ -311,7 +312,10 @@ def test_a_sure_watch_the_estimate_does_not_follow_is_said_and_the_estimate_is_n
     sure = Motion(10.0, 0.999, np.array([5.0, 5.0]), np.eye(2), np.array([1.0, 0.0]), np.eye(2), True)
     mean, cov = np.array([1.0, 2.0]), 4.0 * np.eye(2)
     out = with_motion(sure, None, mean, cov, EstimateState.TRACKING, [], unheeded=True)
-    assert out[2] == EstimateState.POORLY_DETERMINED and out[0] is mean and out[1] is cov
+    assert out[2] == EstimateState.POORLY_DETERMINED and out[0] is mean
+    # by hand: the place stands; its covariance is 0.001 x 4 I + 0.999 x (I + [4, 3][4, 3]^T), the mover 5 m off
+    held = 0.001 * 4.0 * np.eye(2) + 0.999 * (np.eye(2) + np.array([[16.0, 12.0], [12.0, 9.0]]))
+    np.testing.assert_allclose(out[1], held)
     assert len(out[3]) == 1 and "look like a moving transmitter's (p = 1.00)" in out[3][0]
     assert out[4]["motion_probability"] == 0.999 and np.array_equal(out[4]["velocity"], [0.0, 0.0])
     # the place stands; the velocity's spread is the watch's second moment about zero, times p
@@ -319,10 +323,11 @@ def test_a_sure_watch_the_estimate_does_not_follow_is_said_and_the_estimate_is_n
     # not yet followed (the watch not sure for long enough): the place stands, and it is not `tracking` either
     probable = with_motion(sure, None, mean, cov, EstimateState.TRACKING, [])
     assert probable[2] == EstimateState.POORLY_DETERMINED and probable[0] is mean
+    np.testing.assert_allclose(probable[1], held)
     assert len(probable[3]) == 1 and "may be moving (p = 1.00)" in probable[3][0]
     # the count explains it (transmitters taking turns), or motion is improbable: as it was
     explained = with_motion(sure, None, mean, cov, EstimateState.TRACKING, [], explained=True)
-    assert explained[2] == EstimateState.TRACKING and explained[3] == []
+    assert explained[2] == EstimateState.TRACKING and explained[3] == [] and explained[1] is cov
     unlikely = Motion(10.0, 0.2, np.array([5.0, 5.0]), np.eye(2), np.array([1.0, 0.0]), np.eye(2), True)
     quiet = with_motion(unlikely, None, mean, cov, EstimateState.TRACKING, [])
-    assert quiet[2] == EstimateState.TRACKING and quiet[3] == []
+    assert quiet[2] == EstimateState.TRACKING and quiet[3] == [] and quiet[1] is cov

@@ -56,7 +56,8 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
     sure of motion that the estimate does not follow (`unheeded`: Held.motion_unheeded) is said, and the estimate is
     not `tracking`; nor is one that keeps the standing place while motion is as probable as UNSURE_P (the watch not
     yet sure for long enough to be followed: a transmitter that has begun to walk away), unless the count
-    `explained` the motion as transmitters taking turns."""
+    `explained` the motion as transmitters taking turns. Such a held place's covariance is the two models' second
+    moment about it, so its ellipse holds where a mover would be now as probably as the watch says."""
     moves: dict[str, Any] = {"motion_probability": motion.p_moving if motion is not None else float("nan")}
     if said is None and motion is not None:
         # the estimate stands: no velocity, spread by what the watch makes of a motion it may have
@@ -70,8 +71,12 @@ def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, co
         elif motion is not None and motion.p_moving >= UNSURE_P and not explained:
             held = (f"the transmitter may be moving (p = {motion.p_moving:.2f}): the place is where it stood, until "
                     "the motion is sure")
-        if held is None:
+        if held is None or motion is None:
             return mean, cov, state, warnings, moves
+        # the place stands, and its covariance holds where a mover would be now: the models' second moment about it
+        d = motion.mean - mean
+        p = motion.p_moving
+        cov = (1.0 - p) * cov + p * (motion.cov + np.outer(d, d))
         return mean, cov, _not_tracking(state), warnings + [held], moves
     p, v = said.p_moving, said.velocity
     moves.update(velocity=p * v, velocity_cov=p * said.velocity_cov + p * (1.0 - p) * np.outer(v, v))
