@@ -58,7 +58,8 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
     offset (offset.py) is tried at the winner: adopted when the readings' likelihood gains more than the bearing
     reference's prior log odds; and, with `try_course`, for a north reference on a moving vehicle, the bearings turned
     by its course (course.py) with an offset of their own, adopted when they gain as much again over the best of
-    north and explain more than an emitter that moved. None when the readings are too few for a fit."""
+    north and explain more than an emitter that moved once or keeps moving. None when the readings are too few for
+    a fit."""
     cfg, c = batch.cfg, batch.cols
     if c.theta.size < 2:
         return None
@@ -92,7 +93,7 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
                                 ALL_OFFSETS_DEG)
         if on_course is not None and on_course[0] > ll + PRIOR_LOG_ODDS[cfg.bearing_reference]:
             course_fit = Fit(on_course[1], on_course[2], on_course[3], turned)
-            if not _moved_explains_more(out, course_fit, rob):
+            if not _moved_explains_more(out, course_fit, rob) and not _moving_explains_more(out, course_fit, rob):
                 out = course_fit
     return out
 
@@ -122,6 +123,31 @@ def _moved_explains_more(north: Fit, course: Fit, rob: Robust) -> bool:
     course_pts = course.batch.points(course.noise, course.offset)
     one = float(log_posterior(refined(course.at, course_pts, rob), course_pts, rob))
     return split - math.log(k) >= one
+
+
+_PIECES = 3  # a moving emitter's path, as places each holding a run of the points ...
+_PIECE_POINTS = 6  # ... of at least this many
+
+
+def _moving_explains_more(north: Fit, course: Fit, rob: Robust) -> bool:
+    """Whether an emitter that keeps moving explains the points read from north at least as well as the bearings
+    turned by the course do, by their robust log posteriors, each further place's coordinates charged log K (BIC).
+    A car's bearings drift as it drives, and a fit that turns them by the DF vehicle's course can follow part of the
+    drift; a path of places, each holding an equal run of the points, follows all of it. The course's own signature,
+    a bend in the bearings at each of the vehicle's turns, is what a path split by time cannot make."""
+    k = north.batch.sizes.size
+    pieces = min(_PIECES, k // _PIECE_POINTS)
+    if pieces < 2:
+        return False
+    pts = north.batch.points(north.noise, north.offset)
+    path = 0.0
+    for run in np.array_split(np.arange(k), pieces):
+        part = pts.take(run)
+        modes = find_modes(part, rob, True)
+        path += float(log_posterior(refined(modes[0].mean if modes else north.at, part, rob), part, rob))
+    course_pts = course.batch.points(course.noise, course.offset)
+    one = float(log_posterior(refined(course.at, course_pts, rob), course_pts, rob))
+    return path - (pieces - 1) * math.log(k) >= one
 
 
 @dataclass
