@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from aoa_localizer.pooled.noise_family import quantile_of
+from aoa_localizer.pooled.region import size_text
 from aoa_localizer.tools import locate
 
 LENTH = (locate.Path(__file__).resolve().parent.parent / "examples" / "lenth1981.csv").read_text().splitlines()
@@ -56,11 +57,17 @@ def test_a_column_name_spelt_nearly_right_is_suggested(tmp_path, capsys):
 
 
 def test_the_table_writes_sizes_as_a_person_reads_them(tmp_path, capsys):
-    """`1.78e+03 x 1.77e+03` was the table's way to say 1780 m."""
-    assert locate._size(1780.4) == "1780" and locate._size(123.4) == "123" and locate._size(7.346) == "7.35"
+    """`1.78e+03 x 1.77e+03` was the table's way to say 1780 m, and a wide region's warning said `2.99e+03 m`."""
+    assert size_text(1780.4) == "1780" and size_text(123.4) == "123" and size_text(7.346) == "7.35"
     locate.main([str(untimed(tmp_path / "s.csv"))])
     table = capsys.readouterr().out
     assert not re.search(r"\de[+-]\d", table)
+    three = tmp_path / "three.csv"  # three masts whose bearings barely agree: a region kilometres wide
+    three.write_text("id,lat,lon,azimuth_deg,station\ntx,47.37,8.54,45.2,a\ntx,47.36,8.56,330.1,b\n"
+                     "tx,47.365,8.53,80.3,c\n")
+    locate.main([str(three)])
+    out = capsys.readouterr().out
+    assert "is wide for the range" in out and not re.search(r"\de[+-]\d", out)
 
 
 def test_a_noise_posterior_on_one_grid_value_gives_that_values_bin_not_a_point():

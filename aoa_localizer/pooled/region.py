@@ -89,3 +89,8 @@ def summarise(box: Box, p: np.ndarray, point: np.ndarray | None = None, cov: np.
     except np.linalg.LinAlgError:
         held = {lvl: float("nan") for lvl in LEVELS}
     return Region(point, cov, {lvl: hpd_rings(box, p, lvl) for lvl in LEVELS}, held)
+
+
+def size_text(metres: float) -> str:
+    """A length as people read it: whole metres from 100 m on (1780, not 1.78e+03), three figures below."""
+    return f"{metres:.0f}" if metres >= 100 else f"{metres:.3g}"

@@ -38,7 +38,7 @@ from aoa_localizer.pooled.grid import (
     zoom,
 )
 from aoa_localizer.pooled.noise_family import NoiseGrid, expected_error, logsumexp, noise_grid, quantile_of
-from aoa_localizer.pooled.region import LEVELS, Region, mode, moment, summarise
+from aoa_localizer.pooled.region import LEVELS, Region, mode, moment, size_text, summarise
 from aoa_localizer.pooled.stations import Station, SurveyReading, make_stations, pooled_scatter, station_variance
 from aoa_localizer.pooled.transmitters import count_id
 
@@ -271,7 +271,7 @@ def _fix(geom: Geometry, region: Region, shift: np.ndarray, extra: np.ndarray, s
                         "of them may be wild")
     if a95 > reach:
         state = EstimateState.POORLY_DETERMINED
-        warnings.append(f"the 95 % region ({a95:.3g} m) is wide for the range ({reach:.3g} m)")
+        warnings.append(f"the 95 % region ({size_text(a95)} m) is wide for the range ({size_text(reach)} m)")
     if len(region.hpd[0.95]) > 1:
         state = EstimateState.POORLY_DETERMINED
         warnings.append(f"the 95 % region is in {len(region.hpd[0.95])} parts: see `hpd`")

@@ -51,6 +51,7 @@ from aoa_localizer.engine.survey.survey_log import counted
 from aoa_localizer.engine.types import SIGMA_RANGE_DEG, Estimate
 from aoa_localizer.pooled import SurveyReading, locate_pooled
 from aoa_localizer.pooled.noise_family import RECEIVER_CLASSES
+from aoa_localizer.pooled.region import size_text
 
 PROG = "python -m aoa_localizer.locate"
 MAPS = 200  # --report's per-id maps by default: about a minute of drawing; the rest are listed in summary.md
@@ -390,13 +391,8 @@ def _filter_run(groups: dict[str, list[Row]], cfg, datum, lines: _Lines) -> None
             lines.fixed(ident, est, group, record(ident, est, len(group)))
 
 
-def _size(metres: float) -> str:
-    """A semi-axis for the table: whole metres from 100 m on (1780, not 1.78e+03), three figures below."""
-    return f"{metres:.0f}" if metres >= 100 else f"{metres:.3g}"
-
-
 def _print_row(ident: str, est: Estimate):
-    a, b, _ = (_size(v) for v in ellipse_axes(est.cov))
+    a, b, _ = (size_text(v) for v in ellipse_axes(est.cov))
     print(f"{ident or '-':<12} {est.lat:11.6f} {est.lon:12.6f} {a:>8} x {b:<8} {est.bearings_used:8d}  "
           f"{est.state}" + "".join(f"\n{'':<12} {w}" for w in est.warnings))
 
