@@ -93,7 +93,8 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
                                 ALL_OFFSETS_DEG)
         if on_course is not None and on_course[0] > ll + PRIOR_LOG_ODDS[cfg.bearing_reference]:
             course_fit = Fit(on_course[1], on_course[2], on_course[3], turned)
-            if not _moved_explains_more(out, course_fit, rob) and not _moving_explains_more(out, course_fit, rob):
+            if not _moved_explains_more(out, course_fit, rob) and not _moving_explains_more(
+                    out, course_fit, rob, PRIOR_LOG_ODDS[cfg.bearing_reference]):
                 out = course_fit
     return out
 
@@ -129,9 +130,11 @@ _PIECES = 3  # a moving emitter's path, as places each holding a run of the poin
 _PIECE_POINTS = 6  # ... of at least this many
 
 
-def _moving_explains_more(north: Fit, course: Fit, rob: Robust) -> bool:
+def _moving_explains_more(north: Fit, course: Fit, rob: Robust, prior_log_odds: float) -> bool:
     """Whether an emitter that keeps moving explains the points read from north at least as well as the bearings
-    turned by the course do, by their robust log posteriors, each further place's coordinates charged log K (BIC).
+    turned by the course do, by their robust log posteriors, each further place's coordinates charged log K (BIC),
+    and the course charged the reference's prior log odds against it, as it is against north (a reference set
+    wrong is the course's claim; a transmitter on the move is no misconfiguration).
     A car's bearings drift as it drives, and a fit that turns them by the DF vehicle's course can follow part of the
     drift; a path of places, each holding an equal run of the points, follows all of it. The course's own signature,
     a bend in the bearings at each of the vehicle's turns, is what a path split by time cannot make."""
@@ -147,7 +150,7 @@ def _moving_explains_more(north: Fit, course: Fit, rob: Robust) -> bool:
         path += float(log_posterior(refined(modes[0].mean if modes else north.at, part, rob), part, rob))
     course_pts = course.batch.points(course.noise, course.offset)
     one = float(log_posterior(refined(course.at, course_pts, rob), course_pts, rob))
-    return path - (pieces - 1) * math.log(k) >= one
+    return path - (pieces - 1) * math.log(k) + prior_log_odds >= one
 
 
 @dataclass
