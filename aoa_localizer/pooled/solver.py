@@ -200,8 +200,7 @@ def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
     if most < 2 or noise.repeated or not np.any(noise.shared_place > 0):
         return region  # a station that repeats its readings is an instrument's, not an observer's stop
     coarse = coarse_share(np.degrees(noise.tau))
-    w = np.exp(solved.log_w)
-    share_coarse = float(w @ coarse)
+    share_coarse = float(np.exp(solved.log_w) @ coarse)
     if share_coarse < _NEGLIGIBLE:
         return region
     src = solved.boxes[e]

@@ -93,18 +93,21 @@ def fit_noise(batch: PointBatch, noise: NoiseModel, rob: Robust, candidates: lis
                                 ALL_OFFSETS_DEG)
         if on_course is not None and on_course[0] > ll + PRIOR_LOG_ODDS[cfg.bearing_reference]:
             course_fit = Fit(on_course[1], on_course[2], on_course[3], turned)
-            if not _moved_explains_more(out, course_fit, rob) and not _moving_explains_more(
-                    out, course_fit, rob, PRIOR_LOG_ODDS[cfg.bearing_reference]):
+            turned_pts = turned.points(course_fit.noise, course_fit.offset)
+            one = float(log_posterior(refined(course_fit.at, turned_pts, rob), turned_pts, rob))
+            if not _moved_explains_more(out, one, rob) and not _moving_explains_more(
+                    out, one, rob, PRIOR_LOG_ODDS[cfg.bearing_reference]):
                 out = course_fit
     return out
 
 
-def _moved_explains_more(north: Fit, course: Fit, rob: Robust) -> bool:
-    """Whether an emitter that moved explains the points read from north at least as well as the bearings turned
-    by the course do, by their robust log posteriors, the move's extra coordinates charged log K (BIC): both bend
-    the bearings at one moment, and a single turn cannot tell them apart by itself. The move is placed where the
-    vehicle turned most, each part's place found by its global search; then the move goes to the point that
-    explains the points best under those two places, and each place is refined on its part."""
+def _moved_explains_more(north: Fit, one: float, rob: Robust) -> bool:
+    """Whether an emitter that moved explains the points read from north at least as well as the bearings turned by the
+    course do (`one`: their robust log posterior at the course fit's place), by their robust log posteriors, the move's
+    extra coordinates charged log K (BIC): both bend the bearings at one moment, and a single turn cannot tell them
+    apart by itself. The move is placed where the vehicle turned most, each part's place found by its global search;
+    then the move goes to the point that explains the points best under those two places, and each place is refined on
+    its part."""
     c, of, k = north.batch.cols, north.batch.of, north.batch.sizes.size
     if k < 6:
         return False
@@ -121,8 +124,6 @@ def _moved_explains_more(north: Fit, course: Fit, rob: Robust) -> bool:
     split = 0.0
     for x, part in zip(places, (pts.take(np.arange(cut)), pts.take(np.arange(cut, k))), strict=True):
         split += float(log_posterior(refined(x, part, rob), part, rob))
-    course_pts = course.batch.points(course.noise, course.offset)
-    one = float(log_posterior(refined(course.at, course_pts, rob), course_pts, rob))
     return split - math.log(k) >= one
 
 
@@ -130,11 +131,11 @@ _PIECES = 3  # a moving emitter's path, as places each holding a run of the poin
 _PIECE_POINTS = 6  # ... of at least this many
 
 
-def _moving_explains_more(north: Fit, course: Fit, rob: Robust, prior_log_odds: float) -> bool:
+def _moving_explains_more(north: Fit, one: float, rob: Robust, prior_log_odds: float) -> bool:
     """Whether an emitter that keeps moving explains the points read from north at least as well as the bearings
-    turned by the course do, by their robust log posteriors, each further place's coordinates charged log K (BIC),
-    and the course charged the reference's prior log odds against it, as it is against north (a reference set
-    wrong is the course's claim; a transmitter on the move is no misconfiguration).
+    turned by the course do (`one`, as for _moved_explains_more), by their robust log posteriors, each further
+    place's coordinates charged log K (BIC), and the course charged the reference's prior log odds against it, as it
+    is against north (a reference set wrong is the course's claim; a transmitter on the move is no misconfiguration).
     A car's bearings drift as it drives, and a fit that turns them by the DF vehicle's course can follow part of the
     drift; a path of places, each holding an equal run of the points, follows all of it. The course's own signature,
     a bend in the bearings at each of the vehicle's turns, is what a path split by time cannot make."""
@@ -148,8 +149,6 @@ def _moving_explains_more(north: Fit, course: Fit, rob: Robust, prior_log_odds: 
         part = pts.take(run)
         modes = find_modes(part, rob, True)
         path += float(log_posterior(refined(modes[0].mean if modes else north.at, part, rob), part, rob))
-    course_pts = course.batch.points(course.noise, course.offset)
-    one = float(log_posterior(refined(course.at, course_pts, rob), course_pts, rob))
     return path - (pieces - 1) * math.log(k) + prior_log_odds >= one
 
 
