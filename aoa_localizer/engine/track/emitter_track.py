@@ -126,13 +126,18 @@ class EmitterTrack(Held):
         point (motion is judged once a filter runs: a provisional sample's
         spread is no standing transmitter's posterior); None with `motion_model: static` or without `global_safety`
         (the filters alone), while the bearings are turned by the vehicle's course, or when the watch failed
-        (counted `internal_error`); a watch begun before the calibration's offset changed begins again."""
+        (counted `internal_error`); the watch begins again when the calibration learns an offset or takes one back."""
         if self.cfg.motion_model == "static" or not self.cfg.global_safety:  # the filters alone: no watch either
             return None
         # bearings turned by the vehicle's course (every turn of the vehicle would read as a move), or an offset
-        # other than the one the watch's history was weighed with: what the watch said no longer holds
-        if self.calibration.course or (self.watch is not None and self.watched_offset != self.calibration.offset):
+        # learned or taken back: the standing model the watch's odds were weighed against is another, and it begins
+        # again; a refined offset is the same model refined, and the watch goes on (its moving cloud reads the
+        # bearings as given: a mover's track begun again at each refinement lost what it had learned of the mover)
+        learned_or_taken_back = (self.watched_offset == 0.0) != (self.calibration.offset == 0.0)
+        if self.calibration.course or (self.watch is not None and learned_or_taken_back):
             self.watch, self.sure_run, self.motion = None, 0, None
+        elif self.watch is not None:
+            self.watched_offset = self.calibration.offset
         if self.calibration.course:
             return None
         if self.watch is None:  # the first point is the moving cloud's prior: its line of bearing
