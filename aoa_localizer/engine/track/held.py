@@ -66,7 +66,7 @@ class Held:
         self.last_kept = np.zeros(0, bool)  # which readings the newest point kept (the report's trace)
         # Whether the transmitter moves (motion.py): the watch, begun with the filter, and what it last said
         self.watch: MotionWatch | None = None
-        self.watched_offset = 0.0  # the bearing offset (rad) the calibration took off when the watch began
+        self.watched_offset = 0.0  # the bearing offset (rad) the calibration took off at the watch's last point
         self.motion: Motion | None = None
         self.doubts: deque[bool] = deque(maxlen=DOUBT_POINTS)  # per recent point: the filter in alarm, or none
         self.sure_run = 0  # points in a row the watch has been all but sure of motion
