@@ -9,10 +9,21 @@ import sys
 from pathlib import Path
 from types import SimpleNamespace
 
-import numpy as np
-import pytest
 
-from aoa_localizer.engine.geodesy import LocalFrame
+def _write_bytecode() -> None:
+    """Where the environment turns bytecode off (PYTHONDONTWRITEBYTECODE), pytest rewrote every test module's asserts
+    from source in each worker and each run, and each of the suite's processes compiled the package again: the
+    suite writes it (`__pycache__`, which git ignores), as Python does by default."""
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+    sys.dont_write_bytecode = False
+
+
+_write_bytecode()
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from aoa_localizer.engine.geodesy import LocalFrame  # noqa: E402
 
 DATUM = (39.1, 117.2, 5.0)
 ROOT = Path(__file__).resolve().parent.parent
