@@ -428,6 +428,7 @@ def test_a_place_whose_errors_repeat_along_the_drive_widens_its_ellipse_and_inde
     assert np.median([widening(field_readings(rng, 400, 3.0, 300.0))[0] for _ in range(5)]) > 2.0
 
 
+@pytest.mark.slow
 def test_a_transmitter_no_start_reaches_is_born_where_the_readings_left_over_meet():
     """Co-channel II, five at limit 5 (count 4 at p = 1.00 in 6 of 20 runs): five in turns, limit 5, the starts
     offer two places and the one place's wild readings two more; the readings the best four leave over meet at the

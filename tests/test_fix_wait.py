@@ -3,6 +3,8 @@ on a busy machine a replay's bearings came before their fixes, all refused (used
 from pathlib import Path
 from types import SimpleNamespace
 
+import pytest
+
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.ros.fix_wait import FixWait
 from msgs_adapters.bag import read_bag
@@ -42,6 +44,7 @@ def test_parked_records_are_bounded_the_oldest_going_on():
     assert fed == [0.0, 1.0] and wait.count == 3
 
 
+@pytest.mark.slow
 def test_a_burst_of_bearings_ahead_of_their_fixes_is_located_not_refused():
     """The two-car sample bag with each station's bearings delivered up to 150 messages before the fixes that
     place them: straight to the engine, every bearing was refused (before_first_fix, gps_gap) and there was no

@@ -174,6 +174,7 @@ def test_a_huge_metadata_yaml_is_not_parsed(tmp_path, data):
     assert (got["fix"], got["bearing"], got["damage"]) == (len(data.fixes), len(data.bearings), None)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("special", ["zero", "fifo", "fifo_meta"])
 @pytest.mark.parametrize("program", ["replay", "report"])
 def test_a_special_file_in_a_bag_folder_is_refused_at_once(tmp_path, data, special, program):

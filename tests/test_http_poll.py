@@ -25,7 +25,7 @@ def test_a_good_page_is_returned(server):
     ("/many_headers", "more than 100 headers"),
     ("/redirect", "redirected to 'http://127.0.0.1:1/elsewhere'"),
     ("/status_500", "HTTP 500"),
-    ("/endless", "larger than 100000 bytes"),
+    pytest.param("/endless", "larger than 100000 bytes", marks=pytest.mark.slow),  # the server streams until cut
     pytest.param("/trickle_body", "within 1 s", marks=pytest.mark.slow),  # a second each: the deadline
     pytest.param("/trickle_headers", "within 1 s", marks=pytest.mark.slow),
 ])

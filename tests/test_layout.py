@@ -225,6 +225,7 @@ def test_the_maths_has_no_turns_and_no_meter_inside_it():
     assert (engine / "inference" / "global_search.py").read_text().count("@metered(") == 1  # the test sees them
 
 
+@pytest.mark.slow
 def test_no_exception_for_control_flow_is_a_base_exception_and_no_maths_catches_every_exception():
     """Architecture IV: a dropped job's thread ends by an ordinary exception raised at its next kernel
     (slices._Cancelled); that works only while the numerical code catches named errors, never a bare `except`,

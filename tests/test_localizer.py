@@ -426,6 +426,7 @@ def _fixed_sites(loc):
     return loc.estimate
 
 
+@pytest.mark.slow
 def test_the_survey_model_is_handed_to_the_localizer_not_installed_by_an_import():
     """Issue 65, item 5: the survey solver was installed into the engine when aoa_localizer/__init__ ran. Now a
     Localizer is handed one (default: aoa_localizer.pooled's); a solver of one's own is called with the survey's

@@ -35,6 +35,7 @@ def test_ids_that_once_shared_a_file_name_get_one_each():
     assert file_names(reversed(ids)) == names  # the same id, the same name, whatever else the file holds
 
 
+@pytest.mark.slow
 def test_a_survey_report_has_a_file_per_id_and_a_summary_naming_them(tmp_path, capsys):
     ids = ["a/b", "a_b", "a:b", "a\\b", "z" * 300, "tx\x01"]
     path = survey(tmp_path / "s.csv", ids)

@@ -34,6 +34,7 @@ def test_a_survey_without_times_gives_every_id_an_estimate(tmp_path, capsys, mod
     assert err.count("have no time") == 1 and "16 of 16 rows have no time" in err
 
 
+@pytest.mark.slow
 def test_a_report_of_a_survey_without_times_has_no_time_in_its_kml(tmp_path):
     assert locate.main([str(untimed(tmp_path / "s.csv")), "--report", str(tmp_path / "rep")]) == 0
     kml = (tmp_path / "rep" / "emitter.kml").read_text()
