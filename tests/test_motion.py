@@ -363,8 +363,12 @@ def test_a_refined_offset_keeps_the_watch_and_one_learned_or_taken_back_begins_i
     """The moving cloud reads the bearings as given, so a refined bearing offset leaves it as it was (a drone whose
     drift the calibration kept refining as an offset, -54 to +27 deg, lost its track at each refinement: its ellipse
     held it 57-85 % of the time); learning an offset or taking one back changes the standing model its odds were
-    weighed against, and the watch begins again on that point."""
+    weighed against, and the watch begins again on that point, unless it found motion probable (an offset learned
+    from a mover's drift)."""
+    from dataclasses import replace
+
     from aoa_localizer import Localizer
+    from aoa_localizer.engine.inference.motion import UNSURE_P
     from aoa_localizer.engine.types import ObservationPoint
 
     track = Localizer(LocalizerConfig(seed=1)).channels.default.track
@@ -382,3 +386,8 @@ def test_a_refined_offset_keeps_the_watch_and_one_learned_or_taken_back_begins_i
     track.calibration.offset = 0.0  # taken back
     track._watch_motion(point[3])
     assert track.watch is not learned and track.watch.stamp == 3.0 and track.watched_offset == 0.0
+    track.motion = replace(track.motion or track.watch.motion(), p_moving=UNSURE_P)  # motion probable
+    kept = track.watch
+    track.calibration.offset = math.radians(5.0)  # learned from what may be a mover's drift
+    track._watch_motion(point[4])
+    assert track.watch is kept and track.watch.stamp == 4.0 and track.watched_offset == math.radians(5.0)

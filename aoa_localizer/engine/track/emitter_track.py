@@ -36,7 +36,7 @@ from aoa_localizer.engine.inference.co_channel import (
     count_job,
 )
 from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, find_modes
-from aoa_localizer.engine.inference.motion import MOVING_P, SURE_MOTION_P, Motion, MotionWatch, median_bearing
+from aoa_localizer.engine.inference.motion import MOVING_P, SURE_MOTION_P, UNSURE_P, Motion, MotionWatch, median_bearing
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
@@ -126,15 +126,19 @@ class EmitterTrack(Held):
         point (motion is judged once a filter runs: a provisional sample's
         spread is no standing transmitter's posterior); None with `motion_model: static` or without `global_safety`
         (the filters alone), while the bearings are turned by the vehicle's course, or when the watch failed
-        (counted `internal_error`); the watch begins again when the calibration learns an offset or takes one back."""
+        (counted `internal_error`); the watch begins again when the calibration learns an offset or takes one back
+        while motion is improbable."""
         if self.cfg.motion_model == "static" or not self.cfg.global_safety:  # the filters alone: no watch either
             return None
         # bearings turned by the vehicle's course (every turn of the vehicle would read as a move), or an offset
         # learned or taken back: the standing model the watch's odds were weighed against is another, and it begins
-        # again; a refined offset is the same model refined, and the watch goes on (its moving cloud reads the
-        # bearings as given: a mover's track begun again at each refinement lost what it had learned of the mover)
-        learned_or_taken_back = (self.watched_offset == 0.0) != (self.calibration.offset == 0.0)
-        if self.calibration.course or (self.watch is not None and learned_or_taken_back):
+        # again, unless it found motion probable (an offset learned then may be a mover's drift read as one, and the
+        # watch begun again lost the mover: a walker's estimates were the filter's own, 12 % inside their ellipse);
+        # a refined offset is the same model refined, and the watch goes on (its moving cloud reads the bearings as
+        # given: a mover's track begun again at each refinement lost what it had learned of the mover)
+        another = (self.watched_offset == 0.0) != (self.calibration.offset == 0.0)
+        probable = self.motion is not None and self.motion.p_moving >= UNSURE_P
+        if self.calibration.course or (self.watch is not None and another and not probable):
             self.watch, self.sure_run, self.motion = None, 0, None
         elif self.watch is not None:
             self.watched_offset = self.calibration.offset
