@@ -130,20 +130,20 @@ class EmitterTrack(Held):
         while motion is improbable."""
         if self.cfg.motion_model == "static" or not self.cfg.global_safety:  # the filters alone: no watch either
             return None
-        # bearings turned by the vehicle's course (every turn of the vehicle would read as a move), or an offset
-        # learned or taken back: the standing model the watch's odds were weighed against is another, and it begins
-        # again, unless it found motion probable (an offset learned then may be a mover's drift read as one, and the
-        # watch begun again lost the mover: a walker's estimates were the filter's own, 12 % inside their ellipse);
-        # a refined offset is the same model refined, and the watch goes on (its moving cloud reads the bearings as
-        # given: a mover's track begun again at each refinement lost what it had learned of the mover)
+        if self.calibration.course:  # bearings turned by the vehicle's course: every turn would read as a move
+            self.watch, self.sure_run, self.motion = None, 0, None
+            return None
+        # an offset learned or taken back: the standing model the watch's odds were weighed against is another, and
+        # it begins again, unless it found motion probable (an offset learned then may be a mover's drift read as one,
+        # and the watch begun again lost the mover: a walker's estimates were the filter's own, 12 % inside their
+        # ellipse); a refined offset is the same model refined, and the watch goes on (its moving cloud reads the
+        # bearings as given: a mover's track begun again at each refinement lost what it had learned of the mover)
         another = (self.watched_offset == 0.0) != (self.calibration.offset == 0.0)
         probable = self.motion is not None and self.motion.p_moving >= UNSURE_P
-        if self.calibration.course or (self.watch is not None and another and not probable):
+        if self.watch is not None and another and not probable:
             self.watch, self.sure_run, self.motion = None, 0, None
         elif self.watch is not None:
             self.watched_offset = self.calibration.offset
-        if self.calibration.course:
-            return None
         if self.watch is None:  # the first point is the moving cloud's prior: its line of bearing
             self.watch = MotionWatch(point, self.cfg.max_transmitter_speed_mps, self.rng.spawn(1)[0],
                                      self.cfg.gps_sigma_m)
