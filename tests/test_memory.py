@@ -1,8 +1,11 @@
-"""Process memory settings (engine/scheduling/memory.py): the allocator keeps freed memory; old objects leave the
-collector's full passes yet are freed as usual, and their cycles go at the first tick after thaw(), one full pass
-for a burst of thaws."""
+"""Process settings (engine/scheduling/memory.py): the allocator keeps freed memory, BLAS runs on one thread; old
+objects leave the collector's full passes yet are freed as usual, and their cycles go at the first tick after thaw(),
+one full pass for a burst of thaws."""
 import gc
+import os
 import platform
+import subprocess
+import sys
 import weakref
 
 from aoa_localizer.engine.scheduling.memory import OldObjects, keep_freed_memory
@@ -10,6 +13,21 @@ from aoa_localizer.engine.scheduling.memory import OldObjects, keep_freed_memory
 
 def test_keep_freed_memory_applies_on_glibc():
     assert keep_freed_memory() is (platform.libc_ver()[0] == "glibc")
+
+
+def test_a_settled_process_runs_blas_on_one_thread_with_the_same_products():
+    """In a process of its own (the suite's is settled by conftest): BLAS on as many threads as cores before,
+    one after, and a product BLAS makes is the same."""
+    code = ("import numpy as np; from threadpoolctl import threadpool_info\n"
+            "from aoa_localizer.engine.scheduling.memory import settle_process\n"
+            "a = np.arange(40000.0).reshape(200, 200) % 7; before = a @ a\n"
+            "threads = lambda: sorted({p['num_threads'] for p in threadpool_info() if p['user_api'] == 'blas'})\n"
+            "print(threads()); settle_process(); print(threads(), bool(np.array_equal(a @ a, before)))")
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    before, after = out.stdout.splitlines()
+    assert before == f"[{os.cpu_count()}]" and after == "[1] True", out.stdout
 
 
 class Node:

@@ -40,7 +40,7 @@ from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.inference.noise import sentence as noise_sentence
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.rejections import REASONS
-from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import settle_process
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.reporting import export, plots
 from msgs_adapters.bag import BagError
@@ -217,7 +217,7 @@ def parse_args(argv) -> argparse.Namespace:
 
 
 def main(argv=None) -> int:
-    keep_freed_memory()  # the particle temporaries reused, not mapped afresh (scheduling/memory.py)
+    settle_process()  # freed memory reused, BLAS on one thread (scheduling/memory.py)
     args = parse_args(argv)
     setup_logging(args.verbose)
     try:

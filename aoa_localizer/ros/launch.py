@@ -37,6 +37,7 @@ from aoa_localizer.engine.config import parameter_specs
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes
 from aoa_localizer.engine.crlb import nees as crlb_nees
 from aoa_localizer.engine.geodesy import LocalFrame
+from aoa_localizer.engine.scheduling.memory import settle_process
 from aoa_localizer.engine.scheduling.parent_death import die_with_parent
 from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.ros.node_params import NODE_PARAMS
@@ -738,6 +739,7 @@ class Run:
 
 
 def main(argv=None) -> int:
+    settle_process()  # it scores the node's estimates with numpy: BLAS on one thread (scheduling/memory.py)
     args = parse_args(argv)
     problem = refusal(args)
     if problem:

@@ -33,7 +33,7 @@ from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec,
 from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
 from aoa_localizer.engine.localizer import Localizer
 from aoa_localizer.engine.rejections import REASONS
-from aoa_localizer.engine.scheduling.memory import OldObjects, keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import OldObjects
 from aoa_localizer.ros.declare import declare, refuse_unknown, value_of
 from aoa_localizer.ros.fix_wait import FixWait
 from aoa_localizer.ros.node_monitor import NodeMonitor
@@ -621,7 +621,6 @@ GOAL_PERIOD_S = 1.0  # emitter/next_goal is refreshed at most this often (s)
 
 def main(argv=None) -> int:
     sys.setswitchinterval(SWITCH_INTERVAL_S)
-    keep_freed_memory()
     return run_node(NODE_NAME, LocalizerNode, spin, (ConfigError,), argv, usage())
 
 

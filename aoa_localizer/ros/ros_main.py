@@ -13,6 +13,8 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from aoa_localizer.engine.scheduling.memory import settle_process
+
 POLL_S = 0.1  # how soon a spinning program notices SIGINT or SIGTERM
 # The middleware's teardown (a node destroyed, rclpy shut down) at most: past it a program whose work is done exits
 # without it. Fast DDS and rclpy have been seen to hang there now and then (a busy machine, a peer leaving)
@@ -76,13 +78,15 @@ def wants_help(argv) -> bool:
 
 def run_node(name: str, make, run, refusals: tuple, argv=None, usage: str = "") -> int:
     """make() builds the node (raising one of `refusals` to refuse); run(node, stop) works until done or
-    `stop.requested`. With -h or --help, `usage` is printed and nothing starts."""
+    `stop.requested`. With -h or --help, `usage` is printed and nothing starts. The process is settled for the
+    engine first (freed memory kept, BLAS on one thread: scheduling/memory.py)."""
     if wants_help(argv):
         try:
             print(usage, flush=True)
         except BrokenPipeError:  # `--help | head`: the reader left; not an error of ours
             sys.stdout = open(os.devnull, "w")  # the interpreter's exit flush must not fail either
         return 0
+    settle_process()
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:  # --ros-args rcl cannot parse (a -p value YAML reads as a mixed list): one line

@@ -9,7 +9,7 @@ import numpy as np
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import crlb_rmse, crlb_so_far, inside_ellipse, nees
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import settle_process
 from aoa_localizer.engine.types import Estimate
 from aoa_localizer.filters import REGISTRY, make_filter
 from aoa_localizer.simulation.fleet import FleetData
@@ -54,7 +54,7 @@ def feed_fleet(loc: Localizer, data: FleetData) -> None:
 
 def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
     """Feed a scenario's fixes and bearings in stamp order, flush and finish at the end, keep every estimate."""
-    keep_freed_memory()  # a benchmark's process: the particle temporaries reused (scheduling/memory.py)
+    settle_process()  # a benchmark's process: freed memory reused, BLAS on one thread (scheduling/memory.py)
     loc = Localizer(scenario_config(data, cfg))
     estimates, step_s = [], []
 

@@ -45,7 +45,7 @@ from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import settle_process
 from aoa_localizer.engine.site_bearings import SURVEY_PARTICLES, SiteBearing, locate_bearings, survey_config
 from aoa_localizer.engine.survey.survey_log import counted
 from aoa_localizer.engine.types import SIGMA_RANGE_DEG, Estimate
@@ -479,7 +479,7 @@ class _Table:
 
 
 def main(argv=None) -> int:
-    keep_freed_memory()  # the particle temporaries reused, not mapped afresh (scheduling/memory.py)
+    settle_process()  # freed memory reused, BLAS on one thread (scheduling/memory.py)
     stdout, sys.stdout = sys.stdout, _Table(sys.stdout)
     terminate = None
     if threading.current_thread() is threading.main_thread():  # SIGTERM ends a run as Ctrl-C does: what is done stays

@@ -37,7 +37,7 @@ from aoa_localizer.common.output import StagedFile, check_output
 from aoa_localizer.core.spec import ConfigError
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import settle_process
 from aoa_localizer.reporting.words import robustness_lines
 from msgs_adapters.bag import BagError
 
@@ -137,7 +137,7 @@ def _told(loc: Localizer, run, written: int, output: str) -> int:
 
 
 def main(argv=None) -> int:
-    keep_freed_memory()  # the particle temporaries reused, not mapped afresh (scheduling/memory.py)
+    settle_process()  # freed memory reused, BLAS on one thread (scheduling/memory.py)
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.replay", description=__doc__,
                                      formatter_class=HelpFormatter)
     parser.add_argument("bag", help="rosbag2 bag: a directory (MCAP or sqlite3, split, compressed; metadata.yaml "
@@ -160,7 +160,6 @@ def main(argv=None) -> int:
     add_engine_args(parser)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
-    keep_freed_memory()
     if args.offline:
         return run_offline(args)
     if not args.bag or not Path(args.bag).exists():

@@ -38,7 +38,7 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, inside_ellipse, pcrb_moving
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
-from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import settle_process
 from aoa_localizer.reporting.words import robustness_lines
 from aoa_localizer.simulation.evaluation import feed_fleet, run, scenario_config
 from aoa_localizer.simulation.fleet import FLEETS, simulate_fleet
@@ -97,7 +97,7 @@ def receiver_config(mount_offset_deg: float | None) -> LocalizerConfig:
 
 
 def main(argv=None) -> int:
-    keep_freed_memory()  # the particle temporaries reused, not mapped afresh (scheduling/memory.py)
+    settle_process()  # freed memory reused, BLAS on one thread (scheduling/memory.py)
     parser = argparse.ArgumentParser(prog="python -m aoa_localizer.simulate", description=__doc__,
                                      formatter_class=HelpFormatter)
     parser.add_argument("--scenario", choices=sorted(SCENARIOS) + sorted(FLEETS), default="seed",

@@ -1,9 +1,11 @@
-"""Memory settings for a long-running process. keep_freed_memory: the C allocator keeps freed memory for reuse (the
+"""Settings a program that runs the engine makes for its process (`settle_process`), never a Localizer: a process's
+allocator and threads are its program's to set. keep_freed_memory: the C allocator keeps freed memory for reuse (the
 filters' particles x points temporaries are a few MB each, and glibc by default maps each afresh and returns it at
-free, so every temporary paid its pages' first-touch faults: 2-4x the arithmetic on this machine); the programs
-call it (node, replay, simulate, report, locate, the benchmarks' runs) and the check worker at its start, never
-a Localizer: a process's allocator is its program's to set. OldObjects: the node's kept readings out of
-the cyclic garbage collector's full passes (docs/ros.md, "Latency")."""
+free, so every temporary paid its pages' first-touch faults: 2-4x the arithmetic on this machine). one_blas_thread:
+BLAS on one thread (the engine's linear algebra is 2x2 and 3x3 and small products, which more threads do not speed
+up, and an idle BLAS thread spins). Every program calls settle_process (the ROS ones in ros_main.run_node;
+replay, simulate, report, locate, the launcher; the benchmarks' runs), the check worker at its start. OldObjects:
+the node's kept readings out of the cyclic garbage collector's full passes (docs/ros.md, "Latency")."""
 from __future__ import annotations
 
 import ctypes
@@ -12,6 +14,11 @@ import functools
 import gc
 import logging
 import time
+
+# numpy's and scipy's BLAS libraries (each its own) loaded before one_blas_thread limits them
+import numpy  # noqa: F401
+import scipy.linalg  # noqa: F401
+from threadpoolctl import threadpool_info, threadpool_limits
 
 log = logging.getLogger("aoa_localizer")
 
@@ -35,6 +42,22 @@ def keep_freed_memory() -> bool:
         return False
     mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
     return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
+@functools.cache
+def one_blas_thread() -> bool:
+    """BLAS (OpenBLAS under numpy and scipy) on one thread; True when every BLAS library loaded runs on one. Its
+    threads spin while they wait for work: beside other work on two cores they took a fifth of a drive's CPU and
+    gave it no speed (docs/benchmarks.md, "One BLAS thread"). Once per process, as the allocator's setting."""
+    threadpool_limits(limits=1, user_api="blas")
+    blas = [pool for pool in threadpool_info() if pool["user_api"] == "blas"]
+    return bool(blas) and all(pool["num_threads"] == 1 for pool in blas)
+
+
+def settle_process() -> None:
+    """What a program that runs the engine sets for its process: freed memory kept, BLAS on one thread."""
+    keep_freed_memory()
+    one_blas_thread()
 
 
 class OldObjects:

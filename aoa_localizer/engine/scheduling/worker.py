@@ -12,7 +12,7 @@ from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
-from aoa_localizer.engine.scheduling.memory import keep_freed_memory
+from aoa_localizer.engine.scheduling.memory import settle_process
 from aoa_localizer.engine.scheduling.parent_death import die_with_parent
 
 log = logging.getLogger("aoa_localizer")
@@ -28,7 +28,7 @@ def _background(parent_pid: int):
     die_with_parent(parent_pid)
     os.nice(WORKER_NICENESS)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    keep_freed_memory()
+    settle_process()
 
 
 class CheckWorker:
