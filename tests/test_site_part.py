@@ -86,6 +86,8 @@ def test_a_drive_with_a_site_field_gets_an_honest_ellipse_and_a_clean_one_keeps_
             final = est or final
         assert final is not None
         inside += inside_ellipse(np.array([final.east, final.north]) - data.emitter_enu, final.cov)
+        if run >= 3:
+            continue  # the clean drive's ellipse over three runs
         clean = simulate(base, run)
         loc = Localizer(LocalizerConfig(seed=1000 + run, max_emitters_per_channel=1))
         for est in loc.run(clean.inputs()):
