@@ -51,6 +51,16 @@ def pytest_xdist_auto_num_workers(config):
 
 
 
+def pytest_collection_modifyitems(config, items):
+    """The long tests first, the ROS ones (mostly waiting on a drive's clock) between those that compute, the quick
+    ones last: xdist hands the tests out in this order, and the long ROS tests, last by file name, left the run's
+    final minute to one or two workers beside a heavy job."""
+    ros = [item for item in items if item.get_closest_marker("ros")]
+    slow = [item for item in items if item.get_closest_marker("slow") and not item.get_closest_marker("ros")]
+    quick = [item for item in items if not (item.get_closest_marker("slow") or item.get_closest_marker("ros"))]
+    items[:] = [item for pair in itertools.zip_longest(ros, slow) for item in pair if item is not None] + quick
+
+
 @pytest.fixture
 def domain():
     """A ROS domain of this test's own, from this worker's share of 1-101."""
