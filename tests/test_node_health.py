@@ -1,5 +1,6 @@
 """The node's own diagnostics and path, without ROS: stale inputs, a filter that keeps restarting, the path."""
 import math
+import time
 from collections import Counter
 
 import pytest
@@ -139,3 +140,32 @@ def test_messages_the_middleware_never_delivered_are_counted_from_their_numbers_
     none = SequenceGaps()
     none.add(None)  # a middleware that does not number its messages
     assert none.missing == 0 and none.last is None
+
+
+def test_a_quiet_node_ticks_slowly_and_an_input_makes_it_tick_fast_at_once():
+    """The idle timer: IDLE_PERIOD_S while inputs or idle work came within QUIET_AFTER_S, QUIET_IDLE_PERIOD_S after;
+    a change of period starts from now (the timer reset), and an input ends a quiet spell at once."""
+    from types import SimpleNamespace
+
+    from aoa_localizer.ros.node import (
+        IDLE_PERIOD_S,
+        QUIET_AFTER_S,
+        QUIET_IDLE_PERIOD_S,
+        LocalizerNode,
+        quiet_idle_period,
+    )
+
+    assert quiet_idle_period(0.0) == quiet_idle_period(QUIET_AFTER_S - 1e-3) == IDLE_PERIOD_S
+    assert quiet_idle_period(QUIET_AFTER_S) == QUIET_IDLE_PERIOD_S > IDLE_PERIOD_S
+    resets: list[int] = []
+    timer = SimpleNamespace(timer_period_ns=int(IDLE_PERIOD_S * 1e9), reset=lambda: resets.append(1))
+    node = SimpleNamespace(last_active=time.monotonic(), idle_period=IDLE_PERIOD_S, idle_timer=timer)
+    LocalizerNode._pace_idle(node, False)  # type: ignore[arg-type]  # just active: stays fast
+    assert timer.timer_period_ns == int(IDLE_PERIOD_S * 1e9) and not resets
+    node.last_active -= QUIET_AFTER_S
+    LocalizerNode._pace_idle(node, False)  # type: ignore[arg-type]
+    assert timer.timer_period_ns == int(QUIET_IDLE_PERIOD_S * 1e9) and resets == [1]
+    LocalizerNode._pace_idle(node, False)  # type: ignore[arg-type]  # still quiet: nothing changes
+    assert resets == [1]
+    LocalizerNode._pace_idle(node, True)  # type: ignore[arg-type]  # an input
+    assert timer.timer_period_ns == int(IDLE_PERIOD_S * 1e9) and resets == [1, 1]
