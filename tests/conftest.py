@@ -26,7 +26,7 @@ import pytest  # noqa: E402
 from aoa_localizer.engine.geodesy import LocalFrame  # noqa: E402
 from aoa_localizer.engine.scheduling.memory import one_blas_thread  # noqa: E402
 
-# The suite's engine runs as the programs' do: BLAS on one thread (its idle threads spun: a fifth of the suite's CPU)
+# The suite's engine runs as the programs' do: BLAS on one thread (idle BLAS threads spin: scheduling/memory.py)
 one_blas_thread()
 
 DATUM = (39.1, 117.2, 5.0)

@@ -633,7 +633,7 @@ SWITCH_INTERVAL_S = 0.0005
 # One owed sweep (about 2 ms at 300 points) per tick: 50 a second, several times what 50 emitters owe.
 IDLE_PERIOD_S = 0.02
 # A node QUIET_AFTER_S without input or idle work ticks this often: each tick is an executor's wait over every
-# entity, and at 50 a second a node waiting for its receiver took 7 % of a core, 1.4 % at 5 (docs/ros.md)
+# entity, and a node waiting for its receiver spent a share of a core on them (docs/ros.md)
 QUIET_IDLE_PERIOD_S = 0.2
 QUIET_AFTER_S = 1.0
 POSTERIOR_BUDGET_S = 0.004  # between messages, grids are made until this is spent (at least one; the rest wait)

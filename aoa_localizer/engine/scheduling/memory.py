@@ -47,8 +47,8 @@ def keep_freed_memory() -> bool:
 @functools.cache
 def one_blas_thread() -> bool:
     """BLAS (OpenBLAS under numpy and scipy) on one thread; True when every BLAS library loaded runs on one. Its
-    threads spin while they wait for work: beside other work on two cores they took a fifth of a drive's CPU and
-    gave it no speed (docs/benchmarks.md, "One BLAS thread"). Once per process, as the allocator's setting."""
+    threads spin while they wait for work, CPU taken from the rest of the machine for no speed on the engine's small
+    matrices (docs/benchmarks.md, "One BLAS thread"). Once per process, as the allocator's setting."""
     threadpool_limits(limits=1, user_api="blas")
     blas = [pool for pool in threadpool_info() if pool["user_api"] == "blas"]
     return bool(blas) and all(pool["num_threads"] == 1 for pool in blas)
