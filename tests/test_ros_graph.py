@@ -193,7 +193,7 @@ def test_sigterm_to_the_launcher_stops_everything(domain):
 def test_a_bag_is_scored_in_one_frame_with_its_scenarios_settings(tmp_path, domain):
     """The node's map is at its first confirmed fix (3 m GPS noise on urban), the bag's truth at the scenario's
     datum: the launcher compares them in one frame, so its error is the lat/lon error."""
-    res = launch(["--bag", ROOT / "bags/urban", "--scenario", "urban", "--rate", 10, "--seed", 2, "--domain-id", domain,
+    res = launch(["--bag", ROOT / "bags/urban", "--scenario", "urban", "--rate", 2, "--seed", 2, "--domain-id", domain,
                   "--result", tmp_path / "r.json"])
     assert res.returncode == 0, res.stdout + res.stderr
     got = json.loads((tmp_path / "r.json").read_text())
@@ -1134,6 +1134,30 @@ def test_the_launcher_names_another_source_once_discovery_names_it(capsys):
     for k in range(10):
         Monitor._on_diagnostics(monitor, diagnostics(f"/gps/fix has 2 publishers (/other_{k}, /sim_vehicle)"))
     assert capsys.readouterr().err.count("another source") == CROWDED_LINES - 2
+
+
+def test_the_launcher_judges_from_the_nodes_first_input_and_says_what_the_node_never_took():
+    """A busy machine's replay can start while the node still loads, or outrun its input queue (CI77: 39 of 2422
+    bearings taken, "diagnostics: OK throughout"): the launcher counts the run's diagnostics from the node's first
+    input (before it, "no DF reading since the start" is the source still starting) and compares what the node
+    took with what the bag holds (bags/urban/metadata.yaml: 244 fixes, 2422 bearings)."""
+    from types import SimpleNamespace as NS
+
+    from aoa_localizer.ros.launch import Monitor, inputs_lost
+
+    def diagnostics(level: int, fixes: int):
+        kv = [NS(key="fixes_received", value=str(fixes)), NS(key="bearings_received", value="0")]
+        return NS(status=[NS(name="aoa_localizer: localizer", values=kv, level=level, message=f"level {level}")])
+
+    monitor = NS(diag=None, diagnostics_seen=0, worst_diag=(0, ""), crowded="", crowded_said=0)
+    Monitor._on_diagnostics(monitor, diagnostics(1, 0))
+    assert monitor.worst_diag == (0, "")
+    Monitor._on_diagnostics(monitor, diagnostics(1, 3))
+    assert monitor.worst_diag[0] == 1
+    args = NS(bag=ROOT / "bags/urban", scenario="urban")
+    said = inputs_lost(args, {}, {"fixes_received": "244", "bearings_received": "39"})
+    assert said is not None and "39 of 2422 bearings" in said and "fixes" not in said and "--rate" in said
+    assert inputs_lost(args, {}, {"fixes_received": "244", "bearings_received": "2422"}) is None
 
 
 def test_two_sources_on_one_input_topic_are_named_in_the_diagnostics(spawn, domain):

@@ -52,6 +52,7 @@ DIAG_LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}  # diagnostic_msgs/Di
 # After the source ends the node is judged once its counts stand still over two /diagnostics, or after this long
 SETTLED_COUNTS = ("fixes_received", "bearings_received", "bearings_used", "points_used")
 SETTLE_MAX_S = 30.0
+NODE_UP_MAX_S = 60.0  # the longest wait for the node's first /diagnostics before the source starts
 # A domain is another graph's when someone publishes on a topic ending so; the launcher picks this many at most
 RUN_TOPICS = ("gps/fix", "df/bearing", "sim/truth", "emitter/pose")
 DOMAIN_TRIES = 5
@@ -159,6 +160,35 @@ def stations_of_bag(args) -> dict[str, dict[str, str]]:
         return {}
 
 
+def bag_inputs(args, found: dict[str, dict[str, str]]) -> dict[str, list[str]]:
+    """The bag's topics the replay plays into the node, by kind ("fix", "bearing")."""
+    if args.scenario in FLEETS:
+        names = FLEETS[args.scenario].stations
+        return {"fix": [f"/{name}/gps/fix" for name in names], "bearing": [f"/{name}/df/bearing" for name in names]}
+    if found:
+        return {kind: [its[kind] for its in found.values()] for kind in ("fix", "bearing")}
+    return {"fix": ["/gps/fix"], "bearing": ["/df/bearing"]}
+
+
+def inputs_lost(args, found: dict[str, dict[str, str]], diag: dict) -> str | None:
+    """After a whole replay: what the bag holds of the node's inputs that the node never took (lost in its input
+    queue or before its subscription matched), in words; None when it took them all."""
+    try:
+        with BagFiles(args.bag) as files:
+            counts = {t.name: t.count for t in RawReader(files).topics()}
+    except (BagFilesError, BagError):
+        return None
+    short = []
+    for kind, topics in bag_inputs(args, found).items():
+        plural = {"fix": "fixes", "bearing": "bearings"}[kind]
+        sent, took = sum(counts.get(t, 0) for t in topics), int(diag.get(f"{plural}_received", 0))
+        if took < sent:
+            short.append(f"{took} of {sent} {plural}")
+    return None if not short else (f"the node took {' and '.join(short)} the replay sent; the rest were lost before "
+                                   "it took them (its input queue, or its subscription matched late): replay at a "
+                                   "lower --rate")
+
+
 def build_commands(args, node_params: dict, found: dict[str, dict[str, str]]) -> tuple[list[str], list[str]]:
     """The node's and the source's command lines; `found`: the bag's stations (stations_of_bag)."""
     py = sys.executable
@@ -168,14 +198,9 @@ def build_commands(args, node_params: dict, found: dict[str, dict[str, str]]) ->
     for k, v in node_params.items():
         node += ["-p", f"{k}:={ros_value(v)}"]
     if args.bag:
-        if args.scenario in FLEETS:
-            inputs = [f"/{name}/{topic}" for name in FLEETS[args.scenario].stations for topic in ("gps/fix",
-                                                                                                  "df/bearing")]
-        elif found:
-            inputs = [its[kind] for its in found.values() for kind in ("fix", "bearing")]
-        else:
-            inputs = ["/gps/fix", "/df/bearing"]
-        source = [py, "-m", "aoa_localizer.replay", str(args.bag), "--rate", str(args.rate),
+        inputs = [topic for topics in bag_inputs(args, found).values() for topic in topics]
+        # every played topic has a subscriber here (the node's inputs, the monitor's truth and datum)
+        source = [py, "-m", "aoa_localizer.replay", str(args.bag), "--rate", str(args.rate), "--wait", "30",
                   "--topics", *inputs, "/sim/truth", "/sim/datum"]
     else:
         source = [py, "-m", "aoa_localizer.sim_vehicle", "--ros-args", "-p", f"scenario:={args.scenario}",
@@ -374,13 +399,24 @@ class Monitor:
 
         self.diag, self.diagnostics_seen = msg, self.diagnostics_seen + 1
         own = diagnostics_values(msg).get("aoa_localizer: localizer", {})
-        if "level" in own and int(own["level"]) > self.worst_diag[0]:
+        # the run's diagnostics count from the node's first input: before it, "no DF reading since the start" is
+        # the source still starting (a simulated drive computed, a replay loading its bag)
+        fed = any(own.get(k, "0") != "0" for k in ("fixes_received", "bearings_received"))
+        if fed and "level" in own and int(own["level"]) > self.worst_diag[0]:
             self.worst_diag = (int(own["level"]), own.get("message", ""))
         crowded = own.get("input_publishers")
         # another graph that discovery had not shown when the domain was chosen; said again as its names arrive
         if crowded and crowded != self.crowded and self.crowded_said < CROWDED_LINES:
             self.crowded, self.crowded_said = crowded, self.crowded_said + 1
             print(f"launch: another source publishes on the node's inputs: {crowded}", file=sys.stderr, flush=True)
+
+    def wait_for_node(self, running: Callable[[], bool], at_most_s: float) -> bool:
+        """Spin until the node's first /diagnostics (it is up and spinning); False when it exited or `at_most_s`
+        passed first."""
+        end = time.monotonic() + at_most_s
+        while not self.diagnostics_seen and running() and time.monotonic() < end:
+            self.spin(0.1)
+        return self.diagnostics_seen > 0
 
     def settle(self, at_least_s: float, at_most_s: float) -> bool:
         """Spin until the node has worked through what it received: two /diagnostics in a row with the same counts
@@ -671,7 +707,11 @@ class Run:
         self.monitor = monitor = Monitor(args.record, list(zip(flat[::2], flat[1::2], strict=False)),
                                                 self.stop.check)
         node = self.start("aoa_localizer", node_cmd)
-        monitor.spin(1.5)  # let the node come up and the monitor discover it
+        # the source starts once the node spins (its first /diagnostics): on a busy machine a node still loading
+        # would miss the start of a fast replay
+        if not monitor.wait_for_node(node.running, NODE_UP_MAX_S) and node.running():
+            print(f"launch: the localizer said nothing on /diagnostics in {NODE_UP_MAX_S:g} s; starting the "
+                  f"{self.source_name} all the same", file=sys.stderr, flush=True)
         if not node.running():
             print(f"launch: the localizer exited at start (code {node.proc.returncode}):\n{node.tail()}",
                   file=sys.stderr)
@@ -685,7 +725,11 @@ class Run:
         if not monitor.settle(1.5, SETTLE_MAX_S):
             print(f"launch: the node was still working {SETTLE_MAX_S:g} s after the source ended; judging what it "
                   "published", file=sys.stderr)
-        ok, why, figures = verdict(monitor.state(), args.max_ellipse)
+        state = monitor.state()
+        lost = inputs_lost(args, found, state.get("diag", {})) if args.bag else None
+        if lost:
+            print(f"launch: {lost}", file=sys.stderr, flush=True)
+        ok, why, figures = verdict(state, args.max_ellipse)
         if monitor.crowded:  # the estimate may rest on another graph's messages: never "converged"
             ok, why = False, (f"another source published on the node's inputs during the run ({monitor.crowded}); "
                               "run again in a free domain (leave out --domain-id)")

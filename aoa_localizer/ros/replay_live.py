@@ -16,6 +16,7 @@ from msgs_adapters.bag_files import BagFiles, BagFilesError, describe_topics
 from msgs_adapters.types import message_class
 
 HISTORY_DEPTH = 2000  # messages a replayed topic keeps for a reliable reader's resend
+SETTLE_S = 0.5  # after every publisher has a subscriber: the subscriber's side of the match lags its publisher's
 
 
 def live_qos(profiles):
@@ -87,11 +88,18 @@ class LivePlayer:
         while self.stopped_by is None and (left := end - time.monotonic()) > 0:
             time.sleep(min(left, 0.05))
 
-    def wait_for_subscribers(self, seconds: float):
+    def wait_for_subscribers(self, seconds: float) -> list[str]:
+        """Spin until every played topic has a subscriber (then SETTLE_S more: a best-effort subscriber drops what
+        arrives before its own side of the match), or `seconds` passed; the topics still without one."""
         deadline = time.monotonic() + seconds
         while (time.monotonic() < deadline and self.stopped_by is None
                and not all(p.get_subscription_count() for p in self.pubs.values())):
             rclpy.spin_once(self.node, timeout_sec=0.05)
+        alone = sorted(name for name, p in self.pubs.items() if not p.get_subscription_count())
+        settle = time.monotonic() + (0.0 if alone else SETTLE_S)
+        while self.stopped_by is None and time.monotonic() < settle:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        return alone
 
     def play(self, messages, rate: float, max_rate: float):
         """Publish in log-time order with the recorded timing divided by `rate` (0: `max_rate` messages/s)."""
@@ -145,7 +153,10 @@ def run_live(args) -> int:
     old = {s: signal.signal(s, player.stop) for s in (signal.SIGINT, signal.SIGTERM)}
     code = 1  # until the bag was played whole
     try:
-        player.wait_for_subscribers(args.wait)
+        alone = player.wait_for_subscribers(args.wait)
+        if alone and player.stopped_by is None:
+            print(f"replay: no subscriber on {', '.join(alone)} after {args.wait:g} s (--wait); playing anyway",
+                  file=sys.stderr, flush=True)
         player.play(reader.messages(set(player.pubs)), args.rate, args.max_rate)
         stopped = f" (stopped by {player.stopped_by})" if player.stopped_by else ""
         names = [f"{t} as {remap[t]}" if t in remap else t for t in sorted(player.pubs)]
