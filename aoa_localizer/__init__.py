@@ -11,14 +11,16 @@ if TYPE_CHECKING:
     from aoa_localizer.core.spec import ConfigError
     from aoa_localizer.engine.config import LocalizerConfig
     from aoa_localizer.engine.localizer import Localizer
-    from aoa_localizer.engine.types import BearingInput, Estimate, FixInput, Input
+    from aoa_localizer.engine.types import BearingInput, BearingPoseInput, Estimate, FixInput, Input
     from aoa_localizer.filters.afsa import AfsaConfig
 
 _HOME = {"ConfigError": "aoa_localizer.core.spec", "LocalizerConfig": "aoa_localizer.engine.config",
          "Localizer": "aoa_localizer.engine.localizer", "BearingInput": "aoa_localizer.engine.types",
+         "BearingPoseInput": "aoa_localizer.engine.types",
          "Estimate": "aoa_localizer.engine.types", "FixInput": "aoa_localizer.engine.types",
          "Input": "aoa_localizer.engine.types", "AfsaConfig": "aoa_localizer.filters.afsa"}
-__all__ = ["AfsaConfig", "BearingInput", "ConfigError", "Estimate", "FixInput", "Input", "Localizer", "LocalizerConfig"]
+__all__ = ["AfsaConfig", "BearingInput", "BearingPoseInput", "ConfigError", "Estimate", "FixInput", "Input",
+           "Localizer", "LocalizerConfig"]
 
 
 def __getattr__(name: str) -> Any:

@@ -83,11 +83,10 @@ def one_run(scenario: str, r: int, scheduling: str):
                 loc.add_bearing(row[0], row[1], row[2])
             spent += time.perf_counter() - t0
             if scheduling == "realtime":
-                loc.wait_for_worker()  # not idle work: the worker's
                 t1 = time.perf_counter()
-                loc.catch_up()
+                loc.catch_up()  # the worker waited for and every owed move made
                 idle += time.perf_counter() - t1
-            now = loc.track_status().points_used
+            now = loc.view(light=True).track.points_used
             if now > points:  # this call closed (and used) observation points: each costs its share
                 per_point += [spent / (now - points)] * (now - points)
                 spent, points = 0.0, now
@@ -95,8 +94,8 @@ def one_run(scenario: str, r: int, scheduling: str):
         geo_share = geo.seconds
     loc.close()
     total = sum(per_point)
-    pts = loc.recent_points()
-    start = loc.start_cloud
+    post = loc.posterior()
+    pts, start = post.used_points, post.start_cloud
     mean, cov = start.mean(axis=0), 2.0 * np.cov(start.T)
     _, ibis_steps = particles_peers.run_ibis(pts, mean, cov, 100, loc.config.outlier_prob, 10000 + r)
     return per_point, geo_share / max(total, 1e-12), ibis_steps, idle / max(len(per_point), 1)

@@ -44,7 +44,7 @@ def main() -> None:
         feed_fleet(loc, fleet)
         loc.flush()
         loc.finish()
-        for channel in loc.channels.all():
+        for channel in loc.view().channels:
             if channel.estimate is not None:
                 found.setdefault(channel.id, []).append(channel.estimate)
     wall = time.perf_counter() - t0

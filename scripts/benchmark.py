@@ -64,14 +64,15 @@ PAPER_TABLE1 = {"sir-paper": (0.266, 0.206, 0.183, 16), "afsa": (0.101, 0.091, 0
 def peer_runs(data, res, truth_engine, n, seed):
     """Run the particles peers on the points our filter used; returns {name: (estimates, step_s)}."""
     loc = res.localizer
-    points = loc.recent_points()
+    post = loc.posterior()
+    points = post.used_points
     cfg = loc.config
     if cfg.has_prior:
         mean, cov = np.array([cfg.prior_east, cfg.prior_north]), cfg.prior_sigma_m**2 * np.eye(2)
         # The scenario prior is in the scenario frame; our engine frame may be shifted (datum = first fix).
         mean = mean + (truth_engine - data.emitter_enu)
     else:
-        mean, cov = loc.start_cloud.mean(axis=0), 2.0 * np.cov(loc.start_cloud.T)
+        mean, cov = post.start_cloud.mean(axis=0), 2.0 * np.cov(post.start_cloud.T)
     out = {"particles-bootstrap": particles_peers.run_bootstrap(points, mean, cov, n, cfg.process_noise_m,
                                                                 cfg.outlier_prob, seed),
            "particles-ibis": particles_peers.run_ibis(points, mean, cov, n, cfg.outlier_prob, seed)}
@@ -126,7 +127,7 @@ def bench_scenario(name, runs, n, filters, with_peers, bar, scheduling="reproduc
             s = dict(res.scores, step_s=res.step_s, wall_s=res.wall_s)
             rows[fname].append(s)
             if with_peers and fname == "afsa" and s["converged"]:
-                frame = res.localizer.frame
+                frame = res.localizer.view(light=True).frame
                 truth_engine = np.array(frame.to_enu(*data.emitter_lat_lon))
                 for peer, (est, step_s) in peer_runs(data, res, truth_engine, n, 10000 + r).items():
                     rows[peer].append(peer_scores(est, step_s, truth_engine, s["crlb"]))

@@ -94,7 +94,8 @@ def one_run(name: str, run: int) -> dict:
     final = None
     for est in loc.run(data.inputs()):
         final = est if est is not None else final
-    offset_said = loc.events.get("offset_learned", 0) > loc.events.get("offset_taken_back", 0)  # standing at the end
+    events = loc.view(light=True).events
+    offset_said = events.get("offset_learned", 0) > events.get("offset_taken_back", 0)  # standing at the end
     loc.close()
     if final is None:
         return {"count": 0}
@@ -139,7 +140,7 @@ def biased_run(name: str, run: int) -> dict:
     feed_fleet(loc, data)
     loc.flush()
     loc.finish()
-    final = loc.estimate
+    final = loc.view(light=True).estimate
     loc.close()
     if final is None:
         return {"count": 0}

@@ -38,7 +38,7 @@ def _scenario(name: str, data_seed: int, **changes) -> Run:
         loc = Localizer(cfg)
         try:
             estimates = [e for e in loc.run(data.inputs()) if e is not None]
-            return estimates, dict(loc.events)
+            return estimates, dict(loc.view(light=True).events)
         finally:
             loc.close()
     return run
@@ -52,7 +52,7 @@ def _two_emitters() -> tuple[list[Estimate], dict]:
         feed_fleet(loc, data)
         loc.flush()
         loc.finish()
-        return estimates, dict(loc.events)
+        return estimates, dict(loc.view(light=True).events)
     finally:
         loc.close()
 

@@ -83,7 +83,7 @@ def ours(data: ScenarioData, seed: int, particles: int, repeats: int
         if _place(other) != _place(loc):
             raise RuntimeError("a reproducible run gave another estimate when made again")
         fastest = np.minimum(fastest, again)
-    est = loc.estimate
+    est = loc.view(light=True).estimate
     error = np.inf
     if est is not None:
         east, north = data.frame.to_enu(est.lat, est.lon)
@@ -92,7 +92,7 @@ def ours(data: ScenarioData, seed: int, particles: int, repeats: int
 
 
 def _place(loc: Localizer) -> tuple[float, float] | None:
-    est = loc.estimate
+    est = loc.view(light=True).estimate
     return None if est is None else (est.lat, est.lon)
 
 
@@ -154,7 +154,7 @@ def stone_soup(data: ScenarioData, prior: tuple[np.ndarray, np.ndarray], particl
 
 def in_scenario_frame(loc: Localizer, data: ScenarioData, place: np.ndarray) -> np.ndarray:
     """A place in the localizer's map frame (its datum is its first fix) in the scenario's frame."""
-    lat, lon, _ = loc.datum_frame().to_geodetic(float(place[0]), float(place[1]))
+    lat, lon, _ = loc.view(light=True).frame.to_geodetic(float(place[0]), float(place[1]))
     return np.array(data.frame.to_enu(lat, lon), float)
 
 
@@ -162,7 +162,7 @@ def ibis(loc: Localizer, data: ScenarioData, prior: tuple[np.ndarray, np.ndarray
          ) -> tuple[float, float, float]:
     """(total seconds, slowest step, final error m) of IBIS over our observation points (in the localizer's frame;
     `prior` too)."""
-    estimates, steps = particles_peers.run_ibis(loc.recent_points(), prior[0], prior[1], particles,
+    estimates, steps = particles_peers.run_ibis(loc.posterior().used_points, prior[0], prior[1], particles,
                                                 loc.config.outlier_prob,
                                                 seed)
     error = float(np.hypot(*(in_scenario_frame(loc, data, estimates[-1]) - data.emitter_enu)))
@@ -176,7 +176,7 @@ def one_run(case: str, r: int, n_particles: int, repeats: int) -> dict[str, tupl
     n = len(data.bearings)
     total, slowest, end, error, steady, loc = ours(data, 10000 + r, n_particles, repeats)
     out = {"ours": (total / n, slowest, error, end, steady)}
-    start = loc.start_cloud
+    start = loc.posterior().start_cloud
     prior = (start.mean(axis=0), 2.0 * np.cov(start.T))
     for name, particles in (("EKF", 0), ("PF", n_particles)):  # Stone Soup works in the scenario's frame
         total, slowest, error = stone_soup(data, (in_scenario_frame(loc, data, prior[0]), prior[1]), particles,

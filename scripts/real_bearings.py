@@ -71,14 +71,14 @@ def api_fixes(rows, path: str, seed: int) -> PooledResult:
         loc = Localizer(LocalizerConfig(seed=seed))
         for r in group:
             if path == "api_fixed_each":
-                loc.set_station_position(f"{r.station}@{r.line}", r.lat, r.lon)
+                loc.add_station(f"{r.station}@{r.line}", fixed=True, position=(r.lat, r.lon))
                 loc.add_bearing(r.stamp, r.azimuth_deg, float("nan"), station=f"{r.station}@{r.line}")
             else:
                 loc.add_fix(r.stamp, r.lat, r.lon)
                 loc.add_bearing(r.stamp, r.azimuth_deg, float("nan"), frequency_hz=freq[r.id])
         loc.flush()
         loc.finish()
-        for channel in loc.channels.all():
+        for channel in loc.view().channels:
             est = channel.estimate
             ident = (min(freq, key=lambda i: abs(freq[i] - channel.frequency_hz)) if path == "api_walk"
                      else group[0].id)
@@ -86,8 +86,9 @@ def api_fixes(rows, path: str, seed: int) -> PooledResult:
                 fixes[ident] = EmitterFix(ident, est.lat, est.lon, est.cov, est.state, est.warnings,
                                           est.bearings_used, est.bearings_used, [], {0.5: [], 0.95: []}, {})
         loc.close()
-        if loc.rejected:
-            print(f"inputs refused: {dict(loc.rejected)}")
+        rejected = loc.view(light=True).rejected
+        if rejected:
+            print(f"inputs refused: {dict(rejected)}")
     return PooledResult(fixes=fixes)
 
 

@@ -37,7 +37,7 @@ def main() -> None:
             rows = []
             for seed in args.seeds:
                 res = run(simulate(sc, seed), LocalizerConfig(seed=seed).with_changes(**receiver_settings(args.mount)))
-                refused = res.localizer.rejected["heading_unknown"]
+                refused = res.localizer.view(light=True).rejected["heading_unknown"]
                 if not res.estimates:  # scored as infinitely far, outside, in a state of its own
                     no_estimate = {"error": np.inf, "crlb": res.scores["crlb"], "inside95": False, "nees": np.inf}
                     rows.append((no_estimate, "no estimate", np.array([np.inf, np.inf]), refused))

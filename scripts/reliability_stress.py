@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoa_localizer import Localizer, LocalizerConfig
+from aoa_localizer import BearingPoseInput, Input, Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 
 PY = sys.executable
@@ -82,8 +82,8 @@ def pose_variance(_tmp: Path) -> str:
     loc = Localizer(LocalizerConfig(seed=1, datum_lat=47.0, datum_lon=8.0))
     loc.add_fix(0.0, 47.0, 8.0)
     for k, var in enumerate((math.inf, -1.0, 0.0, math.nan)):
-        loc.add_bearing_enu(1.0 + k, 0.3, var)
-    refused = loc.rejected.get("bad_sigma", 0)
+        loc.feed(Input("bearing_pose", BearingPoseInput(1.0 + k, 0.3, var)))
+    refused = loc.view(light=True).rejected.get("bad_sigma", 0)
     loc.close()
     return f"{'held' if refused == 2 else 'broke'}: variance inf and -1 refused as bad_sigma ({refused} of 2)"
 
@@ -202,8 +202,7 @@ def tiny_sigma(_tmp: Path) -> str:
     places = {"a": (0.0, 0.0), "b": (600.0, 0.0), "c": (0.0, 800.0)}
     loc = Localizer(LocalizerConfig(seed=1))
     for name, (e, n) in places.items():
-        loc.add_station(name, fixed=True)
-        loc.set_station_position(name, *frame.to_geodetic(e, n)[:2])
+        loc.add_station(name, fixed=True, position=(*frame.to_geodetic(e, n)[:2],))
     for k in range(12):
         name = "abc"[k % 3]
         e, n = places[name]
@@ -214,7 +213,7 @@ def tiny_sigma(_tmp: Path) -> str:
         raised = ""
     except Exception as exc:  # noqa: BLE001 - what is being tried
         raised = type(exc).__name__
-    rejected = dict(loc.rejected)
+    rejected = dict(loc.view(light=True).rejected)
     loc.close()
     ok = not raised and rejected == {"bad_sigma": 12}
     return f"{'held' if ok else 'broke'}: {raised or 'no exception'}, {rejected}"

@@ -116,7 +116,8 @@ def split(case: str, r: int) -> dict[str, float]:
     loc.finish()
     whole = time.perf_counter() - t0
     loc.close()
-    start = loc.start_cloud
+    post = loc.posterior()
+    start = post.start_cloud if post is not None else None
     assert start is not None, f"{case} {r}: the filter never started"
     prior = (peer_speed.in_scenario_frame(loc, data, start.mean(axis=0)), 2.0 * np.cov(start.T))
     ekf, _, _ = peer_speed.stone_soup(data, prior, 0, 10000 + r)

@@ -117,12 +117,12 @@ def frame():
 def track_of(loc, channel=None):
     """A channel's emitter track (None: the latest estimate's channel), for the tests that check the engine's
     internals."""
-    return (channel or loc.channel()).track
+    return (channel or loc._channel()).track
 
 
 def open_point(loc, station=""):
     """The readings of the default channel's open observation point at `station`."""
-    return loc.channels.default.builder(station).readings
+    return loc._channels.default.builder(station).readings
 
 
 def azimuth_from(frame, east, north, target):

@@ -225,7 +225,7 @@ def test_a_bag_of_scans_reads_as_the_same_records_one_message_each(tmp_path, dat
     assert sum(1 for e in events(tmp_path / "records") if e[0] == "bearing") == 2 * len(data.bearings)
     loc = Localizer(LocalizerConfig(seed=1))
     run_bag(tmp_path / "scans", {}, loc, lambda est: None)
-    assert {"f433920000", "f446000000"} <= {c.id for c in loc.channels.all()}
+    assert {"f433920000", "f446000000"} <= {c.id for c in loc._channels.all()}
 
     ts = typestore()
     T = build.rosbags_types(ts)

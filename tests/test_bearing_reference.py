@@ -32,17 +32,16 @@ def test_relative_bearings_on_a_curved_track_give_the_accuracy_of_true_ones():
         res = run(simulate(mounted(DRIVE, MOUNT), r), _cfg(bearing_reference="vehicle", mount_offset_deg=MOUNT))
         rel_err.append(res.scores["error"])
         # only the readings (10 Hz) of the first 4 s, before the fixes' jitter is known (GPS at 1 Hz)
-        assert res.localizer.rejected["heading_unknown"] <= 40
+        assert res.localizer.view().rejected["heading_unknown"] <= 40
     rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731
     assert rms(rel_err) < 1.5 * rms(true_err) + 0.5, (true_err, rel_err)
 
 
-def _readings_of(loc: Localizer) -> list:
-    """The readings `loc` pairs into observation points, as it makes them."""
+def _watched(cfg: LocalizerConfig) -> tuple[Localizer, list]:
+    """A Localizer on `cfg` and the readings it pairs into observation points, as it makes them."""
     readings: list = []
-    loc.observer = type("Obs", (), {"on_fix": lambda *a: None,
-                                    "on_point": lambda self, rs, kept: readings.extend(rs)})()
-    return readings
+    observer = type("Obs", (), {"on_fix": lambda *a: None, "on_point": lambda self, rs, kept: readings.extend(rs)})()
+    return Localizer(cfg, observer=observer), readings
 
 
 def _drive_east(loc, az_of, speed=10.0, seconds=20, stop_after=None):
@@ -59,18 +58,16 @@ def _drive_east(loc, az_of, speed=10.0, seconds=20, stop_after=None):
 def test_a_relative_bearing_is_turned_by_the_heading_and_the_mount_by_hand():
     """Driving east (heading 90 deg), an array mounted 30 deg right of the nose reading 60 deg: true azimuth 180,
     so the reading points due south, ENU angle -90 deg."""
-    loc = Localizer(_cfg(bearing_reference="vehicle", mount_offset_deg=30.0, datum_lat=DATUM[0],
-                         datum_lon=DATUM[1], datum_alt=DATUM[2]))
-    readings = _readings_of(loc)
+    loc, readings = _watched(_cfg(bearing_reference="vehicle", mount_offset_deg=30.0, datum_lat=DATUM[0],
+                                  datum_lon=DATUM[1], datum_alt=DATUM[2]))
     _drive_east(loc, lambda t, e: 60.0, seconds=8)
     loc.flush()
     assert readings and all(r.theta == pytest.approx(-math.pi / 2, abs=1e-3) for r in readings)
 
 
 def test_magnetic_azimuths_are_turned_by_the_declination():
-    loc = Localizer(_cfg(bearing_reference="magnetic_north", magnetic_declination_deg=-7.0, datum_lat=DATUM[0],
-                         datum_lon=DATUM[1], datum_alt=DATUM[2]))
-    readings = _readings_of(loc)
+    loc, readings = _watched(_cfg(bearing_reference="magnetic_north", magnetic_declination_deg=-7.0,
+                                  datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
     _drive_east(loc, lambda t, e: 97.0, seconds=6)  # magnetic 97 = true 90: due east
     loc.flush()
     assert readings and all(r.theta == pytest.approx(0.0, abs=1e-3) for r in readings)
@@ -79,8 +76,7 @@ def test_magnetic_azimuths_are_turned_by_the_declination():
 def test_a_stopped_vehicle_holds_its_heading_then_refuses_with_a_reason():
     cfg = _cfg(bearing_reference="vehicle", heading_hold_s=5.0, datum_lat=DATUM[0], datum_lon=DATUM[1],
                datum_alt=DATUM[2])
-    loc = Localizer(cfg)
-    readings = _readings_of(loc)
+    loc, readings = _watched(cfg)
     _drive_east(loc, lambda t, e: 0.0, seconds=20, stop_after=6)  # stops at 6 s, readings until 20.5 s
     loc.flush()
     # A reading is paired once the fixes reach 3 s (heading_window_s) past it; no course is trusted before the
@@ -88,8 +84,8 @@ def test_a_stopped_vehicle_holds_its_heading_then_refuses_with_a_reason():
     # 0.5 s (paired at the fix at 4 s) is refused. A course over the window before each fix is still good at the fix
     # at 8 s (widened to 6 s): that heading is held up to 13 s, so the readings at 13.5 ... 19.5 s (7) are refused
     # too; the one at 20.5 s has no fix after it.
-    assert loc.rejected["heading_unknown"] == 8
-    assert len(readings) + loc.rejected["heading_unknown"] + loc.rejected["no_fix_after"] == 21
+    assert loc.view().rejected["heading_unknown"] == 8
+    assert len(readings) + loc.view().rejected["heading_unknown"] + loc.view().rejected["no_fix_after"] == 21
     assert all(r.theta == pytest.approx(0.0, abs=1e-3) for r in readings)  # straight ahead of an east-bound car
 
 
@@ -160,9 +156,9 @@ def test_a_stopped_vehicle_on_noisy_gps_keeps_the_course_it_came_with_and_its_si
     z, stopped_err = [], []
     for seed in range(6):
         rng = np.random.default_rng(seed)
-        loc = Localizer(_cfg(bearing_reference="vehicle", datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2],
-                             init_bearings=1000, init_max_points=1000))  # the readings only: no filter starts
-        readings = _readings_of(loc)
+        # the readings only: no filter starts
+        loc, readings = _watched(_cfg(bearing_reference="vehicle", datum_lat=DATUM[0], datum_lon=DATUM[1],
+                                      datum_alt=DATUM[2], init_bearings=1000, init_max_points=1000))
         for k in range(61):
             noise = 3.0 * rng.standard_normal(2)
             lat, lon, _ = FRAME.to_geodetic(10.0 * min(k, 30) + noise[0], noise[1])
@@ -191,8 +187,7 @@ def test_a_mounted_array_on_noisy_gps_stays_near_the_emitter_inside_its_ellipse(
 def test_an_imu_heading_is_interpolated_at_the_reading_and_bad_ones_are_counted():
     cfg = _cfg(bearing_reference="vehicle", heading_source="imu", datum_lat=DATUM[0], datum_lon=DATUM[1],
                datum_alt=DATUM[2])
-    loc = Localizer(cfg)
-    readings = _readings_of(loc)
+    loc, readings = _watched(cfg)
     for k in range(41):  # yaw turning from 0 (east) to pi/2 (north) over 20 s, 2 Hz
         loc.add_heading(0.5 * k, math.pi / 2 * min(0.5 * k / 20.0, 1.0))
     loc.add_heading(3.0, 0.0)  # out of order
@@ -204,10 +199,10 @@ def test_an_imu_heading_is_interpolated_at_the_reading_and_bad_ones_are_counted(
     loc.flush()
     expected = [math.pi / 2 * (r.stamp / 20.0) for r in readings]
     assert readings and np.allclose([r.theta for r in readings], expected, atol=2e-3)
-    assert loc.rejected["heading_out_of_order"] == 1 and loc.rejected["bad_heading"] == 1
+    assert loc.view().rejected["heading_out_of_order"] == 1 and loc.view().rejected["bad_heading"] == 1
     true_north = Localizer(_cfg())
     true_north.add_heading(1.0, 0.0)
-    assert true_north.rejected["heading_ignored"] == 1  # never silently used
+    assert true_north.view().rejected["heading_ignored"] == 1  # never silently used
 
 
 def test_an_imu_message_gives_its_yaw_and_an_unknown_orientation_is_nan():
@@ -231,9 +226,8 @@ def test_an_imu_yaws_variance_is_the_readings_heading_sigma():
     """An IMU's yaw known to 0.05 rad: the readings turned by it carry that heading sigma (the larger of the two
     samples around them); a variance not known (NaN, 0, negative) is taken as exact."""
     for variance, sigma in ((0.0025, 0.05), (float("nan"), 0.0), (0.0, 0.0), (-1.0, 0.0)):
-        loc = Localizer(_cfg(bearing_reference="vehicle", heading_source="imu", init_bearings=100,
-                             init_max_points=100))
-        readings = _readings_of(loc)
+        loc, readings = _watched(_cfg(bearing_reference="vehicle", heading_source="imu", init_bearings=100,
+                                      init_max_points=100))
         for k in range(12):
             loc.add_heading(float(k), 0.0, variance_rad2=variance)
             lat, lon, _ = FRAME.to_geodetic(0.0, 0.0)
@@ -250,7 +244,7 @@ def test_offline_replay_feeds_a_bags_imu_headings_to_the_engine():
     loc = Localizer(_cfg(bearing_reference="vehicle", heading_source="imu"))
     assert loc.feed(BagEvent("heading", 0, HeadingRecord(1.0, 0.3))) is None
     assert loc.feed(BagEvent("heading", 0, HeadingRecord(0.5, 0.3))) is None
-    assert loc.stations[""].heading.samples.t == [1.0] and loc.rejected["heading_out_of_order"] == 1
+    assert loc._intake.stations[""].heading.samples.t == [1.0] and loc.view().rejected["heading_out_of_order"] == 1
 
 
 def test_the_simulator_takes_azimuths_from_the_forward_axis_with_its_mount_offset():

@@ -15,8 +15,6 @@ EMITTERS = {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0), 868.3e6: (1800.
 
 
 def play(loc: Localizer, fleet, frequency=True):
-    estimates = []
-    loc.on_estimate = estimates.append
     for kind, station, row in fleet.events():
         if kind == "fix":
             loc.add_fix(*row[:4], station=station)
@@ -24,7 +22,6 @@ def play(loc: Localizer, fleet, frequency=True):
             loc.add_bearing(*row[:3], station=station, frequency_hz=row[3] if frequency else math.nan)
     loc.flush()
     loc.finish()
-    return estimates
 
 
 @pytest.mark.slow
@@ -32,12 +29,13 @@ def test_three_emitters_heard_at_the_same_stamps_are_each_found():
     """A receiver's VFOs share one stamp: three records per stamp, one per carrier; each channel finds its
     emitter, every estimate names its channel and frequency, and nothing is refused as repeated."""
     fleet = simulate_fleet({"": SCENARIOS["seed"]}, EMITTERS, 0)
-    loc = Localizer(LocalizerConfig(seed=1))
-    estimates = play(loc, fleet)
-    assert "bearing_repeated" not in loc.rejected
-    frame = loc.datum_frame()
+    estimates: list = []
+    loc = Localizer(LocalizerConfig(seed=1), on_estimate=estimates.append)
+    play(loc, fleet)
+    assert "bearing_repeated" not in loc.view().rejected
+    frame = loc.view().frame
     for f, truth in EMITTERS.items():
-        channel = loc.channels.live[channel_id(f)]
+        channel = loc._channels.live[channel_id(f)]
         assert channel.frequency_hz == f and channel.estimate.channel == channel.id
         e, n = frame.to_enu(channel.estimate.lat, channel.estimate.lon)
         origin = fleet.scenario.datum
@@ -45,7 +43,7 @@ def test_three_emitters_heard_at_the_same_stamps_are_each_found():
         assert math.hypot(e - truth[0], n - truth[1]) < 10.0
         assert channel.estimate.points_used == 60
     assert {est.channel for est in estimates} == {channel_id(f) for f in EMITTERS}
-    assert loc.channels.default.estimate is None  # no record came without a frequency
+    assert loc._channels.default.estimate is None  # no record came without a frequency
 
 
 @pytest.mark.slow
@@ -63,7 +61,8 @@ def test_records_without_a_frequency_behave_exactly_as_before():
             else:
                 loc.add_bearing(*row[:3], frequency_hz=freq)
         loc.flush()
-        runs.append((loc.estimate.east, loc.estimate.north, loc.estimate.cov.tolist(), loc.estimate.channel))
+        est = loc.view().estimate
+        runs.append((est.east, est.north, est.cov.tolist(), est.channel))
     assert runs[0] == runs[1] == runs[2] and runs[0][3] == DEFAULT
 
 
@@ -74,8 +73,8 @@ def test_the_tolerance_decides_which_records_share_a_channel():
     loc.add_bearing(0.1, 10.0, 90.0, frequency_hz=100e6)
     loc.add_bearing(0.2, 10.0, 90.0, frequency_hz=100e6 + 4000)  # within 5 kHz of the channel's first frequency
     loc.add_bearing(0.3, 10.0, 90.0, frequency_hz=100e6 + 20000)  # a new channel
-    assert sorted(loc.channels.live) == [DEFAULT, "f100000000", "f100020000"]
-    assert len(loc.channels.live["f100000000"].builder("").readings) == 2
+    assert sorted(loc._channels.live) == [DEFAULT, "f100000000", "f100020000"]
+    assert len(loc._channels.live["f100000000"].builder("").readings) == 2
 
 
 def test_more_channels_than_max_channels_are_refused_and_counted():
@@ -84,7 +83,7 @@ def test_more_channels_than_max_channels_are_refused_and_counted():
     loc.add_fix(1.0, 39.1, 117.2)
     for k, f in enumerate((1e8, 2e8, 3e8, 3e8, 1e8)):
         loc.add_bearing(0.1 + 0.01 * k, 10.0, 90.0, frequency_hz=f)
-    assert loc.rejected["channel_limit"] == 2 and len(loc.channels.live) == 3  # the default one is not counted
+    assert loc.view().rejected["channel_limit"] == 2 and len(loc._channels.live) == 3  # the default one is not counted
 
 
 @pytest.mark.parametrize("freq", [-1.0, math.inf, -math.inf])
@@ -93,7 +92,7 @@ def test_a_bad_frequency_is_refused_with_its_reason(freq):
     loc.add_fix(0.0, 39.1, 117.2)
     loc.add_fix(1.0, 39.1, 117.2)
     loc.add_bearing(0.5, 10.0, 90.0, frequency_hz=freq)
-    assert loc.rejected["bad_frequency"] == 1 and list(loc.channels.live) == [DEFAULT]
+    assert loc.view().rejected["bad_frequency"] == 1 and list(loc._channels.live) == [DEFAULT]
 
 
 @pytest.mark.slow
@@ -108,11 +107,11 @@ def test_a_silent_channel_is_retired_with_its_last_estimate_and_a_new_one_starts
     fleet.bearings[""] = rows[~gone]
     loc = Localizer(LocalizerConfig(seed=1, channel_timeout_s=0.2 * (end - start)))
     play(loc, fleet)
-    retired = loc.channels.retired["f446000000"]
+    retired = loc._channels.retired["f446000000"]
     assert retired.retired and retired.estimate is not None and retired.estimate.points_used >= 10
-    back = loc.channels.live["f446000000"]
+    back = loc._channels.live["f446000000"]
     assert back is not retired and back.track.points_seen < 60 - retired.track.points_seen
-    assert [c.id for c in loc.channels.all()].count("f446000000") == 1  # the live one; the retired kept aside
+    assert [c.id for c in loc._channels.all()].count("f446000000") == 1  # the live one; the retired kept aside
 
 
 @pytest.mark.slow
@@ -120,11 +119,11 @@ def test_the_json_line_carries_channel_and_frequency():
     loc = Localizer(LocalizerConfig(seed=1))
     fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0)}, 0)
     play(loc, fleet)
-    line = loc.estimate.to_json_dict()
+    line = loc.view().estimate.to_json_dict()
     assert line["channel"] == "f433920000" and line["frequency_hz"] == 433.92e6
     default = Localizer(LocalizerConfig(seed=1))
     play(default, fleet, frequency=False)
-    line = default.estimate.to_json_dict()
+    line = default.view().estimate.to_json_dict()
     assert line["channel"] == "default" and line["frequency_hz"] is None
 
 
@@ -138,7 +137,7 @@ def test_each_channel_draws_from_its_own_generator():
     for fleet in (both, alone):
         loc = Localizer(LocalizerConfig(seed=3))
         play(loc, fleet)
-        runs.append(loc.channels.live["f446000000"].estimate)
+        runs.append(loc._channels.live["f446000000"].estimate)
     assert np.array_equal(runs[0].particles, runs[1].particles)
 
 
@@ -160,7 +159,7 @@ def test_channels_sharing_stamps_close_their_points_at_different_readings():
         for f in freqs:
             loc.add_bearing(1e9 + t, 45.0, 80.0, frequency_hz=f)
         if step == 0:
-            for channel in [c for c in loc.channels.live.values() if c.id != DEFAULT]:
+            for channel in [c for c in loc._channels.live.values() if c.id != DEFAULT]:
                 got = closes[channel.id] = []
                 channel.track.add = lambda readings, real=channel.track.add, got=got: (
                     got.append((readings[0].stamp, len(readings))) or real(readings))
@@ -178,13 +177,14 @@ def test_the_primary_channel_is_the_default_while_it_has_data_else_the_one_with_
     points (one emitter heard on one frequency is the primary, as round 1's clients expect); the default channel
     as soon as it has an estimate. Here 446 MHz goes quiet after 40 % of its records, and the same emitter's
     last 40 % come without a frequency."""
-    loc = Localizer(LocalizerConfig(seed=1))
-    assert loc.channels.primary() is None
+    primaries: list = []
+    loc = Localizer(LocalizerConfig(seed=1), on_estimate=lambda est: primaries.append((est.channel,
+                                                                                        loc.view().primary)))
+    assert loc.view().primary is None
     fleet = simulate_fleet({"": SCENARIOS["seed"]}, {433.92e6: (1200.0, 800.0), 446.0e6: (300.0, 1200.0)}, 0)
     events = list(fleet.events())
     quiet_records = sum(kind == "bearing" and row[3] == 446.0e6 for kind, _, row in events)
-    primaries, seen = [], 0
-    loc.on_estimate = lambda est: primaries.append((est.channel, loc.channels.primary().id))
+    seen = 0
     for kind, station, row in events:
         if kind == "fix":
             loc.add_fix(*row[:4], station=station)
@@ -199,11 +199,11 @@ def test_the_primary_channel_is_the_default_while_it_has_data_else_the_one_with_
     loc.flush()
     loc.finish()
     first_default = next(i for i, (channel, _) in enumerate(primaries) if channel == DEFAULT)
-    busy, quiet = loc.channels.live["f433920000"], loc.channels.live["f446000000"]
+    busy, quiet = loc._channels.live["f433920000"], loc._channels.live["f446000000"]
     assert busy.track.points_used > quiet.track.points_used and quiet.estimate is not None
     assert primaries[first_default - 1][1] == busy.id
     assert all(primary == DEFAULT for _, primary in primaries[first_default:])
-    assert loc.channels.primary() is loc.channels.default
+    assert loc._channels.primary() is loc._channels.default
 
 
 @pytest.mark.slow
@@ -217,17 +217,17 @@ def test_two_localizers_split_the_spectrum_by_band_and_each_emitter_is_found_onc
     for band in bands:
         loc = Localizer(LocalizerConfig(seed=1, frequency_band_hz=band))
         play(loc, fleet)
-        assert not set(loc.rejected) - {"point_outlier"} and loc.channels.default.estimate is None  # (noise)
-        refused = sum(loc.rejected.values())
-        assert loc.other_band == sum(1 for kind, _, row in fleet.events() if kind == "bearing"
+        assert not set(loc.view().rejected) - {"point_outlier"} and loc._channels.default.estimate is None  # (noise)
+        refused = sum(loc.view().rejected.values())
+        assert loc.view().other_band == sum(1 for kind, _, row in fleet.events() if kind == "bearing"
                                      and not band[0] <= row[3] < band[1])
-        for channel in loc.channels.all():
+        for channel in loc._channels.all():
             if channel.estimate is not None:
                 found.setdefault(channel.id, []).append(channel.estimate)
-        before = loc.other_band
+        before = loc.view().other_band
         loc.add_bearing(1e9, 10.0, 50.0)  # no frequency: not in any band
-        assert loc.other_band == before + 1
-        assert sum(loc.rejected.values()) == refused
+        assert loc.view().other_band == before + 1
+        assert sum(loc.view().rejected.values()) == refused
     assert sorted(found) == sorted(channel_id(f) for f in EMITTERS)
     for f, truth in EMITTERS.items():
         (est,) = found[channel_id(f)]  # exactly once
@@ -262,15 +262,15 @@ def test_records_refused_after_opening_their_channels_do_not_lock_a_new_emitter_
     frame = LocalFrame(39.1, 117.2)
     for k in range(64):
         loc.add_bearing(10.0 + 0.01 * k, 40.0, 90.0, frequency_hz=1e8 + 1e6 * k)  # before any fix
-    assert loc.rejected["before_first_fix"] == 64 and list(loc.channels.live) == [DEFAULT]
+    assert loc.view().rejected["before_first_fix"] == 64 and list(loc._channels.live) == [DEFAULT]
     with caplog.at_level(logging.INFO, logger="aoa_localizer"):
         for t in range(20, 400):
             lat, lon, _ = frame.to_geodetic(5.0 * (t - 20), 0.0)
             loc.add_fix(float(t), lat, lon)
             loc.add_bearing(t + 0.5, math.degrees(math.atan2(1200.0 - 5.0 * (t - 19.5), 800.0)) % 360, 90.0,
                             frequency_hz=433.92e6)
-    assert loc.rejected["channel_limit"] == 0
-    assert loc.channels.live["f433920000"].estimate is not None
+    assert loc.view().rejected["channel_limit"] == 0
+    assert loc._channels.live["f433920000"].estimate is not None
     assert "silent for inf s" not in caplog.text
 
 
@@ -284,6 +284,6 @@ def test_at_the_limit_a_record_retires_the_silent_channels_itself():
         if t in (1, 2):
             loc.add_bearing(t + 0.5, 40.0, 90.0, frequency_hz=1e8 * t)
     loc.add_bearing(35.5, 40.0, 90.0, frequency_hz=5e8)
-    assert loc.rejected["channel_limit"] == 0
-    assert set(loc.channels.live) == {DEFAULT, "f500000000"} and set(loc.channels.retired) == {"f100000000",
+    assert loc.view().rejected["channel_limit"] == 0
+    assert set(loc._channels.live) == {DEFAULT, "f500000000"} and set(loc._channels.retired) == {"f100000000",
                                                                                              "f200000000"}

@@ -41,7 +41,7 @@ def play(loc: Localizer, data, paced=True):
 
 def error_and_nees(loc: Localizer, data) -> tuple[float, float]:
     """Error and NEES of the final estimate in the scenario's frame (the Localizer's datum is a noisy first fix)."""
-    est = loc.estimate
+    est = loc.view().estimate
     east, north = LocalFrame(*data.scenario.datum).to_enu(est.lat, est.lon)
     d = np.array([east - data.scenario.emitter[0], north - data.scenario.emitter[1]])
     return float(np.hypot(*d)), float(d @ np.linalg.solve(est.cov, d))
@@ -58,8 +58,8 @@ def test_realtime_scheduling_finds_the_emitter_as_reproducible_does_and_makes_th
     data = simulate(scenario, 2)
     inline = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling="reproducible")))
     play(inline, data)
-    assert inline.estimate is not None and inline.events["recalibrated"] >= 2
-    assert "internal_error" not in inline.rejected
+    assert inline.view().estimate is not None and inline.view().events["recalibrated"] >= 2
+    assert "internal_error" not in inline.view().rejected
     inline_err, _ = error_and_nees(inline, data)
     inline.close()
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=3, scheduling="realtime")))
@@ -79,8 +79,8 @@ def test_realtime_scheduling_finds_the_emitter_as_reproducible_does_and_makes_th
     assert between >= 20 and at_points <= between // 10 and check_moves >= 1  # one scheduled check in these runs
     loc.flush()
     loc.finish()
-    assert loc.estimate is not None and loc.events["recalibrated"] >= 2
-    assert "internal_error" not in loc.rejected
+    assert loc.view().estimate is not None and loc.view().events["recalibrated"] >= 2
+    assert "internal_error" not in loc.view().rejected
     worker_err, worker_nees = error_and_nees(loc, data)
     loc.close()
     assert worker_err < max(3.0, 2.0 * inline_err)  # a trial run: seed 1.2 vs 1.2 m, urban 9.8 vs 10.1 m
@@ -138,7 +138,7 @@ def test_a_worker_that_keeps_dying_is_given_up_after_three_and_the_work_goes_inl
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data)
     assert loc._scheduler.worker.unusable == "its process died 3 times in a row"
-    assert loc.rejected["internal_error"] == 3 and track_of(loc).filter is not None  # started inline
+    assert loc.view().rejected["internal_error"] == 3 and track_of(loc).filter is not None  # started inline
     said = [r for r in caplog.records if r.exc_info]
     assert len(said) == 1  # one traceback, not one per job
     err, nees = error_and_nees(loc, data)
@@ -160,10 +160,10 @@ def test_data_fed_faster_than_the_worker_searches_starts_from_a_fresh_search():
         made += loc.idle()
         if track_of(loc).filter is not None and track_of(loc).job is None:
             break
-    assert made and loc.estimate is made[-1]
+    assert made and loc.view().estimate is made[-1]
     err, nees = error_and_nees(loc, data)
     assert err < 5.0 and nees < 13.8
-    assert loc.estimate.points_used >= 50  # started from (nearly) all 60 points, not the first search's 10
+    assert loc.view().estimate.points_used >= 50  # started from (nearly) all 60 points, not the first search's 10
     loc.close()
 
 
@@ -173,9 +173,9 @@ def test_a_failing_check_is_counted_and_the_track_goes_on(monkeypatch):
     data = simulate("seed", 2)
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data)
-    assert loc.rejected["internal_error"] >= 1
+    assert loc.view().rejected["internal_error"] >= 1
     err, _ = error_and_nees(loc, data)
-    assert loc.track_status().points_used == 60 and err < 5.0  # every point still used, the emitter still found
+    assert loc.view().track.points_used == 60 and err < 5.0  # every point still used, the emitter still found
     loc.close()
 
 
@@ -194,8 +194,8 @@ def test_a_worker_that_cannot_start_leaves_the_work_inline_and_says_so_once(monk
     loc = Localizer(LocalizerConfig(seed=3, scheduling="realtime"))
     play(loc, data, paced=False)
     err, nees = error_and_nees(loc, data)
-    assert track_of(loc).job is None and loc.events["recalibrated"] >= 2
-    assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.rejected
+    assert track_of(loc).job is None and loc.view().events["recalibrated"] >= 2
+    assert err < 5.0 and nees < 13.8 and "internal_error" not in loc.view().rejected
     assert len(starts) == 1 and loc._scheduler.worker.unusable == "cannot start a process"
     said = [r.getMessage() for r in caplog.records if "check worker is given up" in r.getMessage()]
     assert len(said) == 1 and "__main__" in said[0]
@@ -245,7 +245,7 @@ def test_a_check_for_a_filter_since_replaced_is_dropped():
     for kind, row in events[i:]:
         loc.add_fix(*row[:4]) if kind == "fix" else loc.add_bearing(*row[:3])
         loc.catch_up()
-    assert loc.rejected["filter_diverged"] == 1 and "internal_error" not in loc.rejected
+    assert loc.view().rejected["filter_diverged"] == 1 and "internal_error" not in loc.view().rejected
     assert track.filter is not None and len(track.window) < track.points_seen  # re-started after the drop
     loc.close()
 
@@ -325,7 +325,7 @@ def test_a_start_search_stale_twice_is_used_rather_than_searched_forever(monkeyp
     snap = None
     for event in data.inputs():
         loc.feed(event)
-        t = loc.channels.default.track
+        t = loc._channels.default.track
         if snap is None and len(t.window) == 20:
             snap = t.snapshot()
     assert snap is not None and t.filter is None and len(t.window) >= 40
@@ -373,8 +373,8 @@ def test_a_count_that_finishes_after_the_last_point_is_published_between_inputs(
     for _ in range(50):
         loc.catch_up()
         made += loc.idle()
-        if not loc.track_status().working:
+        if not loc.view().track.working:
             break
-    assert not loc.track_status().working
-    assert made and loc.estimate is made[-1] and loc.estimate.transmitter_count == 2
+    assert not loc.view().track.working
+    assert made and loc.view().estimate is made[-1] and loc.view().estimate.transmitter_count == 2
     loc.close()

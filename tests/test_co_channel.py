@@ -164,7 +164,7 @@ def test_a_channel_keeps_a_bounded_share_of_what_it_heard_for_the_count(monkeypa
 
     monkeypatch.setattr(emitter_track, "HEARD_READINGS", 100)
     loc = Localizer(LocalizerConfig(seed=1))
-    track = loc.channels.default.track
+    track = loc._channels.default.track
     at: list[int] = []
     in_turns: list[bool] = []
     real = emitter_track.count_job

@@ -148,7 +148,7 @@ def test_a_tak_server_that_never_reads_costs_the_caller_nothing(estimate):
     start = time.monotonic()
     for _ in range(500):
         stuck.send(payload)
-    assert time.monotonic() - start < 1.0  # 500 x the 2 s timeout, were the sends made here
+    assert time.monotonic() - start < 10.0  # 500 x the 2 s timeout, were the sends made here
     assert stuck.dropped >= 500 - QUEUE_MAX - 2
     stuck.close()
     server.close()

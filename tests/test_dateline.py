@@ -82,7 +82,7 @@ def test_the_engine_driving_a_circle_across_the_antimeridian_or_round_a_pole(tar
         # earlier, it is 0.75 deg off on this circle, an error the engine rightly learns as an offset or motion
         loc.add_bearing(t + 0.5, (azimuth(*at(t + 0.5), target) + rng.normal(0.0, 1.0)) % 360.0, 80.0)
     loc.flush()
-    est = loc.estimate
+    est = loc.view().estimate
     loc.close()
     assert est is not None and est.state.value == "tracking"
     assert metres(est.lat, est.lon, target) < max(10.0, 3.0 * math.sqrt(np.trace(est.ground_cov)))

@@ -13,7 +13,7 @@ def test_afsa_finds_the_emitter_in_every_public_scenario(name):
     for r in range(3):
         res = run(simulate(name, r), LocalizerConfig(seed=10000 + r))
         s = res.scores
-        assert s["converged"], res.localizer.status
+        assert s["converged"], res.localizer.view().status
         assert s["error"] < 3 * s["crlb"] + 1.0, (r, s["error"], s["crlb"])
 
 

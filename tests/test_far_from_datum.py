@@ -70,6 +70,6 @@ def test_a_fix_beyond_the_maps_reach_is_refused_and_named():
     loc = Localizer(LocalizerConfig(datum_lat=39.1, datum_lon=117.2))
     lat, lon = vincenty.vreckon(39.1, 117.2, 3.5e6, 200.0)
     loc.add_fix(1.0, float(lat), float(lon), 5.0)
-    assert loc.rejected["fix_beyond_map"] == 1
+    assert loc.view().rejected["fix_beyond_map"] == 1
     loc.add_fix(2.0, 39.2, 117.3, 5.0)
-    assert loc.rejected["fix_beyond_map"] == 1 and len(loc.stations[""].gps) == 1
+    assert loc.view().rejected["fix_beyond_map"] == 1 and len(loc._intake.stations[""].gps) == 1

@@ -76,7 +76,7 @@ def test_a_burst_of_bearings_ahead_of_their_fixes_is_located_not_refused():
             else:
                 loc.add_bearing(e.record.stamp, e.record.azimuth_deg, e.record.quality, station=e.station)
         loc.flush()
-        results[name] = (loc.estimate, dict(loc.rejected))
+        results[name] = (loc.view().estimate, dict(loc.view().rejected))
         loc.close()
     assert results["skewed"][0] is None and results["skewed"][1].get("gps_gap", 0) > 0
     (done, refused), (base, _) = results["skewed, waited"], results["in order"]

@@ -35,9 +35,9 @@ def test_one_future_record_on_another_channel_costs_only_itself(ahead_s, reason)
     inside max_stamp_jump_s, dropped 141. Now the first is refused on arrival, the second waits for a fix."""
     clean = feed_with(lambda loc, t: None)
     loc = feed_with(lambda loc, t: loc.add_bearing(t + ahead_s, 10.0, 90.0, frequency_hz=1e6))
-    assert clean.track_status().bearings_used == 300 and not clean.rejected
-    assert loc.track_status().bearings_used == 300
-    assert dict(loc.rejected) == {reason: 1}
+    assert clean.view().track.bearings_used == 300 and not clean.view().rejected
+    assert loc.view().track.bearings_used == 300
+    assert dict(loc.view().rejected) == {reason: 1}
 
 
 def test_a_new_channel_of_a_sparse_station_may_start_after_a_long_gap():
@@ -47,7 +47,7 @@ def test_a_new_channel_of_a_sparse_station_may_start_after_a_long_gap():
         loc.add_fix(600.0 * k, 39.1, 117.2 + 0.001 * k)
         loc.add_bearing(600.0 * k + 0.5, 45.0 + 5 * k, 90.0, frequency_hz=433e6)
     loc.add_bearing(5400.0, 45.0, 90.0, frequency_hz=446e6)
-    assert "bearing_stamp_jump" not in loc.rejected
+    assert "bearing_stamp_jump" not in loc.view().rejected
 
 
 @pytest.mark.parametrize("frequency", [1e300, FREQUENCY_MAX_HZ * 1.01, -1.0, float("inf")])
@@ -55,7 +55,7 @@ def test_a_frequency_no_receiver_reports_is_refused(frequency):
     """Item 2: vector.z = 1e300 made a channel whose topic name ROS refuses (the node crashed, rc 1)."""
     loc = Localizer(LocalizerConfig())
     assert loc.add_bearing(1.0, 10.0, 90.0, frequency_hz=frequency) is None
-    assert dict(loc.rejected) == {"bad_frequency": 1}
+    assert dict(loc.view().rejected) == {"bad_frequency": 1}
 
 
 def test_every_channel_id_is_a_short_valid_ros_name_token():
@@ -71,8 +71,8 @@ def test_memory_of_heard_frequencies_is_bounded():
     loc.add_fix(0.5, 39.1, 117.2)
     for k in range(20_000):
         loc.add_bearing(1.0 + k * 1e-3, 10.0, 90.0, frequency_hz=433e6 + k * 1e-3)
-    assert len(loc.channels._heard) <= 4096
-    assert len(loc.channels.live) == 2  # the default channel and 433 MHz: the jitter is within the tolerance
+    assert len(loc._channels._heard) <= 4096
+    assert len(loc._channels.live) == 2  # the default channel and 433 MHz: the jitter is within the tolerance
 
 
 @pytest.mark.parametrize(("name", "value"), [
@@ -119,7 +119,7 @@ def test_a_filter_update_out_of_memory_skips_the_point_and_keeps_the_state(monke
     monkeypatch.setattr(f, "update", no_memory)
     for kind, row in events[half:half + 40]:
         loc.add_fix(row[0], *row[1:4]) if kind == "fix" else loc.add_bearing(row[0], *row[1:3])
-    assert loc.rejected["internal_error"] >= 1 and loc.estimate is not None
+    assert loc.view().rejected["internal_error"] >= 1 and loc.view().estimate is not None
 
 
 def test_retired_channels_are_bounded_under_ever_new_frequencies():
@@ -128,5 +128,5 @@ def test_retired_channels_are_bounded_under_ever_new_frequencies():
     for k in range(60):  # a new frequency every 10 s: each retires while the next ones come
         for j in range(3):
             loc.add_bearing(10.0 * k + j, 10.0, 90.0, frequency_hz=100e6 + 1e6 * k)
-    assert len(loc.channels.retired) <= 4 and len(loc.channels.live) <= 5
-    assert len(loc.channels.all()) <= 9
+    assert len(loc._channels.retired) <= 4 and len(loc._channels.live) <= 5
+    assert len(loc._channels.all()) <= 9

@@ -231,7 +231,8 @@ def test_a_hostile_server_neither_kills_the_bridge_nor_holds_its_sigterm(spawn, 
         start = time.monotonic()
         bridge.send_signal(signal.SIGTERM)
         assert bridge.wait(15) == 0
-        assert time.monotonic() - start < 2.0
+        # held until its poll's end it would take up to the 60 s allowed; a busy machine's exit can take seconds
+        assert time.monotonic() - start < 10.0
     log = open(bridge.log_path).read()
     assert "Traceback" not in log, log
     if path != "/trickle_headers":  # its one poll was still under way, 60 s allowed: stopped mid-poll

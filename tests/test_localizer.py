@@ -10,7 +10,7 @@ from conftest import DATUM, open_point, track_of
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.track.state import TrackState
-from aoa_localizer.engine.types import FixInput, Input
+from aoa_localizer.engine.types import BearingPoseInput, FixInput, Input
 from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
 FRAME = LocalFrame(*DATUM)
@@ -59,8 +59,8 @@ def test_localises_a_drive_past_the_emitter(loc):
     lat, lon = fix_at(est.east, est.north)
     assert est.lat == pytest.approx(lat, abs=1e-7) and est.lon == pytest.approx(lon, abs=1e-7)
     assert est.cov.shape == (2, 2) and np.all(np.linalg.eigvalsh(est.cov) > 0)
-    assert sum(loc.rejected.values()) == 0
-    status = loc.track_status()
+    assert sum(loc.view().rejected.values()) == 0
+    status = loc.view().track
     assert status.state is TrackState.TRACKING and not status.alarm and status.outlier_share == 0.0
     assert (status.text, status.points_used, status.bearings_used) == ("tracking", est.points_used, est.bearings_used)
 
@@ -77,27 +77,27 @@ def test_bearing_between_fixes_uses_the_interpolated_position(loc):
 def test_bearing_after_the_newest_fix_waits_for_the_next_one(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_bearing(0.5, 45.0, 90.0)
-    assert len(loc.stations[""].pending) == 1 and not open_point(loc)
+    assert len(loc._intake.stations[""].pending) == 1 and not open_point(loc)
     loc.add_fix(1.0, *fix_at(10.0, 0.0))
-    assert not loc.stations[""].pending and open_point(loc)[0].east == pytest.approx(5.0, abs=1e-3)
+    assert not loc._intake.stations[""].pending and open_point(loc)[0].east == pytest.approx(5.0, abs=1e-3)
 
 
 def test_bearing_in_a_gps_gap_is_dropped_not_paired_with_a_stale_fix(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_bearing(0.5, 45.0, 90.0)  # waits
     loc.add_fix(10.0, *fix_at(100.0, 0.0))  # 10 s later: gap > gps_max_gap_s
-    assert loc.rejected["gps_gap"] == 1
+    assert loc.view().rejected["gps_gap"] == 1
     loc.add_bearing(13.0, 45.0, 90.0)  # 3 s after the newest fix: no fix can bracket it within 2 s
-    assert loc.rejected["gps_gap"] == 2 and not open_point(loc)
+    assert loc.view().rejected["gps_gap"] == 2 and not open_point(loc)
 
 
 def test_bearings_before_any_fix_and_left_waiting_at_the_end_are_counted(loc):
     loc.add_bearing(0.0, 45.0, 90.0)
-    assert loc.rejected["before_first_fix"] == 1
+    assert loc.view().rejected["before_first_fix"] == 1
     loc.add_fix(1.0, *fix_at(0.0, 0.0))
     loc.add_bearing(1.5, 45.0, 90.0)
     loc.flush()
-    assert loc.rejected["no_fix_after"] == 1
+    assert loc.view().rejected["no_fix_after"] == 1
 
 
 @pytest.mark.parametrize("args, reason", [
@@ -113,15 +113,15 @@ def test_bad_bearings_are_rejected_with_a_reason(loc, args, reason):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(2.0, *fix_at(0.0, 0.0))
     assert loc.add_bearing(*args) is None
-    assert loc.rejected == {reason: 1}
-    assert not loc.stations[""].pending and not open_point(loc)
+    assert loc.view().rejected == {reason: 1}
+    assert not loc._intake.stations[""].pending and not open_point(loc)
 
 
 def test_unknown_quality_is_used_but_counted(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(2.0, *fix_at(0.0, 0.0))
     loc.add_bearing(1.0, 10.0, float("nan"))
-    assert loc.unknown_quality == 1 and len(open_point(loc)) == 1
+    assert loc.view().unknown_quality == 1 and len(open_point(loc)) == 1
 
 
 def test_a_readings_own_sigma_overrides_its_qualitys_and_a_pose_is_one_with_it(loc):
@@ -135,18 +135,18 @@ def test_a_readings_own_sigma_overrides_its_qualitys_and_a_pose_is_one_with_it(l
     loc.add_bearing(3.0, 10.0, 90.0)
     for bad in (0.0, -1.0, math.inf, "wide"):
         loc.add_bearing(3.5, 10.0, 90.0, sigma_deg=bad)
-    assert loc.rejected == {"bad_sigma": 4}
+    assert loc.view().rejected == {"bad_sigma": 4}
     sigmas = [math.degrees(r.sigma) for r in open_point(loc)]
     assert sigmas[0] == pytest.approx(4.0) and sigmas[1] == sigmas[2] != pytest.approx(4.0) and len(sigmas) == 3
-    loc.add_bearing_enu(4.0, math.radians(80.0), math.radians(2.0) ** 2)  # unknown quality: a point of its own
+    feed_pose(loc, 4.0, math.radians(80.0), math.radians(2.0) ** 2)  # unknown quality: a point of its own
     pose = open_point(loc)[-1]
     assert math.degrees(pose.sigma) == pytest.approx(2.0) and pose.stamp == 4.0
-    assert math.degrees(pose.theta) == pytest.approx(80.0) and loc.unknown_quality == 1
-    loc.add_bearing_enu(4.5, math.radians(80.0), 0.0)  # a pose's variance not filled in: its quality's (none)
-    assert dict(loc.rejected) == {"bad_sigma": 4}
-    loc.add_bearing_enu(4.6, math.radians(80.0), -1.0)  # negative, as add_bearing's sigma: refused
-    loc.add_bearing_enu(4.7, math.radians(80.0), math.inf)
-    assert dict(loc.rejected) == {"bad_sigma": 6}
+    assert math.degrees(pose.theta) == pytest.approx(80.0) and loc.view().unknown_quality == 1
+    feed_pose(loc, 4.5, math.radians(80.0), 0.0)  # a pose's variance not filled in: its quality's (none)
+    assert dict(loc.view().rejected) == {"bad_sigma": 4}
+    feed_pose(loc, 4.6, math.radians(80.0), -1.0)  # negative, as add_bearing's sigma: refused
+    feed_pose(loc, 4.7, math.radians(80.0), math.inf)
+    assert dict(loc.view().rejected) == {"bad_sigma": 6}
 
 
 @pytest.mark.parametrize("sigma", [1e-6, 1e-7, 1e-9, 200.0])
@@ -160,8 +160,7 @@ def test_a_sigma_no_bearing_has_is_refused_and_fixed_stations_at_the_finest_one_
     for s, expect in ((sigma, None), (1e-3, "tracking")):
         loc = Localizer(LocalizerConfig(seed=1))
         for name, (e, n) in places.items():
-            loc.add_station(name, fixed=True)
-            loc.set_station_position(name, *frame.to_geodetic(e, n)[:2])
+            loc.add_station(name, fixed=True, position=(*frame.to_geodetic(e, n)[:2],))
         for k in range(20):
             name = "abcd"[k % 4]
             e, n = places[name]
@@ -171,11 +170,11 @@ def test_a_sigma_no_bearing_has_is_refused_and_fixed_stations_at_the_finest_one_
             loc.add_bearing(float(k + 1), azimuth % 360.0, 80.0, station=name, sigma_deg=s)
         loc.flush()
         loc.finish()
-        est = loc.estimate
+        est = loc.view().estimate
         if expect is None:
-            assert est is None and dict(loc.rejected) == {"bad_sigma": 20}
+            assert est is None and dict(loc.view().rejected) == {"bad_sigma": 20}
         else:
-            assert est is not None and est.state.value == expect and "internal_error" not in loc.rejected
+            assert est is not None and est.state.value == expect and "internal_error" not in loc.view().rejected
             assert math.hypot(est.east - 300.0, est.north - 400.0) < 0.1
         loc.close()
 
@@ -186,7 +185,7 @@ def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):
     loc.add_bearing(1.0, 10.0, 90.0)
     loc.add_bearing(1.0, 10.0, 90.0)
     loc.add_bearing(0.5, 10.0, 90.0)
-    assert loc.rejected == {"bearing_repeated": 1, "bearing_out_of_order": 1}
+    assert loc.view().rejected == {"bearing_repeated": 1, "bearing_out_of_order": 1}
 
 
 @pytest.mark.parametrize("args, reason", [
@@ -197,7 +196,7 @@ def test_bearing_stamps_going_backwards_or_repeating_are_rejected(loc):
 ])
 def test_bad_fixes_are_rejected(loc, args, reason):
     loc.add_fix(*args)
-    assert loc.rejected == {reason: 1} and not loc.stations
+    assert loc.view().rejected == {reason: 1} and not loc.view().stations
 
 
 def test_fix_without_a_fix_and_fixes_out_of_order_are_rejected(loc):
@@ -205,24 +204,24 @@ def test_fix_without_a_fix_and_fixes_out_of_order_are_rejected(loc):
     loc.add_fix(5.0, 39.1, 117.2)
     loc.add_fix(5.0, 39.1, 117.2)
     loc.add_fix(4.0, 39.1, 117.2)
-    assert loc.rejected == {"fix_no_fix": 1, "fix_repeated": 1, "fix_out_of_order": 1}
-    assert len(loc.stations[""].gps) == 1
+    assert loc.view().rejected == {"fix_no_fix": 1, "fix_repeated": 1, "fix_out_of_order": 1}
+    assert len(loc._intake.stations[""].gps) == 1
 
 
 def test_datum_comes_from_the_first_valid_fix_when_unset():
     loc = Localizer(LocalizerConfig())
     loc.add_fix(0.0, float("nan"), 0.0)
     loc.add_fix(1.0, -33.9, -70.6, 520.0)
-    assert loc.frame is None and "confirm the datum" in loc.status  # one fix alone never sets the datum
+    assert loc.view().frame is None and "confirm the datum" in loc.view().status  # one fix alone never sets the datum
     loc.add_fix(2.0, -33.90001, -70.6, 521.0)  # 1 m away a second later: confirms it
-    assert (loc.frame.lat0, loc.frame.lon0, loc.frame.alt0) == (-33.9, -70.6, 520.0)
+    assert (loc.view().frame.lat0, loc.view().frame.lon0, loc.view().frame.alt0) == (-33.9, -70.6, 520.0)
 
 
 @pytest.mark.slow
 def test_driving_straight_at_the_emitter_never_starts_from_a_garbage_fix(loc):
     est = drive(loc, seconds=60, track=lambda t: (10.0 * t * 0.832, 10.0 * t * 0.5547))  # along the emitter's bearing
-    assert est is None and loc.track_status().state is not TrackState.TRACKING
-    assert "waiting for geometry" in loc.status and "parallel" in loc.status
+    assert est is None and loc.view().track.state is not TrackState.TRACKING
+    assert "waiting for geometry" in loc.view().status and "parallel" in loc.view().status
 
 
 @pytest.mark.slow
@@ -239,10 +238,10 @@ def test_a_fixed_seed_reproduces_a_run_and_another_seed_does_not():
 def test_reset_drops_the_track_but_keeps_datum_and_counters(loc):
     drive(loc, seconds=90, track=curved)
     loc.add_bearing(-5.0, 10.0, 10.0)
-    frame = loc.frame
+    frame = loc.view().frame
     loc.reset()
-    assert loc.track_status().state is TrackState.COLLECTING and not loc.stations and loc.estimate is None
-    assert loc.frame == frame and loc.rejected["low_quality"] == 1
+    assert loc.view().track.state is TrackState.COLLECTING and not loc.view().stations and loc.view().estimate is None
+    assert loc.view().frame == frame and loc.view().rejected["low_quality"] == 1
     assert drive(loc, seconds=90, track=curved) is not None
 
 
@@ -259,19 +258,19 @@ def test_garbage_never_raises():
             loc.add_bearing(*(rng.choice(values) if rng.random() < 0.3 else v
                               for v in (k * 0.1, azimuth(k, 0.5 * k), 80.0)))
     loc.flush()
-    assert sum(loc.rejected.values()) > 0
+    assert sum(loc.view().rejected.values()) > 0
 
 
 def test_pose_encoding_bearing_is_a_yaw_from_east_with_its_own_variance(loc):
     loc.add_fix(0.0, *fix_at(0.0, 0.0))
     loc.add_fix(1.0, *fix_at(0.0, 0.0))
-    loc.add_bearing_enu(0.5, math.radians(30.0), math.radians(2.0) ** 2)
+    feed_pose(loc, 0.5, math.radians(30.0), math.radians(2.0) ** 2)
     (reading,) = open_point(loc)
     assert reading.theta == pytest.approx(math.radians(30.0), abs=1e-6)
     assert reading.sigma == pytest.approx(math.radians(2.0))
-    assert loc.unknown_quality == 1
-    loc.add_bearing_enu(0.6, float("nan"))
-    assert loc.rejected == {"bad_azimuth": 1}
+    assert loc.view().unknown_quality == 1
+    feed_pose(loc, 0.6, float("nan"))
+    assert loc.view().rejected == {"bad_azimuth": 1}
 
 
 def test_a_later_fix_closes_the_open_point_so_a_stopped_vehicle_gets_its_estimate():
@@ -291,11 +290,11 @@ def test_a_later_fix_closes_the_open_point_so_a_stopped_vehicle_gets_its_estimat
 def test_a_diverged_filter_is_never_published_and_restarts():
     loc = Localizer(LocalizerConfig(seed=3, datum_lat=DATUM[0], datum_lon=DATUM[1], datum_alt=DATUM[2]))
     drive(loc, seconds=90, track=curved)
-    assert loc.track_status().state is TrackState.TRACKING
-    published = loc.estimate
+    assert loc.view().track.state is TrackState.TRACKING
+    published = loc.view().estimate
     track_of(loc).filter.x = np.full_like(track_of(loc).filter.x, np.inf)  # what a run-away move step leaves behind
     est = drive(loc, seconds=100, track=lambda t: curved(t + 90), t0=1000.0)
-    assert loc.rejected["filter_diverged"] == 1
+    assert loc.view().rejected["filter_diverged"] == 1
     assert est is not None and np.isfinite(est.east) and est.stamp > published.stamp
 
 
@@ -314,7 +313,7 @@ def test_on_estimate_sees_every_estimate_whichever_input_made_it_and_estimate_is
             t = k + (j + 0.5) / 5
             est = loc.add_bearing(t, azimuth(*curved(t)) + rng.normal(0, 0.5), 90.0)
             returned["bearing"] += [est] if est is not None else []
-        assert loc.estimate is (seen[-1] if seen else None)
+        assert loc.view().estimate is (seen[-1] if seen else None)
     assert len(returned["fix"]) > len(returned["bearing"])  # the usual case the README now states
     assert {id(e) for e in seen} == {id(e) for e in returned["fix"] + returned["bearing"]}
     assert [e.stamp for e in seen] == sorted(e.stamp for e in seen)
@@ -363,7 +362,7 @@ def test_feed_takes_records_by_field_name_with_optional_fields_left_out_and_name
     with pytest.raises(TypeError, match="fix input's record has no lat, lon"):
         loc.feed(Input("fix", SimpleNamespace(stamp=2.0)))
     assert loc.feed(Input("bearing", SimpleNamespace(stamp=float("nan"), azimuth_deg="x"))) is None
-    assert loc.rejected["bad_stamp"] == 1
+    assert loc.view().rejected["bad_stamp"] == 1
     loc.feed(Input("fix", FixInput(2.0, DATUM[0], DATUM[1])))  # the fix after the bearing pairs it
     (reading,) = open_point(loc)
     assert math.isnan(reading.quality) and reading.stamp == 1.0
@@ -388,7 +387,7 @@ def test_calls_from_two_threads_are_made_one_at_a_time():
         other.start()
         assert not done.wait(0.3)  # it waits
     other.join(5.0)
-    assert done.is_set() and not loc.rejected["internal_error"]
+    assert done.is_set() and not loc.view().rejected["internal_error"]
 
 
 @pytest.mark.parametrize("how", ["pickle", "copy", "deepcopy"])
@@ -406,6 +405,11 @@ def test_a_localizer_is_neither_pickled_nor_copied_and_says_so(how):
         loc.close()
 
 
+def feed_pose(loc: Localizer, *fields):
+    """A bearing as a pose gives it (stamp, yaw_rad, variance_rad2), fed as an input of kind bearing_pose."""
+    return loc.feed(Input("bearing_pose", BearingPoseInput(*fields)))
+
+
 def _fixed_sites(loc):
     """Four fixed sites around (300, 400) m, five readings each of 1 deg."""
     from aoa_localizer.engine.geodesy import LocalFrame
@@ -413,8 +417,7 @@ def _fixed_sites(loc):
     frame, rng = LocalFrame(47.0, 8.0, 0.0), np.random.default_rng(2)
     places = {"a": (0.0, 0.0), "b": (600.0, 0.0), "c": (0.0, 800.0), "d": (600.0, 800.0)}
     for name, (e, n) in places.items():
-        loc.add_station(name, fixed=True)
-        loc.set_station_position(name, *frame.to_geodetic(e, n)[:2])
+        loc.add_station(name, fixed=True, position=(*frame.to_geodetic(e, n)[:2],))
     for k in range(20):
         name = "abcd"[k % 4]
         e, n = places[name]
@@ -423,7 +426,7 @@ def _fixed_sites(loc):
         loc.add_bearing(float(k + 1), (azimuth + rng.normal(0.0, 1.0)) % 360.0, 80.0, station=name, sigma_deg=1.0)
     loc.flush()
     loc.finish()
-    return loc.estimate
+    return loc.view().estimate
 
 
 @pytest.mark.slow

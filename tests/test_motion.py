@@ -268,7 +268,7 @@ def test_a_cars_drift_is_not_taken_for_bearings_that_turn_with_the_vehicle():
         if est is not None and est.stamp > 200.0:
             d = np.array(LocalFrame(*car.datum).to_enu(est.lat, est.lon)) - data.emitter_at(np.array([est.stamp]))[0]
             inside.append(d @ np.linalg.solve(est.cov, d) < 5.99)
-    assert loc.events["course_learned"] == 0 and len(inside) > 100 and np.mean(inside) > 0.7
+    assert loc.view().events["course_learned"] == 0 and len(inside) > 100 and np.mean(inside) > 0.7
 
 
 def test_simulate_refuses_a_moving_run_mixed_with_another_scenario_and_a_bad_speed(cli):
@@ -321,7 +321,7 @@ def test_a_watch_that_fails_costs_the_motion_not_the_point(monkeypatch, caplog):
     loc_free = [e for e in Localizer(LocalizerConfig(seed=1, motion_model="static")).run(data.inputs()) if e]
     assert ests and math.isnan(ests[-1].motion_probability) and ests[-1].motion == "static"
     # the watch begins on one point and fails on the next, again and again: one failure every other point
-    assert loc.rejected["internal_error"] == loc.channels.default.track.points_seen // 2
+    assert loc.view().rejected["internal_error"] == loc._channels.default.track.points_seen // 2
     assert (ests[-1].east, ests[-1].north) == (loc_free[-1].east, loc_free[-1].north)
     assert any("motion watch failed" in r.getMessage() for r in caplog.records)
 
@@ -371,7 +371,7 @@ def test_a_refined_offset_keeps_the_watch_and_one_learned_or_taken_back_begins_i
     from aoa_localizer.engine.inference.motion import UNSURE_P
     from aoa_localizer.engine.types import ObservationPoint
 
-    track = Localizer(LocalizerConfig(seed=1)).channels.default.track
+    track = Localizer(LocalizerConfig(seed=1))._channels.default.track
     point = [ObservationPoint(float(k), 10.0 * k, 0.0, math.radians(45.0), math.radians(1.0), 3) for k in range(5)]
     track._watch_motion(point[0])  # the first point begins the watch
     begun = track.watch

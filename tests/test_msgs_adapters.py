@@ -8,7 +8,7 @@ from rclpy.serialization import serialize_message
 
 from aoa_localizer import Localizer, LocalizerConfig
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_points
-from aoa_localizer.engine.types import Estimate
+from aoa_localizer.engine.types import BearingPoseInput, Estimate, Input
 from msgs_adapters import build
 from msgs_adapters.bag import typestore
 from msgs_adapters.fields import (
@@ -92,13 +92,13 @@ def test_the_nodes_pose_path_and_add_bearing_enu_make_the_same_reading(yaw, vari
     r = df_record(build.pose_bearing(RCLPY, 1.0, yaw, variance), "pose")
     readings, refused = [], []
     for feed in (lambda loc: loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, sigma_deg=r.sigma_deg),
-                 lambda loc: loc.add_bearing_enu(1.0, yaw, variance)):
+                 lambda loc: loc.feed(Input("bearing_pose", BearingPoseInput(1.0, yaw, variance)))):
         loc = Localizer(LocalizerConfig(seed=1, datum_lat=39.1, datum_lon=117.2))
         loc.add_fix(0.0, 39.1, 117.2)
         loc.add_fix(2.0, 39.1, 117.2)
         feed(loc)
         readings.append(open_point(loc))
-        refused.append(loc.rejected.get("bad_sigma", 0))
+        refused.append(loc.view().rejected.get("bad_sigma", 0))
         loc.close()
     assert len(readings[0]) == int(used) and readings[0] == readings[1]
     assert refused == [0, 0] if used else refused == [1, 1]
@@ -132,10 +132,10 @@ def test_a_zero_far_from_unit_or_non_finite_quaternion_gives_no_yaw_and_the_read
         assert math.isnan(p.yaw_rad)
         loc = Localizer(LocalizerConfig(seed=1, datum_lat=39.1, datum_lon=117.2))
         loc.add_fix(0.0, 39.1, 117.2)
-        loc.add_bearing_enu(p.stamp, p.yaw_rad, p.variance_rad2)
+        loc.feed(Input("bearing_pose", BearingPoseInput(p.stamp, p.yaw_rad, p.variance_rad2)))
         r = df_record(m, "pose")
         loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, sigma_deg=r.sigma_deg)
-        assert loc.rejected.get("bad_azimuth") == 2 and not open_point(loc)
+        assert loc.view().rejected.get("bad_azimuth") == 2 and not open_point(loc)
         loc.close()
 
 

@@ -47,11 +47,11 @@ def test_candidates_and_thinning():
 @pytest.mark.slow
 def test_the_localizer_gives_a_goal_within_the_radius_once_it_has_an_estimate():
     loc = Localizer(LocalizerConfig(seed=1))
-    assert loc.vehicle_place() is None and loc.next_goal((0.0, 0.0), 500.0) is None
+    assert loc.view().vehicles.get("") is None and loc.posterior() is None
     res = run(simulate("seed", 1), LocalizerConfig(seed=1))
-    place = res.localizer.vehicle_place()
+    place = res.localizer.view().vehicles.get("")
     assert place == pytest.approx(SCENARIOS["seed"].track[-1], abs=1.0)  # where the drive ended
-    goal = res.localizer.next_goal(place, 300.0)
+    goal = res.localizer.posterior().next_goal(place, 300.0)
     assert math.hypot(goal.east - place[0], goal.north - place[1]) <= 300.0 + 1e-9
     assert goal.gain_nats >= goal.here_nats
 

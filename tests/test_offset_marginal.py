@@ -97,7 +97,7 @@ def test_a_compass_a_few_degrees_off_on_a_straight_drive_stays_inside_the_ellips
     known = run(data, cfg.with_changes(offset_sigma_deg=0.0, motion_model="static"))
     final = known.estimates[-1]
     err = np.array([final.east, final.north]) - data.emitter_enu
-    track = next(iter(known.localizer.channels.all())).track
+    track = next(iter(known.localizer._channels.all())).track
     assert not inside_ellipse(err, final.cov - track.site_spread) and known.scores["inside95"]
     default = run(data, cfg)
     assert default.scores["inside95"]

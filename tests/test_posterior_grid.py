@@ -17,7 +17,7 @@ def test_the_grids_95_percent_region_holds_95_percent_of_the_cloud(scenario):
     (its 95 % highest-density region) hold about 95 % of the particles' weight (N = 100: within Monte Carlo
     error); the most probable cell is 100, and a more probable cell never has a lower value."""
     res = run(simulate(scenario, 1), LocalizerConfig(seed=1))
-    grid, est = res.localizer.posterior_grid(), res.localizer.estimate
+    grid, est = res.localizer.posterior().grid(), res.localizer.view().estimate
     assert grid.value.shape == (CELLS, CELLS) and grid.prob.sum() == pytest.approx(1.0)
     assert abs(region_mass(grid, est.particles, est.weights) - REGION) < 0.06
     order = np.argsort(grid.prob, axis=None)
@@ -31,7 +31,7 @@ def test_the_grids_95_percent_region_holds_95_percent_of_the_cloud(scenario):
 def test_no_grid_before_the_first_estimate():
     from aoa_localizer import Localizer
 
-    assert Localizer(LocalizerConfig(seed=1)).posterior_grid() is None
+    assert Localizer(LocalizerConfig(seed=1)).posterior() is None
 
 
 def region_mass(grid: PosteriorGrid, particles: np.ndarray, weights: np.ndarray) -> float:

@@ -124,7 +124,7 @@ def test_a_point_spans_at_most_a_share_of_its_range_to_the_channels_estimate():
 
 def test_a_channels_builders_take_its_estimates_place():
     loc = Localizer(LocalizerConfig(seed=1))
-    channel = loc.channels.default
+    channel = loc._channels.default
     channel.builder("car")
     channel.published(Estimate(0.0, 120.0, -40.0, 39.0, 117.0, np.eye(2), 3, 3, 100.0, "afsa"))
     assert channel.builders["car"].emitter == (120.0, -40.0)

@@ -28,8 +28,8 @@ def test_driving_straight_at_a_far_emitter_ends_with_a_long_honest_ellipse_on_it
     loc.flush()
     est = loc.finish()
     assert est is not None
-    assert loc.channels.default.track.state is TrackState.PROVISIONAL
-    assert "parallel" in loc.status
+    assert loc._channels.default.track.state is TrackState.PROVISIONAL
+    assert "parallel" in loc.view().status
     err = np.array(data.frame.to_enu(est.lat, est.lon)) - data.emitter_enu
     short, long = np.sqrt(np.linalg.eigvalsh(est.cov))
     assert short < 50.0 < 500.0 < long
@@ -47,7 +47,7 @@ def test_a_near_track_mode_of_wild_bearings_leaves_its_ray_open(seed):
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=seed)))
     for event in data.inputs():
         est = loc.feed(event)
-        track = loc.channels.default.track
+        track = loc._channels.default.track
         if est is not None and track.state is TrackState.PROVISIONAL:
             break
     else:
@@ -86,7 +86,7 @@ def test_the_provisional_sample_is_made_in_the_start_searchs_turns(monkeypatch):
     monkeypatch.setattr(initiator, "search_start", search)
     data = simulate(robustness_cells()["wild20"], 1)
     loc = Localizer(scenario_config(data, LocalizerConfig(seed=1)))
-    track = loc.channels.default.track
+    track = loc._channels.default.track
     real_outcome = track.initiator.outcome
 
     def outcome(res, held):

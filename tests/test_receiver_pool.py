@@ -48,11 +48,11 @@ def test_a_new_channel_starts_from_the_receivers_pool_once():
     loc.add_fix(1.0, 39.1, 117.2)
     loc.add_fix(2.0, 39.1, 117.2)
     loc.add_bearing(1.5, 10.0, 90.0, frequency_hz=433e6)
-    first = loc.channels.live["f433000000"]
+    first = loc._channels.live["f433000000"]
     first.track.calibration.noise = _fitted({4: 3.0})
-    assert loc.receiver_noise() is None  # one channel: its own calibration says it all
+    assert loc.view().receiver_noise is None  # one channel: its own calibration says it all
     loc.add_bearing(1.6, 50.0, 90.0, frequency_hz=446e6)
-    second = loc.channels.live["f446000000"].track.calibration
+    second = loc._channels.live["f446000000"].track.calibration
     grid = second.noise_prior()
     assert second.pooled is not None and second.pooled.scale == pytest.approx(3.0)
     first.track.calibration.noise = _fitted({4: 9.0})  # later calibrations do not move a prior already taken

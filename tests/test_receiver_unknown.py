@@ -122,8 +122,8 @@ def test_a_moving_surveyor_minutes_apart_is_used_not_refused_as_clock_jumps():
         loc.add_bearing(t + 0.5, az)
     loc.add_fix(survey.stamps[-1] + 600, *frame.to_geodetic(0.0, 500.0)[:2])
     loc.flush()
-    est = loc.finish() or loc.estimate
-    assert not {k: v for k, v in loc.rejected.items() if "jump" in k or k == "gps_gap"}
+    est = loc.finish() or loc.view().estimate
+    assert not {k: v for k, v in loc.view().rejected.items() if "jump" in k or k == "gps_gap"}
     assert est is not None and est.bearings_used == 3
 
 
@@ -136,15 +136,15 @@ def test_a_dense_stream_still_refuses_a_far_stamp_the_next_fix_contradicts_and_t
         loc.add_fix(float(t), lat, lon)
     loc.add_fix(1e6, lat, lon)  # a glitch on a 1 Hz stream ...
     loc.add_fix(20.0, lat, lon)  # ... as the next fix shows
-    assert loc.rejected["fix_stamp_jump"] == 1
+    assert loc.view().rejected["fix_stamp_jump"] == 1
     loc.add_fix(4e9, lat, lon)  # the year 2096: no receiver measured it yet
     loc.add_fix(4e9 + 1, lat, lon)
-    assert loc.rejected["fix_stamp_jump"] == 3
+    assert loc.view().rejected["fix_stamp_jump"] == 3
     loc.add_fix(5000.0, lat, lon)  # a pause of 80 minutes ...
     loc.add_fix(5001.0, lat, lon)  # ... the stream goes on from it
-    assert loc.rejected["fix_stamp_jump"] == 3 and not loc.rejected["fix_out_of_order"]
-    assert loc.events["fix_pause"] == 1
-    assert len(loc.stations[""].gps) == 23
+    assert loc.view().rejected["fix_stamp_jump"] == 3 and not loc.view().rejected["fix_out_of_order"]
+    assert loc.view().events["fix_pause"] == 1
+    assert len(loc._intake.stations[""].gps) == 23
 
 
 @pytest.mark.slow

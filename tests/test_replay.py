@@ -180,8 +180,8 @@ def test_the_pose_bearing_encoding_is_read_offline_by_its_type(tmp_path):
     loc = Localizer(LocalizerConfig(seed=1))
     estimates = []
     run_bag(bag, {}, loc, estimates.append)
-    assert len(estimates) > 30 and loc.unknown_quality == 300
-    assert np.hypot(loc.estimate.east - 1200.0, loc.estimate.north - 800.0) < 10.0
+    assert len(estimates) > 30 and loc.view().unknown_quality == 300
+    assert np.hypot(loc.view().estimate.east - 1200.0, loc.view().estimate.north - 800.0) < 10.0
 
 
 @pytest.mark.slow
@@ -194,7 +194,7 @@ def test_a_pose_bags_quaternions_are_normalised_or_refused(tmp_path):
     for scale in (1.0, 1.02, 2.0):
         loc = Localizer(LocalizerConfig(seed=1))
         run_bag(_bag_with(tmp_path / str(scale), "pose", extra_string=False, scale=scale), {}, loc, lambda e: None)
-        finals.append((loc.estimate, dict(loc.rejected)))
+        finals.append((loc.view().estimate, dict(loc.view().rejected)))
         loc.close()
     (unit, _), (near, _), (far, refused) = finals
     assert near is not None and unit is not None

@@ -246,10 +246,10 @@ def test_the_map_draws_the_posterior_grid_where_it_lies(tmp_path, monkeypatch):
     from aoa_localizer.simulation.scenarios import simulate
 
     loc = run(simulate("seed", 1), LocalizerConfig(seed=1)).localizer
-    est, grid = loc.estimate, loc.posterior_grid()
+    est, grid = loc.view().estimate, loc.posterior().grid()
     figures = []
     monkeypatch.setattr(plots.plt, "close", figures.append)
-    plots.map_figure(tmp_path / "map.png", loc.datum_frame(), {}, np.zeros((0, 5)), np.zeros(0, bool), est,
+    plots.map_figure(tmp_path / "map.png", loc.view().frame, {}, np.zeros((0, 5)), np.zeros(0, bool), est,
                      posterior=grid)
     side = grid.resolution * grid.value.shape[0]
     (main,), (zoom,) = figures[0].axes[0].images, figures[0].axes[1].images

@@ -31,7 +31,7 @@ def feed(loc: Localizer, data, until_s=np.inf, after_s=-np.inf):
 
 
 def truth_in_engine(loc, data):
-    return np.array(loc.frame.to_enu(*data.emitter_lat_lon))
+    return np.array(loc.view().frame.to_enu(*data.emitter_lat_lon))
 
 
 @pytest.mark.slow
@@ -44,7 +44,7 @@ def test_a_cloud_locked_1_km_off_under_the_outlier_floor(safety):
     half = data.bearings[len(data.bearings) // 2, 0]
     feed(loc, data, until_s=half)
     truth = truth_in_engine(loc, data)
-    assert np.hypot(*(np.array([loc.estimate.east, loc.estimate.north]) - truth)) < 30
+    assert np.hypot(*(np.array([loc.view().estimate.east, loc.view().estimate.north]) - truth)) < 30
     wrong = truth + np.array([-800.0, -600.0])
     jitter = 3.0 * np.random.default_rng(0).standard_normal((loc.config.num_particles, 2))
     track_of(loc).filter.replace_cloud(wrong + jitter)
@@ -52,7 +52,7 @@ def test_a_cloud_locked_1_km_off_under_the_outlier_floor(safety):
     errors = [np.hypot(e.east - truth[0], e.north - truth[1]) for e in estimates]
     if safety:
         assert max(errors[20:]) < 30, errors  # rescued within 20 points, and stays
-        assert loc.events["global_restart"] + loc.events["alarm"] >= 1
+        assert loc.view().events["global_restart"] + loc.view().events["alarm"] >= 1
     else:
         assert min(errors[:20]) > 900, errors  # the freeze: no particle explains the points, nothing moves
 
@@ -63,7 +63,7 @@ def test_self_calibrated_sigma_of_a_3_degree_receiver():
     and the published ellipse holds the truth."""
     sc = replace(BASE, name="nan3", sigma_q_deg=None, sigma_rad=np.radians(3.0), quality_known=False, points=150)
     res = run(simulate(sc, 1), LocalizerConfig(seed=1))
-    noise = res.localizer.noise_summary()
+    noise = dict(res.localizer.view().noise)
     assert noise["sigma_deg"]["nan"] == pytest.approx(3.0, rel=0.10), noise
     assert res.scores["inside95"] and res.scores["error"] < 3 * res.scores["crlb"]
 
@@ -168,9 +168,9 @@ def test_two_modes_are_reported_with_their_masses(seed):
     assert len(modes) == 2, modes
     assert sum(m[2] for m in modes) == pytest.approx(1.0, abs=1e-6)
     assert min(m[2] for m in modes) > 0.1, modes  # both real; N = 100 estimates 0.5 / 0.5 roughly (design.md)
-    places = np.array(sorted(data.frame.to_enu(*loc.frame.to_geodetic(m[0], m[1])[:2]) for m in modes))
+    places = np.array(sorted(data.frame.to_enu(*loc.view().frame.to_geodetic(m[0], m[1])[:2]) for m in modes))
     assert np.hypot(*(places - [[-300.0, 800.0], [300.0, 800.0]]).T).max() < 25, places
-    grid = loc.posterior_grid()  # emitter/posterior shows both, not one ellipse between them
+    grid = loc.posterior().grid()  # emitter/posterior shows both, not one ellipse between them
     rows, cols = grid.cell_of([m[0] for m in modes], [m[1] for m in modes])
     assert all(grid.value[r, c] > 0 for r, c in zip(rows, cols, strict=True)), (rows, cols)
 
@@ -198,17 +198,18 @@ def test_an_emitter_moved_400_m_is_noticed_and_re_found():
     estimates = feed(loc, data)
     est = loc.flush() or estimates[-1]
     new = truth_in_engine(loc, data)
-    assert loc.events["emitter_moved"] == 1
-    assert loc.rejected["emitter_moved"] > 0
+    assert loc.view().events["emitter_moved"] == 1
+    assert loc.view().rejected["emitter_moved"] > 0
     assert np.hypot(est.east - new[0], est.north - new[1]) < 20
     assert len(est.modes) == 1
     # /diagnostics counts one restart here (issue 67, item 1: the bearings the move dropped were counted too, and a
     # good co-channel run read ERROR, "the filter restarted 201 times")
     from aoa_localizer.ros.node_monitor import restarts_made
 
-    assert restarts_made(loc)["emitter_moved"] == 1
-    assert sum(restarts_made(loc).values()) == loc.events["emitter_moved"] + loc.events["global_restart"] + \
-        loc.rejected["filter_diverged"]
+    assert restarts_made(loc.view())["emitter_moved"] == 1
+    view = loc.view()
+    assert sum(restarts_made(view).values()) == view.events["emitter_moved"] + view.events["global_restart"] + \
+        view.rejected["filter_diverged"]
 
 
 def test_the_start_never_uses_a_crossing_a_clear_majority_contradicts():
@@ -369,10 +370,11 @@ def test_diagnostics_say_the_nodes_health_ok_whatever_the_estimates_state_and_wa
     from aoa_localizer.simulation.scenarios import SCENARIOS, simulate
 
     waiting = Localizer(LocalizerConfig(seed=1))
-    level, message, _ = NodeMonitor(time.monotonic(), 1e9, lambda: 1.0).diagnostics(waiting, time.monotonic(), {}, {})
+    fresh = NodeMonitor(time.monotonic(), 1e9, lambda: 1.0)
+    level, message, _ = fresh.diagnostics(waiting.view(), waiting.config, time.monotonic(), {}, {})
     assert (level, message) == (0, "waiting for a GPS fix")
     stale = NodeMonitor(time.monotonic() - 100.0, 5.0, lambda: 1.0)  # started 100 s ago, stale after 5 s
-    level, message, values = stale.diagnostics(waiting, time.monotonic(), {}, {})
+    level, message, values = stale.diagnostics(waiting.view(), waiting.config, time.monotonic(), {}, {})
     assert level == 1 and "no valid GPS fix since the start" in message and "gps_stale" in values
 
     data = simulate(replace(SCENARIOS["seed"], co_channel=((300.0, 1200.0),)), 0)
@@ -380,12 +382,12 @@ def test_diagnostics_say_the_nodes_health_ok_whatever_the_estimates_state_and_wa
     for _ in loc.run(data.inputs()):
         pass
     monitor = NodeMonitor(time.monotonic(), 1e9, lambda: 1.0)
-    assert loc.estimate is not None and loc.estimate.state == EstimateState.TRACKING
-    level, message, _ = monitor.diagnostics(loc, time.monotonic(), {}, {})
+    assert loc.view().estimate is not None and loc.view().estimate.state == EstimateState.TRACKING
+    level, message, _ = monitor.diagnostics(loc.view(), loc.config, time.monotonic(), {}, {})
     assert level == 0 and "2 transmitters on this frequency" in message
-    loc._estimates.newest = replace(loc.estimate, state=EstimateState.POORLY_DETERMINED)
-    level, message, _ = monitor.diagnostics(loc, time.monotonic(), {}, {})
+    loc._estimates.newest = replace(loc.view().estimate, state=EstimateState.POORLY_DETERMINED)
+    level, message, _ = monitor.diagnostics(loc.view(), loc.config, time.monotonic(), {}, {})
     assert level == 0 and "2 transmitters on this frequency" in message
-    loc._estimates.newest = replace(loc.estimate, state=EstimateState.SUSPECT, warnings=["a misfit"])
-    level, message, values = monitor.diagnostics(loc, time.monotonic(), {}, {})
+    loc._estimates.newest = replace(loc.view().estimate, state=EstimateState.SUSPECT, warnings=["a misfit"])
+    level, message, values = monitor.diagnostics(loc.view(), loc.config, time.monotonic(), {}, {})
     assert level == 1 and "a misfit" in message and values["warning_0"] == "a misfit"

@@ -92,7 +92,7 @@ def test_a_drive_with_a_site_field_gets_an_honest_ellipse_and_a_clean_one_keeps_
         loc = Localizer(LocalizerConfig(seed=1000 + run, max_emitters_per_channel=1))
         for est in loc.run(clean.inputs()):
             final = est or final
-        track = next(iter(loc.channels.all())).track
+        track = next(iter(loc._channels.all())).track
         widened.append(math.sqrt(np.trace(final.cov) / np.trace(final.cov - track.site_spread)))
     assert inside >= 4 and max(widened) < 1.5, (inside, widened)
 

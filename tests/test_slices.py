@@ -229,7 +229,7 @@ def test_a_reproducible_run_is_the_same_with_idle_calls_between_inputs(scenario,
                 started_at = i
         loc.flush()
         loc.finish()
-        est = loc.estimate
+        est = loc.view().estimate
         ends.append((est.lat, est.lon, started_at))
         loc.close()
     assert ends[0] == ends[1]

@@ -70,7 +70,7 @@ def test_locate_and_a_localizer_give_the_same_transmitters(tmp_path, cli):
 
     loc = Localizer(LocalizerConfig(seed=1))
     for r in readings:
-        loc.set_station_position(r.station, r.lat, r.lon)
+        loc.add_station(r.station, fixed=True, position=(r.lat, r.lon))
     for r in readings:
         loc.add_bearing(1.7e9 + r.stamp, r.azimuth_deg, math.nan, station=r.station)
     loc.flush()

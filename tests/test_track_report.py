@@ -76,7 +76,7 @@ def test_a_survey_whose_filter_is_wide_for_its_range_publishes_the_spatial_media
     # the filter's end of data; no offset marginalised: the place is the cloud's own
     cfg = LocalizerConfig(seed=0, offset_sigma_deg=0.0, end_of_data_model="filter")
     est, loc = locate_survey_with(survey, cfg)
-    track = loc.channels.default.track
+    track = loc._channels.default.track
     f = track.filter
     assert est is not None and f is not None
     mean, cov = f.estimate()

@@ -18,30 +18,30 @@ def summary(loc: Localizer, truths: dict[str, tuple], datum) -> list[str]:
     """Human-readable closing lines: the estimate (one line per channel when frequencies were heard), ellipse,
     counts, and each channel's error when the bag carries its truth (truth_of)."""
     lines = []
-    heard = [c for c in loc.channels.all() if c.estimate is not None]
+    view = loc.view()
+    heard = [c for c in view.channels if c.estimate is not None]
     if not heard:
-        lines.append(f"no estimate: {loc.status}")
+        lines.append(f"no estimate: {view.status}")
     for channel in heard:
         label = "" if channel.id == DEFAULT and len(heard) == 1 else (
             f"channel {channel.id}{' (retired)' if channel.retired else ''}: ")
         truth = truth_of(truths, channel.id, len(heard))
-        lines += [label + line for line in _estimate_lines(loc, channel.estimate, truth, datum)]
+        lines += [label + line for line in _estimate_lines(view.frame, channel.estimate, truth, datum)]
     if "" in truths and len(heard) > 1 and not set(truths) & {c.id for c in heard}:
         lines.append(f"the bag's truth (/sim/truth) names no transmitter: not scored against the {len(heard)} "
                      "channels (a bag with several writes each one's on /sim/CHANNEL/truth)")
-    rejected = ", ".join(f"{k} {v}" for k, v in sorted(loc.rejected.items())) or "none"
+    rejected = ", ".join(f"{k} {v}" for k, v in sorted(view.rejected.items())) or "none"
     lines.append(f"inputs not used: {rejected}")
     return lines
 
 
-def _estimate_lines(loc: Localizer, est, truth, datum) -> list[str]:
+def _estimate_lines(origin: LocalFrame, est, truth, datum) -> list[str]:
     a, b, _ = ellipse_axes(est.cov)
     # East/north in one frame only: the truth's (sim/datum) when the bag has it, else the engine's datum.
     if truth is not None and datum is not None:
         e, n = LocalFrame(*datum).to_enu(est.lat, est.lon)
         where = f"E {e:.1f} m, N {n:.1f} m from the bag's datum {datum[0]:.7f}, {datum[1]:.7f}"
     else:
-        origin = loc.datum_frame()
         where = f"E {est.east:.1f} m, N {est.north:.1f} m from the datum {origin.lat0:.7f}, {origin.lon0:.7f}"
     lines = [f"estimate: lat {est.lat:.7f} lon {est.lon:.7f} ({where}), 95% ellipse semi-axes {a:.1f} x {b:.1f} m, "
              f"{est.bearings_used} bearings in {est.points_used} points"]
@@ -49,7 +49,7 @@ def _estimate_lines(loc: Localizer, est, truth, datum) -> list[str]:
         lines.append(f"error against the bag's truth (E {truth[1]:.1f} m, N {truth[2]:.1f} m, same frame): "
                      f"{math.hypot(e - truth[1], n - truth[2]):.2f} m")
     if est.transmitters:
-        frame = LocalFrame(*datum) if truth is not None and datum is not None else loc.datum_frame()
+        frame = LocalFrame(*datum) if truth is not None and datum is not None else origin
         places = [(frame.to_enu(t.lat, t.lon), t) for t in est.transmitters]
         lines.append(f"{est.transmitter_count} transmitters on this frequency (p = {est.count_probability:.2f}): "
                      + "; ".join(f"E {te:.1f} m, N {tn:.1f} m ({100 * t.share:.0f} %, {t.state})"
@@ -84,15 +84,8 @@ class BagRun:
 def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay", stations=None) -> BagRun:
     """Feed a bag's fixes and bearings (of `stations`, {NAME: {kind: topic}}, when given) to `loc` in log-time
     order, call on_estimate(est) with each channel's newest estimate after each input (the final flush and
-    check included). Raises BagError when nothing could be read; damage later is recorded."""
+    check included: Localizer.run). Raises BagError when nothing could be read; damage later is recorded."""
     result = BagRun()
-    made: dict[str, object] = {}  # channel -> its newest estimate from the input being fed
-    loc.on_estimate = lambda est: made.__setitem__(est.channel, est)
-
-    def hand_over():
-        for est in made.values():
-            on_estimate(est)
-        made.clear()
 
     def events():
         with tqdm(desc=desc, unit="msg", disable=None, file=sys.stderr) as bar:
@@ -113,7 +106,6 @@ def run_bag(bag, topics: dict, loc: Localizer, on_estimate, desc: str = "replay"
                     raise
                 result.damage = str(exc)
 
-    for _ in loc.run(events()):
-        hand_over()
-    hand_over()
+    for est in loc.run(events()):
+        on_estimate(est)
     return result

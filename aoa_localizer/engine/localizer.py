@@ -2,8 +2,10 @@
 
 GPS fixes and DF readings go in as a vehicle gives them (lat/lon, azimuths, qualities, stamps);
 estimates come out with ENU metres, lat/lon and a 2x2 covariance. Every input that is not used is
-counted under a reason (`rejected`) and logged; no exception escapes for bad data. An input goes to the intake
-(ingest/intake.py), and the points it closes to the estimates (outputs/estimates.py): one way, no call back.
+counted under a reason (`view().rejected`) and logged; no exception escapes for bad data. What programs read
+leaves as values copied when asked (`view`, `posterior`: engine/outputs/view.py), never the engine's objects.
+An input goes to the intake (ingest/intake.py), and the points it closes to the estimates (outputs/estimates.py):
+one way, no call back.
 """
 from __future__ import annotations
 
@@ -11,27 +13,28 @@ import functools
 import logging
 import math
 import threading
-from collections import Counter
+import warnings
 from collections.abc import Callable, Iterable, Iterator
-from typing import Protocol
+from dataclasses import replace
+from types import MappingProxyType
+from typing import Any, Protocol
 
 import numpy as np
 
 from aoa_localizer.engine.channels import Channel, Channels
 from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame
-from aoa_localizer.engine.inference.clock_check import ClockHint
+from aoa_localizer.engine.inference.global_search import Points
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.ingest.gps_track import GpsTrack
 from aoa_localizer.engine.ingest.intake import Intake, as_float
-from aoa_localizer.engine.ingest.station import Station
 from aoa_localizer.engine.outputs.estimates import Estimates, noise_summary
-from aoa_localizer.engine.outputs.next_goal import NextGoal, next_goal
-from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid, posterior_grid
+from aoa_localizer.engine.outputs.next_goal import NextGoal
+from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid
+from aoa_localizer.engine.outputs.view import ChannelView, LocalizerView, PosteriorView, frozen
 from aoa_localizer.engine.rejections import Rejections
 from aoa_localizer.engine.scheduling.scheduler import Scheduler
 from aoa_localizer.engine.survey.survey_solver import SurveySolver, pooled_solver
-from aoa_localizer.engine.track.state import TrackStatus
 from aoa_localizer.engine.types import Estimate, Input, Reading
 
 log = logging.getLogger("aoa_localizer")
@@ -68,31 +71,32 @@ class Localizer:
 
     def __init__(self, config: LocalizerConfig | None = None, observer: Observer | None = None,
                  on_estimate: Callable[[Estimate], None] | None = None, live: bool = False,
-                 survey_solver: SurveySolver | None = pooled_solver):
+                 survey_solver: SurveySolver | None = pooled_solver, datum: LocalFrame | None = None):
         """`observer`: told of every accepted fix and every closed point (see Observer), for reports.
         `on_estimate`: called with every new estimate, whichever input made it (a fix often closes the point
-        that makes it); `estimate` always holds the latest one (None before the first). `live`: a node's
-        Localizer, scheduled `realtime` under `scheduling: auto`. `survey_solver`: the survey model of the
-        channels heard from fixed sites or standing antennas (default aoa_localizer.pooled's; None: none, such a
-        channel keeps its filter's estimate)."""
+        that makes it; the add_ calls return the newest one). `live`: a node's Localizer, scheduled `realtime`
+        under `scheduling: auto`. `survey_solver`: the survey model of the channels heard from fixed sites or
+        standing antennas (default aoa_localizer.pooled's; None: none, such a channel keeps its filter's estimate).
+        `datum`: the map frame of an earlier Localizer (a datum it took from a fix), kept so that a restart with new
+        settings does not move the map; a configured datum (datum_lat, datum_lon) wins."""
         self._lock = threading.RLock()  # the calls below are made one at a time (_one_at_a_time)
         self._cfg = cfg = config or LocalizerConfig()
         self._survey_solver = survey_solver
         self._rng = np.random.default_rng(cfg.seed)
-        frame = None
+        frame = datum
         if cfg.datum_lat is not None and cfg.datum_lon is not None:
             frame = LocalFrame(cfg.datum_lat, cfg.datum_lon, cfg.datum_alt or 0.0)
         self._rejections = Rejections()
         realtime = cfg.scheduling == "realtime" or (cfg.scheduling == "auto" and live)
         self._scheduler = Scheduler(realtime, self._rejections)
-        self.channels = Channels(cfg, self._rng, self._rejections, self._scheduler)
-        self._intake = Intake(cfg, self.channels, self._rejections, frame, observer)
+        self._channels = Channels(cfg, self._rng, self._rejections, self._scheduler)
+        self._intake = Intake(cfg, self._channels, self._rejections, frame, observer)
         self._fixed_stations: dict[str, tuple[float, float, float, float] | None] = {}  # configured positions
         self._start_tracks(on_estimate)
 
     def _start_tracks(self, on_estimate: Callable[[Estimate], None] | None):
         """The state of a fresh start on the current channels (the fixed stations placed again)."""
-        self._estimates = Estimates(self._cfg, self.channels, self._intake, self._scheduler, self._rejections,
+        self._estimates = Estimates(self._cfg, self._channels, self._intake, self._scheduler, self._rejections,
                                     on_estimate, self._survey_solver)
         for name, position in self._fixed_stations.items():
             self._intake.add_station(name, fixed=True)
@@ -101,162 +105,86 @@ class Localizer:
 
     # -- what programs read ------------------------------------------------------------------------
     @property
-    def estimate(self) -> Estimate | None:
-        """The newest estimate of any channel; None before the first."""
-        return self._estimates.newest
-
-    @property
-    def on_estimate(self) -> Callable[[Estimate], None] | None:
-        """Called with every new estimate, whichever input or call made it (None: nobody is told)."""
-        return self._estimates.on_estimate
-
-    @on_estimate.setter
-    def on_estimate(self, on_estimate: Callable[[Estimate], None] | None):
-        self._estimates.on_estimate = on_estimate
-
-    @property
     def config(self) -> LocalizerConfig:
         """The configuration the Localizer runs with (read-only: a change is a new Localizer, or `reset`)."""
         return self._cfg
 
-    def channel(self, cid: str | None = None) -> Channel | None:
-        """The channel `cid` (its id, "default" for readings without a frequency), None if it is not heard; without
-        `cid`, the channel of the latest estimate (the default channel before one). A retired channel is found too."""
-        return self._estimates.latest if cid is None else next((c for c in self.channels.all() if c.id == cid), None)
+    @_one_at_a_time
+    def view(self, light: bool = False) -> LocalizerView:
+        """The Localizer as a program reads it, copied now (engine/outputs/view.py): the newest estimate, the state
+        in one line, the inputs not used by reason, the events, the map frame, each channel and the noise. `light`:
+        without the channels, the noise and the clock hint (empty), for a caller that reads the rest once per
+        estimate among hundreds of channels."""
+        latest, intake = self._estimates.latest, self._intake
+        primary = self._channels.primary()
+        vehicles = {name: (float(st.gps.e[-1]), float(st.gps.n[-1])) for name, st in intake.stations.items()
+                    if isinstance(st.gps, GpsTrack) and len(st.gps)}
+        every = self._channels.all()
+        view = LocalizerView(
+            estimate=self._estimates.newest, status=self._status(), primary=None if primary is None else primary.id,
+            latest=latest.id, track=latest.track.summary(),
+            estimates=MappingProxyType({c.id: c.estimate for c in every if c.estimate is not None}), channels=(),
+            rejected=frozen(self._rejections.counts),
+            events=frozen(latest.track.events + intake.input_events), unknown_quality=intake.pairing.unknown_quality,
+            other_band=intake.other_band, frame=intake.frame, stations=tuple(intake.stations),
+            vehicles=MappingProxyType(vehicles), noise=MappingProxyType({}), clock_hint=None, receiver_noise=None)
+        if light:
+            return view
+        channels = tuple(ChannelView(c.id, c.frequency_hz, c.retired, c.estimate, c.track.summary(),
+                                     frozen(c.track.events)) for c in every)
+        return replace(view, channels=channels, noise=MappingProxyType(noise_summary(latest, self._cfg)),
+                       clock_hint=latest.track.supervisor.clock_hint, receiver_noise=self._receiver_noise())
 
-    @property
-    def rejected(self) -> Counter:
-        """Inputs not used, by reason (rejections.Reason: docs/design.md's table)."""
-        return self._rejections.counts
+    @_one_at_a_time
+    def posterior(self, cid: str | None = None) -> PosteriorView | None:
+        """The posterior of channel `cid` (None: the latest estimate's), copied now, with its grid and next goal
+        (engine/outputs/view.py); None when the channel is not heard or has no estimate yet."""
+        channel = self._channel(cid)
+        if channel is None or channel.estimate is None or not channel.track.estimating:
+            return None
+        track = channel.track
+        cloud = track.cloud
+        start = track.initiator.start_cloud
+        return PosteriorView(channel.id, channel.estimate, np.array(cloud.x, float), np.array(cloud.weights, float),
+                             track.cloud_is_current, Points.of(track.posterior_points().rows()), track.robust(),
+                             tuple(track.modes), track.used_points(), None if start is None else np.array(start, float))
 
-    @property
-    def frame(self) -> LocalFrame | None:
-        """The map frame at the datum; None before it is set."""
-        return self._intake.frame
+    def _channel(self, cid: str | None = None) -> Channel | None:
+        """The channel `cid` (retired ones too), or without `cid` the latest estimate's."""
+        if cid is None:
+            return self._estimates.latest
+        return self._channels.live.get(cid) or self._channels.retired.get(cid)
 
-    @property
-    def stations(self) -> dict[str, Station]:
-        return self._intake.stations
-
-    @property
-    def unknown_quality(self) -> int:
-        """Readings used with NaN quality (no correction, the default sigma)."""
-        return self._intake.pairing.unknown_quality
-
-    @property
-    def other_band(self) -> int:
-        """DF records outside `frequency_band_hz` (another node's band), not used and not refused."""
-        return self._intake.other_band
-
-    @property
-    def observer(self) -> Observer | None:
-        return self._intake.observer
-
-    @observer.setter
-    def observer(self, observer: Observer | None):
-        self._intake.observer = observer
-
-    @property
-    def status(self) -> str:
-        """One line on the state: waiting for a fix, collecting bearings, waiting for geometry, tracking, checking;
-        and, when more than half of the latest inputs were refused, the commonest reason."""
+    def _status(self) -> str:
         intake = self._intake
         base = intake.waiting_line if intake.waiting_for_gps else self._estimates.latest.track.status.words()
         return base + self._rejections.refused_line()
 
-    def track_status(self, channel: Channel | None = None) -> TrackStatus:
-        """The state of `channel`'s track (None: the channel of the latest estimate)."""
-        return (channel or self._estimates.latest).track.summary()
-
-    def recent_points(self, n: int | None = None, channel: str | None = None) -> np.ndarray:
-        """The latest `n` (all: None) observation points the filter of `channel` (None: the latest estimate's) uses,
-        oldest first, as rows of antenna east, north (m), bearing theta (ENU rad), its sigma (rad) and the antenna
-        position's sigma (m); (0, 5) before the start."""
-        found = self._estimates.latest if channel is None else self.channels.live.get(channel)
-        rows = found.track.used_points() if found is not None else np.zeros((0, 5))
-        return rows if n is None else rows[len(rows) - min(n, len(rows)):]
-
-    @property
-    def start_cloud(self) -> np.ndarray | None:
-        """The particles the latest estimate's filter started from (after its latest start or re-start), or None."""
-        return self._estimates.latest.track.initiator.start_cloud
-
-    @property
-    def events(self) -> Counter:
-        """Robustness events (alarm, global_restart, emitter_moved, recalibrated) and input events
-        (fix_clock_jump, df_clock_jump)."""
-        return self._estimates.latest.track.events + self._intake.input_events
-
-    def noise_summary(self, channel: Channel | None = None) -> dict:
-        """The self-calibrated noise of a channel (default: the latest estimate's): sigma (deg) per quality band with
-        data, reading and point outlier rates."""
-        return noise_summary(channel or self._estimates.latest, self._cfg)
-
-    def clock_hint(self) -> ClockHint | None:
-        """The DF clock offset the bearings point to, from the latest estimate's last global check (None: none)."""
-        return self._estimates.latest.track.supervisor.clock_hint
-
-    def receiver_noise(self) -> PooledNoise | None:
+    def _receiver_noise(self) -> PooledNoise | None:
         """The receiver's noise pooled over the channels that calibrated theirs (receiver_pool.py), when more than
         one frequency was heard (with one, its own calibration says it all); None otherwise."""
-        if sum(not math.isnan(c.frequency_hz) for c in self.channels.all()) < 2 or not self._cfg.calibrate_noise:
+        if sum(not math.isnan(c.frequency_hz) for c in self._channels.all()) < 2 or not self._cfg.calibrate_noise:
             return None
-        return self.channels.pooled_noise()
-
-    def posterior_grid(self, channel: Channel | None = None) -> PosteriorGrid | None:
-        """The posterior of `channel`'s track (None: the latest estimate's channel) on a map grid around its
-        estimate (engine/outputs/posterior_grid.py); None before its first estimate."""
-        channel = channel or self._estimates.latest
-        track, est = channel.track, channel.estimate
-        if est is None or not track.estimating:
-            return None
-        places = np.vstack([track.cloud.x, np.array([m[:2] for m in est.modes]).reshape(-1, 2)])
-        return posterior_grid(track.posterior_points(), track.robust(), np.array([est.east, est.north]), est.cov,
-                              places, track.modes)
-
-    def vehicle_place(self, station: str = "") -> tuple[float, float] | None:
-        """A moving station's newest accepted fix (east, north in the map frame, m); None before one, or for a fixed
-        site."""
-        st = self._intake.stations.get(station)
-        if st is None or not isinstance(st.gps, GpsTrack) or not len(st.gps):
-            return None
-        return st.gps.e[-1], st.gps.n[-1]
-
-    def next_goal(self, vehicle: tuple[float, float], radius_m: float, channel: Channel | None = None
-                  ) -> NextGoal | None:
-        """Where within `radius_m` of `vehicle` (east, north) the next bearing is expected to shrink the posterior of
-        `channel` (None: the latest estimate's) most (engine/outputs/next_goal.py), for a bearing as noisy as the
-        median of the points used; None before its first estimate, and while a provisional one is behind the points
-        held (the vehicle should drive on, across its bearings)."""
-        channel = channel or self._estimates.latest
-        track, est = channel.track, channel.estimate
-        if est is None or not track.cloud_is_current:
-            return None
-        sigma = float(np.median(track.posterior_points().sigma))
-        return next_goal(track.cloud.x, track.cloud.weights, vehicle, radius_m, sigma)
-
-    def datum_frame(self) -> LocalFrame:
-        """The map frame at the datum (ENU metres); raises RuntimeError before the datum is set."""
-        return self._intake.datum_frame()
+        return self._channels.pooled_noise()
 
     # -- inputs -----------------------------------------------------------------------------------
-    def add_station(self, name: str, fixed: bool = False) -> Station:
-        """Declare a station (stations are also made at their first input, moving). `fixed`: a site that does not
-        move; its position comes from `set_station_position` or its fixes (the newest wins), not a track."""
-        if fixed:
-            self._fixed_stations.setdefault(name, None)
-        return self._intake.add_station(name, fixed)
-
     @_one_at_a_time
-    def set_station_position(self, name: str, lat, lon, alt=float("nan"), sigma_m=0.0) -> bool:
-        """A fixed station's position (kept across reset()); it sets the datum when none is set yet. False (the
-        reason counted) for a position a fix could not have."""
+    def add_station(self, name: str, fixed: bool = False, position: tuple | None = None) -> bool:
+        """Declare a station (stations are also made at their first input, moving). `fixed`: a site that does not
+        move; its position comes from `position` (lat, lon[, alt[, sigma_m]]; kept across reset(); it sets the datum
+        when none is set yet) or its fixes (the newest wins), not a track. False (the reason counted) for a position
+        a fix could not have."""
+        if fixed or position is not None:
+            self._fixed_stations.setdefault(name, None)
+        self._intake.add_station(name, fixed or position is not None)
+        return True if position is None else self._place_station(name, *position)
+
+    def _place_station(self, name: str, lat, lon, alt=float("nan"), sigma_m=0.0) -> bool:
         lat, lon, alt, sigma_m = map(as_float, (lat, lon, alt, sigma_m))
         why = self._intake.bad_position(lat, lon, alt)
         if why:
             self._rejections(why)
             return False
-        self.add_station(name, fixed=True)
         position = (lat, lon, alt, sigma_m if math.isfinite(sigma_m) and sigma_m >= 0 else 0.0)
         self._fixed_stations[name] = position
         self._intake.place(name, *position)
@@ -289,12 +217,12 @@ class Localizer:
         closed = self._intake.take_bearing(stamp, azimuth_deg, quality, sigma_deg, station, frequency_hz)
         return self._estimates.take_points(closed)
 
-    def add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan"), station: str = "",
-                        frequency_hz=float("nan")) -> Estimate | None:
+    def _add_bearing_enu(self, stamp, yaw_rad, variance_rad2=float("nan"), station: str = "",
+                         frequency_hz=float("nan")) -> Estimate | None:
         """A bearing as a REP-103 yaw (rad, counter-clockwise from east at the antenna) with its variance
-        (the `pose` encoding): add_bearing with its azimuth and sigma. No quality: counted as unknown quality.
-        A variance of NaN or 0 (ROS's "not filled in") means the configured sigma; a negative or infinite one is
-        refused as add_bearing refuses such a sigma (`bad_sigma`)."""
+        (the `pose` encoding, fed as a `bearing_pose` input): add_bearing with its azimuth and sigma. No quality:
+        counted as unknown quality. A variance of NaN or 0 (ROS's "not filled in") means the configured sigma; a
+        negative or infinite one is refused as add_bearing refuses such a sigma (`bad_sigma`)."""
         yaw, var = as_float(yaw_rad), as_float(variance_rad2)
         azimuth = 90.0 - math.degrees(yaw) if math.isfinite(yaw) else yaw
         if math.isnan(var) or var == 0.0:
@@ -325,26 +253,42 @@ class Localizer:
                                     frequency_hz=getattr(r, "frequency_hz", nan),
                                     sigma_deg=getattr(r, "sigma_deg", nan))
         if kind == "bearing_pose":
-            return self.add_bearing_enu(r.stamp, r.yaw_rad, getattr(r, "variance_rad2", nan), station=station)
+            return self._add_bearing_enu(r.stamp, r.yaw_rad, getattr(r, "variance_rad2", nan), station=station)
         self.add_heading(r.stamp, r.yaw_rad, station=station, variance_rad2=getattr(r, "variance_rad2", nan))
         return None
 
     def run(self, source: Iterable[Input]) -> Iterator[Estimate]:
         """Offline, in one call: every input of `source` fed in order, then the end of data (flush, finish) and the
-        worker stopped. Yields each estimate an input made, as feed() returns it, then flush's and finish's. Under
-        `scheduling: realtime` the worker is waited for and the owed moves made after each input (catch_up), so the
-        run is what a node at the receiver's pace would make."""
+        worker stopped. Yields, after each input and then after flush and finish, each channel's newest estimate
+        it made (one input can close several channels' points; the constructor's `on_estimate` is told of every
+        one). Under `scheduling: realtime` the worker is waited for and the owed moves made after each input
+        (catch_up), so the run is what a node at the receiver's pace would make."""
+        made: dict[str, Estimate] = {}
+        told = self._estimates.on_estimate
+
+        def collect(est: Estimate) -> None:
+            made[est.channel] = est
+            if told is not None:
+                told(est)
+
+        def drained() -> list[Estimate]:
+            out = list(made.values())
+            made.clear()
+            return out
+
+        self._estimates.on_estimate = collect
         try:
             for event in source:
-                estimate = self.feed(event)
+                self.feed(event)
                 if self._scheduler.realtime:
                     self.catch_up()
-                if estimate is not None:
-                    yield estimate
-            for estimate in (self.flush(), self.finish()):
-                if estimate is not None:
-                    yield estimate
+                yield from drained()
+            self.flush()
+            yield from drained()
+            self.finish()
+            yield from drained()
         finally:
+            self._estimates.on_estimate = told
             self.close()
 
     # -- the lifecycle ----------------------------------------------------------------------------
@@ -368,7 +312,7 @@ class Localizer:
         check, transmitter count or site-part fit it was due, and one owed move made, for the channel owing the most,
         so the points that follow carry none. Returns the estimates the results made (each also goes to
         `on_estimate`)."""
-        live = list(self.channels.live.values())
+        live = list(self._channels.live.values())
         ready = self._scheduler.owners_done()
         done = []
         for c in live if ready else ():
@@ -387,20 +331,19 @@ class Localizer:
     def catch_up(self) -> int:
         """Wait for the worker's jobs, then make every owed move (`scheduling: realtime`; nothing otherwise): what a
         receiver's pace leaves time for between messages, so a replay runs live-like however fast it is fed. The
-        jobs' results are applied at each channel's next point, as live. Returns how many moves it made."""
-        self.wait_for_worker()
-        tracks = [c.track for c in self.channels.live.values()]
+        jobs' results are applied at each channel's next point (or by idle()), as live. Returns how many moves it
+        made."""
+        self._wait_for_worker()
+        tracks = [c.track for c in self._channels.live.values()]
         made = 0
         while self._scheduler.move_one(t.debtor for t in tracks):
             made += 1
         return made
 
-    @_one_at_a_time
-    def wait_for_worker(self) -> None:
+    def _wait_for_worker(self) -> None:
         """Wait until the check worker has finished the live channels' jobs, counts and site-part fits included
-        (`scheduling: realtime`; nothing otherwise); their results are applied at each channel's next point, or by
-        idle()."""
-        self._scheduler.wait(place for c in self.channels.live.values() for place in c.track.places)
+        (`scheduling: realtime`; nothing otherwise)."""
+        self._scheduler.wait(place for c in self._channels.live.values() for place in c.track.places)
 
     def close(self):
         """Stop the background checks' worker (a check running finishes; its result is dropped)."""
@@ -420,13 +363,87 @@ class Localizer:
         taken from a bad fix)."""
         if drop_datum and not self._cfg.has_datum:
             self._intake.frame = None
-        self.channels = Channels(self._cfg, self._rng, self._rejections, self._scheduler)
-        self._intake.reset(self.channels)
+        self._channels = Channels(self._cfg, self._rng, self._rejections, self._scheduler)
+        self._intake.reset(self._channels)
         self._start_tracks(self._estimates.on_estimate)
 
-    @_one_at_a_time
-    def adopt_datum(self, frame: LocalFrame | None):
-        """Keep the map frame of an earlier Localizer (a datum it took from a fix) so that a restart with new
-        settings does not move the map; a configured datum (datum_lat, datum_lon) wins and is kept."""
-        if frame is not None and not self._cfg.has_datum and self.frame is None and not self.stations:
+    def _adopt_datum(self, frame: LocalFrame | None):
+        if frame is not None and not self._cfg.has_datum and self._intake.frame is None and not self._intake.stations:
             self._intake.frame = frame
+
+    def _recent_points(self, n: int | None = None, channel: str | None = None) -> np.ndarray:
+        found = self._estimates.latest if channel is None else self._channels.live.get(channel)
+        rows = found.track.used_points() if found is not None else np.zeros((0, 5))
+        return rows if n is None else rows[len(rows) - min(n, len(rows)):]
+
+    # -- the old face, working for one more round with a DeprecationWarning (docs/interface.md, "Python API") ----
+    def __getattr__(self, name: str):
+        old = None if name.startswith("_") else _DEPRECATED.get(name)
+        if old is None:
+            raise AttributeError(f"'Localizer' object has no attribute {name!r}")
+        advice, get = old
+        warnings.warn(f"Localizer.{name} is deprecated: {advice}", DeprecationWarning, stacklevel=2)
+        return get(self)
+
+    def __setattr__(self, name: str, value) -> None:
+        if name in ("on_estimate", "observer"):
+            warnings.warn(f"setting Localizer.{name} is deprecated: give {name} to the constructor",
+                          DeprecationWarning, stacklevel=2)
+            if name == "on_estimate":
+                self._estimates.on_estimate = value
+            else:
+                self._intake.observer = value
+            return
+        object.__setattr__(self, name, value)
+
+
+def _by_channel(loc: Localizer, channel) -> str | None:
+    """The old face's channel argument (a Channel, its id, or None) as an id."""
+    return channel if channel is None or isinstance(channel, str) else channel.id
+
+
+def _grid(loc: Localizer, channel=None) -> PosteriorGrid | None:
+    post = loc.posterior(_by_channel(loc, channel))
+    return None if post is None else post.grid()
+
+
+def _goal(loc: Localizer, vehicle: tuple[float, float], radius_m: float, channel=None) -> NextGoal | None:
+    post = loc.posterior(_by_channel(loc, channel))
+    return None if post is None else post.next_goal(vehicle, radius_m)
+
+
+# Each old member: what to use instead, and its value (a method's: a callable taking the old arguments)
+_DEPRECATED: dict[str, tuple[str, Callable[[Localizer], Any]]] = {
+    "estimate": ("read view().estimate, or what the add_ calls return", lambda loc: loc._estimates.newest),
+    "on_estimate": ("give on_estimate to the constructor", lambda loc: loc._estimates.on_estimate),
+    "observer": ("give observer to the constructor", lambda loc: loc._intake.observer),
+    "channels": ("read view().channels (values; the engine's channels stay inside it)", lambda loc: loc._channels),
+    "channel": ("read view().channel(cid)", lambda loc: loc._channel),
+    "rejected": ("read view().rejected", lambda loc: loc._rejections.counts),
+    "frame": ("read view().frame", lambda loc: loc._intake.frame),
+    "datum_frame": ("read view().frame (None before the datum is set)", lambda loc: loc._intake.datum_frame),
+    "stations": ("read view().stations", lambda loc: loc._intake.stations),
+    "unknown_quality": ("read view().unknown_quality", lambda loc: loc._intake.pairing.unknown_quality),
+    "other_band": ("read view().other_band", lambda loc: loc._intake.other_band),
+    "status": ("read view().status", lambda loc: loc._status()),
+    "events": ("read view().events",
+               lambda loc: loc._estimates.latest.track.events + loc._intake.input_events),
+    "track_status": ("read view().channel(cid).track",
+                     lambda loc: lambda channel=None: (channel or loc._estimates.latest).track.summary()),
+    "noise_summary": ("read view().noise",
+                      lambda loc: lambda channel=None: noise_summary(channel or loc._estimates.latest, loc._cfg)),
+    "clock_hint": ("read view().clock_hint", lambda loc: lambda: loc._estimates.latest.track.supervisor.clock_hint),
+    "receiver_noise": ("read view().receiver_noise", lambda loc: loc._receiver_noise),
+    "vehicle_place": ("read view().vehicles.get(station)",
+                      lambda loc: lambda station="": loc.view(light=True).vehicles.get(station)),
+    "recent_points": ("read posterior(cid).used_points", lambda loc: loc._recent_points),
+    "start_cloud": ("read posterior().start_cloud",
+                    lambda loc: loc._estimates.latest.track.initiator.start_cloud),
+    "posterior_grid": ("call posterior(cid).grid()", lambda loc: functools.partial(_grid, loc)),
+    "next_goal": ("call posterior(cid).next_goal(vehicle, radius_m)", lambda loc: functools.partial(_goal, loc)),
+    "set_station_position": ("call add_station(name, fixed=True, position=(lat, lon, alt, sigma_m))",
+                             lambda loc: lambda name, *position: loc.add_station(name, True, position)),
+    "add_bearing_enu": ("feed an Input of kind bearing_pose", lambda loc: loc._add_bearing_enu),
+    "wait_for_worker": ("call catch_up()", lambda loc: loc._wait_for_worker),
+    "adopt_datum": ("give datum= to the constructor", lambda loc: loc._adopt_datum),
+}

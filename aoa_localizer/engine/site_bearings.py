@@ -46,11 +46,11 @@ def locate_bearings(bearings: list[SiteBearing], cfg: LocalizerConfig) -> tuple[
     """One emitter's bearings fed as fixed sites in stamp order; the end-of-data estimate and its Localizer."""
     loc = Localizer(cfg)
     for b in sorted(bearings, key=lambda b: b.stamp):
-        loc.set_station_position(b.site, b.lat, b.lon)
+        loc.add_station(b.site, fixed=True, position=(b.lat, b.lon))
         # a bearing with its own sigma is taken at it alone, its quality unused
         quality = b.quality if math.isnan(b.sigma_deg) else math.nan
         loc.add_bearing(b.stamp, b.azimuth_deg, quality, station=b.site, sigma_deg=b.sigma_deg)
     loc.flush()
-    est = loc.finish() or loc.estimate
+    est = loc.finish() or loc.view(light=True).estimate
     loc.close()
     return est, loc

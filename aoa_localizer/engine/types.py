@@ -17,8 +17,9 @@ SIGMA_RANGE_RAD = (math.radians(SIGMA_RANGE_DEG[0]), math.radians(SIGMA_RANGE_DE
 
 class Input(NamedTuple):
     """One input as a source gives it (Localizer.feed and run): `kind` fix, bearing, bearing_pose or heading (other
-    kinds are not the engine's: passed over), `record` its fields by name (those of add_fix, add_bearing,
-    add_bearing_enu, add_heading: FixInput, BearingInput, or a bag's records), `station` ("": the default one)."""
+    kinds are not the engine's: passed over), `record` its fields by name (those of add_fix, add_bearing and
+    add_heading, or a pose bearing's: FixInput, BearingInput, BearingPoseInput, or a bag's records), `station`
+    ("": the default one)."""
 
     kind: str
     record: Any
@@ -44,6 +45,15 @@ class BearingInput(NamedTuple):
     quality: float = math.nan
     frequency_hz: float = math.nan
     sigma_deg: float = math.nan
+
+
+class BearingPoseInput(NamedTuple):
+    """A bearing as a pose gives it (the `pose` encoding): a REP-103 yaw (rad, counter-clockwise from east at the
+    antenna) and its variance (rad^2; NaN or 0: the configured sigma), fed as an Input of kind bearing_pose."""
+
+    stamp: float
+    yaw_rad: float
+    variance_rad2: float = math.nan
 
 
 @dataclass(frozen=True)

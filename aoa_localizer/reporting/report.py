@@ -137,12 +137,15 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
                   truths=None, cot_files=()):
     a, b, azimuth = ellipse_axes(est.cov)
     used = int(sum(1 for r in trace.readings if r[5]))
+    view = loc.view()
+    frame = view.frame
+    assert frame is not None  # write_files comes after report() found a fix
     lines = [
         f"# Emitter localisation: {Path(inp).name}",
         "",
         f"* **Estimate**{'' if est.channel == 'default' else f' (channel {est.channel}, {_mhz(est.frequency_hz)})'}"
         f": {est.lat:.7f}, {est.lon:.7f} (east {est.east:.1f} m, north {est.north:.1f} m "
-        f"of the datum {loc.datum_frame().lat0:.7f}, {loc.datum_frame().lon0:.7f})",
+        f"of the datum {frame.lat0:.7f}, {frame.lon0:.7f})",
         f"* **95 % error ellipse**: semi-axes {a:.1f} m x {b:.1f} m, major axis at {azimuth:.0f} deg from north",
         f"* **Algorithm**: {est.algorithm}, N = {loc.config.num_particles}, seed {loc.config.seed}",
         f"* **Bearings used**: {est.bearings_used} in {est.points_used} observation points "
@@ -159,8 +162,8 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
     if damage:
         lines.append(f"* **Input damaged**: {damage}; this report covers the data before the damage")
     if loc.config.calibrate_noise:
-        lines.append(f"* **Receiver noise (self-calibrated)**: {noise_sentence(loc.noise_summary())}")
-    pooled = loc.receiver_noise()
+        lines.append(f"* **Receiver noise (self-calibrated)**: {noise_sentence(dict(view.noise))}")
+    pooled = view.receiver_noise
     if pooled is not None:
         lines.append(f"* **The receiver over its channels**: {pooled.sentence()}")
     if len(est.modes) > 1:
@@ -169,7 +172,7 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
             + "; ".join(
                 f"{lat:.7f}, {lon:.7f} ({100 * m:.0f} %)"
                 for (lat, lon), (_, _, m) in zip(
-                    (loc.datum_frame().to_geodetic(e, n)[:2] for e, n, _ in est.modes), est.modes, strict=False
+                    (frame.to_geodetic(e, n)[:2] for e, n, _ in est.modes), est.modes, strict=False
                 )
             )
         )
@@ -180,13 +183,13 @@ def write_summary(path: Path, inp, loc: Localizer, trace: Trace, est: Estimate, 
                   f"{ellipse_axes(e.cov)[0]:.1f} x {ellipse_axes(e.cov)[1]:.1f} m | {e.points_used} | "
                   f"{_error_words(e, (truths or {}).get(e.channel))} |" for e in others]
         lines.append("")
-    events = {k: v for k, v in loc.events.items() if k != "alarm_points"}
+    events = {k: v for k, v in view.events.items() if k != "alarm_points"}
     if events:
         lines.append("* **Robustness events**: " + ", ".join(f"{k} {v}" for k, v in sorted(events.items())))
     lines += ["", "## Inputs not used", ""]
-    if loc.rejected:
+    if view.rejected:
         lines += ["| reason | count | meaning |", "|---|---|---|"]
-        lines += [f"| `{k}` | {v} | {REASONS[k]} |" for k, v in sorted(loc.rejected.items())]
+        lines += [f"| `{k}` | {v} | {REASONS[k]} |" for k, v in sorted(view.rejected.items())]
     else:
         lines.append("none")
     lines += [
@@ -270,15 +273,16 @@ def make_report(args) -> int:
         raise ReportError(str(exc)) from exc
     if run.damage:
         print(f"report: {run.damage}; reporting what came before", file=sys.stderr)
-    if loc.frame is None:
+    view = loc.view(light=True)
+    if view.frame is None:
         raise ReportError("the bag holds no usable GPS fix")
     if jsonl:
         try:
-            estimates = estimates_from_jsonl(args.input, loc.frame)
+            estimates = estimates_from_jsonl(args.input, view.frame)
         except (OSError, ValueError) as exc:
             raise ReportError(str(exc)) from exc
     if not estimates:
-        raise ReportError(f"no estimate ({loc.status})")
+        raise ReportError(f"no estimate ({view.status})")
     write_files(args, loc, trace, estimates, run)
     print(f"report written to {args.out}: " + ", ".join(sorted(p.name for p in args.out.iterdir())), file=sys.stderr)
     return 1 if run.damage else 0
@@ -288,7 +292,9 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     """map.png, error.png (with the truth), emitter.kml, emitter.geojson and summary.md in args.out. Every emitter
     (channel) is drawn and exported, a moving one's path as a line; the error plot and the summary's figures are the
     last estimate's channel's."""
-    frame, est = loc.datum_frame(), estimates[-1]
+    view, est = loc.view(light=True), estimates[-1]
+    frame = view.frame
+    assert frame is not None  # report() found a fix
     finals = list({e.channel: e for e in estimates}.values())  # each channel's last estimate
     paths = export.moving_paths(estimates)  # a moving transmitter's path, per channel
     all_estimates, estimates = estimates, [e for e in estimates if e.channel == est.channel]
@@ -304,7 +310,8 @@ def write_files(args, loc: Localizer, trace: Trace, estimates: list[Estimate], r
     kept = readings[:, 5].astype(bool)
     args.out.mkdir(parents=True, exist_ok=True)
     others = [e for e in finals if e.channel != est.channel]
-    posterior = loc.posterior_grid() if loc.estimate is est else None  # the run's own estimate, not a file's
+    own = loc.posterior() if view.estimate is est else None  # the run's own estimate, not a file's
+    posterior = own.grid() if own is not None else None
     plots.map_figure(args.out / "map.png", frame, tracks, readings[:, :5], kept, est, truth, others=others,
                      posterior=posterior, history=all_estimates)
     bound = None

@@ -31,7 +31,9 @@ from std_srvs.srv import Trigger
 from aoa_localizer.common.cot import CotSender, CotUnavailable, estimate_event
 from aoa_localizer.core.spec import ConfigError, IncompleteGroup, ParameterSpec, unknown_names
 from aoa_localizer.engine.config import LocalizerConfig, parameter_specs
+from aoa_localizer.engine.geodesy import LocalFrame
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.outputs.view import LocalizerView
 from aoa_localizer.engine.rejections import REASONS
 from aoa_localizer.engine.scheduling.memory import OldObjects
 from aoa_localizer.ros.declare import declare, refuse_unknown, value_of
@@ -272,13 +274,13 @@ class LocalizerNode(Node):
             positions[n] = pos
         return names or [""], positions
 
-    def _new_localizer(self, cfg: LocalizerConfig) -> Localizer:
-        """A Localizer with the node's stations declared (fixed ones at their configured positions)."""
-        loc = Localizer(cfg, observer=self.path, on_estimate=self._made, live=True)
+    def _new_localizer(self, cfg: LocalizerConfig, datum: LocalFrame | None = None) -> Localizer:
+        """A Localizer with the node's stations declared (fixed ones at their configured positions); `datum`: the
+        map frame to keep (a restart with new settings that do not move it)."""
+        loc = Localizer(cfg, observer=self.path, on_estimate=self._made, live=True, datum=datum)
         for name, pos in self.fixed_positions.items():
-            loc.add_station(name, fixed=True)
-            if pos and not loc.set_station_position(name, *pos):
-                reason = next(iter(loc.rejected))
+            if not loc.add_station(name, fixed=True, position=tuple(pos) if pos else None):
+                reason = next(iter(loc.view(light=True).rejected))
                 raise ConfigError(f"{name}.position {pos} is not a usable position: {REASONS[reason]}")
         return loc
 
@@ -354,12 +356,12 @@ class LocalizerNode(Node):
         self.restart_due = None
         old = self.loc
         old.close()
-        self.cfg, self.loc = cfg, self._new_localizer(cfg)
+        moved = bool(names & DATUM_PARAMS)  # only datum_* move the map frame
+        self.cfg = cfg
+        self.loc = self._new_localizer(cfg, None if moved else old.view(light=True).frame)
         self.fix_wait.reset()  # what waited goes to the new engine; its fixes start again
-        if names & DATUM_PARAMS:
+        if moved:
             self.path.clear()  # drawn in the old map frame
-        else:
-            self.loc.adopt_datum(old.frame)  # only datum_* move the map frame
         del old
         self.old_objects.thaw()  # the dropped Localizer's reference cycles go now
         self.outputs.datum(self.loc)
@@ -460,21 +462,24 @@ class LocalizerNode(Node):
             self._send_cot(est)
             if latency:
                 self.monitor.published()
-        self.outputs.summary(self.loc, only_if_new_channel=list(made))
+        if made and self.outputs.summary_due(list(made)):
+            self.outputs.summary(self.loc.view())
 
     def _now(self) -> float:
         """The node's clock (ROS time: /clock under use_sim_time), seconds."""
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def diagnostics(self) -> tuple[int, str, dict]:
-        """(level, message, values) of the localizer's state, as published on /diagnostics (NodeMonitor)."""
+    def diagnostics(self, view: LocalizerView | None = None) -> tuple[int, str, dict]:
+        """(level, message, values) of the localizer's state (`view`: the Localizer's now, if not given), as
+        published on /diagnostics (NodeMonitor)."""
         problems = self._publisher_problems()
         said = problems["input_publishers"] + problems["node_name"]
         if said != self.crowded_said:  # said in the log once each time it changes
             self.crowded_said = said
             for words in said:
                 self.get_logger().warning(words)
-        level, message, values = self.monitor.diagnostics(self.loc, self._now(), self.pending_params, problems)
+        level, message, values = self.monitor.diagnostics(view or self.loc.view(), self.loc.config, self._now(),
+                                                          self.pending_params, problems)
         values.update(df_waiting_for_fix=self.fix_wait.count, df_waited_for_fix=self.fix_wait.waited,
                       df_fix_wait_timed_out=self.fix_wait.timed_out)
         if self.cot is not None:  # what went to TAK, and why not
@@ -568,21 +573,22 @@ class LocalizerNode(Node):
         t0 = time.perf_counter()
         mon = self.monitor
         mon.period_done()
-        level, message, values = self.diagnostics()
+        view = self.loc.view()
+        level, message, values = self.diagnostics(view)
         hardware_id = self.get_parameter("hardware_id").value
         self.pub_diag.publish(build.diagnostic_array(self.types, self._now(), self.diag_name, level, message, values,
-                                                     hardware_id, mon.channel_diagnostics(self.loc, self.diag_name)))
+                                                     hardware_id, mon.channel_diagnostics(view, self.diag_name)))
         mon.posterior_work = PosteriorWork()  # the grids of the period just reported
         self.outputs.paths(self.path)
-        self.outputs.summary(self.loc)
-        self.outputs.drop_gone(self.loc)
+        self.outputs.summary(view)
+        self.outputs.drop_gone(view)
         mon.end_period(t0)
 
     def on_goal_period(self):
         """Once a second: where to drive next (emitter/next_goal), for the channels someone listens to, from the
         first moving station's newest fix."""
         t0 = time.perf_counter()
-        vehicle = self.loc.vehicle_place(self.vehicle) if self.vehicle is not None else None
+        vehicle = self.loc.view(light=True).vehicles.get(self.vehicle) if self.vehicle is not None else None
         self.outputs.next_goals(self.loc, vehicle, self.get_parameter("goal_radius_m").value)
         self.monitor.other_s += time.perf_counter() - t0
 

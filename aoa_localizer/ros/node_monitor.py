@@ -12,13 +12,14 @@ import numpy as np
 from rclpy.event_handler import SubscriptionEventCallbacks
 
 from aoa_localizer.engine.channels import DEFAULT
+from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.crlb import ellipse_axes
 from aoa_localizer.engine.inference.noise import sentence as noise_sentence
 from aoa_localizer.engine.ingest.input_guard import StampGaps
-from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.outputs.view import LocalizerView
 from aoa_localizer.engine.rejections import FIX_REASONS
 from aoa_localizer.engine.types import EstimateState
-from aoa_localizer.reporting.words import clock_hint_sentence
+from aoa_localizer.reporting.words import clock_hint_words
 from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
 from aoa_localizer.ros.node_outputs import PosteriorWork
 
@@ -141,7 +142,8 @@ class NodeMonitor:
         self.other_s = self.period_start - t0
 
     # -- /diagnostics ---------------------------------------------------------------------------------
-    def diagnostics(self, loc: Localizer, now: float, held: dict, wrong: dict[str, list[str]]) -> tuple[int, str, dict]:
+    def diagnostics(self, view: LocalizerView, config: LocalizerConfig, now: float, held: dict,
+                    wrong: dict[str, list[str]]) -> tuple[int, str, dict]:
         """(level, message, values) of the node's health: OK while it works as designed, whatever the estimate's
         state (waiting for a fix, collecting, checking, `poorly_determined`, `tracking`: the message and `state`
         say which, and an estimate's own warnings join the message); WARN while the estimate is `suspect` (the model
@@ -149,20 +151,20 @@ class NodeMonitor:
         filter keeps restarting.
         `held`: parameters waiting for the rest of their group; `wrong`: what is wrong with the inputs' publishers,
         by diagnostics key (Node._publisher_problems)."""
-        values = self._state_values(loc)
-        values.update(self._robustness_values(loc))
+        values = self._state_values(view, config)
+        values.update(self._robustness_values(view, config))
         if held:
             values["parameters_held"] = ", ".join(sorted(held)) + " (waiting for the rest of the group)"
         values.update(df_stamp_gaps=sum(g.gaps for g in self.df_gaps.values()),
                       df_missing_by_stamp=sum(g.missing for g in self.df_gaps.values()),
                       fix_stamp_gaps=sum(g.gaps for g in self.fix_gaps.values()),
                       fixes_missing_by_stamp=sum(g.missing for g in self.fix_gaps.values()))
-        self.health.count_restarts(now, restarts_made(loc))
-        warnings = self._warnings(loc, wrong) + self.health.stale(now)
+        self.health.count_restarts(now, restarts_made(view))
+        warnings = self._warnings(view, config, wrong) + self.health.stale(now)
         error = self.health.restart_error()
         if error:
             warnings.append(("restarting", *error))
-        est = loc.estimate
+        est = view.estimate
         # An estimate's own warnings are findings (two transmitters on the frequency, an offset learned and taken
         # off, a wide ellipse) said in the message at OK; a suspect estimate's say why it is WARN
         findings: list[tuple[str, str, str]] = []
@@ -175,22 +177,22 @@ class NodeMonitor:
                 findings = said
         values.update({key: value for key, value, _ in warnings})
         level = 2 if error else 1 if warnings else 0
-        return level, "; ".join([loc.status] + [words for _, _, words in warnings + findings]), values
+        return level, "; ".join([view.status] + [words for _, _, words in warnings + findings]), values
 
-    def _state_values(self, loc: Localizer) -> dict[str, Any]:
+    def _state_values(self, view: LocalizerView, config: LocalizerConfig) -> dict[str, Any]:
         """Counts, rejections by reason, callback load and the estimate."""
-        track = loc.track_status()
+        track = view.track
         # Totals over every channel kept (each channel's own are in its status, channel_diagnostics)
-        tracks = [loc.track_status(channel) for channel in loc.channels.all()] or [track]
+        tracks = [channel.track for channel in view.channels] or [track]
         values: dict[str, Any] = dict(self.counts)
-        values.update(status=loc.status, algorithm=loc.config.algorithm,
+        values.update(status=view.status, algorithm=config.algorithm,
                       bearings_used=sum(t.bearings_used for t in tracks),
                       points_used=sum(t.points_used for t in tracks),
                       jobs_running=sum(t.working for t in tracks),  # searches, checks, counts, fits: results to come
-                      unknown_quality=loc.unknown_quality, other_band=loc.other_band,
-                      bearings_rejected=sum(v for k, v in loc.rejected.items() if k not in FIX_REASONS),
-                      fixes_rejected=sum(v for k, v in loc.rejected.items() if k in FIX_REASONS))
-        values.update({f"rejected.{k}": v for k, v in sorted(loc.rejected.items())})
+                      unknown_quality=view.unknown_quality, other_band=view.other_band,
+                      bearings_rejected=sum(v for k, v in view.rejected.items() if k not in FIX_REASONS),
+                      fixes_rejected=sum(v for k, v in view.rejected.items() if k in FIX_REASONS))
+        values.update({f"rejected.{k}": v for k, v in sorted(view.rejected.items())})
         if self.callback_s:
             values.update(callback_mean_ms=f"{1e3 * sum(self.callback_s) / len(self.callback_s):.3f}",
                           callback_max_ms=f"{1e3 * self.callback_max_s:.3f}",
@@ -210,7 +212,7 @@ class NodeMonitor:
         if self.latency_since_start.total:
             values.update(poses_since_start=self.latency_since_start.total,
                           pose_latency_p99_ms_since_start=f"{self.latency_since_start.percentile(99):.3f}")
-        est = loc.estimate
+        est = view.estimate
         if est is not None:
             values.update(ess=f"{est.ess:.1f}", update_ms=f"{1e3 * track.update_s:.3f}", east=f"{est.east:.2f}",
                           north=f"{est.north:.2f}", lat=f"{est.lat:.7f}", lon=f"{est.lon:.7f}",
@@ -223,13 +225,14 @@ class NodeMonitor:
         period = max(time.perf_counter() - self.period_start, self.period_s())
         return (sum(self.callback_s) + self.other_s) / period
 
-    def _warnings(self, loc: Localizer, wrong: dict[str, list[str]]) -> list[tuple[str, str, str]]:
+    def _warnings(self, view: LocalizerView, config: LocalizerConfig,
+                  wrong: dict[str, list[str]]) -> list[tuple[str, str, str]]:
         """(key, value, words for the status message) of each warning that holds now."""
         out = []
         for key, problems in wrong.items():  # a publisher of another type; more than one source on one input topic
             if problems:
                 out.append((key, "; ".join(problems), problems[0]))
-        overload = self._overload(loc)
+        overload = self._overload(view)
         if overload:
             out.append(("overload", overload, "the node cannot keep up with its inputs"))
         lost = self.counts["fixes_lost"] + self.counts["bearings_lost"]
@@ -238,12 +241,12 @@ class NodeMonitor:
                         "last period (network, or input_queue_depth too small for the load)",
                         "input messages are being lost"))
         self.lost_reported = lost
-        clock = clock_hint_sentence(loc)
+        clock = clock_hint_words(view.clock_hint, config.df_time_offset_s)
         if clock:
             out.append(("clock_offset", clock, "the DF stamps look offset from the GPS clock"))
         return out
 
-    def _overload(self, loc: Localizer) -> str | None:
+    def _overload(self, view: LocalizerView) -> str | None:
         """Why the node could not keep up in this period (its work over _MAX_LOAD of the wall time, or the period
         held up), with the inputs refused meanwhile; the words hold one more period, since what a stall lost is
         refused while its backlog is worked off. None when it kept up."""
@@ -263,7 +266,7 @@ class NodeMonitor:
             cause = f"the node was held up: this diagnostics period lasted {wall:.1f} s ({period:g} s configured)"
         elif load > _MAX_LOAD:
             cause = f"the node worked {100 * load:.0f} % of the last period"
-        return self.overload.judge(cause, loc.rejected, self._missing())
+        return self.overload.judge(cause, view.rejected, self._missing())
 
     def _missing(self) -> int:
         """Inputs that never arrived, as far as anything can tell: the middleware's lost counts, and the stamp gaps
@@ -274,37 +277,37 @@ class NodeMonitor:
                 + max(stamps, sum(g.missing for g in self.sequences.values())))
 
     @staticmethod
-    def _robustness_values(loc: Localizer) -> dict:
+    def _robustness_values(view: LocalizerView, config: LocalizerConfig) -> dict:
         """Self-calibrated noise, modes, the health test and the robustness events, as diagnostic values."""
         values: dict[str, Any] = {}
-        if loc.config.calibrate_noise:
-            noise = loc.noise_summary()
+        if config.calibrate_noise:
+            noise = dict(view.noise)
             values["noise"] = noise_sentence(noise)
             values.update({f"noise.sigma_deg.q{k}": v for k, v in noise["sigma_deg"].items()})
             values.update({"noise.reading_outlier_prob": noise["reading_outlier_prob"],
                            "noise.point_outlier_prob": noise["point_outlier_prob"]})
-        pooled = loc.receiver_noise()
+        pooled = view.receiver_noise
         if pooled is not None:  # one receiver over its channels (receiver_pool.py)
             values.update({"receiver_noise": pooled.sentence(), "receiver_noise.scale": round(pooled.scale, 3),
                            "receiver_noise.channels": pooled.channels})
-        values["health.recent_outlier_share"] = f"{loc.track_status().outlier_share:.2f}"
-        est = loc.estimate
+        values["health.recent_outlier_share"] = f"{view.track.outlier_share:.2f}"
+        est = view.estimate
         if est is not None:
             values["modes"] = len(est.modes)
             values.update({f"mode.{i + 1}": f"E {e:.1f} N {n:.1f} mass {m:.3f}"
                            for i, (e, n, m) in enumerate(est.modes)})
-        values.update({f"events.{k}": v for k, v in sorted(loc.events.items())})
+        values.update({f"events.{k}": v for k, v in sorted(view.events.items())})
         return values
 
     @staticmethod
-    def channel_diagnostics(loc: Localizer, diag_name: str) -> list[tuple[str, int, str, dict]]:
+    def channel_diagnostics(view: LocalizerView, diag_name: str) -> list[tuple[str, int, str, dict]]:
         """One status per frequency channel: WARN while its estimate is `suspect`, else OK (retired, before its
         first estimate, checking, `poorly_determined` or `tracking`: the message says which)."""
         out = []
-        for channel in loc.channels.all():
+        for channel in view.channels:
             if channel.id == DEFAULT:
                 continue
-            track, est = loc.track_status(channel), channel.estimate
+            track, est = channel.track, channel.estimate
             values: dict[str, Any] = {"frequency_hz": f"{channel.frequency_hz:.0f}", "status": track.text,
                                       "bearings_used": track.bearings_used, "points_used": track.points_used,
                                       "topics": f"emitter/{channel.id}/"}
@@ -317,12 +320,12 @@ class NodeMonitor:
         return out
 
 
-def restarts_made(loc) -> Counter:
+def restarts_made(view: LocalizerView) -> Counter:
     """The restarts of every channel's filter so far, by kind: a re-start from a global check or because the
     emitter moved (one event each; the bearings an `emitter_moved` restart drops are rejections, not restarts),
     and a diverged filter (one rejection each)."""
     made: Counter = Counter()
-    for channel in loc.channels.all():
-        made.update({k: channel.track.events.get(k, 0) for k in ("global_restart", "emitter_moved")})
-    made["filter_diverged"] = loc.rejected.get("filter_diverged", 0)
+    for channel in view.channels:
+        made.update({k: channel.events.get(k, 0) for k in ("global_restart", "emitter_moved")})
+    made["filter_diverged"] = view.rejected.get("filter_diverged", 0)
     return made

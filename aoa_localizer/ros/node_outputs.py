@@ -10,13 +10,15 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any
 
+import numpy as np
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from aoa_localizer.engine.channels import DEFAULT, Channel
+from aoa_localizer.engine.channels import DEFAULT
 from aoa_localizer.engine.crlb import ELLIPSE_95, ellipse_axes, ellipse_points
 from aoa_localizer.engine.localizer import Localizer
+from aoa_localizer.engine.outputs.view import LocalizerView
 from aoa_localizer.ros.vehicle_path import VehiclePath
 from msgs_adapters import build
 
@@ -78,23 +80,27 @@ class NodeOutputs:
         pubs = self.channel_pubs.get(est.channel)
         if pubs is None:
             pubs = self.channel_pubs[est.channel] = self._channel_publishers(f"emitter/{est.channel}/")
-        self._publish_on(loc, pubs, est, marker_rays)
+        view = loc.view(light=True)
+        self._publish_on(loc, view, pubs, est, marker_rays)
         self._transmitters(est)
-        if est.channel != DEFAULT and getattr(loc.channels.primary(), "id", None) == est.channel:
-            self._publish_on(loc, self.channel_pubs[DEFAULT], est, marker_rays)  # emitter/ carries the primary
+        if est.channel != DEFAULT and view.primary == est.channel:
+            self._publish_on(loc, view, self.channel_pubs[DEFAULT], est, marker_rays)  # emitter/ carries the primary
 
-    def _publish_on(self, loc: Localizer, pubs: SimpleNamespace, est, marker_rays: int):
+    def _publish_on(self, loc: Localizer, view: LocalizerView, pubs: SimpleNamespace, est, marker_rays: int):
         """The estimate on one set of publishers (a channel's, or emitter/ for the primary channel)."""
         T, frame = self.types, self.map_frame
         pubs.pose.publish(build.emitter_pose(T, est, frame))
         if est.velocity is not None and est.velocity_cov is not None:
             pubs.velocity.publish(build.emitter_velocity(T, est, frame))
-        pubs.fix.publish(build.emitter_fix(T, est, loc.datum_frame().alt0, self.emitter_frame))
+        alt0 = view.frame.alt0 if view.frame is not None else 0.0  # an estimate comes after the datum
+        pubs.fix.publish(build.emitter_fix(T, est, alt0, self.emitter_frame))
         # The cloud and the markers cost about 1 ms to build: only for someone listening.
         if pubs.particles.get_subscription_count():
             pubs.particles.publish(build.particle_array(T, est, frame))
         if pubs.markers.get_subscription_count():
-            rays = loc.recent_points(marker_rays, est.channel)[:, :3]
+            post = loc.posterior(est.channel)
+            rows = post.used_points if post is not None else np.zeros((0, 5))
+            rays = rows[len(rows) - min(marker_rays, len(rows)):, :3]
             ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
             pubs.markers.publish(build.markers(T, est, rays, ring, frame))
 
@@ -122,25 +128,25 @@ class NodeOutputs:
         start, now = self._grid_turn % len(listened), time.monotonic()
         t0 = time.perf_counter()
         for k in range(len(listened)):
-            channel, listening = listened[(start + k) % len(listened)]
-            est = channel.estimate
-            if est is None or now - self._grid_sent.get(channel.id, -math.inf) < period_s:
+            cid, est, listening = listened[(start + k) % len(listened)]
+            if now - self._grid_sent.get(cid, -math.inf) < period_s:
                 continue
-            cached = self._grids.get(channel.id)
+            cached = self._grids.get(cid)
             if cached is None or cached[0] is not est:
                 if time.perf_counter() - t0 >= budget_s:
                     work.deferred += 1
                     continue
-                grid = loc.posterior_grid(channel)
-                if grid is None:
+                post = loc.posterior(cid)
+                if post is None:
                     continue
-                cached = self._grids[channel.id] = (est, build.occupancy_grid(
+                grid = post.grid()
+                cached = self._grids[cid] = (est, build.occupancy_grid(
                     self.types, est.stamp, grid.east0, grid.north0, grid.resolution, grid.value, self.map_frame))
                 work.made += 1
                 self._grid_turn = (start + k + 1) % len(listened)
             for pub in listening:
                 pub.publish(cached[1])
-            self._grid_sent[channel.id] = now
+            self._grid_sent[cid] = now
         work.seconds = time.perf_counter() - t0
         return work
 
@@ -150,34 +156,42 @@ class NodeOutputs:
         listens to; none without an estimate or a vehicle's place."""
         if vehicle is None:
             return
-        for channel, listening in self._listened(loc, "goal", "goal_marker"):
-            goal = loc.next_goal(vehicle, radius_m, channel)
-            est = channel.estimate
-            if goal is None or est is None:
+        for cid, est, listening in self._listened(loc, "goal", "goal_marker"):
+            post = loc.posterior(cid)
+            goal = post.next_goal(vehicle, radius_m) if post is not None else None
+            if goal is None:
                 continue
             place = (goal.east, goal.north)
             pose = build.goal_pose(self.types, est.stamp, vehicle, place, self.map_frame)
-            arrow = build.goal_arrow(self.types, est.stamp, vehicle, place, channel.id, self.map_frame)
+            arrow = build.goal_arrow(self.types, est.stamp, vehicle, place, cid, self.map_frame)
             for pub in listening:
                 pub.publish(pose if pub.msg_type is self.types.PoseStamped else arrow)
 
-    def _listened(self, loc: Localizer, *kinds: str) -> list[tuple[Channel, list]]:
-        """The channels with a listener on one of their `kinds` of publishers (its own, or emitter/'s for the primary
-        channel), each with those publishers. One pass over the publishers: a node keeps hundreds of them."""
-        primary, by_id = loc.channels.primary(), {c.id: c for c in loc.channels.all()}
-        out: dict[str, tuple[Channel, list]] = {}
+    def _listened(self, loc: Localizer, *kinds: str) -> list[tuple[str, Any, list]]:
+        """The channels with an estimate and a listener on one of their `kinds` of publishers (its own, or
+        emitter/'s for the primary channel): (id, its estimate, those publishers). One pass over the publishers: a
+        node keeps hundreds of them; the Localizer is read only when someone listens."""
+        wanted = []
         for cid, pubs in self.channel_pubs.items():
-            channel = (primary or by_id.get(DEFAULT)) if cid == DEFAULT else by_id.get(cid)
             listening = [getattr(pubs, kind) for kind in kinds if getattr(pubs, kind).get_subscription_count()]
-            if channel is not None and listening:
-                out.setdefault(channel.id, (channel, []))[1].extend(listening)
+            if listening:
+                wanted.append((cid, listening))
+        if not wanted:
+            return []
+        view = loc.view(light=True)
+        out: dict[str, tuple[str, Any, list]] = {}
+        for cid, listening in wanted:
+            channel = (view.primary or DEFAULT) if cid == DEFAULT else cid
+            est = view.estimates.get(channel)
+            if est is not None:
+                out.setdefault(channel, (channel, est, []))[2].extend(listening)
         return list(out.values())
 
     @staticmethod
-    def channel_summary(loc: Localizer) -> dict[str, dict]:
+    def channel_summary(view: LocalizerView) -> dict[str, dict]:
         """Every channel with an estimate: its frequency, topics, state (live or retired) and latest estimate."""
         out = {}
-        for channel in loc.channels.all():
+        for channel in view.channels:
             est = channel.estimate
             if est is None:
                 continue
@@ -196,21 +210,22 @@ class NodeOutputs:
             }
         return out
 
-    def summary(self, loc: Localizer, only_if_new_channel: list[str] | None = None):
-        """emitter/channels (latched std_msgs/String): a JSON object of the channels, when it changed; with
-        `only_if_new_channel`, only when one of those channels is not in the last one sent."""
+    def summary_due(self, channels: list[str]) -> bool:
+        """Whether one of these channels (ones that just made an estimate) is not in the last emitter/channels."""
         sent = self.summary_sent
-        if only_if_new_channel is not None and not any(sent is None or c not in sent for c in only_if_new_channel):
-            return
-        summary = self.channel_summary(loc)
-        if summary != sent:
+        return any(sent is None or c not in sent for c in channels)
+
+    def summary(self, view: LocalizerView):
+        """emitter/channels (latched std_msgs/String): a JSON object of the channels, when it changed."""
+        summary = self.channel_summary(view)
+        if summary != self.summary_sent:
             self.pub_channels.publish(self.types.String(data=json.dumps({"channels": summary}, sort_keys=True)))
             self.summary_sent = summary
 
     def datum(self, loc: Localizer, stamp: float | None = None):
         """emitter/datum (latched) whenever the map frame's origin is new: set from a fix (stamped with the fix that
         made it known: measurement time, as every output), or configured (the node's clock: no measurement yet)."""
-        datum = loc.frame
+        datum = loc.view(light=True).frame
         if datum is not None and datum != self.datum_sent:
             when = self.now() if stamp is None else stamp
             self.pub_datum.publish(build.datum_fix(self.types, when, datum.lat0, datum.lon0, datum.alt0,
@@ -225,10 +240,10 @@ class NodeOutputs:
             if pub is not None and pub.get_subscription_count():
                 pub.publish(build.vehicle_path(self.types, poses[-1][0], poses, self.map_frame))
 
-    def drop_gone(self, loc: Localizer):
+    def drop_gone(self, view: LocalizerView):
         """The publishers of channels the engine no longer keeps (retired long ago): memory stays bounded under a
         stream of ever new frequencies."""
-        kept = {c.id for c in loc.channels.all()} | {DEFAULT}
+        kept = {c.id for c in view.channels} | {DEFAULT}
         self._grids = {cid: g for cid, g in self._grids.items() if cid in kept}
         self._grid_sent = {cid: t for cid, t in self._grid_sent.items() if cid in kept}
         for cid in [cid for cid in self.channel_pubs if cid not in kept]:

@@ -61,7 +61,7 @@ def run(data: ScenarioData, cfg: LocalizerConfig) -> RunResult:
     def keep(est):
         if est is not None:
             estimates.append(est)
-            step_s.append(loc.track_status().update_s)
+            step_s.append(loc.view(light=True).track.update_s)
 
     t0 = time.perf_counter()
     for estimate in loc.run(data.inputs()):
@@ -79,14 +79,17 @@ def run_batch_ml(data: ScenarioData, cfg: LocalizerConfig) -> dict:
     t0 = time.perf_counter()
     feed(loc, data)
     loc.flush()  # no finish(): no filter runs; the batch estimate is the end-of-data search
-    channel = loc.channel()
+    # the reference reads the track's held points directly: no filter runs, so no estimate leaves the face
+    channel = loc._channel()
     mode = channel.batch_estimate() if channel is not None else None
     wall = time.perf_counter() - t0
     truth = data.emitter_enu
     bound = crlb_rmse(truth, data.sensor_enu[~data.wild], data.sigma[~data.wild])
     if mode is None:
         return {"converged": False, "crlb": bound, "wall_s": wall}
-    lat, lon, _ = loc.datum_frame().to_geodetic(mode.mean[0], mode.mean[1])
+    frame = loc.view(light=True).frame
+    assert frame is not None  # a mode comes from points, after the datum
+    lat, lon, _ = frame.to_geodetic(mode.mean[0], mode.mean[1])
     err = np.array(data.frame.to_enu(lat, lon)) - truth
     return {**final_scores(err, mode.cov, bound), "wall_s": wall}
 

@@ -91,7 +91,8 @@ def closed_loop(drive: GoalDrive, loc: Localizer, radius_m: float, follow_goal: 
     while goal is not None or drive.route_s < drive.route.length or not drive.legs:
         feed(loc, drive.leg(goal))
         if follow_goal:
-            place = loc.vehicle_place()
-            found = loc.next_goal(place, radius_m) if place is not None else None
+            place = loc.view(light=True).vehicles.get("")
+            post = loc.posterior() if place is not None else None
+            found = post.next_goal(place, radius_m) if post is not None and place is not None else None
             goal = (found.east, found.north) if found is not None else None
-        yield loc.estimate
+        yield loc.view(light=True).estimate

@@ -386,7 +386,7 @@ def _filter_run(groups: dict[str, list[Row]], cfg, datum, lines: _Lines) -> None
     for ident, group in groups.items():
         est, loc = locate(group, cfg, datum)
         if est is None:
-            lines.none(ident, loc.status)
+            lines.none(ident, loc.view(light=True).status)
         else:
             lines.fixed(ident, est, group, record(ident, est, len(group)))
 

@@ -133,7 +133,7 @@ def _told(loc: Localizer, run, written: int, output: str) -> int:
     print(f"{written} estimates written to {output}", file=sys.stderr)
     if run.damage:
         return 1
-    return 0 if loc.estimate is not None else 3
+    return 0 if loc.view(light=True).estimate is not None else 3
 
 
 def main(argv=None) -> int:

@@ -161,7 +161,7 @@ def main(argv=None) -> int:
     print(f"scenario {args.scenario}: {len(data.fixes)} fixes, {len(data.bearings)} DF readings, "
           f"emitter at E {data.emitter_enu[0]:.0f} m N {data.emitter_enu[1]:.0f} m")
     if not s["converged"]:
-        print(f"no estimate: {loc.status}")
+        print(f"no estimate: {loc.view(light=True).status}")
         return 1
     est = res.estimates[-1]
     a, b, _ = ellipse_axes(est.cov)
@@ -172,7 +172,7 @@ def main(argv=None) -> int:
     print(f"state: {est.state}" + "".join(f"; {w}" for w in est.warnings))
     print(f"{est.bearings_used} readings in {est.points_used} observation points; median step "
           f"{1e3 * float(np.median(res.step_s)):.3f} ms; inputs not used: "
-          f"{', '.join(f'{k} {v}' for k, v in sorted(loc.rejected.items())) or 'none'}")
+          f"{', '.join(f'{k} {v}' for k, v in sorted(loc.view(light=True).rejected.items())) or 'none'}")
     for line in robustness_lines(loc):
         print(line)
     if args.co_channel:
@@ -267,8 +267,9 @@ def run_fleet(args) -> int:
     print(f"scenario {args.scenario}: stations {', '.join(n or 'default' for n in stations)}; "
           f"{sum(map(len, data.bearings.values()))} DF readings of {len(emitters)} emitter(s)")
     frame, found = LocalFrame(*data.scenario.datum), 0
+    live = {c.id: c for c in loc.view().channels if not c.retired}
     for f, truth in data.truth.items():
-        channel = loc.channels.live.get(channel_id(f)) if f else loc.channels.live.get("default")
+        channel = live.get(channel_id(f) if f else "default")
         est = channel.estimate if channel is not None else None
         name = f"{f / 1e6:.3f} MHz" if f else "the emitter"
         if est is None:
