@@ -965,18 +965,18 @@ def test_hostile_records_and_parameters_cost_only_themselves_through_the_graph(s
     assert "Traceback" not in open(node_p.log_path).read()
 
 
-def test_two_nodes_split_fifty_emitters_by_band_and_each_is_localised_once(spawn, domain):
+def test_two_nodes_split_twenty_emitters_by_band_and_each_is_localised_once(spawn, domain):
     """`frequency_band_hz`: two nodes in their own namespaces read one receiver's shared gps/fix and df/bearing,
-    each over half the spectrum; every one of 50 emitters is on exactly one node's emitter/channels, near its
-    truth, and each node counts the other's records as `other_band`."""
+    each over half the spectrum; every one of 20 emitters is on exactly one node's emitter/channels, near its
+    truth, and each node counts the other's records as `other_band` (scripts/band_split.py runs 50, offline)."""
     from dataclasses import replace
 
     from aoa_localizer.simulation.fleet import simulate_fleet
     from aoa_localizer.simulation.scenarios import SCENARIOS
 
     rng = np.random.default_rng(7)
-    emitters = {400e6 + 25e3 * k: (float(rng.uniform(300, 1800)), float(rng.uniform(300, 1300))) for k in range(50)}
-    split = 400e6 + 25e3 * 25
+    emitters = {400e6 + 25e3 * k: (float(rng.uniform(300, 1800)), float(rng.uniform(300, 1300))) for k in range(20)}
+    split = 400e6 + 25e3 * 10
     bands = {"low": [400e6, split], "high": [split, 402e6]}
     fleet = simulate_fleet({"": replace(SCENARIOS["seed"], points=20)}, emitters, 0)
     for name, band in bands.items():
@@ -1022,9 +1022,9 @@ def test_two_nodes_split_fifty_emitters_by_band_and_each_is_localised_once(spawn
                 assert miss < 3.0 * bound, (cid, entry)  # no emitter lost
                 if miss >= bound:
                     outside.append((cid, round(miss, 1), bound))
-        # Honest ellipses leave an emitter outside its 95 % semi-major now and then (1-5 % each: 50 emitters make
-        # one or two a run; a busy machine's node, behind the 50x stream, closes points later): a few, not many
-        assert len(outside) <= 5, outside
+        # Honest ellipses leave an emitter outside its 95 % semi-major now and then (1-5 % each: 20 emitters make
+        # one a run at times; a busy machine's node, behind the 50x stream, closes points later): a few, not many
+        assert len(outside) <= 3, outside
         assert spin_until(executor, lambda: all(f"diag {name}" in got for name in bands), 5)
         for name in bands:
             values = diagnostics_values(T.DiagnosticArray(status=[got[f"diag {name}"]]))[got[f"diag {name}"].name]
