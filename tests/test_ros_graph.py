@@ -1137,8 +1137,8 @@ def test_the_launcher_names_another_source_once_discovery_names_it(capsys):
 
 
 def test_the_launcher_judges_from_the_nodes_first_input_and_says_what_the_node_never_took():
-    """A busy machine's replay can start while the node still loads, or outrun its input queue (CI77: 39 of 2422
-    bearings taken, "diagnostics: OK throughout"): the launcher counts the run's diagnostics from the node's first
+    """A busy machine's replay can outrun a node still loading and its input queue (CI77: 39 of 2422 bearings
+    taken, "diagnostics: OK throughout"): the launcher counts the run's diagnostics from the node's first
     input (before it, "no DF reading since the start" is the source still starting) and compares what the node
     took with what the bag holds (bags/urban/metadata.yaml: 244 fixes, 2422 bearings)."""
     from types import SimpleNamespace as NS

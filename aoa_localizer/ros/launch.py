@@ -52,7 +52,6 @@ DIAG_LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}  # diagnostic_msgs/Di
 # After the source ends the node is judged once its counts stand still over two /diagnostics, or after this long
 SETTLED_COUNTS = ("fixes_received", "bearings_received", "bearings_used", "points_used")
 SETTLE_MAX_S = 30.0
-NODE_UP_MAX_S = 60.0  # the longest wait for the node's first /diagnostics before the source starts
 # A domain is another graph's when someone publishes on a topic ending so; the launcher picks this many at most
 RUN_TOPICS = ("gps/fix", "df/bearing", "sim/truth", "emitter/pose")
 DOMAIN_TRIES = 5
@@ -410,14 +409,6 @@ class Monitor:
             self.crowded, self.crowded_said = crowded, self.crowded_said + 1
             print(f"launch: another source publishes on the node's inputs: {crowded}", file=sys.stderr, flush=True)
 
-    def wait_for_node(self, running: Callable[[], bool], at_most_s: float) -> bool:
-        """Spin until the node's first /diagnostics (it is up and spinning); False when it exited or `at_most_s`
-        passed first."""
-        end = time.monotonic() + at_most_s
-        while not self.diagnostics_seen and running() and time.monotonic() < end:
-            self.spin(0.1)
-        return self.diagnostics_seen > 0
-
     def settle(self, at_least_s: float, at_most_s: float) -> bool:
         """Spin until the node has worked through what it received: two /diagnostics in a row with the same counts
         (fixes and bearings received and used) and the same newest estimate, no search or check of its own still
@@ -707,11 +698,9 @@ class Run:
         self.monitor = monitor = Monitor(args.record, list(zip(flat[::2], flat[1::2], strict=False)),
                                                 self.stop.check)
         node = self.start("aoa_localizer", node_cmd)
-        # the source starts once the node spins (its first /diagnostics): on a busy machine a node still loading
-        # would miss the start of a fast replay
-        if not monitor.wait_for_node(node.running, NODE_UP_MAX_S) and node.running():
-            print(f"launch: the localizer said nothing on /diagnostics in {NODE_UP_MAX_S:g} s; starting the "
-                  f"{self.source_name} all the same", file=sys.stderr, flush=True)
+        # the source loads while the node does: it plays once the node's inputs have subscribers (sim_vehicle's
+        # wait_for_subscribers, replay's --wait), then half a second more for the match to settle
+        monitor.spin(1.5)
         if not node.running():
             print(f"launch: the localizer exited at start (code {node.proc.returncode}):\n{node.tail()}",
                   file=sys.stderr)
