@@ -152,6 +152,7 @@ def test_the_old_face_answers_for_one_round_with_a_warning_naming_what_replaces_
     assert old("frame") == view.frame == old("datum_frame")() and old("events") == view.events
     assert old("channel")().id == view.latest and old("track_status")() == view.track
     assert np.array_equal(old("recent_points")(), post.used_points)
+    assert np.array_equal(post.recent_points(5), post.used_points[-5:]) and len(post.recent_points(0)) == 0
     assert np.array_equal(old("posterior_grid")().prob, post.grid().prob)
     assert old("vehicle_place")() == view.vehicles[""] and old("noise_summary")() == dict(view.noise)
     with pytest.warns(DeprecationWarning, match="setting Localizer.on_estimate is deprecated"):

@@ -397,18 +397,18 @@ class Localizer:
         object.__setattr__(self, name, value)
 
 
-def _by_channel(loc: Localizer, channel) -> str | None:
+def _by_channel(channel) -> str | None:
     """The old face's channel argument (a Channel, its id, or None) as an id."""
     return channel if channel is None or isinstance(channel, str) else channel.id
 
 
 def _grid(loc: Localizer, channel=None) -> PosteriorGrid | None:
-    post = loc.posterior(_by_channel(loc, channel))
+    post = loc.posterior(_by_channel(channel))
     return None if post is None else post.grid()
 
 
 def _goal(loc: Localizer, vehicle: tuple[float, float], radius_m: float, channel=None) -> NextGoal | None:
-    post = loc.posterior(_by_channel(loc, channel))
+    post = loc.posterior(_by_channel(channel))
     return None if post is None else post.next_goal(vehicle, radius_m)
 
 
@@ -436,7 +436,7 @@ _DEPRECATED: dict[str, tuple[str, Callable[[Localizer], Any]]] = {
     "receiver_noise": ("read view().receiver_noise", lambda loc: loc._receiver_noise),
     "vehicle_place": ("read view().vehicles.get(station)",
                       lambda loc: lambda station="": loc.view(light=True).vehicles.get(station)),
-    "recent_points": ("read posterior(cid).used_points", lambda loc: loc._recent_points),
+    "recent_points": ("call posterior(cid).recent_points(n)", lambda loc: loc._recent_points),
     "start_cloud": ("read posterior().start_cloud",
                     lambda loc: loc._estimates.latest.track.initiator.start_cloud),
     "posterior_grid": ("call posterior(cid).grid()", lambda loc: functools.partial(_grid, loc)),

@@ -99,8 +99,7 @@ class NodeOutputs:
             pubs.particles.publish(build.particle_array(T, est, frame))
         if pubs.markers.get_subscription_count():
             post = loc.posterior(est.channel)
-            rows = post.used_points if post is not None else np.zeros((0, 5))
-            rays = rows[len(rows) - min(marker_rays, len(rows)):, :3]
+            rays = post.recent_points(marker_rays)[:, :3] if post is not None else np.zeros((0, 3))
             ring = ellipse_points((est.east, est.north), est.cov, ELLIPSE_95)
             pubs.markers.publish(build.markers(T, est, rays, ring, frame))
 

@@ -87,6 +87,11 @@ class PosteriorView:
     used_points: np.ndarray  # (K, 5)
     start_cloud: np.ndarray | None  # the particles its filter started from (after its latest start), or None
 
+    def recent_points(self, n: int) -> np.ndarray:
+        """The last `n` rows of `used_points` (all of them when it holds fewer)."""
+        rows = self.used_points
+        return rows[len(rows) - min(n, len(rows)):]
+
     def grid(self) -> PosteriorGrid:
         """The posterior on a map grid around the estimate (engine/outputs/posterior_grid.py)."""
         est = self.estimate
