@@ -49,9 +49,11 @@ _FIT_P = 0.05  # a fix whose stations' residuals are this unlikely under their e
 _RANGE_CAP = 2.0  # a truth's range counts up to this many times the crossing's (beyond, the Cauchy prior rules)
 # The place-like error's prior was fitted to two walking observers (docs/design.md, "Errors that no crossing
 # shows"): a receiver as coarse as they were (a learned station error of about 7 deg), a handful of stations per
-# emitter. It is applied in that regime and fades outside it: half at this station error ...
+# emitter. It is applied in that regime and fades outside it: half at this station error, as this power of the
+# scale's ratio to it (their learned 7-11 deg keep it whole; a 3 deg receiver, where nothing was fitted, keeps 3 %) ...
 PLACE_LIKE_SCALE_DEG = 4.0
-PLACE_LIKE_STATIONS = 6  # ... and in proportion beyond this many stations of one emitter
+PLACE_LIKE_STEEPNESS = 12
+PLACE_LIKE_STATIONS = 6  # ... and as the square of the ratio beyond this many stations of one emitter
 _NEGLIGIBLE = 1e-3  # a share of the hypotheses' posterior too small to change a region
 REPEATED_READINGS = 3  # a group whose median station has this many readings measures their scatter apart
 
@@ -208,8 +210,8 @@ def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
     with np.errstate(divide="ignore"):
         log_coarse, log_fine = np.log(coarse), np.log1p(-coarse)
     rng_m = float(median_range(geom.xy, region.point[:1], region.point[1:])[0])
-    # an emitter ringed by many stations (a network) is where it was not fitted: smaller in proportion
-    shares = noise.shared_place * most / len(geom.receivers) * min(1.0, PLACE_LIKE_STATIONS / len(geom.xy))
+    # an emitter ringed by many stations is where it was not fitted (3-5 a collar): it fades fast beyond six
+    shares = noise.shared_place * most / len(geom.receivers) * min(1.0, PLACE_LIKE_STATIONS / len(geom.xy)) ** 2
     cap = _RANGE_CAP * rng_m
     out = widened(src, 3.0 * float(shares.max()) * cap)
     floor = 0.5 * min(src.hx, src.hy) / CELLS  # a share of 0 still moves the mass onto the wider grid
@@ -229,9 +231,10 @@ def _displaced(geom: Geometry, solved: _Solved, noise: NoiseGrid) -> Region:
 
 def coarse_share(scale_deg: np.ndarray) -> np.ndarray:
     """The chance that a receiver of this station error (deg) is as coarse as the observers the place-like error
-    was fitted to (a person with a Yagi): near 1 from about 7 deg, a half at 4 deg, near 0 below 2 deg, where
-    bearings that agree to a degree suggest an instrument and nothing suggests the error."""
-    return 1.0 / (1.0 + (PLACE_LIKE_SCALE_DEG / np.maximum(scale_deg, 1e-9)) ** 6)
+    was fitted to (a person with a Yagi, learned at 7-11 deg): near 1 from about 5 deg, a half at 4 deg, 3 % at
+    3 deg and nothing below 2.5 deg, where bearings that agree to a few degrees suggest an instrument and nothing
+    suggests the error."""
+    return 1.0 / (1.0 + (PLACE_LIKE_SCALE_DEG / np.maximum(scale_deg, 1e-9)) ** PLACE_LIKE_STEEPNESS)
 
 
 def _noise_summary(noise: NoiseGrid, log_w: np.ndarray, receivers: list[str], emitters: int) -> dict:
