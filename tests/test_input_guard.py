@@ -250,7 +250,7 @@ def test_stamp_gaps_count_a_hole_in_a_regular_stream_and_nothing_else():
 def test_the_closed_form_positive_definite_test_agrees_with_the_eigenvalues():
     """The 2x2 test (low eigenvalue as det / high) against numpy's eigenvalues, over scales from 1e-6 to 1e6 and
     near-singular clouds; non-finite and singular covariances are refused."""
-    from aoa_localizer.engine.outputs.estimates import positive_definite as _positive_definite
+    from aoa_localizer.engine.track.said import positive_definite as _positive_definite
 
     rng = np.random.default_rng(0)
     for i in range(5000):

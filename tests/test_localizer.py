@@ -447,3 +447,35 @@ def test_the_survey_model_is_handed_to_the_localizer_not_installed_by_an_import(
     assert math.hypot(est.east - 300.0, est.north - 400.0) < 20.0
     est = _fixed_sites(Localizer(LocalizerConfig(seed=1), survey_solver=None))
     assert est is not None and est.algorithm != "survey" and math.hypot(est.east - 300.0, est.north - 400.0) < 20.0
+
+
+def test_a_points_step_returns_what_the_track_says_and_the_estimate_is_made_of_that_value(monkeypatch):
+    """Architecture IV: the track's step returns one value (track/said.py) and the estimate is formatted from it
+    alone: each published estimate carries the stamp, counts, modes, cloud and noise of the value its point's
+    step returned; a value whose covariance is not positive definite is refused, counted, and nothing published."""
+    from aoa_localizer.engine.outputs.estimates import Estimates
+    from aoa_localizer.engine.track.said import Standing
+
+    pairs = []
+    publish = Estimates.publish
+
+    def watched(self, channel, said=None, end_of_data=False):
+        made = publish(self, channel, said, end_of_data)
+        if said is not None and made is not None:
+            pairs.append((said, made))
+        return made
+
+    monkeypatch.setattr(Estimates, "publish", watched)
+    data = simulate("seed", 1)
+    list(Localizer(LocalizerConfig(seed=1)).run(data.inputs()))
+    assert len(pairs) > 20 and all(isinstance(s, Standing) for s, _ in pairs)
+    for said, est in pairs:
+        assert (est.stamp, est.points_used, est.bearings_used, est.ess) == (
+            said.stamp, said.points_used, said.bearings_used, said.ess)
+        assert est.modes == said.modes and est.noise == said.noise and est.particles is said.particles
+    loc = Localizer(LocalizerConfig(seed=1))
+    loc.add_fix(1.0, *DATUM[:2])
+    loc.add_fix(2.0, *DATUM[:2])
+    said = dataclasses.replace(pairs[-1][0], cov=np.zeros((2, 2)), degenerate=True)
+    channel = loc._estimates.latest
+    assert loc._estimates.publish(channel, said) is None and loc.view().rejected == {"covariance_degenerate": 1}

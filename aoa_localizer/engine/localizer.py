@@ -132,7 +132,7 @@ class Localizer:
             return view
         channels = tuple(ChannelView(c.id, c.frequency_hz, c.retired, c.estimate, c.track.summary(),
                                      frozen(c.track.events)) for c in every)
-        return replace(view, channels=channels, noise=MappingProxyType(noise_summary(latest, self._cfg)),
+        return replace(view, channels=channels, noise=MappingProxyType(noise_summary(latest)),
                        clock_hint=latest.track.supervisor.clock_hint, receiver_noise=self._receiver_noise())
 
     @_one_at_a_time
@@ -431,7 +431,7 @@ _DEPRECATED: dict[str, tuple[str, Callable[[Localizer], Any]]] = {
     "track_status": ("read view().channel(cid).track",
                      lambda loc: lambda channel=None: (channel or loc._estimates.latest).track.summary()),
     "noise_summary": ("read view().noise",
-                      lambda loc: lambda channel=None: noise_summary(channel or loc._estimates.latest, loc._cfg)),
+                      lambda loc: lambda channel=None: noise_summary(channel or loc._estimates.latest)),
     "clock_hint": ("read view().clock_hint", lambda loc: lambda: loc._estimates.latest.track.supervisor.clock_hint),
     "receiver_noise": ("read view().receiver_noise", lambda loc: loc._receiver_noise),
     "vehicle_place": ("read view().vehicles.get(station)",

@@ -19,31 +19,22 @@ from aoa_localizer.engine.config import LocalizerConfig
 from aoa_localizer.engine.geodesy import LocalFrame, ground_to_map
 from aoa_localizer.engine.inference.motion import SURE_MOVING_P, UNSURE_P, Motion, mixture
 from aoa_localizer.engine.ingest.intake import Intake
-from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.survey.survey_log import SurveyFix, counted, live_fix
 from aoa_localizer.engine.survey.survey_solver import SurveySolver
-from aoa_localizer.engine.track.report import between_transmitters, co_channel, others_share, stations_disagree
+from aoa_localizer.engine.track.report import between_transmitters, co_channel, stations_disagree
+from aoa_localizer.engine.track.said import Moving, Said, positive_definite
 from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 
 AGREE_CHI2 = 9.21  # two places further apart than this (Mahalanobis, squared, both covariances: 1 % for 2-D)
 
 
-def positive_definite(cov) -> bool:
-    """Finite and full rank to working precision (a cloud of 2 particles, or all on one line, is not)."""
-    (a, _), (b, c) = np.asarray(cov, float).tolist()  # 2x2 symmetric: its eigenvalues in closed form
-    if not all(map(math.isfinite, (a, b, c))):
-        return False
-    high = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
-    return high > 0 and (a * c - b * b) / high > 1e-9 * high  # the low eigenvalue as det / high
-
-
-def noise_summary(channel: Channel, cfg: LocalizerConfig) -> dict:
+def noise_summary(channel: Channel) -> dict:
     """A channel's self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier
     rates."""
-    return channel.track.calibration.noise_summary(lambda q: math.degrees(reading_sigma(q, cfg)))
+    return channel.track.noise_summary()
 
 
 def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, cov: np.ndarray, state: EstimateState,
@@ -118,41 +109,38 @@ class Estimates:
             track = channel.track
             with slices.one_call(calls.setdefault(id(track), slices.Call())):
                 self.scheduler.point_came(channel.surveying)
-                took = track.add(readings)
+                said = track.add(readings)
                 self.scheduler.take_turn(channel.surveying)  # its live survey fix's turn, after the track's
             if observer is not None:
                 observer.on_point(readings, track.last_kept)
-            if took:
-                estimate = self.publish(channel) or estimate
+            if said is not None:
+                estimate = self.publish(channel, said) or estimate
             elif self.cfg.end_of_data_model == "survey":  # a survey-like channel's fix needs no started filter
                 estimate = self._live_survey(channel) or estimate
         return estimate
 
-    def publish(self, channel: Channel, end_of_data: bool = False) -> Estimate | None:
-        """The channel's new estimate, kept and handed to `on_estimate`; None (counted) when its covariance is not
-        positive definite. A survey-like channel's is the survey model's while it has a fix (_live_survey)."""
-        track = channel.track
-        count = track.count_transmitters(final=end_of_data)  # several transmitters taking turns are no mover
-        if track.moving:
-            return self._publish_moving(channel, end_of_data)
+    def publish(self, channel: Channel, said: Said | None = None, end_of_data: bool = False) -> Estimate | None:
+        """The channel's new estimate from what its track says (`said`; None: asked of it now), kept and handed to
+        `on_estimate`; None (counted) when its covariance is not positive definite. A survey-like channel's is the
+        survey model's while it has a fix (_live_survey)."""
+        if said is None:
+            said = channel.track.said(final=end_of_data)  # several transmitters taking turns are no mover
+        if isinstance(said, Moving):
+            return self._publish_moving(channel, said, end_of_data)
         if not end_of_data and self.cfg.end_of_data_model == "survey":
             live = self._live_survey(channel)
             if live is not None:
                 return live
-        mean, cov = track.estimate()
-        if not positive_definite(cov):
+        if said.degenerate:
             self.reject(Reason.COVARIANCE_DEGENERATE)
             return None
         frame = self.intake.datum_frame()
-        cloud = track.cloud
-        modes, state, warnings = track.assess(np.asarray(mean), np.asarray(cov), others_share(count, np.asarray(mean)))
+        count, mean, cov, state, warnings = said.count, said.mean, said.cov, said.state, said.warnings
         transmitters: list[Transmitter] = []
         if count is not None:
-            # the antennas only rate the transmitters' ellipses: a single transmitter (most channels) skips them
-            antennas = np.array([[g[0].east, g[0].north] for g in track.heard]) if count.transmitters else None
-            places, said = co_channel(count, antennas, self.cfg.max_emitters_per_channel)
-            warnings = warnings + said
-            for said_too in (between_transmitters(count, np.asarray(mean), np.asarray(cov)), stations_disagree(count)):
+            places, words = co_channel(count, said.antennas, self.cfg.max_emitters_per_channel)
+            warnings = warnings + words
+            for said_too in (between_transmitters(count, mean, cov), stations_disagree(count)):
                 if said_too is not None:
                     warnings.append(said_too)
                     if state == EstimateState.TRACKING:
@@ -161,30 +149,25 @@ class Estimates:
                 t_lat, t_lon, _ = frame.to_geodetic(place.mean[0], place.mean[1])
                 transmitters.append(Transmitter(float(place.mean[0]), float(place.mean[1]), float(t_lat),
                                                 float(t_lon), place.cov.copy(), place.share, place_state))
-        mean, cov, state, warnings, moves = with_motion(track.motion, track.motion_said, np.asarray(mean, float),
-                                                        np.asarray(cov, float), state, warnings,
-                                                        track.motion_unheeded, track.count_explains_motion)
+        mean, cov, state, warnings, moves = with_motion(said.motion, said.said, mean, cov, state, warnings,
+                                                        said.unheeded, said.explained)
         lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
         from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))
-        estimate = Estimate(stamp=track.last_stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
+        estimate = Estimate(stamp=said.stamp, east=float(mean[0]), north=float(mean[1]), lat=float(lat),
                             lon=float(lon), cov=np.array(cov), ground_cov=from_map @ np.asarray(cov) @ from_map.T,
-                            bearings_used=track.bearings_used,
-                            points_used=track.points_used, ess=cloud.ess(), algorithm=self.cfg.algorithm,
-                            # the user's own copies: the filter's arrays are read-only and shared
-                            particles=cloud.x.copy(), weights=cloud.weights.copy(), modes=modes,
-                            noise=noise_summary(channel, self.cfg) if self.cfg.calibrate_noise else None,
-                            channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
+                            bearings_used=said.bearings_used, points_used=said.points_used, ess=said.ess,
+                            algorithm=self.cfg.algorithm, particles=said.particles, weights=said.weights,
+                            modes=said.modes, noise=said.noise, channel=channel.id,
+                            frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
                             end_of_data=end_of_data, transmitter_count=count.count if count is not None else 1,
                             count_probability=count.probability if count is not None else float("nan"),
                             transmitters=transmitters, **moves)
         return self._announce(channel, estimate)
 
-    def _publish_moving(self, channel: Channel, end_of_data: bool) -> Estimate | None:
+    def _publish_moving(self, channel: Channel, said: Moving, end_of_data: bool) -> Estimate | None:
         """A moving transmitter's estimate: where the motion watch's moving model has it now, its velocity, and
         `poorly_determined` while its range is not observed (the observer has not turned across its line of sight)."""
-        track = channel.track
-        motion, watch = track.motion_said, track.watch
-        assert motion is not None and watch is not None
+        motion = said.motion
         if not positive_definite(motion.cov):
             self.reject(Reason.COVARIANCE_DEGENERATE)
             return None
@@ -201,16 +184,15 @@ class Estimates:
             state = EstimateState.POORLY_DETERMINED
             warnings.append("a moving transmitter's range is not observed from bearings until the observer turns "
                             "across its line of sight: the ellipse is long along it")
-        places = watch.place
-        estimate = Estimate(stamp=track.last_stamp, east=east, north=north, lat=float(lat), lon=float(lon),
+        estimate = Estimate(stamp=said.stamp, east=east, north=north, lat=float(lat), lon=float(lon),
                             cov=np.array(motion.cov), ground_cov=from_map @ motion.cov @ from_map.T,
-                            bearings_used=track.bearings_used, points_used=track.points_used,
-                            ess=float(places.shape[0]), algorithm=self.cfg.algorithm, particles=places.copy(),
-                            weights=watch.weights.copy(), modes=[(east, north, 1.0)],
-                            noise=noise_summary(channel, self.cfg) if self.cfg.calibrate_noise else None,
-                            channel=channel.id, frequency_hz=channel.frequency_hz, state=state, warnings=warnings,
-                            end_of_data=end_of_data, motion="moving", motion_probability=motion.p_moving,
-                            velocity=motion.velocity.copy(), velocity_cov=motion.velocity_cov.copy())
+                            bearings_used=said.bearings_used, points_used=said.points_used,
+                            ess=float(said.particles.shape[0]), algorithm=self.cfg.algorithm,
+                            particles=said.particles, weights=said.weights, modes=[(east, north, 1.0)],
+                            noise=said.noise, channel=channel.id, frequency_hz=channel.frequency_hz, state=state,
+                            warnings=warnings, end_of_data=end_of_data, motion="moving",
+                            motion_probability=motion.p_moving, velocity=motion.velocity.copy(),
+                            velocity_cov=motion.velocity_cov.copy())
         return self._announce(channel, estimate)
 
     def finish(self) -> Estimate | None:

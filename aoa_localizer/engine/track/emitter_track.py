@@ -47,10 +47,11 @@ from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET
 from aoa_localizer.engine.track.calibrator import Recalibration
 from aoa_localizer.engine.track.held import COUNT_EVERY_MAX, HEARD_READINGS, Held
 from aoa_localizer.engine.track.initiator import START_SWEEPS, Holding, Initiator, Outcome
-from aoa_localizer.engine.track.report import looks_wild
+from aoa_localizer.engine.track.report import looks_wild, others_share
+from aoa_localizer.engine.track.said import Moving, Said, Standing, positive_definite
 from aoa_localizer.engine.track.state import Phase, Status, WindowEntry
 from aoa_localizer.engine.track.supervisor import CheckVerdict, Moved, Supervisor, Watch
-from aoa_localizer.engine.types import ObservationPoint, Reading
+from aoa_localizer.engine.types import EstimateState, ObservationPoint, Reading
 from aoa_localizer.filters.base import ParticleFilter
 
 log = logging.getLogger("aoa_localizer")
@@ -75,10 +76,10 @@ class EmitterTrack(Held):
         self.supervisor = Supervisor(cfg)
 
     # -- the flow -----------------------------------------------------------------------------------
-    def add(self, readings: list[Reading]) -> bool:
-        """One closed group of readings; True when the filter took it (or started) and has a new estimate. Its
-        job's turn comes after the filter's step, within what the step left of the call's budget (the Localizer
-        opens it: slices.one_call)."""
+    def add(self, readings: list[Reading]) -> Said | None:
+        """One closed group of readings; what the track says after it (said()) when the filter took it (or started)
+        and has a new estimate, else None. Its job's turn comes after the filter's step, within what the step left
+        of the call's budget (the Localizer opens it: slices.one_call)."""
         t0 = time.perf_counter()
         owed_before = self.scheduler.debt(self.filter).modes
         for place in self.places:
@@ -118,7 +119,7 @@ class EmitterTrack(Held):
         self.scheduler.take_turn(self.site_fitting)
         self.fit_site_part()
         self.last_update_s = time.perf_counter() - t0  # what this point cost, searches and calibration included
-        return took or self.moving
+        return self.said() if took or self.moving else None
 
     def _watch_motion(self, point: ObservationPoint) -> Motion | None:
         """A point's readings (as one, as the receiver gave them: median_bearing) read by the motion watch
@@ -447,6 +448,28 @@ class EmitterTrack(Held):
         if f.ess() < self.cfg.ess_threshold * f.n:
             f.resample()
             f.rejuvenate(_CALIBRATION_SWEEPS, self.proposal)
+
+    def said(self, final: bool = False) -> Said:
+        """What the track says now: the newest count made (at the end of data, `final`, made again over every
+        reading), then the mover the estimate follows (Moving), or the standing place with its state (Standing)."""
+        count = self.count_transmitters(final=final)
+        noise = self.noise_summary() if self.cfg.calibrate_noise else None
+        if self.moving:
+            motion, watch = self.motion_said, self.watch
+            assert motion is not None and watch is not None
+            return Moving(self.last_stamp, motion, watch.place.copy(), watch.weights.copy(), self.bearings_used,
+                          self.points_used, noise)
+        mean, cov = (np.asarray(v, float) for v in self.estimate())
+        degenerate = not positive_definite(cov)
+        modes, state, warnings = ([], EstimateState.POORLY_DETERMINED, []) if degenerate else self.assess(
+            mean, cov, others_share(count, mean))
+        # the antennas only rate the transmitters' ellipses: a single transmitter (most channels) skips them
+        antennas = (np.array([[g[0].east, g[0].north] for g in self.heard])
+                    if count is not None and count.transmitters else None)
+        cloud = self.cloud
+        return Standing(self.last_stamp, mean, cov, degenerate, modes, state, warnings, cloud.ess(), cloud.x.copy(),
+                        cloud.weights.copy(), self.bearings_used, self.points_used, noise, count, antennas,
+                        self.motion, self.motion_said, self.motion_unheeded, self.count_explains_motion)
 
     def count_transmitters(self, final: bool = False) -> Count | None:
         """How many transmitters the channel's bearings come from (co_channel.py): the newest count made. At the end

@@ -24,6 +24,7 @@ from aoa_localizer.engine.inference.motion import (
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.point_batch import points_of, rows_of
 from aoa_localizer.engine.inference.safety import ModeProposal
+from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.scheduling.scheduler import JobPlace, PendingJob, Scheduler
 from aoa_localizer.engine.track.calibrator import Calibrator
 from aoa_localizer.engine.track.report import assess, cloud_estimate, mode_masses, spatial_median, wide_for_range
@@ -256,6 +257,10 @@ class Held:
         return radio_reach(np.array([[e.point.east, e.point.north] for e in self.window]))
 
     # -- estimates ------------------------------------------------------------------------------------
+    def noise_summary(self) -> dict:
+        """The self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier rates."""
+        return self.calibration.noise_summary(lambda q: math.degrees(reading_sigma(q, self.cfg)))
+
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """The published place and covariance, marginalised over the residual bearing offset the points cannot tell
         from a place (offset.marginalise): a running filter's mean and covariance (with what the points' shared site
