@@ -70,9 +70,9 @@ def test_one_point_likelihood_equals_the_general_code():
                 np.testing.assert_allclose(fast, ref, rtol=1e-12, atol=1e-12)
 
 
-def _filter(**kw):
+def _filter(deferred=False, **kw):
     cfg = LocalizerConfig(seed=1, num_particles=kw.pop("n", 4), **kw)
-    return make_filter(cfg, np.random.default_rng(cfg.seed), EmitterModel(cfg))
+    return make_filter(cfg, np.random.default_rng(cfg.seed), EmitterModel(cfg), deferred)
 
 
 def test_ess_estimate_and_covariance_by_hand():
@@ -223,8 +223,7 @@ def _counting_filter(realtime, sweep_cost_us=0.0, n=200):
     """A scheduler and an n-particle filter it took, whose sweeps are counted in `made`, each as the particles it
     moved (each metered at `sweep_cost_us`, the model's own looks unmetered)."""
     scheduler = Scheduler(realtime, lambda reason: None)
-    f = _filter(n=n)
-    scheduler.defer_moves(f)
+    f = _filter(n=n, deferred=True)
     made = []
     real = f.sweep
 

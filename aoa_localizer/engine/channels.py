@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import math
 import zlib
+from collections.abc import Callable
 
 import numpy as np
 
@@ -43,10 +44,12 @@ class Channel:
     """One emitter: its frequency (NaN for the default channel), track, builders per station and latest estimate."""
 
     def __init__(self, cid: str, frequency_hz: float, cfg: LocalizerConfig, rng: np.random.Generator, reject,
-                 scheduler: Scheduler, first_point: float = 1.0):
-        """`first_point`: the share of the observation-point limits its builders give their first point."""
+                 scheduler: Scheduler, first_point: float = 1.0,
+                 pool: Callable[[], PooledNoise | None] | None = None):
+        """`first_point`: the share of the observation-point limits its builders give their first point; `pool`: asks
+        for the receiver's calibration pooled over the other channels (its track's first search asks once)."""
         self.id, self.frequency_hz, self.cfg, self.first_point = cid, frequency_hz, cfg, first_point
-        self.track = EmitterTrack(cfg, rng, reject, scheduler)
+        self.track = EmitterTrack(cfg, rng, reject, scheduler, pool)
         self.surveying = JobPlace()  # its live survey fix among the scheduler's jobs (the Localizer's)
         self.builders: dict[str, PointBuilder] = {}
         self.estimate: Estimate | None = None
@@ -109,8 +112,8 @@ class Channels:
             rng = np.random.default_rng()
         else:
             rng = np.random.default_rng([self.cfg.seed, zlib.crc32(cid.encode())])
-        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.scheduler, self._first_point(cid))
-        channel.track.calibration.pool = lambda: self.pooled_noise(but=channel)
+        channel = Channel(cid, frequency_hz, self.cfg, rng, self._reject, self.scheduler, self._first_point(cid),
+                          lambda: self.pooled_noise(but=channel))
         self.live[cid] = channel
         return channel
 

@@ -16,9 +16,10 @@ class ModelMismatch(TypeError):
     """The model lacks a capability the chosen filter needs: the message names both."""
 
 
-def make_filter(cfg: Any, rng: np.random.Generator, model: StateSpaceModel) -> ParticleFilter:
+def make_filter(cfg: Any, rng: np.random.Generator, model: StateSpaceModel, deferred: bool = False) -> ParticleFilter:
     """The filter `cfg.algorithm` names (in its group's variant), with its own Generator, on `model`, given only the
-    settings filters read. Raises ModelMismatch when the model lacks a capability the filter needs."""
+    settings filters read; `deferred`: a resample-move filter's sweeps are owed to its driver (ResampleMove).
+    Raises ModelMismatch when the model lacks a capability the filter needs."""
     algorithm = REGISTRY[cfg.algorithm]
     paper, mcmc = cast(type[ParticleFilter], algorithm.paper), cast(type[MoveKernel], algorithm.mcmc)
     variant = getattr(cfg, algorithm.group).variant
@@ -30,5 +31,5 @@ def make_filter(cfg: Any, rng: np.random.Generator, model: StateSpaceModel) -> P
                             f"{' and '.join(missing)}; {type(model).__name__} has not{hint}")
     settings = FilterSettings.of(cfg)
     if variant == "mcmc":
-        return ResampleMove(settings, rng, model, mcmc())
+        return ResampleMove(settings, rng, model, mcmc(), deferred)
     return paper(settings, rng, model)

@@ -91,10 +91,13 @@ class ParticleFilter:
         self._summary: CloudSummary | None = None
 
     # -- set-up -------------------------------------------------------------------------------
-    def initialise(self, particles: np.ndarray, prior_mean=None, prior_cov=None):
-        """Start from given particles (equal weights); the emitter model also takes a Gaussian prior."""
+    def initialise(self, particles: np.ndarray, prior_mean=None, prior_cov=None, logw: np.ndarray | None = None,
+                   taken: int = 0):
+        """Start from given particles (equal weights, or the log weights `logw`) after `taken` measurements the
+        model already holds; the emitter model also takes a Gaussian prior."""
         self.x = np.array(particles, dtype=float).reshape(self.n, self.model.dim)
-        self.logw = np.zeros(self.n)
+        self.logw = np.zeros(self.n) if logw is None else np.array(logw, dtype=float).reshape(self.n)
+        self.k = taken
         if prior_mean is not None:
             self.posterior_model.set_prior(prior_mean, prior_cov)
 

@@ -46,7 +46,7 @@ class ResampleMove(ParticleFilter):
 
     needs: tuple[type, ...] = (StaticPosterior,)
 
-    def __init__(self, settings, rng, model, kernel: MoveKernel):
+    def __init__(self, settings, rng, model, kernel: MoveKernel, deferred: bool = False):
         super().__init__(settings, rng, model)
         self.kernel = kernel
         self.name = kernel.name
@@ -56,7 +56,7 @@ class ResampleMove(ParticleFilter):
         # False: a resampling's `sweeps` are made right after it. True: none there; whoever drives the filter makes
         # them later with move() (the engine's Scheduler, `scheduling: realtime`: a bounded step). Any sweep keeps the
         # current posterior invariant, so when it is made changes no law.
-        self.deferred = False
+        self.deferred = deferred
         self.last_z = None  # the newest point, for sweeps made after it
         self._given: np.ndarray | None = None  # each particle's noise hypothesis during a sweep that drew them
 

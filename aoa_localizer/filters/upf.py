@@ -49,8 +49,8 @@ class UkfProposalFilter(ParticleFilter):
 
     needs = (UnscentedForm, TransitionDensity)
 
-    def initialise(self, particles, prior_mean=None, prior_cov=None):
-        super().initialise(particles, prior_mean, prior_cov)
+    def initialise(self, particles, prior_mean=None, prior_cov=None, logw=None, taken=0):
+        super().initialise(particles, prior_mean, prior_cov, logw, taken)
         d = self.model.dim
         p0 = getattr(self.model, "p0", None)
         cov = np.diag(p0) if p0 is not None else np.atleast_2d(np.cov(self.x.T)) + 1e-6 * np.eye(d)

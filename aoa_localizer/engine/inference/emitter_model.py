@@ -66,16 +66,21 @@ class EmitterModel(StateSpaceModel):
 
     dim = 2
 
-    def __init__(self, cfg: LocalizerConfig):
+    def __init__(self, cfg: LocalizerConfig, grid: NoiseGrid | None = None,
+                 reach: tuple[float, float, float] | None = None, outlier_prob: float | None = None):
+        """`grid`, `reach`: as below; `outlier_prob`: the point outlier share the receiver's calibration learned (None:
+        the configured one)."""
         self.q = cfg.process_noise_m
         self.lik = BearingLikelihood(cfg.likelihood, cfg.outlier_prob, cfg.gps_sigma_m)
+        if outlier_prob is not None:
+            self.lik.outlier_prob = outlier_prob
         self.history = PointHistory(cfg.history_points)
         self.prior_mean = np.zeros(2)
         self.prior_prec = np.zeros((2, 2))  # precision of the Gaussian prior; zero = flat
         # The receiver's noise while it is not known: marginalised over these hypotheses (None: the points' sigmas
         # and the likelihood's outlier share are taken as they are)
-        self.grid: NoiseGrid | None = None
-        self.reach: tuple[float, float, float] | None = None  # global_search.Robust.reach
+        self.grid = grid
+        self.reach = reach  # global_search.Robust.reach
         self.sums: RunningSums | None = None  # the last point weight's, under the latent noise
 
     def set_prior(self, mean, cov):

@@ -150,11 +150,6 @@ class Scheduler:
         return {owner for owner, job in self._jobs.items() if job.future.done()}
 
     # -- the moves owed ------------------------------------------------------------------------------
-    def defer_moves(self, f: ParticleFilter) -> None:
-        """A new filter: its resamplings' sweeps are owed, not made in its step (a bounded step)."""
-        if isinstance(f, ResampleMove):
-            f.deferred = True
-
     def debt(self, f: ParticleFilter | None) -> Debt:
         """What `f` owes now (nothing for None)."""
         if f is None:

@@ -41,7 +41,8 @@ class Recalibration:
 class Calibrator:
     """One track's receiver calibration (noise.py, receiver.py, offset.py)."""
 
-    def __init__(self, cfg: LocalizerConfig):
+    def __init__(self, cfg: LocalizerConfig, pool: Callable[[], PooledNoise | None] | None = None):
+        """`pool`: asks for the receiver's calibration pooled over its other channels (Channels.pooled_noise)."""
         self.cfg = cfg
         self.noise = NoiseModel(cfg.outlier_prob)
         self.outlier_prob = cfg.outlier_prob  # point level, in the likelihood
@@ -56,7 +57,7 @@ class Calibrator:
             self.grid = NoiseGrid.for_config(cfg)
         # The receiver's calibration pooled over its other channels (Channels.pooled_noise), asked once, at the
         # track's first search; `pooled` what it said (None: nothing was pooled)
-        self.pool: Callable[[], PooledNoise | None] | None = None
+        self.pool = pool
         self.pooled: PooledNoise | None = None
         self._pool_asked = False
         self._summary: tuple[NoiseModel, int, float, dict] | None = None  # (model, fits, share, summary)

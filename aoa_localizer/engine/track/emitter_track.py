@@ -39,6 +39,7 @@ from aoa_localizer.engine.inference.global_search import Mode, Points, Robust, f
 from aoa_localizer.engine.inference.motion import MOVING_P, SURE_MOTION_P, UNSURE_P, Motion, MotionWatch, median_bearing
 from aoa_localizer.engine.inference.noise import NoiseModel
 from aoa_localizer.engine.inference.point_batch import Built
+from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.inference.site_part import site_part_spread
 from aoa_localizer.engine.rejections import Reason
@@ -68,9 +69,10 @@ class EmitterTrack(Held):
     owner of what it holds (held.py). `reject(reason, count)` counts unused inputs."""
 
     def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, reject: Callable[[Reason, int], None],
-                 scheduler: Scheduler):
-        """`scheduler`: where the start searches and global checks run (inline, or beside the filter)."""
-        super().__init__(cfg, rng, scheduler)
+                 scheduler: Scheduler, pool: Callable[[], PooledNoise | None] | None = None):
+        """`scheduler`: where the start searches and global checks run (inline, or beside the filter); `pool`: the
+        receiver's calibration pooled over its other channels, asked for (Calibrator)."""
+        super().__init__(cfg, rng, scheduler, pool)
         self.reject = reject
         self.initiator = Initiator(cfg, rng, scheduler)
         self.supervisor = Supervisor(cfg)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
+from collections.abc import Callable
 from typing import cast
 
 import numpy as np
@@ -23,6 +24,7 @@ from aoa_localizer.engine.inference.motion import (
 )
 from aoa_localizer.engine.inference.offset import marginalise, prior_sd
 from aoa_localizer.engine.inference.point_batch import points_of, rows_of
+from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.inference.safety import ModeProposal
 from aoa_localizer.engine.points.preprocess import reading_sigma
 from aoa_localizer.engine.scheduling.scheduler import JobPlace, PendingJob, Scheduler
@@ -46,9 +48,10 @@ class Held:
 
     supervisor: Supervisor  # the track's (EmitterTrack makes it): its health is part of what the track reports
 
-    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, scheduler: Scheduler):
+    def __init__(self, cfg: LocalizerConfig, rng: np.random.Generator, scheduler: Scheduler,
+                 pool: Callable[[], PooledNoise | None] | None = None):
         self.cfg, self.rng, self.scheduler = cfg, rng, scheduler
-        self.calibration = Calibrator(cfg)
+        self.calibration = Calibrator(cfg, pool)
         # The points waiting for a start, then the filter's history
         self.window: deque[WindowEntry] = deque()
         self.filter: ParticleFilter | None = None

@@ -117,20 +117,17 @@ class Initiator:
         the likelihood under the radio-range prior (no Gaussian at the best mode: at a mode by the track, ten times
         its few metres of range held the cloud there and cut off the far end of its ray); and the modes' proposal,
         the track's from now on."""
-        f = self.new_filter(held.noise, particles)
+        f = self.new_filter(held.noise, particles, held.outlier_prob, held.reach)
         model = cast(EmitterModel, f.model)
-        model.reach = held.reach
-        model.lik.outlier_prob = held.outlier_prob
         for point in held.points:
             model.observe(point)
-        f.k = len(held.points)
         return f, ModeProposal.over(modes, points_of(held.points))
 
     def sample_posterior(self, modes: list[Mode], held: Holding) -> tuple[ParticleFilter, ModeProposal]:
         """The filter's start: an importance sample of the posterior from the modes, resampled, then MH sweeps (kept
         as `start_cloud`); with the modes' proposal."""
         f, proposal = self._holding_points(modes, held)
-        f.initialise(importance_sample(f.log_target, proposal, f.n, self.rng))
+        f.initialise(importance_sample(f.log_target, proposal, f.n, self.rng), taken=len(held.points))
         self.start_cloud = f.x.copy()
         f.rejuvenate(START_SWEEPS, proposal)
         return f, proposal
@@ -141,10 +138,7 @@ class Initiator:
         resampling and no moves to spread duplicates), over the `searched` points it drew them for."""
         particles, logw = sample
         f, proposal = self._holding_points(modes, held, max(self.cfg.num_particles, len(particles)))
-        f.initialise(particles)
-        if np.isfinite(logw.max()):
-            f.logw = logw - logw.max()
-        f.k = searched
+        f.initialise(particles, logw=logw - logw.max() if np.isfinite(logw.max()) else None, taken=searched)
         return f, proposal
 
     def triangulation(self, pts: list[ObservationPoint]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | str:
@@ -171,21 +165,19 @@ class Initiator:
                         outlier_prob: float) -> ParticleFilter:
         """A filter started from `particles` under a Gaussian prior, to take the points held one by one (kept as
         `start_cloud`)."""
-        f = self.new_filter(noise)
-        cast(EmitterModel, f.model).lik.outlier_prob = outlier_prob
+        f = self.new_filter(noise, outlier_prob=outlier_prob)
         f.initialise(particles, mean, cov)
         self.start_cloud = f.x.copy()
         return f
 
-    def new_filter(self, noise: NoiseGrid | None, particles: int | None = None) -> ParticleFilter:
-        """A filter on a new emitter model (with the latent `noise` while it is latent); `particles`: N if not the
-        configured one."""
-        model = EmitterModel(self.cfg)
-        model.grid = noise
+    def new_filter(self, noise: NoiseGrid | None, particles: int | None = None, outlier_prob: float | None = None,
+                   reach: tuple[float, float, float] | None = None) -> ParticleFilter:
+        """A filter on a new emitter model (with the latent `noise` while it is latent, the learned point
+        `outlier_prob`, the radio-range prior's `reach`); `particles`: N if not the configured one. Its resamplings'
+        sweeps are owed to the scheduler (a bounded step)."""
+        model = EmitterModel(self.cfg, noise, reach, outlier_prob)
         cfg = self.cfg if particles is None else self.cfg.with_changes(num_particles=particles)
-        f = make_filter(cfg, self.rng, model)
-        self.scheduler.defer_moves(f)
-        return f
+        return make_filter(cfg, self.rng, model, deferred=True)
 
 
 def _prior_sigma(start: np.ndarray, last: ObservationPoint) -> float:
