@@ -28,7 +28,7 @@ from aoa_localizer.engine.inference.global_search import Points
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.ingest.gps_track import GpsTrack
 from aoa_localizer.engine.ingest.intake import Intake, as_float
-from aoa_localizer.engine.outputs.estimates import Estimates, noise_summary
+from aoa_localizer.engine.outputs.estimates import Estimates
 from aoa_localizer.engine.outputs.next_goal import NextGoal
 from aoa_localizer.engine.outputs.posterior_grid import PosteriorGrid
 from aoa_localizer.engine.outputs.view import ChannelView, LocalizerView, PosteriorView, frozen
@@ -132,7 +132,7 @@ class Localizer:
             return view
         channels = tuple(ChannelView(c.id, c.frequency_hz, c.retired, c.estimate, c.track.summary(),
                                      frozen(c.track.events)) for c in every)
-        return replace(view, channels=channels, noise=MappingProxyType(noise_summary(latest)),
+        return replace(view, channels=channels, noise=MappingProxyType(latest.track.noise_summary()),
                        clock_hint=latest.track.supervisor.clock_hint, receiver_noise=self._receiver_noise())
 
     @_one_at_a_time
@@ -431,7 +431,7 @@ _DEPRECATED: dict[str, tuple[str, Callable[[Localizer], Any]]] = {
     "track_status": ("read view().channel(cid).track",
                      lambda loc: lambda channel=None: (channel or loc._estimates.latest).track.summary()),
     "noise_summary": ("read view().noise",
-                      lambda loc: lambda channel=None: noise_summary(channel or loc._estimates.latest)),
+                      lambda loc: lambda channel=None: (channel or loc._estimates.latest).track.noise_summary()),
     "clock_hint": ("read view().clock_hint", lambda loc: lambda: loc._estimates.latest.track.supervisor.clock_hint),
     "receiver_noise": ("read view().receiver_noise", lambda loc: loc._receiver_noise),
     "vehicle_place": ("read view().vehicles.get(station)",

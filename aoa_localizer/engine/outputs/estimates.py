@@ -31,12 +31,6 @@ from aoa_localizer.engine.types import Estimate, EstimateState, Transmitter
 AGREE_CHI2 = 9.21  # two places further apart than this (Mahalanobis, squared, both covariances: 1 % for 2-D)
 
 
-def noise_summary(channel: Channel) -> dict:
-    """A channel's self-calibrated noise: sigma (deg) per quality band with data, reading and point outlier
-    rates."""
-    return channel.track.noise_summary()
-
-
 def with_motion(motion: Motion | None, said: Motion | None, mean: np.ndarray, cov: np.ndarray, state: EstimateState,
                 warnings: list[str], unheeded: bool = False, explained: bool = False
                 ) -> tuple[np.ndarray, np.ndarray, EstimateState, list[str], dict[str, Any]]:
@@ -149,7 +143,7 @@ class Estimates:
                 t_lat, t_lon, _ = frame.to_geodetic(place.mean[0], place.mean[1])
                 transmitters.append(Transmitter(float(place.mean[0]), float(place.mean[1]), float(t_lat),
                                                 float(t_lon), place.cov.copy(), place.share, place_state))
-        mean, cov, state, warnings, moves = with_motion(said.motion, said.said, mean, cov, state, warnings,
+        mean, cov, state, warnings, moves = with_motion(said.motion, said.followed, mean, cov, state, warnings,
                                                         said.unheeded, said.explained)
         lat, lon, _ = frame.to_geodetic(mean[0], mean[1])
         from_map = np.linalg.inv(ground_to_map(frame.north_angle(lat, lon), LocalFrame.skew(mean[0], mean[1])))

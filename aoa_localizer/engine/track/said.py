@@ -27,7 +27,7 @@ class Standing:
     definite, then no modes, state or warnings were made), the posterior's modes, the state with the warnings
     behind it, the cloud (its effective size, particles and weights: copies), the transmitter count with the
     antennas of the points it heard (for its transmitters' ratings), and what the motion watch says (`motion`),
-    what the estimate may follow of it (`said`), whether a sure watch goes unheeded and whether the count explains
+    what the estimate may follow of it (`followed`), whether a sure watch goes unheeded and whether the count explains
     the motion."""
 
     stamp: float
@@ -46,7 +46,7 @@ class Standing:
     count: Count | None
     antennas: np.ndarray | None
     motion: Motion | None
-    said: Motion | None
+    followed: Motion | None
     unheeded: bool
     explained: bool
 
