@@ -315,8 +315,7 @@ def test_a_points_calibrated_sigmas_are_the_same_from_its_readings_and_from_the_
     model = NoiseModel(0.1)
     model.k = np.random.default_rng(2).uniform(0.2, 3.0, model.k.size)
     readings = [Reading(float(i), 0.0, q, 0.01 * (1 + i), 0.0, 0.0) for i, q in enumerate([45.0, np.nan, 99.0, 70.0])]
-    fields_only = Group()
-    fields_only.cols = columns(readings)
+    fields_only = Group(cols=columns(readings))
     here, there = sigmas(readings, model), sigmas(fields_only, model)
     assert np.array_equal(here, there)
     assert here == pytest.approx(fields_only.cols.sigma * model.scale(fields_only.cols.quality), rel=1e-15)

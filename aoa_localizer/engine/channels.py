@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 import math
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from aoa_localizer.engine.types import Estimate, EstimateState, Reading
 
 log = logging.getLogger("aoa_localizer")
 
-Closed = list[tuple["Channel", list[Reading]]]  # closed observation points, each with its channel
+Closed = list[tuple["Channel", Sequence[Reading]]]  # closed observation points, each with its channel
 
 DEFAULT = "default"  # the channel of records without a frequency
 # Carrier frequencies a DF receiver can report: above 0 and at most 1 THz (receivers stop near 50 GHz), so a

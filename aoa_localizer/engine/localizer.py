@@ -14,7 +14,7 @@ import logging
 import math
 import threading
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import replace
 from types import MappingProxyType
 from typing import Any, Protocol
@@ -51,7 +51,7 @@ class Observer(Protocol):
     def on_fix(self, stamp: float, east: float, north: float, station: str) -> None:
         """An accepted fix, at its ENU position, and its station ("" : the default one)."""
 
-    def on_point(self, readings: list[Reading], kept: np.ndarray) -> None:
+    def on_point(self, readings: Sequence[Reading], kept: np.ndarray) -> None:
         """The readings of a closed observation point, and which of them it kept (False: gated out as wild)."""
 
 

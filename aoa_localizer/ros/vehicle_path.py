@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -25,7 +25,7 @@ class VehiclePath:
         self.added[station] = self.added.get(station, 0) + 1
         self.on_valid_fix()
 
-    def on_point(self, readings: list[Reading], kept: np.ndarray) -> None:
+    def on_point(self, readings: Sequence[Reading], kept: np.ndarray) -> None:
         """Observation points are drawn by emitter/markers, not in the path."""
 
     def resize(self, length: int):

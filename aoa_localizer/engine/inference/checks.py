@@ -15,7 +15,7 @@ callback of the node (measured: twice as long). A snapshot crosses as a few arra
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -40,7 +40,7 @@ from aoa_localizer.engine.inference.point_batch import Built, PointBatch, points
 from aoa_localizer.engine.inference.provisional import DRAWS, provisional_sample
 from aoa_localizer.engine.inference.start_grid import StartGrid
 from aoa_localizer.engine.points.course import moved
-from aoa_localizer.engine.points.preprocess import Columns, Group, columns, group_size
+from aoa_localizer.engine.points.preprocess import Group, fields
 from aoa_localizer.engine.types import Reading
 
 
@@ -204,7 +204,7 @@ class Snapshot:
     particle, the best mode of the last check)."""
 
     cfg: LocalizerConfig
-    groups: list[list[Reading]]
+    groups: list[Sequence[Reading]]
     rows: np.ndarray
     noise: NoiseModel
     outlier_prob: float
@@ -220,18 +220,14 @@ class Snapshot:
         """For the worker process: the readings' fields as one array and the group sizes (a list of Reading
         objects pickles tens of times slower)."""
         state = dict(self.__dict__)
-        cols = [columns(g) for g in self.groups]  # made once per group: only the newest are made here
-        packed = np.array([np.concatenate(field) for field in zip(*cols, strict=True)]) if cols else None
-        state["groups"] = (packed, [group_size(g) for g in self.groups])
+        packed = np.concatenate([fields(g) for g in self.groups], axis=1) if self.groups else None
+        state["groups"] = (packed, [len(g) for g in self.groups])
         return state
 
     def __setstate__(self, state: dict):
         packed, sizes = state["groups"]
-        groups = []
-        for block in np.split(packed, np.cumsum(sizes)[:-1], axis=1) if sizes else []:
-            g = Group()  # fields only: what make_point and the fits read
-            g.cols = Columns(*(row.copy() for row in block))
-            groups.append(g)
+        # fields only: what make_point and the fits read
+        groups = [Group(cols=block) for block in np.split(packed, np.cumsum(sizes)[:-1], axis=1)] if sizes else []
         self.__dict__.update(state, groups=groups)
 
     def robust(self, outlier_prob: float, fitted: bool) -> Robust:

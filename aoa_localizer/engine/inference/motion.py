@@ -24,10 +24,12 @@ where the moving transmitter is now, how fast it goes, and whether its range is 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from aoa_localizer.engine.points.preprocess import field_lists
 from aoa_localizer.engine.types import ObservationPoint, Reading
 from aoa_localizer.filters.resampling import systematic
 
@@ -85,19 +87,17 @@ def _moments(x: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, (d * w[:, None]).T @ d
 
 
-def median_bearing(readings: list[Reading]) -> ObservationPoint:
+def median_bearing(readings: Sequence[Reading]) -> ObservationPoint:
     """A point's readings as the watch reads them: the median bearing as the receiver gave it (about the first, so
     wrapping cannot split it; robust to a wild one), its sigma the median's (1.25 times the readings' own over root
     n), at their mean time and antenna place."""
-    n = len(readings)
-    first = readings[0].theta
-    turns = sorted((r.theta - first + math.pi) % (2.0 * math.pi) - math.pi for r in readings)
+    stamp, theta, _, sigmas, east, north, gps, *_ = field_lists(readings)
+    n, first = len(theta), theta[0]
+    turns = sorted((t - first + math.pi) % (2.0 * math.pi) - math.pi for t in theta)
     turn = turns[n // 2] if n % 2 else 0.5 * (turns[n // 2 - 1] + turns[n // 2])
-    sigma = math.sqrt(sum(r.sigma * r.sigma for r in readings) / n)
-    return ObservationPoint(sum(r.stamp for r in readings) / n, sum(r.east for r in readings) / n,
-                            sum(r.north for r in readings) / n, first + turn,
-                            (1.2533 if n > 2 else 1.0) * sigma / math.sqrt(n), n,
-                            sum(r.gps_sigma for r in readings) / n)
+    sigma = math.sqrt(sum(s * s for s in sigmas) / n)
+    return ObservationPoint(sum(stamp) / n, sum(east) / n, sum(north) / n, first + turn,
+                            (1.2533 if n > 2 else 1.0) * sigma / math.sqrt(n), n, sum(gps) / n)
 
 
 def bearing_likelihood(place: np.ndarray, r: ObservationPoint, log_noise: np.ndarray, log_wild: np.ndarray,

@@ -19,7 +19,6 @@ from aoa_localizer.engine.points.preprocess import (
     Columns,
     Group,
     columns,
-    group_size,
     make_point,
 )
 from aoa_localizer.engine.scheduling.slices import BATCH_MADE, POINTS_MADE, metered
@@ -37,12 +36,11 @@ def points_of(points: Sequence[ObservationPoint]) -> Points:
     return Points.of(rows_of(points))
 
 
-def sigmas(group: list[Reading], noise: NoiseModel | None) -> np.ndarray:
+def sigmas(group: Sequence[Reading], noise: NoiseModel | None) -> np.ndarray:
     """The readings' sigmas under `noise` (None: the configured ones)."""
-    if noise is not None and 0 < group_size(group) <= SMALL_POINT:  # a few readings: plain floats (per point)
-        cols = getattr(group, "cols", None)
-        if cols is not None:
-            return cols.sigma * np.array(noise.scales(cols.quality.tolist()))
+    if noise is not None and 0 < len(group) <= SMALL_POINT:  # a few readings: plain floats (per point)
+        if isinstance(group, Group):
+            return group.field("sigma") * np.array(noise.scales(group.field("quality").tolist()))
         return np.array([r.sigma for r in group], float) * np.array(noise.scales([r.quality for r in group]))
     cols = columns(group)
     return cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
@@ -62,7 +60,7 @@ class PointBatch:
 
     # turning the readings is a pass of its own
     @metered(BATCH_MADE, lambda self, *_args, **_kw: (1 + self.course) * (self.of.size + 4 * self.sizes.size))
-    def __init__(self, groups: Sequence[list[Reading]], cfg: LocalizerConfig, course: bool = False):
+    def __init__(self, groups: Sequence[Sequence[Reading]], cfg: LocalizerConfig, course: bool = False):
         """`course`: each bearing turned by the vehicle's course (course.py), for bearings from its forward axis."""
         self.cfg, self.course = cfg, course
         if course:

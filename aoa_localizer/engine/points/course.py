@@ -48,12 +48,10 @@ def group_courses(cols: Sequence[Columns]) -> np.ndarray:
 
 def turned_group(cols: Columns, turn: np.ndarray) -> Group:
     """A fields-only group (preprocess.Group) of the readings `cols` with their bearings turned by `turn` (rad)."""
-    g = Group()
-    g.cols = cols._replace(theta=wrap_pi(cols.theta + turn))
-    return g
+    return Group(cols=cols._replace(theta=wrap_pi(cols.theta + turn)))
 
 
-def turned(readings: list[Reading], held: float) -> tuple[Group, float]:
+def turned(readings: Sequence[Reading], held: float) -> tuple[Group, float]:
     """The readings with each bearing turned by the vehicle's course (`held`: the course before them, NaN if
     none), and the course the last of them holds."""
     cols = columns(readings)

@@ -9,8 +9,9 @@ unless they are.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
 from operator import attrgetter
-from typing import NamedTuple
+from typing import NamedTuple, overload
 
 import numpy as np
 
@@ -84,7 +85,7 @@ def circular_median(theta: np.ndarray) -> float:
     return float(theta[np.flatnonzero(spread <= spread.min() + TIE_RAD)[0]])
 
 
-def make_point(readings: list[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None = None,
+def make_point(readings: Sequence[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None = None,
                heading_scale: float = 1.0) -> tuple[ObservationPoint, np.ndarray]:
     """Corrected bearing of one observation point and the mask of the readings it kept (the rest: wild).
 
@@ -97,14 +98,14 @@ def make_point(readings: list[Reading], cfg: LocalizerConfig, sigma: np.ndarray 
     calibration bore out (noise.py). Up to SMALL_POINT readings in plain floats, else (and as the reference)
     make_point_arrays.
     """
-    if 0 < group_size(readings) <= SMALL_POINT and cfg.point_weighting != "paper":
+    if 0 < len(readings) <= SMALL_POINT and cfg.point_weighting != "paper":
         made = _make_small_point(readings, cfg, sigma, heading_scale)
         if made is not None:
             return made
     return make_point_arrays(readings, cfg, sigma, heading_scale)
 
 
-def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None = None,
+def make_point_arrays(readings: Sequence[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None = None,
                       heading_scale: float = 1.0) -> tuple[ObservationPoint, np.ndarray]:
     """make_point in numpy, for any number of readings: the reference the plain-float path is tested against."""
     cols = columns(readings)
@@ -135,7 +136,7 @@ def make_point_arrays(readings: list[Reading], cfg: LocalizerConfig, sigma: np.n
 SMALL_POINT = 32  # readings up to which a point is made in plain floats (numpy's per-call cost dominates below)
 
 
-def _make_small_point(readings: list[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None,
+def _make_small_point(readings: Sequence[Reading], cfg: LocalizerConfig, sigma: np.ndarray | None,
                       heading_scale: float = 1.0) -> tuple[ObservationPoint, np.ndarray] | None:
     """make_point for a few readings in plain floats, the same maths term by term (make_point's numpy code is the
     reference the tests hold this to); None when a sigma is not positive and finite (the reference handles it)."""
@@ -175,19 +176,17 @@ def _make_small_point(readings: list[Reading], cfg: LocalizerConfig, sigma: np.n
     return point, np.array(keep)
 
 
-def group_size(group: list[Reading]) -> int:
-    """How many readings a group holds (a fields-only Group, as the worker gets them, holds its columns only)."""
-    cols = getattr(group, "cols", None)
-    return len(group) if cols is None else cols.stamp.size
+def field_lists(group: Sequence[Reading]) -> list[list[float]]:
+    """The readings' fields (Columns' order) as lists of floats, from a Group's array or a list's readings: the
+    plain-float paths read the same values on both sides of the worker."""
+    return fields(group).tolist()
 
 
-def field_lists(group: list[Reading]) -> list[list[float]]:
-    """The readings' fields (Columns' order) as lists of floats, from the readings or a fields-only Group's
-    columns: the plain-float paths read the same values on both sides of the worker."""
-    cols = getattr(group, "cols", None)
-    if cols is not None:
-        return [c.tolist() for c in cols]
-    return [list(f) for f in zip(*map(_FIELDS, group), strict=True)]
+def fields(group: Sequence[Reading]) -> np.ndarray:
+    """The readings' fields as one array (Columns' order, one row a field): a Group's own, or made."""
+    if isinstance(group, Group):
+        return group.block
+    return np.array([_FIELDS(r) for r in group], float).reshape(-1, len(Columns._fields)).T
 
 
 class Columns(NamedTuple):
@@ -207,24 +206,76 @@ class Columns(NamedTuple):
 
 
 _FIELDS = attrgetter(*Columns._fields)
+_FIELD_ROW = {name: i for i, name in enumerate(Columns._fields)}
 
 
-class Group(list):
-    """The readings of one observation point, with their fields as arrays made once (points are rebuilt from
-    their readings at every noise calibration)."""
+class Group(Sequence[Reading]):
+    """The readings of one observation point, kept as one array of their fields and their stations: a channel
+    keeps thousands of readings for its count and noise fits, and a Reading object's floats cost about 350 bytes
+    against 80 here. Indexing and iterating give Reading objects again (the same values)."""
 
-    cols: Columns | None = None
+    __slots__ = ("block", "stations")
+
+    def __init__(self, readings: Sequence[Reading] = (), cols: Columns | np.ndarray | None = None):
+        """From the readings, or from their fields alone (`cols`, or an array of Columns' rows: the worker's and a
+        course's turned groups; their station is the default one)."""
+        self.stations: str | tuple[str, ...] = ""  # one for all (most groups), or one per reading
+        if cols is not None:
+            self.block = np.array(cols, float).reshape(len(Columns._fields), -1)
+            return
+        self.block = np.ascontiguousarray(fields(readings))
+        names = tuple(r.station for r in readings)
+        self.stations = names if len(set(names)) > 1 else (names[0] if names else "")
+
+    def field(self, name: str) -> np.ndarray:
+        """One field of the readings (a view of the group's array: not to be written)."""
+        return self.block[_FIELD_ROW[name]]
+
+    @property
+    def cols(self) -> Columns:
+        """The fields as arrays, each made anew (as the worker unpacks them: the same sums to the bit)."""
+        return Columns(*(row.copy() for row in self.block))
+
+    def station(self, i: int) -> str:
+        return self.stations if isinstance(self.stations, str) else self.stations[i]
+
+    def __len__(self) -> int:
+        return self.block.shape[1]
+
+    @overload
+    def __getitem__(self, i: int) -> Reading: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> list[Reading]: ...
+
+    def __getitem__(self, i: int | slice) -> Reading | list[Reading]:
+        if isinstance(i, slice):
+            return [self[k] for k in range(len(self))[i]]
+        k = range(len(self))[i]  # negative indices and bounds as a list's
+        return _reading(self.block[:, k].tolist(), self.station(k))
+
+    def __iter__(self) -> Iterator[Reading]:
+        return map(_reading, self.block.T.tolist(), stations(self))
 
 
-def columns(readings: list[Reading]) -> Columns:
-    """The readings' fields as arrays (made once for a Group)."""
-    cols = getattr(readings, "cols", None)
-    if cols is None:
-        block = np.array([_FIELDS(r) for r in readings], float).reshape(-1, len(Columns._fields))
-        cols = Columns(*(block[:, i].copy() for i in range(block.shape[1])))  # as the worker unpacks them
-        if isinstance(readings, Group):
-            readings.cols = cols
-    return cols
+def _reading(row: list[float], station: str) -> Reading:
+    """A Reading of its fields (Columns' order) and its station."""
+    stamp, theta, quality, sigma, east, north, gps_sigma, v_east, v_north, heading_sigma = row
+    return Reading(stamp, theta, quality, sigma, east, north, gps_sigma, v_east, v_north, heading_sigma, station)
+
+
+def stations(group: Sequence[Reading]) -> list[str]:
+    """The station that took each reading."""
+    if isinstance(group, Group):
+        return [group.station(k) for k in range(len(group))]
+    return [r.station for r in group]
+
+
+def columns(readings: Sequence[Reading]) -> Columns:
+    """The readings' fields as arrays."""
+    if isinstance(readings, Group):
+        return readings.cols
+    return Columns(*(row.copy() for row in fields(readings)))  # as the worker unpacks them
 
 
 class PointBuilder:
@@ -242,7 +293,7 @@ class PointBuilder:
         self.readings: list[Reading] = []
         self.emitter: tuple[float, float] | None = None  # the channel's estimate (ENU m), once it has one
 
-    def add(self, r: Reading) -> list[list[Reading]]:
+    def add(self, r: Reading) -> list[Group]:
         """Add a reading; returns the readings of each point it closed (zero, one or two)."""
         closed = []
         cfg, scale = self.cfg, self.scale
@@ -261,11 +312,11 @@ class PointBuilder:
             closed.append(self._take())
         return closed
 
-    def _take(self) -> list[Reading]:
+    def _take(self) -> Group:
         readings, self.readings, self.scale = Group(self.readings), [], 1.0
         return readings
 
-    def flush(self) -> list[Reading] | None:
+    def flush(self) -> Group | None:
         """Close the open point (end of data, reset) and return its readings (None when none is open); the next
         point is a first point again."""
         taken = self._take() or None

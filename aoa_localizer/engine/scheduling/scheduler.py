@@ -13,7 +13,7 @@ invariant, so when it is made changes no law.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Future, wait
 from dataclasses import dataclass
 from typing import Any
@@ -67,7 +67,7 @@ class PendingJob:
 
     future: Future | SlicedJob
     filter: ParticleFilter | None
-    groups: list[list[Reading]]
+    groups: list[Sequence[Reading]]
 
     @property
     def in_calls(self) -> bool:
@@ -107,7 +107,7 @@ class Scheduler:
         return self.worker.failures if self.worker is not None else 0
 
     def start(self, owner: object, job: Callable[[], object], budget_us: float, f: ParticleFilter | None,
-              groups: list[list[Reading]], first_turn: bool = True) -> None:
+              groups: list[Sequence[Reading]], first_turn: bool = True) -> None:
         """`owner`'s job, a plain function (a track's start search for `f` None, else a check for `f`, over the
         snapshot of `groups`; its transmitter count; its channel's live survey fix): handed to the worker; inline, or
         when the worker cannot take it, made in turns within the calls, up to `budget_us` a call (slices.py), the

@@ -7,7 +7,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -73,11 +73,11 @@ class Calibrator:
                 self.grid, self.pooled = NoiseGrid.for_config(self.cfg, pooled), pooled
         return self.grid
 
-    def sigmas(self, readings: list[Reading]) -> np.ndarray:
+    def sigmas(self, readings: Sequence[Reading]) -> np.ndarray:
         """Each reading's sigma under the calibrated noise model (the configured one until calibrated)."""
         return sigmas(readings, self.noise if self.cfg.calibrate_noise else None)
 
-    def make(self, readings: list[Reading]) -> tuple[ObservationPoint, np.ndarray]:
+    def make(self, readings: Sequence[Reading]) -> tuple[ObservationPoint, np.ndarray]:
         """The point of `readings` under the calibrated noise model (the readings' own sigmas until calibrated)."""
         if self.course:
             readings, self.held_course = turned(readings, self.held_course)
@@ -114,7 +114,7 @@ class Calibrator:
             return None
         return self.apply(fit.noise, fit.at, {}, fit.offset, fit.batch.course, window)
 
-    def apply(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]], offset: float,
+    def apply(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[Sequence[Reading], Built]], offset: float,
               course: bool, window: deque[WindowEntry]) -> Recalibration:
         """Adopt `noise`, the bearing `offset` and `course` (bearings turned by the vehicle's course), fitted at the
         place `at`: the `window`'s points rebuilt with them (`built`: points already made with them, by their

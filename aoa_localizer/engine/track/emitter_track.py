@@ -19,7 +19,7 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import replace
 from functools import partial
 
@@ -42,6 +42,7 @@ from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.inference.site_part import site_part_spread
+from aoa_localizer.engine.points.preprocess import Columns, fields, stations
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
@@ -78,7 +79,7 @@ class EmitterTrack(Held):
         self.supervisor = Supervisor(cfg)
 
     # -- the flow -----------------------------------------------------------------------------------
-    def add(self, readings: list[Reading]) -> Said | None:
+    def add(self, readings: Sequence[Reading]) -> Said | None:
         """One closed group of readings; what the track says after it (said()) when the filter took it (or started)
         and has a new estimate, else None. Its job's turn comes after the filter's step, within what the step left
         of the call's budget (the Localizer opens it: slices.one_call)."""
@@ -258,7 +259,7 @@ class EmitterTrack(Held):
             self._diverged()
         return True
 
-    def _apply_fit(self, res: CheckResult, groups: list[list[Reading]]):
+    def _apply_fit(self, res: CheckResult, groups: list[Sequence[Reading]]):
         """A search's noise and offset fit, if it made one, adopted by the calibrator."""
         if res.noise is not None and res.at is not None:
             self._recalibrate(res.noise, res.at, _by_group(groups, res.built), res.offset, res.course)
@@ -291,7 +292,7 @@ class EmitterTrack(Held):
         self.scheduler.start(self, job, START_BUDGET_US, None, snap.groups)
         return self.apply_job()  # a sliced search small enough to finish in its first call starts the filter now
 
-    def _apply_start(self, res: CheckResult, groups: list[list[Reading]]) -> bool:
+    def _apply_start(self, res: CheckResult, groups: list[Sequence[Reading]]) -> bool:
         """Start the filter from a start search's modes over the points held now (a background search's snapshot
         may have fewer): an importance sample of the posterior, then MH sweeps; or hold a provisional sample and
         wait for more points (searching again at once when enough came while it ran)."""
@@ -321,7 +322,7 @@ class EmitterTrack(Held):
         c = self.calibration
         return Holding([e.point for e in self.window], self.reach(), c.lik_outlier_prob, c.noise_prior())
 
-    def _hold_modes(self, modes: list[Mode], searched: list[list[Reading]] | None = None):
+    def _hold_modes(self, modes: list[Mode], searched: list[Sequence[Reading]] | None = None):
         """The track's modes and its estimate's points: every point waiting (none before: a start holds all), or
         those of them the search drew a provisional sample over (`searched`: their readings)."""
         self.modes = modes
@@ -383,7 +384,7 @@ class EmitterTrack(Held):
         self.scheduler.start(self, job, CHECK_BUDGET_US, self.running, snap.groups)
         self.apply_job()
 
-    def _apply_check(self, res: CheckResult, groups: list[list[Reading]]):
+    def _apply_check(self, res: CheckResult, groups: list[Sequence[Reading]]):
         """The cheap part of a global check, on the current cloud and points: re-weight by the fitted noise,
         emitter-moved test (in alarm), then the modes' MH move or a re-start from a far better mode."""
         self._apply_fit(res, groups)
@@ -425,7 +426,7 @@ class EmitterTrack(Held):
             self._adopt(recalibration)
         return recalibration is not None
 
-    def _recalibrate(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[list[Reading], Built]],
+    def _recalibrate(self, noise: NoiseModel, at: np.ndarray, built: dict[int, tuple[Sequence[Reading], Built]],
                      offset: float, course: bool):
         if self.counted is not None and self.counted.count >= 2 and self.counted.probability >= COUNT_SURE:
             # several transmitters on the air: their bearings, fitted as one, differ by an angle that is no
@@ -497,12 +498,12 @@ class EmitterTrack(Held):
             return
         groups = list(self.heard)
         stride = math.ceil(self.heard_held / COUNT_MAX_READINGS)
-        readings = [r for g in groups[::-1][::stride][::-1] for r in g]  # the newest point always in
+        chosen = groups[::-1][::stride][::-1]  # the newest point always in
         # The readings as heard, with their own sigmas (the configured model): a receiver calibrated on two
         # transmitters' bearings reads them as one wide noise or an offset; the count fits its own of both
-        rows = np.array([[r.stamp, r.east, r.north, r.theta, r.sigma, r.quality] for r in readings])
-        heard = Readings(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], np.maximum(rows[:, 4], 1e-4), rows[:, 5])
-        names, station = np.unique([r.station for r in readings], return_inverse=True)
+        f = Columns(*np.concatenate([fields(g) for g in chosen], axis=1))
+        heard = Readings(f.stamp, f.east, f.north, f.theta, np.maximum(f.sigma, 1e-4), f.quality)
+        names, station = np.unique([s for g in chosen for s in stations(g)], return_inverse=True)
         if names.size >= 2:  # each station's receiver may carry a steady bias of its own: a site of the count's
             heard = replace(heard, site=station, site_sd=math.radians(STATION_BIAS_SD_DEG))
         first = self.filter.estimate()[0] if self.filter is not None else self.modes[0].mean
@@ -601,6 +602,6 @@ def count_every(every: int, before: Count | None, now: Count | None) -> int:
     return min(2 * every, COUNT_EVERY_MAX) if agree else HEARD_READINGS
 
 
-def _by_group(groups: Iterable[list[Reading]], built: list[Built]) -> dict[int, tuple[list[Reading], Built]]:
+def _by_group(groups: Iterable[Sequence[Reading]], built: list[Built]) -> dict[int, tuple[Sequence[Reading], Built]]:
     """A check's points rebuilt with its noise, by their group's identity (empty when the check made none)."""
     return {id(g): (g, b) for g, b in zip(groups, built, strict=True)} if built else {}

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import cast
 
 import numpy as np
@@ -77,7 +77,7 @@ class Held:
         # Every point's readings as heard (the transmitter count's: the window drops points when the emitter moved,
         # which is what transmitters taking turns look like), their number, and the last count with the readings
         # it was made from
-        self.heard: deque[list[Reading]] = deque()
+        self.heard: deque[Sequence[Reading]] = deque()
         self.heard_held = 0  # readings in `heard`
         self.heard_readings = 0  # readings heard since the start
         self.counted: Count | None = None

@@ -1,6 +1,7 @@
 """What an emitter track holds between its parts: the state it is in and its points."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum, StrEnum
 
@@ -81,7 +82,7 @@ class TrackStatus:
 class WindowEntry:
     """One observation point the track keeps: its readings, the point made of them, how many readings it gated out."""
 
-    readings: list[Reading]
+    readings: Sequence[Reading]
     point: ObservationPoint
     gated: int
 
