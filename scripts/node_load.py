@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 from node_rig import NodeRig
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from aoa_localizer.engine.channels import channel_id
 from aoa_localizer.engine.geodesy import LocalFrame
@@ -121,11 +122,32 @@ def main():
                     round(tree_rss_mb(rig.proc.pid), 1)))
         figures = {"posterior_grids_received": grids[0], "node_cpu_s": cpu_seconds(rig.proc.pid),
                    "worker_cpu_s": round(sum(cpu_seconds(c) for c in children(rig.proc.pid)), 1)}
+        figures.update(final_estimates(rig, freqs, emitters, frame))
     figures.update(summarise(args, sent, last, periods, rss))
     print(json.dumps(figures, indent=1))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(figures, fh, indent=1)
+
+
+def final_estimates(rig: NodeRig, freqs: np.ndarray, emitters: np.ndarray, frame: LocalFrame) -> dict:
+    """Each channel's last emitter/<channel>/fix (latched), taken after the run, against its emitter: the error and
+    whether the emitter lies inside the fix's 95 % ellipse (its ENU covariance), over the channels that have one."""
+    fixes: dict[int, object] = {}
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+    for k, f in enumerate(freqs):
+        rig.node.create_subscription(rig.T.NavSatFix, f"emitter/{channel_id(float(f))}/fix",
+                                     lambda m, k=k: fixes.__setitem__(k, m), latched)
+    rig.spin_until(time.monotonic() + 5)
+    errors, inside = [], 0
+    for k, m in fixes.items():
+        east, north = frame.to_enu(m.latitude, m.longitude)
+        d = np.array([float(east) - emitters[k, 0], float(north) - emitters[k, 1]])
+        cov = np.array(m.position_covariance, float).reshape(3, 3)[:2, :2]
+        errors.append(float(np.hypot(*d)))
+        inside += bool(d @ np.linalg.solve(cov, d) <= 5.991)
+    return {"channels_with_estimate": len(fixes), "median_error_m": float(np.median(errors)) if errors else None,
+            "inside_95_ellipse": inside}
 
 
 def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> dict:
@@ -139,6 +161,8 @@ def summarise(args, sent: int, last: dict, periods: list[dict], rss: list) -> di
         "emitters": args.emitters, "df_hz_each": args.df_hz, "seconds": args.seconds, "scan": args.scan,
         "df_records_sent": sent, "df_records_received": int(last.get("bearings_received", 0)),
         "fixes_received": int(last.get("fixes_received", 0)), "bearings_used": int(last.get("bearings_used", 0)),
+        "df_records_shed": int(last.get("records_shed", 0)), "kept_share_at_end": last.get("records_kept_share"),
+        "input_messages_missed": int(last.get("input_messages_missed", 0)),
         "rejected": {k: v for k, v in last.items() if k.startswith("rejected.")},
         "poses": poses, "periods": len(periods),
         "latency_p50_ms_median_of_periods": float(np.median(p50)) if p50 else None,

@@ -169,3 +169,67 @@ def test_a_quiet_node_ticks_slowly_and_an_input_makes_it_tick_fast_at_once():
     assert resets == [1]
     LocalizerNode._pace_idle(node, True)  # type: ignore[arg-type]  # an input
     assert timer.timer_period_ns == int(IDLE_PERIOD_S * 1e9) and resets == [1, 1]
+
+
+def test_the_node_sheds_half_its_df_records_per_period_it_cannot_keep_up_and_takes_them_back_once_it_does():
+    """Issue 69: a backlog grew unseen in the node's input queue. The rule (shedding.py): a period whose messages
+    waited LAG_S (median) before they were taken, while the engine's calls filled SHED_LOAD of it, halves the share of
+    DF records kept, down to KEEP_MIN; one without a wait (QUICK_S) and with the engine under RELIEF_LOAD doubles it
+    back; between, it stays. A wait while the engine's work is light is not the engine's: not shed for."""
+    from aoa_localizer.ros.shedding import KEEP_MIN, LAG_S, QUICK_S, RELIEF_LOAD, SHED_LOAD, Shedding
+
+    s = Shedding()
+    assert all(s.keeps() for _ in range(1000)) and s.judge(0.0, 0.9) is None  # busy, yet keeping up
+    assert all(s.keeps() for _ in range(1000))
+    assert s.judge(LAG_S, 0.9 * SHED_LOAD) is None and s.keep == 1.0  # waiting, but the engine is not the cause
+    assert all(s.keeps() for _ in range(1000))
+    words = s.judge(LAG_S, SHED_LOAD)
+    assert s.keep == 0.5 and "kept with probability 0.5" in words and "0 of 1000 DF records shed" in words
+    kept = sum(s.keeps() for _ in range(4000))
+    assert 1800 < kept < 2200 and s.shed == 4000 - kept  # each record with probability 0.5 (seeded)
+    assert f"{4000 - kept} of 4000 DF records shed" in s.judge(2 * LAG_S, 0.8)
+    for _ in range(10):
+        s.judge(2 * LAG_S, 0.8)
+    assert s.keep == KEEP_MIN
+    s.judge(0.5 * LAG_S, 0.8)  # no wait, the engine busy: it stays
+    s.judge(2 * LAG_S, 0.4)  # waiting, the engine between the two: it stays
+    assert s.keep == KEEP_MIN
+    s.judge(0.0, 0.5 * RELIEF_LOAD)
+    assert s.keep == 2 * KEEP_MIN
+    s.judge(10.0, 0.5 * RELIEF_LOAD)  # waiting, but the engine idle: not its work; nor yet caught up
+    s.judge(QUICK_S, 0.5 * RELIEF_LOAD)
+    assert s.keep == 2 * KEEP_MIN
+    s.judge(0.5 * QUICK_S, 0.5 * RELIEF_LOAD)
+    assert s.keep == 4 * KEEP_MIN
+    for _ in range(5):
+        s.judge(0.0, 0.1)
+    assert s.keep == 1.0 and s.judge(0.0, 0.1) is None
+    off = Shedding(enabled=False)
+    assert off.judge(10.0, 1.0) is None and all(off.keeps() for _ in range(100)) and off.shed == 0
+    s.judge(10.0, 1.0)
+    s.enable(False)
+    assert s.keep == 1.0
+
+
+def test_a_backlog_is_said_as_overload_with_the_share_kept():
+    """Messages that waited before the node took them are a backlog the middleware never reports: overload, and
+    the records kept from then on are said and counted in the values."""
+    import time
+    from types import SimpleNamespace
+
+    from aoa_localizer.ros.node_monitor import NodeMonitor
+
+    mon = NodeMonitor(time.monotonic(), 1e9, lambda: 1.0)
+    loc = SimpleNamespace(rejected=Counter())
+    waited = time.time_ns() - 2_000_000_000  # arrived 2 s ago
+    for _ in range(10):
+        mon.arrived({"received_timestamp": waited}, "/df/bearing")
+    mon.period_start, mon.callback_s = time.perf_counter() - 1.0, [0.9]  # a period of 1 s, 0.9 s of it worked
+    mon.engine_s = 0.8  # of which in the engine's calls
+    words = mon._overload(loc)
+    assert words is not None and "waited 2.0" in words and "kept with probability 0.5" in words
+    fresh = NodeMonitor(time.monotonic(), 1e9, lambda: 1e9, shed=False)
+    for _ in range(10):
+        fresh.arrived({"received_timestamp": waited}, "/df/bearing")
+    words = fresh._overload(loc)
+    assert words is not None and "waited" in words and "shedding" not in words

@@ -155,7 +155,8 @@ class LocalizerNode(Node):
         self._init_parameters()  # raises ConfigError: the caller refuses to start
         self.types = build.rclpy_types()
         self.monitor = NodeMonitor(self._now(), self.get_parameter("stale_after_s").value,
-                                   lambda: self.get_parameter("diagnostics_period_s").value)
+                                   lambda: self.get_parameter("diagnostics_period_s").value,
+                                   self.get_parameter("shed_overload").value)
         self.path = VehiclePath(self.get_parameter("path_length").value,
                                 lambda: self.monitor.health.valid_fix(self._now()))
         self.made: dict[str, Any] = {}  # the newest estimate of each channel made by the input being handled
@@ -319,6 +320,8 @@ class LocalizerNode(Node):
                 self.path.resize(p.value)
             elif p.name == "stale_after_s":
                 self.monitor.health.stale_after_s = p.value
+            elif p.name == "shed_overload":
+                self.monitor.shedding.enable(p.value)
         changes = {p.name: p.value for p in params if p.name in ENGINE_PARAMS}
         if not changes:
             return SetParametersResult(successful=True)
@@ -396,7 +399,9 @@ class LocalizerNode(Node):
             mon.counts["adapter_errors"] += 1
             return
         mon.fix_stamp(station, r.stamp)
+        t1 = time.perf_counter()
         self.loc.add_fix(r.stamp, r.lat, r.lon, r.alt, r.status, r.sigma_m, station=station)
+        mon.engine_s += time.perf_counter() - t1
         self.fix_wait.fix(station, r.stamp)  # the DF records that waited for it follow it
         self._publish_made()
         self.outputs.datum(self.loc, r.stamp)
@@ -448,8 +453,13 @@ class LocalizerNode(Node):
         mon.timed(t0)
 
     def _feed_bearing(self, station: str, r) -> None:
+        mon = self.monitor
+        if not mon.shedding.keeps():  # the engine's work outruns the input: counted, said under `overload`
+            return
+        t1 = time.perf_counter()
         self.loc.add_bearing(r.stamp, r.azimuth_deg, r.quality, station=station, frequency_hz=r.frequency_hz,
                              sigma_deg=r.sigma_deg)
+        mon.engine_s += time.perf_counter() - t1
 
     # -- outputs ------------------------------------------------------------------------------------
     def _publish_made(self, latency: bool = True):
@@ -546,7 +556,9 @@ class LocalizerNode(Node):
         busy = self.restart_due is not None
         self._apply_parameters()
         self.fix_wait.due(time.monotonic())
+        t1 = time.perf_counter()
         self.loc.idle()
+        self.monitor.engine_s += time.perf_counter() - t1
         busy |= bool(self.made)
         self._publish_made(latency=False)  # no input made these: no latency to count
         grids = self.outputs.posteriors(self.loc, POSTERIOR_BUDGET_S, self.get_parameter("diagnostics_period_s").value)

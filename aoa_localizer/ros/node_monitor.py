@@ -22,8 +22,10 @@ from aoa_localizer.engine.types import EstimateState
 from aoa_localizer.reporting.words import clock_hint_words
 from aoa_localizer.ros.node_health import LatencyHistogram, NodeHealth, Overload
 from aoa_localizer.ros.node_outputs import PosteriorWork
+from aoa_localizer.ros.shedding import LAG_S, Shedding
 
 _MAX_LOAD = 0.8  # share of wall time spent working (inputs, idle moves, diagnostics) above which it warns
+_LAG_SANE_NS = 3_600_000_000_000  # a receive stamp further back than an hour is not this host's clock: no wait taken
 _STALL_PERIODS = 2.0  # a diagnostics period this many times longer than configured: the node was held up
 _GAP_FACTOR = 1.5  # a stamp gap this many typical intervals long holds lost records (a regular receiver jitters less)
 _GAP_STREAMS = 256  # input streams whose stamp gaps are followed; past it the one heard least recently is dropped
@@ -69,7 +71,8 @@ class NodeMonitor:
     """The node's counts, timings and input health over a diagnostics period, and the /diagnostics it makes of them
     and of the engine. `period_s()` reads diagnostics_period_s (a parameter that may change)."""
 
-    def __init__(self, now: float, stale_after_s: float, period_s: Callable[[], float]):
+    def __init__(self, now: float, stale_after_s: float, period_s: Callable[[], float], shed: bool = True):
+        """`shed`: thin the DF records when the input outruns the node (shedding.py)."""
         self.period_s = period_s
         self.health = NodeHealth(now, stale_after_s)
         self.counts = dict.fromkeys(("fixes_received", "bearings_received", "scans_received", "adapter_errors",
@@ -85,6 +88,9 @@ class NodeMonitor:
         self.restarts = 0  # track restarts they made (a burst of sets makes one)
         self.period_start = time.perf_counter()
         self.overload = Overload()
+        self.shedding = Shedding(shed)
+        self.take_lag_s: list[float] = []  # how long each message of the period waited before the node took it
+        self.engine_s = 0.0  # the period's time in the engine's calls (add_bearing, add_fix, idle): what shedding cuts
         self.arrival_ns = time.time_ns()
         self.sequences: dict[str, SequenceGaps] = {}  # each input subscription's publication numbers
         self.taken = 0  # input messages taken since the start
@@ -105,7 +111,10 @@ class NodeMonitor:
         """When the message being handled reached this process (the middleware's receive time, else now): the
         start of the latency of any pose it produces; and its publication number on input `stream`."""
         received = info.get("received_timestamp", 0) if isinstance(info, dict) else 0
-        self.arrival_ns = received if received > 0 else time.time_ns()
+        now = time.time_ns()
+        self.arrival_ns = received if received > 0 else now
+        if 0 <= now - self.arrival_ns < _LAG_SANE_NS:  # the middleware's stamp is this host's clock
+            self.take_lag_s.append(1e-9 * (now - self.arrival_ns))
         self.taken += 1
         if isinstance(info, dict):
             gaps = self.sequences.get(stream)
@@ -137,7 +146,8 @@ class NodeMonitor:
 
     def end_period(self, t0: float) -> None:
         """The periodic work that started at `t0` is done: a new period begins (that work counts in it)."""
-        self.callback_s, self.callback_max_s, self.latency_ms = [], 0.0, []
+        self.callback_s, self.callback_max_s, self.latency_ms, self.take_lag_s = [], 0.0, [], []
+        self.engine_s = 0.0
         self.period_start = time.perf_counter()
         self.other_s = self.period_start - t0
 
@@ -200,6 +210,7 @@ class NodeMonitor:
         values.update(load_pct=f"{100 * self._load():.0f}", period_s=f"{time.perf_counter() - self.period_start:.3f}",
                       rejected_while_overloaded=sum(self.overload.rejected.values()),
                       input_messages_missed=sum(g.missing for g in self.sequences.values()),
+                      records_shed=self.shedding.shed, records_kept_share=f"{self.shedding.keep:.4g}",
                       parameter_changes=self.parameter_changes, restarts=self.restarts)
         w = self.posterior_work
         if w.made or w.deferred:  # the grids listened to: their cost is named, not blamed on the filter
@@ -253,6 +264,7 @@ class NodeMonitor:
         period = self.period_s()
         wall = time.perf_counter() - self.period_start
         load = self._load()
+        lag = float(np.median(self.take_lag_s)) if self.take_lag_s else 0.0
         cause = None
         missed = sum(g.missing for g in self.sequences.values())
         new_taken, new_missed = self.taken - self.seen_missing[0], missed - self.seen_missing[1]
@@ -264,9 +276,13 @@ class NodeMonitor:
                      "df/scan cost one message)")
         elif wall > _STALL_PERIODS * period:
             cause = f"the node was held up: this diagnostics period lasted {wall:.1f} s ({period:g} s configured)"
+        elif lag >= LAG_S:
+            cause = f"the messages it took had waited {lag:.2f} s (median) since they arrived: a backlog"
         elif load > _MAX_LOAD:
             cause = f"the node worked {100 * load:.0f} % of the last period"
-        return self.overload.judge(cause, view.rejected, self._missing())
+        words = self.overload.judge(cause, view.rejected, self._missing())
+        shedding = self.shedding.judge(lag, self.engine_s / max(wall, period))
+        return "; ".join(w for w in (words, shedding) if w) or None
 
     def _missing(self) -> int:
         """Inputs that never arrived, as far as anything can tell: the middleware's lost counts, and the stamp gaps

@@ -26,6 +26,12 @@ NODE_PARAMS = [
                                                     high=3600.0, read_only=True)),
     ParameterSpec("stale_after_s", 5.0, Spec("/diagnostics warns when no DF reading or no valid GPS fix arrived for "
                                              "this long (s)", float, low=0.0, low_open=True, high=86_400.0)),
+    ParameterSpec("shed_overload", True, Spec(
+        "when the engine's work leaves the input messages waiting 0.25 s (median) before the node takes them (the "
+        "engine filling half a diagnostics period), keep each DF record with a probability halved each such period "
+        "(down to 1/16) and doubled back once they wait under 0.05 s with the engine filling under 30 %; "
+        "the records shed are counted (records_shed) and said under `overload`; false: none are shed (a backlog then "
+        "grows in the input queue, or it drops whole messages)", bool)),
     ParameterSpec("stations", [], Spec(
         "DF stations whose inputs are fused: each NAME subscribes NAME/gps/fix, NAME/df/bearing, NAME/df/scan (and "
         "NAME/heading/imu) and publishes NAME/vehicle/path; empty: one station on gps/fix, df/bearing and df/scan",
