@@ -3,8 +3,9 @@ at --df-hz each (all channels of a scan share one stamp, as a KrakenSDR's VFOs d
 into a real node process over Fast DDS with its default configuration. Every diagnostics period the node reports
 the latency from the arrival of each message that made a pose to that pose's publication (p50, p99, max over the
 period, and the p99 since the node started, to 6 %); this script keeps them, samples the resident memory of the
-node (and of its check worker process) every 10 s, and prints the figures of docs/benchmarks.md "Many emitters
-through one node".
+node (and of its check worker process) every 10 s, takes each channel's last emitter/<channel>/fix after the run
+against its emitter (the error, and whether the 95 % ellipse holds it), and prints the figures of
+docs/benchmarks.md "Many emitters through one node".
 
     python scripts/node_load.py --emitters 50 --df-hz 20 --seconds 600
 """
