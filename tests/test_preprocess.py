@@ -161,8 +161,7 @@ def test_a_small_point_in_plain_floats_is_the_numpy_reference_to_rounding():
         assert abs(math.remainder(point.theta - ref.theta, 2 * math.pi)) < 1e-12
         for f in ("stamp", "east", "north", "sigma", "gps_sigma"):
             assert getattr(point, f) == pytest.approx(getattr(ref, f), rel=1e-12, abs=1e-12), f
-        fields_only = Group()
-        fields_only.cols = columns(readings)
+        fields_only = Group(cols=columns(readings))
         again, again_kept = make_point(fields_only, cfg, sigma)
         assert again == point and np.array_equal(again_kept, kept)
 
