@@ -264,6 +264,11 @@ def _reading(row: list[float], station: str) -> Reading:
     return Reading(stamp, theta, quality, sigma, east, north, gps_sigma, v_east, v_north, heading_sigma, station)
 
 
+def first_antenna(group: Sequence[Reading]) -> np.ndarray:
+    """(east, north) of the antenna at a group's first reading (a Group's without making a Reading)."""
+    return fields(group)[[_FIELD_ROW["east"], _FIELD_ROW["north"]], 0]
+
+
 def stations(group: Sequence[Reading]) -> list[str]:
     """The station that took each reading."""
     if isinstance(group, Group):

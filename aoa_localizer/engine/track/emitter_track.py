@@ -42,7 +42,7 @@ from aoa_localizer.engine.inference.point_batch import Built
 from aoa_localizer.engine.inference.receiver_pool import PooledNoise
 from aoa_localizer.engine.inference.safety import ModeProposal, importance_sample
 from aoa_localizer.engine.inference.site_part import site_part_spread
-from aoa_localizer.engine.points.preprocess import Columns, fields, stations
+from aoa_localizer.engine.points.preprocess import Columns, fields, first_antenna, stations
 from aoa_localizer.engine.rejections import Reason
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
 from aoa_localizer.engine.scheduling.slices import CHECK_BUDGET_US, START_BUDGET_US
@@ -467,7 +467,7 @@ class EmitterTrack(Held):
         modes, state, warnings = ([], EstimateState.POORLY_DETERMINED, []) if degenerate else self.assess(
             mean, cov, others_share(count, mean))
         # the antennas only rate the transmitters' ellipses: a single transmitter (most channels) skips them
-        antennas = (np.array([[g[0].east, g[0].north] for g in self.heard])
+        antennas = (np.array([first_antenna(g) for g in self.heard])
                     if count is not None and count.transmitters else None)
         cloud = self.cloud
         return Standing(self.last_stamp, mean, cov, degenerate, modes, state, warnings, cloud.ess(), cloud.x.copy(),
