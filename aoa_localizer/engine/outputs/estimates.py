@@ -22,7 +22,7 @@ from aoa_localizer.engine.ingest.intake import Intake
 from aoa_localizer.engine.rejections import Reason, Rejections
 from aoa_localizer.engine.scheduling import slices
 from aoa_localizer.engine.scheduling.scheduler import PendingJob, Scheduler
-from aoa_localizer.engine.survey.survey_log import SurveyFix, counted, live_fix
+from aoa_localizer.engine.survey.survey_log import LiveFixes, SurveyFix, counted, live_fix
 from aoa_localizer.engine.survey.survey_solver import SurveySolver
 from aoa_localizer.engine.track.report import between_transmitters, co_channel, stations_disagree
 from aoa_localizer.engine.track.said import Moving, Said, positive_definite
@@ -91,6 +91,7 @@ class Estimates:
         self.survey_solver = survey_solver  # None: no survey model (a standing antenna's channel keeps its filter's)
         self.newest: Estimate | None = None
         self.latest: Channel = channels.default
+        self.live_fixes = LiveFixes()
 
     def take_points(self, closed: Closed) -> Estimate | None:
         """The channels' tracks take the closed points in order, the points of one track within one call's budget
@@ -217,25 +218,22 @@ class Estimates:
         a fix that counts transmitters takes up to seconds) and published once it is done; until then the last one,
         restamped; None (the filter's estimate) for any other channel or while the model has no fix for it. The end
         of data pools every survey-like channel (finish)."""
-        survey, place = self.intake.pairing.survey_log, channel.surveying
+        survey, fixes, place = self.intake.pairing.survey_log, self.live_fixes, channel.surveying
         done = self.scheduler.finished(place)
         if not self._surveyed(channel):  # a drive's, or stops that show no site part: the filter's
-            survey.live.pop(channel.id, None)
+            fixes.forget(channel.id)
             return None
         if done is not None:
             return self._adopt_live_fix(channel, done)
         solve = self.survey_solver
-        if solve is not None and survey.due(channel.id) and self.scheduler.job(place) is None:
-            survey.mark_solved(channel.id)
+        if solve is not None and fixes.due(survey, channel.id) and self.scheduler.job(place) is None:
+            counting = fixes.count_due(survey, channel.id)
+            last = fixes.solving(survey, channel.id, counting)
+            max_k = self.cfg.max_emitters_per_channel if counting else 1
             records = survey.survey_records(self.intake.datum_frame(), [channel.id])
-            if survey.count_due(channel.id):
-                max_k, last = self.cfg.max_emitters_per_channel, None
-                survey.counted[channel.id] = (len(records), survey.counted.get(channel.id, (0, None))[1])
-            else:
-                max_k, last = 1, survey.counted[channel.id][1]
             job = functools.partial(live_fix, solve, records, channel.id, self.cfg.receiver_class, max_k, last)
             self.scheduler.start(place, job, slices.CHECK_BUDGET_US, None, [], first_turn=False)
-        last_made = survey.live.get(channel.id)
+        last_made = fixes.live.get(channel.id)
         if last_made is None:
             return None
         return self._announce(channel, replace(last_made, stamp=channel.track.last_stamp))
@@ -247,15 +245,9 @@ class Estimates:
 
     def _adopt_live_fix(self, channel: Channel, done: PendingJob) -> Estimate | None:
         """A live survey fix the scheduler finished, published (and its count kept when it made one)."""
-        survey = self.intake.pairing.survey_log
         fix = self.scheduler.value(done, "a live survey fix")[1]
-        if fix is not None and fix.count is not None and channel.id in survey.counted:
-            survey.counted[channel.id] = (survey.counted[channel.id][0], fix.count)
         made = self._publish_survey(channel, fix, end_of_data=False) if fix is not None else None
-        if made is None:
-            survey.live.pop(channel.id, None)
-        else:
-            survey.live[channel.id] = made
+        self.live_fixes.made(channel.id, made, fix.count if fix is not None else None)
         return made
 
     def _publish_survey(self, channel: Channel, fix: SurveyFix, end_of_data: bool = True) -> Estimate | None:

@@ -224,9 +224,6 @@ class SurveyLog:
         self.stopped: set[str] = set()  # channels with a bearing from a standing antenna (not a fixed station)
         self._judged: dict[str, tuple[int, bool | None]] = {}  # a stopped channel's rows when its site part was judged
         self.places: dict[str, set] = defaultdict(set)  # each channel's antenna places (decimetres)
-        self.solved: dict[str, tuple[int, int]] = {}  # (bearings, places) at a channel's last live fix
-        self.live: dict[str, Estimate] = {}  # a channel's last live survey estimate
-        self.counted: dict[str, tuple[int, SurveyCount | None]] = {}  # bearings at its last count, and the count
 
     def add(self, channel: str, fixed: bool, still: bool, row: tuple) -> None:
         """Keep a used bearing's row: from a fixed station, or an antenna standing still; one from a moving antenna
@@ -235,7 +232,7 @@ class SurveyLog:
             return
         if not (fixed or still) or len(self.records[channel]) >= MAX_RECORDS:
             self.not_survey.add(channel)
-            for kept in (self.records, self.places, self.solved, self.live, self.counted, self._judged):
+            for kept in (self.records, self.places, self._judged):
                 kept.pop(channel, None)
             self.stopped.discard(channel)
             return
@@ -244,14 +241,9 @@ class SurveyLog:
         self.records[channel].append(row)
         self.places[channel].add((round(row[2], 1), round(row[3], 1)))
 
-    def due(self, channel: str) -> bool:
-        """Whether a survey-like channel's live fix is to be made (again): from LIVE_PLACES places on, when its
-        bearings grew by LIVE_GROWTH or a place joined since the last one."""
-        if channel in self.not_survey or len(self.places.get(channel, ())) < LIVE_PLACES:
-            return False
-        last = self.solved.get(channel)
-        now = (len(self.records[channel]), len(self.places[channel]))
-        return last is None or now[1] > last[1] or now[0] >= LIVE_GROWTH * last[0]
+    def size(self, channel: str) -> tuple[int, int]:
+        """A channel's bearings kept and the places they came from."""
+        return len(self.records.get(channel, ())), len(self.places.get(channel, ()))
 
     def survey_like(self, channel: str, started: bool) -> bool:
         """Whether a kept channel goes to the survey model: every bearing from a fixed station, or its stops show
@@ -266,15 +258,6 @@ class SurveyLog:
         if judged is None or len(rows) >= LIVE_GROWTH * judged[0]:
             judged = self._judged[channel] = (len(rows), site_part_shown(rows))
         return judged[1] is True or (judged[1] is None and not started)
-
-    def count_due(self, channel: str) -> bool:
-        """Whether a live fix counts the channel's transmitters again: its first, then whenever its bearings
-        doubled (a count costs 0.05-1 s; between, the last one holds)."""
-        last = self.counted.get(channel)
-        return last is None or len(self.records[channel]) >= COUNT_GROWTH * last[0]
-
-    def mark_solved(self, channel: str) -> None:
-        self.solved[channel] = (len(self.records[channel]), len(self.places[channel]))
 
     def survey_records(self, frame: LocalFrame, channels: Iterable[str]) -> list[SurveyRecord]:
         """The bearings of these channels (the survey-like ones), in WGS84 with azimuths from true north."""
@@ -294,9 +277,56 @@ class SurveyLog:
         return out
 
     def clear(self) -> None:
-        for kept in (self.records, self.not_survey, self.places, self.solved, self.live, self.counted, self.stopped,
-                     self._judged):
+        for kept in (self.records, self.not_survey, self.places, self.stopped, self._judged):
             kept.clear()
+
+
+class LiveFixes:
+    """What a survey-like channel's live fixes were made of (the estimates' own; the bearings are the intake's
+    SurveyLog): the bearings and places at the last (when to make the next), its estimate, and the bearings at
+    the last count with the count."""
+
+    def __init__(self):
+        self.solved: dict[str, tuple[int, int]] = {}  # (bearings, places) at a channel's last live fix
+        self.live: dict[str, Estimate] = {}  # a channel's last live survey estimate
+        self.counted: dict[str, tuple[int, SurveyCount | None]] = {}  # bearings at its last count, and the count
+
+    def due(self, log: SurveyLog, channel: str) -> bool:
+        """Whether a survey-like channel's live fix is to be made (again): from LIVE_PLACES places on, when its
+        bearings grew by LIVE_GROWTH or a place joined since the last one."""
+        now = log.size(channel)
+        if channel in log.not_survey or now[1] < LIVE_PLACES:
+            return False
+        last = self.solved.get(channel)
+        return last is None or now[1] > last[1] or now[0] >= LIVE_GROWTH * last[0]
+
+    def count_due(self, log: SurveyLog, channel: str) -> bool:
+        """Whether a live fix counts the channel's transmitters again: its first, then whenever its bearings
+        doubled (a count costs 0.05-1 s; between, the last one holds)."""
+        last = self.counted.get(channel)
+        return last is None or log.size(channel)[0] >= COUNT_GROWTH * last[0]
+
+    def solving(self, log: SurveyLog, channel: str, counting: bool) -> SurveyCount | None:
+        """A live fix of `channel` begins, counting its transmitters or not: noted; the count it goes on from (None
+        when it counts)."""
+        self.solved[channel] = log.size(channel)
+        if counting:
+            self.counted[channel] = (log.size(channel)[0], self.counted.get(channel, (0, None))[1])
+            return None
+        return self.counted[channel][1]
+
+    def made(self, channel: str, estimate: Estimate | None, count: SurveyCount | None) -> None:
+        """A live fix finished: its estimate (None: none published) and the count it made, if it counted."""
+        if count is not None and channel in self.counted:
+            self.counted[channel] = (self.counted[channel][0], count)
+        if estimate is None:
+            self.live.pop(channel, None)
+        else:
+            self.live[channel] = estimate
+
+    def forget(self, channel: str) -> None:
+        """The channel is no longer survey-like."""
+        self.live.pop(channel, None)
 
 
 def survey_sentence(noise: dict) -> str:
