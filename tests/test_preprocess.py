@@ -218,7 +218,7 @@ def test_a_group_gives_back_its_readings_and_costs_a_quarter_of_them():
     assert all(np.array_equal(a, b) for a, b in zip(columns(g), columns(readings), strict=True))
     one = Group(readings[1:3])
     assert one.stations == "" and [r.station for r in one] == ["", ""]
-    assert not Group() and Group(cols=columns(readings)).field("theta").tolist() == [r.theta for r in readings]
+    assert not Group() and columns(Group(cols=columns(readings))).theta.tolist() == [r.theta for r in readings]
 
     rows = rng.random((2000, 10))
     Group([Reading(*map(float, row)) for row in rows])  # the tuples' free list filled: not the group's

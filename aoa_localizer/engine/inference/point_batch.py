@@ -19,6 +19,7 @@ from aoa_localizer.engine.points.preprocess import (
     Columns,
     Group,
     columns,
+    fields,
     make_point,
 )
 from aoa_localizer.engine.scheduling.slices import BATCH_MADE, POINTS_MADE, metered
@@ -39,9 +40,8 @@ def points_of(points: Sequence[ObservationPoint]) -> Points:
 def sigmas(group: Sequence[Reading], noise: NoiseModel | None) -> np.ndarray:
     """The readings' sigmas under `noise` (None: the configured ones)."""
     if noise is not None and 0 < len(group) <= SMALL_POINT:  # a few readings: plain floats (per point)
-        if isinstance(group, Group):
-            return group.field("sigma") * np.array(noise.scales(group.field("quality").tolist()))
-        return np.array([r.sigma for r in group], float) * np.array(noise.scales([r.quality for r in group]))
+        f = Columns(*fields(group))
+        return f.sigma * np.array(noise.scales(f.quality.tolist()))
     cols = columns(group)
     return cols.sigma if noise is None else cols.sigma * noise.scale(cols.quality)
 

@@ -227,10 +227,6 @@ class Group(Sequence[Reading]):
         names = tuple(r.station for r in readings)
         self.stations = names if len(set(names)) > 1 else (names[0] if names else "")
 
-    def field(self, name: str) -> np.ndarray:
-        """One field of the readings (a view of the group's array: not to be written)."""
-        return self.block[_FIELD_ROW[name]]
-
     @property
     def cols(self) -> Columns:
         """The fields as arrays, each made anew (as the worker unpacks them: the same sums to the bit)."""

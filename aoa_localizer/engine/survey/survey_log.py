@@ -311,7 +311,7 @@ class LiveFixes:
         when it counts)."""
         self.solved[channel] = log.size(channel)
         if counting:
-            self.counted[channel] = (log.size(channel)[0], self.counted.get(channel, (0, None))[1])
+            self.counted[channel] = (self.solved[channel][0], self.counted.get(channel, (0, None))[1])
             return None
         return self.counted[channel][1]
 
